@@ -1,0 +1,532 @@
+// final_control: wheel-velocity controller for the wcdrive power wheelchair.
+//
+// Arduino Mega 2560 at 16 MHz driving a Cytron SmartDriveDuo (PWM + DIR per
+// motor). Behaviour follows the seed guide sections 1.4 to 1.8; the fixes to
+// the seed's defects are listed in README.md beside this file.
+//
+// Structure of one loop() pass (nothing in it blocks):
+//   1. every byte waiting in the UART RX buffer goes through processByte(),
+//      which frames and parses commands from a fixed buffer;
+//   2. when 50 ms of millis() have passed, controlTick() runs the controller
+//      and sends one feedback line.
+// Everything a command changes takes effect at the next control tick.
+//
+// The controller state is kept in plain globals with stable names so that the
+// simavr harness (hil/) can read them from SRAM by symbol. The Python port in
+// wcdrive/firmware/ mirrors every function here, bit for bit.
+
+#include <Arduino.h>
+#include <math.h>
+#include <stdlib.h>
+#include <util/atomic.h>
+
+#include "wc_config.h"
+
+#if SERIAL_TX_BUFFER_SIZE < 256
+#warning "build with -DSERIAL_TX_BUFFER_SIZE=256 (see README.md): feedback lines may be dropped"
+#endif
+
+// ---------------------------------------------------------------------------
+// Encoder state, written by the interrupts.
+// ---------------------------------------------------------------------------
+volatile int32_t encoderValueL = 0;
+volatile int32_t encoderValueR = 0;
+volatile uint32_t illegalL = 0;   // transitions with both channels changed
+volatile uint32_t illegalR = 0;
+volatile uint8_t lastEncodedL = 0;
+volatile uint8_t lastEncodedR = 0;
+
+// Indexed by (previous AB << 2) | current AB, A the high bit. +1 forward,
+// -1 backward, 0 no change, QUAD_ILLEGAL both channels changed.
+#define QUAD_ILLEGAL 2
+static const int8_t QUAD_TABLE[16] = {
+  0, -1, +1, QUAD_ILLEGAL,
+  +1, 0, QUAD_ILLEGAL, -1,
+  -1, QUAD_ILLEGAL, 0, +1,
+  QUAD_ILLEGAL, +1, -1, 0,
+};
+
+// Left encoder: A on PE4 (pin 2), B on PE5 (pin 3).
+static inline uint8_t readEncoderL() {
+  uint8_t pins = PINE;
+  return (uint8_t)(((pins >> 3) & 0x02) | ((pins >> 5) & 0x01));
+}
+
+// Right encoder: A on PD3 (pin 18), B on PD2 (pin 19).
+static inline uint8_t readEncoderR() {
+  return (uint8_t)((PIND >> 2) & 0x03);
+}
+
+ISR(INT4_vect) {
+  uint8_t now = readEncoderL();
+  int8_t step = QUAD_TABLE[(lastEncodedL << 2) | now];
+  if (step == QUAD_ILLEGAL) {
+    illegalL++;
+  } else {
+    encoderValueL += step;
+  }
+  lastEncodedL = now;
+}
+ISR(INT5_vect, ISR_ALIASOF(INT4_vect));
+
+ISR(INT3_vect) {
+  uint8_t now = readEncoderR();
+  int8_t step = QUAD_TABLE[(lastEncodedR << 2) | now];
+  if (step == QUAD_ILLEGAL) {
+    illegalR++;
+  } else {
+    encoderValueR += step;
+  }
+  lastEncodedR = now;
+}
+ISR(INT2_vect, ISR_ALIASOF(INT3_vect));
+
+// ---------------------------------------------------------------------------
+// Controller state (read by the simulator by name).
+// ---------------------------------------------------------------------------
+uint8_t mode = WC_MODE_CMDVEL;
+float targetL = 0.0f, targetR = 0.0f;       // commanded wheel speeds, rad/s
+float setpointL = 0.0f, setpointR = 0.0f;   // ramped setpoints fed to the PID
+float rawVelL = 0.0f, rawVelR = 0.0f;       // measured this tick, rad/s
+float filtVelL = 0.0f, filtVelR = 0.0f;     // IIR-filtered velocity
+float integralL = 0.0f, integralR = 0.0f;
+float prevMeasL = 0.0f, prevMeasR = 0.0f;   // last filtered velocity seen by the PID
+float outputL = 0.0f, outputR = 0.0f;       // PID output, -100..100
+uint8_t pwmL = 0, pwmR = 0;                 // duty written to the driver
+uint8_t dirL = HIGH, dirR = HIGH;
+int32_t encTickL = 0, encTickR = 0;         // counts latched at the last tick
+int32_t prevEncL = 0, prevEncR = 0;
+uint32_t lastControlTime = 0;               // millis() of the last tick
+uint32_t tickCount = 0;
+
+float lastTravel = 0.0f;                    // m/s of travel of the last command
+uint8_t pivotTicksLeft = 0;
+float pendingL = 0.0f, pendingR = 0.0f;     // command waiting for the pivot to end
+
+bool cmdSinceTick = false;                  // a valid command arrived since the last tick
+bool watchdogArmed = false;
+uint32_t lastCmdTime = 0;                   // millis() of the tick that saw the last command
+bool emergencyStop = false;                 // ramp down at WC_EMERGENCY_DECEL
+bool ppmLost = false;
+uint8_t stillTicks = 0;
+volatile bool parked = true;                       // motors held at zero with integrators reset
+
+uint32_t rejectedCount = 0;                 // every malformed command
+uint32_t errSuppressed = 0;                 // ERR lines not sent (rate limit)
+uint32_t txDropped = 0;                     // lines not sent for lack of TX room
+uint8_t errLinesThisTick = 0;
+
+// ---------------------------------------------------------------------------
+// Output lines: formatted with Arduino's Print into a fixed buffer and written
+// whole, only when the TX ring has room, so loop() never blocks on the UART.
+// ---------------------------------------------------------------------------
+class LineBuffer : public Print {
+ public:
+  size_t write(uint8_t c) override {
+    if (len_ >= sizeof(buf_)) return 0;
+    buf_[len_++] = c;
+    return 1;
+  }
+  using Print::write;
+  void send() {
+    if (Serial.availableForWrite() >= (int)len_) {
+      Serial.write(buf_, len_);
+    } else {
+      txDropped++;
+    }
+    len_ = 0;
+  }
+
+ private:
+  uint8_t buf_[96];
+  uint8_t len_ = 0;
+};
+
+static LineBuffer line;
+
+static void sendEvent(const __FlashStringHelper* what) {
+  line.print(F("EVT:"));
+  line.println(what);
+  line.send();
+}
+
+// ---------------------------------------------------------------------------
+// Control law
+// ---------------------------------------------------------------------------
+static float computePID(float setpoint, float measurement, float& integral, float& prevMeas,
+                        float kp, float ki, float kd, float dt) {
+  float error = setpoint - measurement;
+  integral += error * dt;
+  integral = constrain(integral, -WC_PID_OUT_MAX / ki, WC_PID_OUT_MAX / ki);
+  float derivative = -(measurement - prevMeas) / dt;   // on measurement: no setpoint kick
+  float output = kp * error + ki * integral + kd * derivative;
+  float clamped = constrain(output, -WC_PID_OUT_MAX, WC_PID_OUT_MAX);
+  if (output != clamped) {
+    integral = (clamped - kp * error - kd * derivative) / ki;   // back-calculation
+  }
+  prevMeas = measurement;
+  return clamped;
+}
+
+static float rampToward(float current, float target, float maxChange) {
+  float diff = target - current;
+  if (fabs(diff) <= maxChange) return target;
+  return current + (diff > 0.0f ? maxChange : -maxChange);
+}
+
+static bool needsPivot(float travel, float prevTravel) {
+  return (prevTravel > WC_PIVOT_THRESHOLD && travel < -WC_PIVOT_THRESHOLD) ||
+         (prevTravel < -WC_PIVOT_THRESHOLD && travel > WC_PIVOT_THRESHOLD);
+}
+
+static void setMotor(uint8_t pwmPin, uint8_t dirPin, float output, uint8_t& pwm, uint8_t& dir) {
+  dir = output >= 0.0f ? HIGH : LOW;
+  digitalWrite(dirPin, dir);
+  pwm = (uint8_t)(int)(fabs(output) * WC_PWM_SCALE);
+  analogWrite(pwmPin, pwm);
+}
+
+// Targets to zero; the ramp brings the setpoints down at the emergency rate.
+static void emergencyHalt() {
+  targetL = targetR = 0.0f;
+  pivotTicksLeft = 0;
+  lastTravel = 0.0f;
+  emergencyStop = true;
+}
+
+// A valid command: new wheel targets, through the pivot state machine.
+static void acceptCommand(uint8_t newMode, float right, float left) {
+  mode = newMode;
+  cmdSinceTick = true;
+  emergencyStop = false;
+  float travel = (right + left) * 0.5f * WC_WHEEL_RADIUS;
+  if (right == 0.0f && left == 0.0f) {
+    pivotTicksLeft = 0;            // a stop is honoured at once, even mid-pivot
+    targetR = targetL = 0.0f;
+  } else if (needsPivot(travel, lastTravel)) {
+    pivotTicksLeft = WC_PIVOT_TICKS;
+    pendingR = right;
+    pendingL = left;
+    targetR = WC_PIVOT_SPEED;
+    targetL = -WC_PIVOT_SPEED;
+  } else if (pivotTicksLeft > 0) {
+    pendingR = right;
+    pendingL = left;
+  } else {
+    targetR = right;
+    targetL = left;
+  }
+  lastTravel = travel;
+}
+
+extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
+  float dt = (float)(now - lastControlTime) / 1000.0f;
+  lastControlTime = now;
+  tickCount++;
+
+  ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
+    encTickL = encoderValueL;
+    encTickR = encoderValueR;
+  }
+  int32_t deltaL = (int32_t)((uint32_t)encTickL - (uint32_t)prevEncL);
+  int32_t deltaR = (int32_t)((uint32_t)encTickR - (uint32_t)prevEncR);
+  prevEncL = encTickL;
+  prevEncR = encTickR;
+
+  // The left wheel is mounted mirrored: its counts run backwards.
+  rawVelL = -((float)deltaL / WC_CPR) * (WC_TWO_PI / dt);
+  rawVelR = ((float)deltaR / WC_CPR) * (WC_TWO_PI / dt);
+  filtVelL = WC_ALPHA * rawVelL + (1.0f - WC_ALPHA) * filtVelL;
+  filtVelR = WC_ALPHA * rawVelR + (1.0f - WC_ALPHA) * filtVelR;
+
+  if (cmdSinceTick) {
+    cmdSinceTick = false;
+    lastCmdTime = now;
+    watchdogArmed = true;
+  }
+  if (watchdogArmed && now - lastCmdTime >= WC_WATCHDOG_MS) {
+    watchdogArmed = false;
+    emergencyHalt();
+    sendEvent(F("WATCHDOG"));
+  }
+
+  float maxChange = (emergencyStop ? WC_EMERGENCY_DECEL : WC_MAX_ACCEL) * dt;
+  setpointL = rampToward(setpointL, targetL, maxChange);
+  setpointR = rampToward(setpointR, targetR, maxChange);
+
+  bool still = fabs(filtVelL) < WC_STILL_SPEED && fabs(filtVelR) < WC_STILL_SPEED;
+  if (!still) {
+    stillTicks = 0;
+  } else if (stillTicks < 255) {
+    stillTicks++;
+  }
+  bool atRest = targetL == 0.0f && targetR == 0.0f && setpointL == 0.0f && setpointR == 0.0f;
+  if (atRest && stillTicks >= WC_STILL_TICKS) {
+    parked = true;
+    integralL = integralR = 0.0f;
+    prevMeasL = filtVelL;
+    prevMeasR = filtVelR;
+    outputL = outputR = 0.0f;
+  } else {
+    parked = false;
+    outputL = computePID(setpointL, filtVelL, integralL, prevMeasL, WC_KP_L, WC_KI_L, WC_KD_L, dt);
+    outputR = computePID(setpointR, filtVelR, integralR, prevMeasR, WC_KP_R, WC_KI_R, WC_KD_R, dt);
+  }
+  setMotor(WC_PIN_PWM_L, WC_PIN_DIR_L, outputL, pwmL, dirL);
+  setMotor(WC_PIN_PWM_R, WC_PIN_DIR_R, outputR, pwmR, dirR);
+
+  if (pivotTicksLeft > 0 && --pivotTicksLeft == 0) {
+    targetL = pendingL;
+    targetR = pendingR;
+  }
+
+  line.print(F("ENC:"));
+  line.print(encTickL);
+  line.print(',');
+  line.print(encTickR);
+  line.print(F(",VEL:"));
+  line.print(rawVelL, 2);
+  line.print(',');
+  line.print(rawVelR, 2);
+  line.print(F(",MODE:"));
+  line.println(mode == WC_MODE_WHEEL ? F("WHEEL") : mode == WC_MODE_CMDVEL ? F("CMDVEL") : F("PPM"));
+  line.send();
+
+  errLinesThisTick = 0;
+}
+
+// ---------------------------------------------------------------------------
+// Command framing and parsing (protocol/PROTOCOL.md)
+// ---------------------------------------------------------------------------
+enum ParseResult : uint8_t { PARSE_OK, ERR_SYNTAX, ERR_NUMBER, ERR_RANGE, ERR_FIELDS, ERR_OVERLONG };
+
+static char cmdBuf[WC_CMD_MAX_LEN + 1];
+uint8_t cmdLen = 0;
+uint8_t cmdCommas = 0;
+bool cmdDiscarding = false;   // after an overlong command: drop bytes up to ',' or line end
+
+static void reject(ParseResult why) {
+  rejectedCount++;
+  if (errLinesThisTick >= WC_ERR_LINES_PER_TICK) {
+    errSuppressed++;
+    return;
+  }
+  errLinesThisTick++;
+  line.print(F("ERR:"));
+  switch (why) {
+    case ERR_NUMBER: line.println(F("number")); break;
+    case ERR_RANGE: line.println(F("range")); break;
+    case ERR_FIELDS: line.println(F("fields")); break;
+    case ERR_OVERLONG: line.println(F("overlong")); break;
+    default: line.println(F("syntax")); break;
+  }
+  line.send();
+}
+
+// Splits the command at its commas (replaced by NULs). Returns the number of
+// fields; a trailing comma does not open another field.
+static uint8_t splitFields(char* fields[], uint8_t maxFields) {
+  uint8_t n = 0;
+  char* p = cmdBuf;
+  char* end = cmdBuf + cmdLen;
+  while (p < end) {
+    if (n == maxFields) return maxFields + 1;
+    fields[n++] = p;
+    while (p < end && *p != ',') p++;
+    if (p < end) *p++ = '\0';
+  }
+  return n;
+}
+
+// A decimal number through avr-libc strtod, the whole field consumed.
+static ParseResult parseNumber(const char* s, bool allowSign, float max, float& value) {
+  char c = s[0];
+  bool digitOrPoint = (c >= '0' && c <= '9') || c == '.';
+  if (!digitOrPoint && !(allowSign && (c == '+' || c == '-'))) return ERR_NUMBER;
+  char* end;
+  value = (float)strtod(s, &end);
+  if (end == s || *end != '\0') return ERR_NUMBER;
+  if (!(value >= -max && value <= max)) return ERR_RANGE;   // also catches inf and NaN
+  return PARSE_OK;
+}
+
+// rp5.0,lp3.0,  (p/n give the sign)
+static ParseResult parseWheel() {
+  char* f[2];
+  if (splitFields(f, 2) != 2) return ERR_FIELDS;
+  if (f[0][0] != 'r' || f[1][0] != 'l') return ERR_SYNTAX;
+  float v[2];
+  for (uint8_t i = 0; i < 2; i++) {
+    char sign = f[i][1];
+    if (sign != 'p' && sign != 'n') return ERR_SYNTAX;
+    ParseResult r = parseNumber(f[i] + 2, false, WC_MAX_WHEEL_SPEED, v[i]);
+    if (r != PARSE_OK) return r;
+    if (sign == 'n') v[i] = -v[i];
+  }
+  acceptCommand(WC_MODE_WHEEL, v[0], v[1]);
+  return PARSE_OK;
+}
+
+// x:0.5,t:0.1,  (m/s, rad/s; seed section 1.7)
+static ParseResult parseCmdVel() {
+  char* f[2];
+  if (splitFields(f, 2) != 2) return ERR_FIELDS;
+  if (f[0][0] != 'x' || f[0][1] != ':' || f[1][0] != 't' || f[1][1] != ':') return ERR_SYNTAX;
+  float x, t;
+  ParseResult r = parseNumber(f[0] + 2, true, WC_MAX_LINEAR, x);
+  if (r != PARSE_OK) return r;
+  r = parseNumber(f[1] + 2, true, WC_MAX_ANGULAR, t);
+  if (r != PARSE_OK) return r;
+  float right = (x + t * WC_WHEELBASE / 2.0f) / WC_WHEEL_RADIUS;
+  float left = (x - t * WC_WHEELBASE / 2.0f) / WC_WHEEL_RADIUS;
+  float peak = fabs(right) > fabs(left) ? fabs(right) : fabs(left);
+  if (peak > WC_MAX_WHEEL_SPEED) {   // keep the curvature, cap the faster wheel
+    float k = WC_MAX_WHEEL_SPEED / peak;
+    right *= k;
+    left *= k;
+  }
+  acceptCommand(WC_MODE_CMDVEL, right, left);
+  return PARSE_OK;
+}
+
+static int16_t shapeStick(int16_t us) {
+  if (us >= -WC_PPM_DEADBAND && us <= WC_PPM_DEADBAND) return 0;
+  return constrain(us, -WC_PPM_SPAN, WC_PPM_SPAN);
+}
+
+// ppm:c1,...,c8,  (pulse widths in us; seed section 1.5.3)
+static ParseResult parsePpm() {
+  if (cmdBuf[3] != ':') return ERR_SYNTAX;
+  cmdBuf[3] = ',';   // "ppm:" becomes a first field of its own
+  char* f[WC_PPM_CHANNELS + 1];
+  if (splitFields(f, WC_PPM_CHANNELS + 1) != WC_PPM_CHANNELS + 1) return ERR_FIELDS;
+  int16_t ch[WC_PPM_CHANNELS];
+  bool lost = false;
+  for (uint8_t i = 0; i < WC_PPM_CHANNELS; i++) {
+    uint8_t n = 0;
+    int16_t v = 0;
+    for (const char* p = f[i + 1]; *p; p++, n++) {
+      if (*p < '0' || *p > '9' || n == 4) return ERR_NUMBER;
+      v = (int16_t)(v * 10 + (*p - '0'));
+    }
+    if (n == 0) return ERR_NUMBER;
+    ch[i] = v;
+    if (v < WC_PPM_VALID_MIN || v > WC_PPM_VALID_MAX) lost = true;
+  }
+  mode = WC_MODE_PPM;
+  cmdSinceTick = true;
+  if (lost) {
+    emergencyHalt();
+    if (!ppmLost) sendEvent(F("PPM_LOST"));
+    ppmLost = true;
+    return PARSE_OK;
+  }
+  ppmLost = false;
+  float perUs = WC_PPM_MAX_WHEEL / WC_PPM_SPAN;
+  float fwd = (float)shapeStick(ch[WC_PPM_FWD_CHANNEL] - WC_PPM_NEUTRAL) * perUs;
+  float turn = (float)shapeStick(ch[WC_PPM_TURN_CHANNEL] - WC_PPM_NEUTRAL) * perUs;
+  float right = constrain(fwd - turn, -WC_PPM_MAX_WHEEL, WC_PPM_MAX_WHEEL);
+  float left = constrain(fwd + turn, -WC_PPM_MAX_WHEEL, WC_PPM_MAX_WHEEL);
+  acceptCommand(WC_MODE_PPM, right, left);
+  return PARSE_OK;
+}
+
+// Which command the buffer holds, by its first bytes: the number of fields it
+// takes, or 0 when no command starts that way.
+static uint8_t fieldsExpected() {
+  if (cmdBuf[0] == 'r' || cmdBuf[0] == 'x') return 2;
+  if (cmdLen >= 4 && cmdBuf[0] == 'p' && cmdBuf[1] == 'p' && cmdBuf[2] == 'm' && cmdBuf[3] == ':') {
+    return WC_PPM_CHANNELS;
+  }
+  return 0;
+}
+
+static void finishCommand() {
+  cmdBuf[cmdLen] = '\0';
+  ParseResult r;
+  if (cmdBuf[0] == 'r') {
+    r = parseWheel();
+  } else if (cmdBuf[0] == 'x') {
+    r = parseCmdVel();
+  } else if (cmdLen >= 4 && cmdBuf[0] == 'p' && cmdBuf[1] == 'p' && cmdBuf[2] == 'm') {
+    r = parsePpm();
+  } else {
+    r = ERR_SYNTAX;
+  }
+  if (r != PARSE_OK) reject(r);
+  cmdLen = 0;
+  cmdCommas = 0;
+}
+
+extern "C" __attribute__((noinline)) void processByte(uint8_t c) {
+  if (c == '\n' || c == '\r') {
+    if (cmdDiscarding) {
+      cmdDiscarding = false;
+    } else if (cmdLen > 0) {
+      finishCommand();
+    }
+    return;
+  }
+  if (cmdDiscarding) {
+    if (c == ',') cmdDiscarding = false;
+    return;
+  }
+  if (cmdLen >= WC_CMD_MAX_LEN) {
+    reject(ERR_OVERLONG);
+    cmdLen = 0;
+    cmdCommas = 0;
+    cmdDiscarding = (c != ',');
+    return;
+  }
+  cmdBuf[cmdLen++] = (char)c;
+  if (c != ',') return;
+  cmdCommas++;
+  uint8_t expected = fieldsExpected();
+  if (expected == 0) {
+    reject(ERR_SYNTAX);
+    cmdLen = 0;
+    cmdCommas = 0;
+  } else if (cmdCommas >= expected) {
+    finishCommand();   // the seed host's newline-less form ends at the last comma
+  }
+}
+
+// ---------------------------------------------------------------------------
+void setup() {
+  pinMode(WC_PIN_RELAY, OUTPUT);
+  digitalWrite(WC_PIN_RELAY, LOW);
+  pinMode(WC_PIN_DIR_L, OUTPUT);
+  pinMode(WC_PIN_DIR_R, OUTPUT);
+  pinMode(WC_PIN_PWM_L, OUTPUT);
+  pinMode(WC_PIN_PWM_R, OUTPUT);
+  setMotor(WC_PIN_PWM_L, WC_PIN_DIR_L, 0.0f, pwmL, dirL);
+  setMotor(WC_PIN_PWM_R, WC_PIN_DIR_R, 0.0f, pwmR, dirR);
+  pinMode(WC_PIN_ENC_L_A, INPUT);
+  pinMode(WC_PIN_ENC_L_B, INPUT);
+  pinMode(WC_PIN_ENC_R_A, INPUT);
+  pinMode(WC_PIN_ENC_R_B, INPUT);
+
+  Serial.begin(WC_BAUD);
+
+  lastEncodedL = readEncoderL();
+  lastEncodedR = readEncoderR();
+  // Any edge on INT2..INT5 (both channels of both encoders).
+  EICRA = (EICRA & 0x0F) | _BV(ISC20) | _BV(ISC30);
+  EICRB = (EICRB & 0xF0) | _BV(ISC40) | _BV(ISC50);
+  EIFR = _BV(INTF2) | _BV(INTF3) | _BV(INTF4) | _BV(INTF5);
+  EIMSK |= _BV(INT2) | _BV(INT3) | _BV(INT4) | _BV(INT5);
+
+  digitalWrite(WC_PIN_RELAY, HIGH);
+  line.println(F("BOOT:final_control"));
+  line.send();
+  lastControlTime = millis();
+}
+
+void loop() {
+  // Bounded: at most one RX buffer's worth per pass.
+  for (uint8_t n = 0; n < 64 && Serial.available() > 0; n++) {
+    processByte((uint8_t)Serial.read());
+  }
+  uint32_t now = millis();
+  if (now - lastControlTime >= WC_CONTROL_PERIOD_MS) controlTick(now);
+}

@@ -1,0 +1,76 @@
+// wc_config.h: every constant of the final_control firmware in one place.
+//
+// The Python port (wcdrive/firmware/constants.py) mirrors these names and
+// values; tests/test_firmware_constants.py parses this file and fails when the
+// two disagree.
+#ifndef WC_CONFIG_H
+#define WC_CONFIG_H
+
+// ---- Serial link --------------------------------------------------------
+#define WC_BAUD 115200UL
+#define WC_CMD_MAX_LEN 63          // longest command (bytes before its terminator)
+#define WC_ERR_LINES_PER_TICK 2    // ERR lines sent per 50 ms window; the rest are counted
+
+// ---- Timing --------------------------------------------------------------
+#define WC_CONTROL_PERIOD_MS 50UL  // control tick and feedback period
+#define WC_WATCHDOG_MS 500UL       // no valid command for this long -> emergency stop
+#define WC_PIVOT_TICKS 6           // pivot length in control ticks (300 ms nominal)
+
+// ---- Geometry and encoders (seed section 1.4.2) ---------------------------
+#define WC_CPR 10000.0f            // counts per wheel revolution (2500 PPR x4)
+#define WC_WHEELBASE 0.57f         // m
+#define WC_WHEEL_RADIUS 0.1524f    // m
+#define WC_TWO_PI 6.28318548f      // 2*pi rounded to binary32
+
+// ---- Limits ---------------------------------------------------------------
+#define WC_MAX_WHEEL_SPEED 17.59f  // rad/s, WHEEL range and CMDVEL wheel limit
+#define WC_MAX_LINEAR 2.68f        // m/s, CMDVEL x range
+#define WC_MAX_ANGULAR 9.4f        // rad/s, CMDVEL t range
+
+// ---- Controller ------------------------------------------------------------
+#define WC_ALPHA 0.8f              // IIR filter coefficient
+#define WC_MAX_ACCEL 5.0f          // rad/s^2, normal setpoint ramp
+#define WC_EMERGENCY_DECEL 15.0f   // rad/s^2, watchdog and PPM-loss ramp
+#define WC_PID_OUT_MAX 100.0f      // PID output limit (percent of full duty)
+#define WC_PWM_SCALE 2.55f         // percent -> 8-bit duty
+#define WC_KP_R 7.0f
+#define WC_KI_R 8.0f
+#define WC_KD_R 0.15f
+#define WC_KP_L 7.2f
+#define WC_KI_L 8.5f
+#define WC_KD_L 0.15f
+#define WC_STILL_SPEED 0.05f       // rad/s: |filtered velocity| below this is "still"
+#define WC_STILL_TICKS 3           // consecutive still ticks before the motors park
+
+// ---- Pivot (caster swivel) ------------------------------------------------
+#define WC_PIVOT_SPEED 2.0f        // rad/s per wheel, right +, left -
+#define WC_PIVOT_THRESHOLD 0.1f    // m/s of travel on either side of zero
+
+// ---- PPM ------------------------------------------------------------------
+#define WC_PPM_CHANNELS 8
+#define WC_PPM_NEUTRAL 1500
+#define WC_PPM_SPAN 500            // us from neutral to full stick
+#define WC_PPM_DEADBAND 10         // us around neutral read as neutral
+#define WC_PPM_VALID_MIN 900       // a channel outside [MIN, MAX] means signal lost
+#define WC_PPM_VALID_MAX 2100
+#define WC_PPM_MAX_WHEEL 5.0f      // rad/s at full stick
+#define WC_PPM_FWD_CHANNEL 1       // zero-based: channel 2 is forward/back
+#define WC_PPM_TURN_CHANNEL 3      // zero-based: channel 4 is turn (stick right = turn right)
+
+// ---- Pins (Arduino Mega 2560 numbering) ----------------------------------
+#define WC_PIN_ENC_L_A 2           // PE4, INT4
+#define WC_PIN_ENC_L_B 3           // PE5, INT5
+#define WC_PIN_ENC_R_A 18          // PD3, INT3
+#define WC_PIN_ENC_R_B 19          // PD2, INT2
+#define WC_PIN_PWM_L 9             // PH6, OC2B
+#define WC_PIN_PWM_R 10            // PB4, OC2A
+#define WC_PIN_DIR_L 8             // PH5
+#define WC_PIN_DIR_R 11            // PB5
+#define WC_PIN_RELAY 7             // PH4, powers the SmartDriveDuo
+
+// ---- Modes (printed as MODE:WHEEL / CMDVEL / PPM) -------------------------
+#define WC_MODE_WHEEL 0
+#define WC_MODE_CMDVEL 1
+#define WC_MODE_PPM 2
+
+#endif

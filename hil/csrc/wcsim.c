@@ -1,0 +1,322 @@
+/*
+ * wcsim: a lock-step harness over libsimavr (Debian simavr 1.6) that turns a
+ * compiled Mega 2560 ELF into a virtual board driven from Python (ctypes).
+ *
+ * Deterministic: nothing here looks at the wall clock. Stimulus (pin levels,
+ * UART bytes) is queued at exact cycles and applied at the first instruction
+ * boundary at or after its cycle; every UART TX byte is stamped with the cycle
+ * at which the firmware wrote it; entries to chosen functions (by flash byte
+ * address) are logged with the cycle and the argument registers r22..r25.
+ *
+ * Compiled on first use by hil/build.py into libwcsim.so (gcc, -lsimavr -lelf).
+ */
+#include <stdarg.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include <simavr/sim_avr.h>
+#include <simavr/sim_elf.h>
+#include <simavr/sim_io.h>
+#include <simavr/sim_irq.h>
+#include <simavr/sim_vcd_file.h>
+#include <simavr/avr_ioport.h>
+#include <simavr/avr_uart.h>
+
+#define WCSIM_MAX_HOOKS 16
+
+typedef struct {
+    uint64_t cycle;
+    uint8_t kind;   /* 0 pin, 1 uart byte */
+    uint8_t port;   /* 'A'.. for pins */
+    uint8_t bit;
+    uint8_t value;
+} wcsim_event_t;
+
+typedef struct {
+    uint64_t cycle;
+    uint8_t byte;
+} wcsim_tx_t;
+
+typedef struct {
+    uint64_t cycle;
+    uint32_t hook;   /* index into hooks */
+    uint32_t arg;    /* r22..r25 little-endian */
+    uint8_t r24;
+} wcsim_hit_t;
+
+typedef struct {
+    avr_t *avr;
+    elf_firmware_t fw;
+    /* stimulus queue, kept sorted by cycle (stable for equal cycles) */
+    wcsim_event_t *events;
+    size_t n_events, cap_events, next_event;
+    /* TX log */
+    wcsim_tx_t *tx;
+    size_t n_tx, cap_tx;
+    /* hook log */
+    uint32_t hook_pc[WCSIM_MAX_HOOKS];
+    int n_hooks;
+    int break_hook;
+    int at_break;     /* stopped at the break: do not log the same entry twice */   /* run_until stops before this hook's instruction (-1: none) */
+    wcsim_hit_t *hits;
+    size_t n_hits, cap_hits;
+    /* VCD */
+    avr_vcd_t vcd;
+    int vcd_on;
+    avr_irq_t *pwm_irq;   /* two 8-bit signals for the VCD: left, right duty */
+    int crashed;
+} wcsim_t;
+
+static void no_sleep(avr_t *avr, avr_cycle_count_t how_long) {
+    (void)avr;
+    (void)how_long;
+}
+
+/* simavr's own messages (ELF loading, register traces): only errors, to stderr. */
+static void quiet_logger(avr_t *avr, const int level, const char *format, va_list ap) {
+    (void)avr;
+    if (level <= LOG_ERROR) vfprintf(stderr, format, ap);
+}
+
+static void *grow(void *p, size_t *cap, size_t need, size_t elem) {
+    if (need <= *cap) return p;
+    size_t c = *cap ? *cap : 256;
+    while (c < need) c *= 2;
+    void *q = realloc(p, c * elem);
+    if (!q) return NULL;
+    *cap = c;
+    return q;
+}
+
+static void on_uart_tx(struct avr_irq_t *irq, uint32_t value, void *param) {
+    (void)irq;
+    wcsim_t *s = (wcsim_t *)param;
+    wcsim_tx_t *t = grow(s->tx, &s->cap_tx, s->n_tx + 1, sizeof(*t));
+    if (!t) return;
+    s->tx = t;
+    s->tx[s->n_tx].cycle = s->avr->cycle;
+    s->tx[s->n_tx].byte = (uint8_t)value;
+    s->n_tx++;
+}
+
+wcsim_t *wcsim_new(const char *elf_path, char *err, int errlen) {
+    wcsim_t *s = calloc(1, sizeof(*s));
+    if (!s) return NULL;
+    avr_global_logger_set(quiet_logger);
+    if (elf_read_firmware(elf_path, &s->fw) != 0) {
+        snprintf(err, errlen, "cannot read ELF %s", elf_path);
+        free(s);
+        return NULL;
+    }
+    const char *mmcu = s->fw.mmcu[0] ? s->fw.mmcu : "atmega2560";
+    s->avr = avr_make_mcu_by_name(mmcu);
+    if (!s->avr) {
+        snprintf(err, errlen, "simavr knows no MCU %s", mmcu);
+        free(s);
+        return NULL;
+    }
+    avr_init(s->avr);
+    s->avr->frequency = s->fw.frequency ? s->fw.frequency : 16000000;
+    s->avr->log = 0;
+    avr_load_firmware(s->avr, &s->fw);
+    s->avr->sleep = no_sleep;
+    s->break_hook = -1;
+
+    uint32_t flags = 0;
+    avr_ioctl(s->avr, AVR_IOCTL_UART_GET_FLAGS('0'), &flags);
+    flags &= ~(AVR_UART_FLAG_STDIO | AVR_UART_FLAG_POLL_SLEEP);
+    avr_ioctl(s->avr, AVR_IOCTL_UART_SET_FLAGS('0'), &flags);
+    avr_irq_register_notify(avr_io_getirq(s->avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUTPUT),
+                            on_uart_tx, s);
+    static const char *pwm_names[] = {"8>pwm_left", "8>pwm_right"};
+    s->pwm_irq = avr_alloc_irq(&s->avr->irq_pool, 0, 2, pwm_names);
+    return s;
+}
+
+void wcsim_free(wcsim_t *s) {
+    if (!s) return;
+    if (s->vcd_on) avr_vcd_close(&s->vcd);
+    free(s->events);
+    free(s->tx);
+    free(s->hits);
+    /* simavr 1.6 has no avr_free(); the MCU struct is reclaimed at exit. */
+    free(s);
+}
+
+uint64_t wcsim_cycle(wcsim_t *s) { return s->avr->cycle; }
+uint32_t wcsim_frequency(wcsim_t *s) { return s->avr->frequency; }
+int wcsim_crashed(wcsim_t *s) { return s->crashed; }
+
+/* Events must be queued in non-decreasing cycle order per call sequence; an
+ * event earlier than one already queued is inserted in place. */
+int wcsim_schedule(wcsim_t *s, uint64_t cycle, int kind, int port, int bit, int value) {
+    wcsim_event_t *e = grow(s->events, &s->cap_events, s->n_events + 1, sizeof(*e));
+    if (!e) return -1;
+    s->events = e;
+    size_t i = s->n_events;
+    while (i > s->next_event && s->events[i - 1].cycle > cycle) {
+        s->events[i] = s->events[i - 1];
+        i--;
+    }
+    s->events[i].cycle = cycle;
+    s->events[i].kind = (uint8_t)kind;
+    s->events[i].port = (uint8_t)port;
+    s->events[i].bit = (uint8_t)bit;
+    s->events[i].value = (uint8_t)value;
+    s->n_events++;
+    return 0;
+}
+
+static void apply_event(wcsim_t *s, const wcsim_event_t *e) {
+    if (e->kind == 0) {
+        avr_irq_t *irq = avr_io_getirq(s->avr, AVR_IOCTL_IOPORT_GETIRQ(e->port), e->bit);
+        if (irq) avr_raise_irq(irq, e->value);
+    } else {
+        avr_raise_irq(avr_io_getirq(s->avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_INPUT), e->value);
+    }
+}
+
+/* Queues n events at once (sorted by cycle), for encoder edge trains. */
+int wcsim_schedule_many(wcsim_t *s, size_t n, const uint64_t *cycles, const uint8_t *kinds,
+                        const uint8_t *ports, const uint8_t *bits, const uint8_t *values) {
+    for (size_t i = 0; i < n; i++) {
+        if (wcsim_schedule(s, cycles[i], kinds[i], ports[i], bits[i], values[i]) != 0) return -1;
+    }
+    return 0;
+}
+
+int wcsim_add_hook(wcsim_t *s, uint32_t pc_byte_addr) {
+    if (s->n_hooks >= WCSIM_MAX_HOOKS) return -1;
+    s->hook_pc[s->n_hooks] = pc_byte_addr;
+    return s->n_hooks++;
+}
+
+static void record_hit(wcsim_t *s, int h) {
+    wcsim_hit_t *p = grow(s->hits, &s->cap_hits, s->n_hits + 1, sizeof(*p));
+    if (!p) return;
+    s->hits = p;
+    uint8_t *r = s->avr->data;
+    p = &s->hits[s->n_hits++];
+    p->cycle = s->avr->cycle;
+    p->hook = (uint32_t)h;
+    p->arg = (uint32_t)r[22] | ((uint32_t)r[23] << 8) | ((uint32_t)r[24] << 16) | ((uint32_t)r[25] << 24);
+    p->r24 = r[24];
+}
+
+void wcsim_set_break(wcsim_t *s, int hook) { s->break_hook = hook; }
+
+/* Runs until avr->cycle >= target. Returns 0; 1 when it stopped at the break
+ * hook (logged, not yet executed; the next call runs on past it); -1 when the
+ * core stopped (crash or sleep with interrupts off). */
+int wcsim_run_until(wcsim_t *s, uint64_t target) {
+    avr_t *avr = s->avr;
+    while (avr->cycle < target) {
+        while (s->next_event < s->n_events && s->events[s->next_event].cycle <= avr->cycle) {
+            apply_event(s, &s->events[s->next_event]);
+            s->next_event++;
+        }
+        if (s->next_event == s->n_events) {   /* drained: reuse the queue from the start */
+            s->next_event = s->n_events = 0;
+        }
+        for (int h = 0; h < s->n_hooks; h++) {
+            if (avr->pc == s->hook_pc[h] && !s->at_break) {
+                record_hit(s, h);
+                if (h == s->break_hook) {
+                    s->at_break = 1;
+                    return 1;
+                }
+            }
+        }
+        s->at_break = 0;
+        int state = avr_run(avr);
+        if (state == cpu_Done || state == cpu_Crashed) {
+            s->crashed = 1;
+            return -1;
+        }
+    }
+    return 0;
+}
+
+size_t wcsim_tx_count(wcsim_t *s) { return s->n_tx; }
+
+/* Copies and removes up to max TX entries from the front of the log. */
+size_t wcsim_tx_take(wcsim_t *s, uint64_t *cycles, uint8_t *bytes, size_t max) {
+    size_t n = s->n_tx < max ? s->n_tx : max;
+    for (size_t i = 0; i < n; i++) {
+        cycles[i] = s->tx[i].cycle;
+        bytes[i] = s->tx[i].byte;
+    }
+    memmove(s->tx, s->tx + n, (s->n_tx - n) * sizeof(*s->tx));
+    s->n_tx -= n;
+    return n;
+}
+
+size_t wcsim_hits_count(wcsim_t *s) { return s->n_hits; }
+
+size_t wcsim_hits_take(wcsim_t *s, uint64_t *cycles, uint32_t *hooks, uint32_t *args, size_t max) {
+    size_t n = s->n_hits < max ? s->n_hits : max;
+    for (size_t i = 0; i < n; i++) {
+        cycles[i] = s->hits[i].cycle;
+        hooks[i] = s->hits[i].hook;
+        args[i] = s->hits[i].arg;
+    }
+    memmove(s->hits, s->hits + n, (s->n_hits - n) * sizeof(*s->hits));
+    s->n_hits -= n;
+    return n;
+}
+
+/* Data space: registers, I/O, SRAM (addresses as avr-nm prints them less 0x800000). */
+int wcsim_read(wcsim_t *s, uint32_t addr, uint8_t *buf, uint32_t n) {
+    if ((uint64_t)addr + n > (uint64_t)s->avr->ramend + 1) return -1;
+    memcpy(buf, s->avr->data + addr, n);
+    return 0;
+}
+
+int wcsim_write(wcsim_t *s, uint32_t addr, const uint8_t *buf, uint32_t n) {
+    if ((uint64_t)addr + n > (uint64_t)s->avr->ramend + 1) return -1;
+    memcpy(s->avr->data + addr, buf, n);
+    return 0;
+}
+
+uint32_t wcsim_ramend(wcsim_t *s) { return s->avr->ramend; }
+
+/* Stack pointer, for free-RAM measurements. */
+uint32_t wcsim_sp(wcsim_t *s) { return (uint32_t)s->avr->data[0x5d] | ((uint32_t)s->avr->data[0x5e] << 8); }
+
+/* Feeds the two PWM duty values into the VCD (called by Python when it samples). */
+void wcsim_vcd_pwm(wcsim_t *s, int left, int right) {
+    avr_raise_irq(s->pwm_irq + 0, (uint32_t)left);
+    avr_raise_irq(s->pwm_irq + 1, (uint32_t)right);
+}
+
+/* VCD of the given port pins plus UART RX/TX bytes and the PWM duty signals.
+ * pins: a string of "<port><bit>:<name>;" entries, e.g. "E4:enc_l_a;E5:enc_l_b;". */
+int wcsim_vcd_open(wcsim_t *s, const char *path, const char *pins) {
+    if (s->vcd_on) return -1;
+    if (avr_vcd_init(s->avr, path, &s->vcd, 1000) != 0) return -1;
+    char buf[512];
+    snprintf(buf, sizeof(buf), "%s", pins);
+    for (char *tok = strtok(buf, ";"); tok; tok = strtok(NULL, ";")) {
+        if (strlen(tok) < 4 || tok[2] != ':') continue;
+        avr_irq_t *irq = avr_io_getirq(s->avr, AVR_IOCTL_IOPORT_GETIRQ(tok[0]), tok[1] - '0');
+        if (irq) avr_vcd_add_signal(&s->vcd, irq, 1, strdup(tok + 3));
+    }
+    avr_vcd_add_signal(&s->vcd, avr_io_getirq(s->avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_INPUT), 8,
+                       "uart_rx");
+    avr_vcd_add_signal(&s->vcd, avr_io_getirq(s->avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUTPUT), 8,
+                       "uart_tx");
+    avr_vcd_add_signal(&s->vcd, s->pwm_irq + 0, 8, "pwm_left");
+    avr_vcd_add_signal(&s->vcd, s->pwm_irq + 1, 8, "pwm_right");
+    avr_vcd_start(&s->vcd);
+    s->vcd_on = 1;
+    return 0;
+}
+
+void wcsim_vcd_close(wcsim_t *s) {
+    if (!s->vcd_on) return;
+    avr_vcd_stop(&s->vcd);
+    avr_vcd_close(&s->vcd);
+    s->vcd_on = 0;
+}

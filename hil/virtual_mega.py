@@ -1,0 +1,378 @@
+"""A virtual Arduino Mega 2560: the compiled firmware in simavr, in lock step with Python.
+
+``VirtualMega`` wraps the C harness (``hil/csrc/wcsim.c``) through ctypes. Time is
+simulated cycles at 16 MHz and advances only in ``run_until``/``run_for``; stimulus
+is queued at exact cycles, so one trace always gives the same bytes.
+
+    mega = VirtualMega()                  # builds firmware/final_control if needed
+    mega.send(b"rp2.0,lp2.0,")            # bytes on the wire from now on
+    mega.run_for(0.2)
+    print(mega.take_tx_text(), mega.pwm("left"), mega.read("setpointL"))
+"""
+
+from __future__ import annotations
+
+import ctypes
+import struct
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from elftools.elf.elffile import ELFFile
+from elftools.elf.sections import SymbolTableSection
+
+from hil.build import firmware_elf, harness_library
+from wcdrive.firmware.quadrature import EdgeTrain
+
+F_CPU = 16_000_000
+SRAM_OFFSET = 0x800000
+#: 115200 baud with U2X (UBRR 16) is 117,647 baud; simavr spends 11 bit times a byte.
+UART_BYTE_CYCLES = 1496
+
+# Pins of final_control (wc_config.h) as (port letter, bit).
+ENCODER_PINS = {"left": (("E", 4), ("E", 5)), "right": (("D", 3), ("D", 2))}
+DIR_PINS = {"left": ("H", 5), "right": ("B", 5)}
+RELAY_PIN = ("H", 4)
+# PWM: pin 9 = OC2B on PH6, pin 10 = OC2A on PB4 (Timer2, phase-correct).
+_TCCR2A, _OCR2A, _OCR2B = 0xB0, 0xB3, 0xB4
+_PWM = {"left": (_OCR2B, 1 << 5, ("H", 6)), "right": (_OCR2A, 1 << 7, ("B", 4))}
+_PORT_REG = {"B": 0x25, "D": 0x2B, "E": 0x2E, "H": 0x102}
+
+#: C types of the controller globals, for ``read(name)``.
+VARIABLE_FORMATS = {
+    "f": ("targetL", "targetR", "setpointL", "setpointR", "rawVelL", "rawVelR", "filtVelL",
+          "filtVelR", "integralL", "integralR", "prevMeasL", "prevMeasR", "outputL", "outputR",
+          "lastTravel", "pendingL", "pendingR"),
+    "i": ("encoderValueL", "encoderValueR", "encTickL", "encTickR", "prevEncL", "prevEncR"),
+    "I": ("illegalL", "illegalR", "lastControlTime", "tickCount", "lastCmdTime", "rejectedCount",
+          "errSuppressed", "txDropped", "timer0_millis", "timer0_overflow_count"),
+    "B": ("mode", "pwmL", "pwmR", "dirL", "dirR", "pivotTicksLeft", "cmdSinceTick",
+          "watchdogArmed", "emergencyStop", "ppmLost", "stillTicks", "parked", "cmdLen",
+          "cmdCommas", "cmdDiscarding", "errLinesThisTick", "lastEncodedL", "lastEncodedR",
+          "timer0_fract"),
+}
+_FORMAT_OF = {name: fmt for fmt, names in VARIABLE_FORMATS.items() for name in names}
+
+#: Functions whose entries are logged: (name, what the harness records).
+HOOKS = ("processByte", "controlTick", "main")
+
+
+class HarnessError(RuntimeError):
+    """The virtual board could not be made or stopped unexpectedly."""
+
+
+@dataclass(frozen=True)
+class Hit:
+    """One logged function entry: the cycle, the function, its first 32-bit argument."""
+
+    cycle: int
+    function: str
+    arg: int
+
+
+def read_symbols(elf_path: Path) -> tuple[dict[str, tuple[int, int]], dict[str, int]]:
+    """``(variables, functions)``: data-space address and size by name, flash byte address by name."""
+    variables: dict[str, tuple[int, int]] = {}
+    functions: dict[str, int] = {}
+    with open(elf_path, "rb") as handle:
+        elf = ELFFile(handle)
+        for section in elf.iter_sections():
+            if not isinstance(section, SymbolTableSection):
+                continue
+            for sym in section.iter_symbols():
+                kind = sym["st_info"]["type"]
+                value = sym["st_value"]
+                if kind in ("STT_OBJECT", "STT_NOTYPE") and value >= SRAM_OFFSET:
+                    variables[sym.name] = (value - SRAM_OFFSET, sym["st_size"])
+                elif kind == "STT_FUNC":
+                    functions[sym.name] = value
+    return variables, functions
+
+
+def _load_library() -> ctypes.CDLL:
+    lib = ctypes.CDLL(str(harness_library()))
+    p, u64, u32, i32, sz = ctypes.c_void_p, ctypes.c_uint64, ctypes.c_uint32, ctypes.c_int, ctypes.c_size_t
+    u8p = ctypes.POINTER(ctypes.c_uint8)
+    sig = {
+        "wcsim_new": (p, [ctypes.c_char_p, ctypes.c_char_p, i32]),
+        "wcsim_free": (None, [p]),
+        "wcsim_cycle": (u64, [p]),
+        "wcsim_crashed": (i32, [p]),
+        "wcsim_schedule": (i32, [p, u64, i32, i32, i32, i32]),
+        "wcsim_schedule_many": (i32, [p, sz, ctypes.POINTER(u64), u8p, u8p, u8p, u8p]),
+        "wcsim_add_hook": (i32, [p, u32]),
+        "wcsim_set_break": (None, [p, i32]),
+        "wcsim_run_until": (i32, [p, u64]),
+        "wcsim_tx_count": (sz, [p]),
+        "wcsim_tx_take": (sz, [p, ctypes.POINTER(u64), u8p, sz]),
+        "wcsim_hits_count": (sz, [p]),
+        "wcsim_hits_take": (sz, [p, ctypes.POINTER(u64), ctypes.POINTER(u32), ctypes.POINTER(u32), sz]),
+        "wcsim_read": (i32, [p, u32, u8p, u32]),
+        "wcsim_write": (i32, [p, u32, u8p, u32]),
+        "wcsim_sp": (u32, [p]),
+        "wcsim_ramend": (u32, [p]),
+        "wcsim_vcd_pwm": (None, [p, i32, i32]),
+        "wcsim_vcd_open": (i32, [p, ctypes.c_char_p, ctypes.c_char_p]),
+        "wcsim_vcd_close": (None, [p]),
+    }
+    for name, (restype, argtypes) in sig.items():
+        fn = getattr(lib, name)
+        fn.restype = restype
+        fn.argtypes = argtypes
+    return lib
+
+
+_LIB: ctypes.CDLL | None = None
+
+
+def _lib() -> ctypes.CDLL:
+    global _LIB
+    if _LIB is None:
+        _LIB = _load_library()
+    return _LIB
+
+
+class VirtualMega:
+    """The firmware ELF running in simavr, advanced only by this object's calls."""
+
+    def __init__(self, elf: str | Path | None = None, *, millis_start: int | None = None,
+                 vcd: str | Path | None = None) -> None:
+        self.elf = Path(elf) if elf is not None else firmware_elf()
+        self.variables, self.functions = read_symbols(self.elf)
+        self._c = _lib()
+        err = ctypes.create_string_buffer(256)
+        handle = self._c.wcsim_new(str(self.elf).encode(), err, len(err))
+        if not handle:
+            raise HarnessError(err.value.decode())
+        self._s = handle
+        self._hook_names: list[str] = []
+        for name in HOOKS:
+            if name in self.functions:
+                index = self._c.wcsim_add_hook(self._s, self.functions[name])
+                if index >= 0:
+                    self._hook_names.append(name)
+        self._uart_free_at = 0
+        self._pin_level: dict[tuple[str, int], int] = {}
+        self.tx_log: list[tuple[int, int]] = []
+        self.hit_log: list[Hit] = []
+        # Both encoders rest at count 0, state 11, before the firmware boots.
+        for side in ENCODER_PINS:
+            for pin in ENCODER_PINS[side]:
+                self.set_pin(pin, 1, at=0)
+        if vcd is not None:
+            pins = "".join(f"{p}{b}:{n};" for n, (p, b) in self._named_pins().items())
+            if self._c.wcsim_vcd_open(self._s, str(vcd).encode(), pins.encode()) != 0:
+                raise HarnessError(f"cannot open VCD file {vcd}")
+            self._vcd = True
+        else:
+            self._vcd = False
+        if millis_start is not None:
+            self._start_millis_at(millis_start)
+
+    # ---- lifecycle -----------------------------------------------------------------
+    def close(self) -> None:
+        if self._s:
+            if self._vcd:
+                self._c.wcsim_vcd_close(self._s)
+            self._c.wcsim_free(self._s)
+            self._s = None
+
+    def __enter__(self) -> VirtualMega:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def __del__(self) -> None:
+        try:
+            self.close()
+        except Exception:
+            pass
+
+    # ---- time --------------------------------------------------------------------
+    @property
+    def cycle(self) -> int:
+        return int(self._c.wcsim_cycle(self._s))
+
+    @property
+    def time(self) -> float:
+        """Simulated seconds since reset."""
+        return self.cycle / F_CPU
+
+    def run_until(self, cycle: int) -> None:
+        while True:
+            status = self._c.wcsim_run_until(self._s, int(cycle))
+            if status == 0:
+                break
+            if status < 0:
+                raise HarnessError(f"the AVR core stopped (crashed) at cycle {self.cycle}")
+        self._collect()
+
+    def run_for(self, seconds: float) -> None:
+        self.run_until(self.cycle + round(seconds * F_CPU))
+
+    def _start_millis_at(self, millis: int) -> None:
+        """Stops at main() (after .bss is cleared), then sets millis() to ``millis``."""
+        if "main" not in self._hook_names:
+            raise HarnessError("the ELF has no main symbol to stop at")
+        self._c.wcsim_set_break(self._s, self._hook_names.index("main"))
+        status = self._c.wcsim_run_until(self._s, F_CPU)
+        self._c.wcsim_set_break(self._s, -1)
+        if status != 1:
+            raise HarnessError("the firmware never reached main()")
+        self.write("timer0_millis", millis & 0xFFFFFFFF)
+        self._collect()
+
+    # ---- stimulus ----------------------------------------------------------------
+    def set_pin(self, pin: tuple[str, int], level: int, at: int | None = None) -> None:
+        port, bit = pin
+        cycle = self.cycle if at is None else int(at)
+        self._c.wcsim_schedule(self._s, cycle, 0, ord(port), bit, 1 if level else 0)
+        self._pin_level[pin] = 1 if level else 0
+
+    def send(self, data: bytes, at: int | None = None) -> list[int]:
+        """Queues bytes on the RX wire, one per byte time, starting at ``at`` (default:
+        now, or when the previous bytes have gone). Returns each byte's cycle."""
+        start = max(self.cycle if at is None else int(at), self._uart_free_at)
+        cycles = [start + i * UART_BYTE_CYCLES for i in range(len(data))]
+        for cycle, byte in zip(cycles, data, strict=True):
+            self._c.wcsim_schedule(self._s, cycle, 1, 0, 0, byte)
+        if data:
+            self._uart_free_at = cycles[-1] + UART_BYTE_CYCLES
+        return cycles
+
+    def encoder_edges(self, side: str, train: EdgeTrain, t0: float = 0.0) -> None:
+        """Queues an encoder's edges; ``train.times`` are seconds after ``t0``."""
+        if train.times.size == 0:
+            return
+        a_pin, b_pin = ENCODER_PINS[side]
+        cycles = np.round((t0 + train.times) * F_CPU).astype(np.uint64)
+        if np.any(np.diff(cycles.astype(np.int64)) < 0):
+            raise ValueError("edge times must not decrease")
+        states = train.states.astype(np.int64)
+        previous = np.concatenate(([self._state(side)], states[:-1]))
+        changed_a = ((previous ^ states) & 0b10) != 0
+        changed_b = ((previous ^ states) & 0b01) != 0
+        events: list[tuple[int, tuple[str, int], int]] = []
+        for cyc, st, ca, cb in zip(cycles.tolist(), states.tolist(), changed_a.tolist(),
+                                   changed_b.tolist(), strict=True):
+            if ca:
+                events.append((cyc, a_pin, (st >> 1) & 1))
+            if cb:
+                events.append((cyc, b_pin, st & 1))
+        self._schedule_pins(events)
+        last = int(states[-1])
+        self._pin_level[a_pin] = (last >> 1) & 1
+        self._pin_level[b_pin] = last & 1
+
+    def _state(self, side: str) -> int:
+        a_pin, b_pin = ENCODER_PINS[side]
+        return (self._pin_level.get(a_pin, 1) << 1) | self._pin_level.get(b_pin, 1)
+
+    def _schedule_pins(self, events: list[tuple[int, tuple[str, int], int]]) -> None:
+        n = len(events)
+        if n == 0:
+            return
+        cycles = (ctypes.c_uint64 * n)(*[e[0] for e in events])
+        kinds = (ctypes.c_uint8 * n)()
+        ports = (ctypes.c_uint8 * n)(*[ord(e[1][0]) for e in events])
+        bits = (ctypes.c_uint8 * n)(*[e[1][1] for e in events])
+        values = (ctypes.c_uint8 * n)(*[e[2] for e in events])
+        if self._c.wcsim_schedule_many(self._s, n, cycles, kinds, ports, bits, values) != 0:
+            raise HarnessError("out of memory queueing pin events")
+
+    # ---- observation -------------------------------------------------------------
+    def _collect(self) -> None:
+        n = self._c.wcsim_tx_count(self._s)
+        if n:
+            cycles = (ctypes.c_uint64 * n)()
+            data = (ctypes.c_uint8 * n)()
+            got = self._c.wcsim_tx_take(self._s, cycles, data, n)
+            self.tx_log.extend(zip(list(cycles[:got]), list(data[:got]), strict=True))
+        n = self._c.wcsim_hits_count(self._s)
+        if n:
+            cycles = (ctypes.c_uint64 * n)()
+            hooks = (ctypes.c_uint32 * n)()
+            args = (ctypes.c_uint32 * n)()
+            got = self._c.wcsim_hits_take(self._s, cycles, hooks, args, n)
+            self.hit_log.extend(Hit(cycles[i], self._hook_names[hooks[i]], args[i]) for i in range(got))
+        if self._vcd:
+            self._c.wcsim_vcd_pwm(self._s, self.pwm("left"), self.pwm("right"))
+
+    def take_tx(self) -> list[tuple[int, int]]:
+        """TX bytes sent since the last call, each as ``(cycle, byte)``."""
+        out, self.tx_log = self.tx_log, []
+        return out
+
+    def take_tx_text(self) -> str:
+        return bytes(b for _, b in self.take_tx()).decode("latin-1")
+
+    def take_hits(self) -> list[Hit]:
+        out, self.hit_log = self.hit_log, []
+        return out
+
+    def read_bytes(self, address: int, size: int) -> bytes:
+        buf = (ctypes.c_uint8 * size)()
+        if self._c.wcsim_read(self._s, address, buf, size) != 0:
+            raise ValueError(f"address {address:#x}+{size} is outside the data space")
+        return bytes(buf)
+
+    def address_of(self, name: str) -> tuple[int, int]:
+        try:
+            return self.variables[name]
+        except KeyError:
+            raise KeyError(f"the ELF has no variable {name!r}") from None
+
+    def read_raw(self, name: str) -> bytes:
+        address, size = self.address_of(name)
+        return self.read_bytes(address, size)
+
+    def read(self, name: str) -> float | int:
+        """A firmware global by name, decoded by its C type (floats as Python floats
+        holding the exact binary32 value)."""
+        fmt = _FORMAT_OF.get(name)
+        if fmt is None:
+            raise KeyError(f"no known C type for {name!r}; use read_raw()")
+        return struct.unpack("<" + fmt, self.read_raw(name))[0]
+
+    def write(self, name: str, value: float | int) -> None:
+        address, size = self.address_of(name)
+        data = struct.pack("<" + _FORMAT_OF[name], value)
+        buf = (ctypes.c_uint8 * size)(*data)
+        self._c.wcsim_write(self._s, address, buf, size)
+
+    def pin_output(self, pin: tuple[str, int]) -> int:
+        port, bit = pin
+        return (self.read_bytes(_PORT_REG[port], 1)[0] >> bit) & 1
+
+    def pwm(self, side: str) -> int:
+        """Duty 0..255 on the motor's PWM pin: OCR when the compare output is on,
+        else the pin's level (analogWrite 0 and 255 fall back to digitalWrite)."""
+        ocr, com_bit, pin = _PWM[side]
+        tccr2a = self.read_bytes(_TCCR2A, 1)[0]
+        if tccr2a & com_bit:
+            return self.read_bytes(ocr, 1)[0]
+        return 255 if self.pin_output(pin) else 0
+
+    def direction(self, side: str) -> int:
+        return self.pin_output(DIR_PINS[side])
+
+    def relay(self) -> int:
+        return self.pin_output(RELAY_PIN)
+
+    def stack_pointer(self) -> int:
+        return int(self._c.wcsim_sp(self._s))
+
+    def free_ram(self) -> int:
+        """Bytes between the end of .bss (no heap is used) and the stack pointer."""
+        if "__bss_end" not in self.variables:
+            raise HarnessError("the ELF has no __bss_end symbol")
+        return self.stack_pointer() - self.variables["__bss_end"][0]
+
+    def _named_pins(self) -> dict[str, tuple[str, int]]:
+        return {
+            "enc_l_a": ENCODER_PINS["left"][0], "enc_l_b": ENCODER_PINS["left"][1],
+            "enc_r_a": ENCODER_PINS["right"][0], "enc_r_b": ENCODER_PINS["right"][1],
+            "dir_l": DIR_PINS["left"], "dir_r": DIR_PINS["right"], "relay": RELAY_PIN,
+            "pwm_l_pin": _PWM["left"][2], "pwm_r_pin": _PWM["right"][2],
+        }
