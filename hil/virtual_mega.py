@@ -101,7 +101,7 @@ def _load_library() -> ctypes.CDLL:
         "wcsim_schedule": (i32, [p, u64, i32, i32, i32, i32]),
         "wcsim_schedule_many": (i32, [p, sz, ctypes.POINTER(u64), u8p, u8p, u8p, u8p]),
         "wcsim_add_hook": (i32, [p, u32]),
-        "wcsim_set_break": (None, [p, i32]),
+        "wcsim_set_break_mask": (None, [p, u32]),
         "wcsim_run_until": (i32, [p, u64]),
         "wcsim_tx_count": (sz, [p]),
         "wcsim_tx_take": (sz, [p, ctypes.POINTER(u64), u8p, sz]),
@@ -200,13 +200,26 @@ class VirtualMega:
         return self.cycle / F_CPU
 
     def run_until(self, cycle: int) -> None:
-        while True:
-            status = self._c.wcsim_run_until(self._s, int(cycle))
-            if status == 0:
-                break
-            if status < 0:
-                raise HarnessError(f"the AVR core stopped (crashed) at cycle {self.cycle}")
+        while self.run_to_break(cycle):
+            pass
+
+    def run_to_break(self, cycle: int) -> bool:
+        """Runs until ``cycle`` or until a function set with ``break_on`` is entered.
+        Returns True when it stopped at such an entry (the last of ``hit_log``)."""
+        status = self._c.wcsim_run_until(self._s, int(cycle))
         self._collect()
+        if status < 0:
+            raise HarnessError(f"the AVR core stopped (crashed) at cycle {self.cycle}")
+        return status == 1
+
+    def break_on(self, *functions: str) -> None:
+        """Makes ``run_to_break`` stop at the entry of these functions (none: never)."""
+        mask = 0
+        for name in functions:
+            if name not in self._hook_names:
+                raise KeyError(f"no hook on {name!r}; hooks: {self._hook_names}")
+            mask |= 1 << self._hook_names.index(name)
+        self._c.wcsim_set_break_mask(self._s, mask)
 
     def run_for(self, seconds: float) -> None:
         self.run_until(self.cycle + round(seconds * F_CPU))
@@ -215,13 +228,12 @@ class VirtualMega:
         """Stops at main() (after .bss is cleared), then sets millis() to ``millis``."""
         if "main" not in self._hook_names:
             raise HarnessError("the ELF has no main symbol to stop at")
-        self._c.wcsim_set_break(self._s, self._hook_names.index("main"))
-        status = self._c.wcsim_run_until(self._s, F_CPU)
-        self._c.wcsim_set_break(self._s, -1)
-        if status != 1:
+        self.break_on("main")
+        stopped = self.run_to_break(F_CPU)
+        self.break_on()
+        if not stopped:
             raise HarnessError("the firmware never reached main()")
         self.write("timer0_millis", millis & 0xFFFFFFFF)
-        self._collect()
 
     # ---- stimulus ----------------------------------------------------------------
     def set_pin(self, pin: tuple[str, int], level: int, at: int | None = None) -> None:
@@ -322,6 +334,18 @@ class VirtualMega:
             return self.variables[name]
         except KeyError:
             raise KeyError(f"the ELF has no variable {name!r}") from None
+
+    def snapshot(self, names: tuple[str, ...]) -> dict[str, float | int]:
+        """Several globals at once (one read of the SRAM span that holds them)."""
+        spans = [self.address_of(n) for n in names]
+        lo = min(a for a, _ in spans)
+        hi = max(a + size for a, size in spans)
+        block = self.read_bytes(lo, hi - lo)
+        out: dict[str, float | int] = {}
+        for name, (address, size) in zip(names, spans, strict=True):
+            raw = block[address - lo:address - lo + size]
+            out[name] = struct.unpack("<" + _FORMAT_OF[name], raw)[0]
+        return out
 
     def read_raw(self, name: str) -> bytes:
         address, size = self.address_of(name)

@@ -441,10 +441,22 @@ static uint8_t fieldsExpected() {
   return 0;
 }
 
+// Commands are printable ASCII without spaces: a control byte, a NUL (which
+// would end a field early for strtod) or a byte with the top bit set is junk.
+static bool allPrintable() {
+  for (uint8_t i = 0; i < cmdLen; i++) {
+    uint8_t c = (uint8_t)cmdBuf[i];
+    if (c <= ' ' || c >= 0x7F) return false;
+  }
+  return true;
+}
+
 static void finishCommand() {
   cmdBuf[cmdLen] = '\0';
   ParseResult r;
-  if (cmdBuf[0] == 'r') {
+  if (!allPrintable()) {
+    r = ERR_SYNTAX;
+  } else if (cmdBuf[0] == 'r') {
     r = parseWheel();
   } else if (cmdBuf[0] == 'x') {
     r = parseCmdVel();

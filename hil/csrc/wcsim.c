@@ -58,8 +58,8 @@ typedef struct {
     /* hook log */
     uint32_t hook_pc[WCSIM_MAX_HOOKS];
     int n_hooks;
-    int break_hook;
-    int at_break;     /* stopped at the break: do not log the same entry twice */   /* run_until stops before this hook's instruction (-1: none) */
+    uint32_t break_mask;  /* run_until stops before the hooks whose bit is set */
+    int at_break;         /* stopped at a break: do not log the same entry twice */
     wcsim_hit_t *hits;
     size_t n_hits, cap_hits;
     /* VCD */
@@ -122,7 +122,6 @@ wcsim_t *wcsim_new(const char *elf_path, char *err, int errlen) {
     s->avr->log = 0;
     avr_load_firmware(s->avr, &s->fw);
     s->avr->sleep = no_sleep;
-    s->break_hook = -1;
 
     uint32_t flags = 0;
     avr_ioctl(s->avr, AVR_IOCTL_UART_GET_FLAGS('0'), &flags);
@@ -205,9 +204,9 @@ static void record_hit(wcsim_t *s, int h) {
     p->r24 = r[24];
 }
 
-void wcsim_set_break(wcsim_t *s, int hook) { s->break_hook = hook; }
+void wcsim_set_break_mask(wcsim_t *s, uint32_t mask) { s->break_mask = mask; }
 
-/* Runs until avr->cycle >= target. Returns 0; 1 when it stopped at the break
+/* Runs until avr->cycle >= target. Returns 0; 1 when it stopped at a break
  * hook (logged, not yet executed; the next call runs on past it); -1 when the
  * core stopped (crash or sleep with interrupts off). */
 int wcsim_run_until(wcsim_t *s, uint64_t target) {
@@ -223,7 +222,7 @@ int wcsim_run_until(wcsim_t *s, uint64_t target) {
         for (int h = 0; h < s->n_hooks; h++) {
             if (avr->pc == s->hook_pc[h] && !s->at_break) {
                 record_hit(s, h);
-                if (h == s->break_hook) {
+                if (s->break_mask & (1u << h)) {
                     s->at_break = 1;
                     return 1;
                 }

@@ -1,0 +1,211 @@
+"""Differential proof: the Python port against the compiled firmware in simavr.
+
+``record(trace)`` runs the trace on the virtual Mega and stops at the entry of every
+``processByte`` and ``controlTick`` call. Each stop gives one firmware event (the
+byte, or the tick's ``millis()``) and the controller state the previous event left,
+read from SRAM by symbol, with PWM and DIR from the I/O registers.
+
+``compare(recording)`` feeds the same events to ``wcdrive.firmware.Firmware`` started
+from the firmware's own state after ``setup()``, and compares after every event:
+every controller float bit for bit, every integer and flag, PWM duty and DIR per
+motor, and, at the end, the whole TX byte stream. The only inputs the port takes
+from the run are what the firmware's loop reads: the bytes, ``millis()`` at each
+tick and the encoder counts the tick latched; those counts are themselves checked
+against the Python quadrature decoder run over the trace's edges.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from hil.traces import Trace
+from hil.virtual_mega import F_CPU, VirtualMega
+from wcdrive.firmware.board import Firmware
+from wcdrive.firmware.f32 import bits
+from wcdrive.firmware.quadrature import QUAD_TABLE, ILLEGAL
+from wcdrive.firmware.state import FLOAT_FIELDS, INT_FIELDS, FirmwareState
+
+_WATCHED = FLOAT_FIELDS + INT_FIELDS + ("txDropped",)
+_BOOL_FIELDS = {"cmdSinceTick", "watchdogArmed", "emergencyStop", "ppmLost", "parked",
+                "cmdDiscarding"}
+
+
+@dataclass
+class Event:
+    kind: str                 # "byte" or "tick"
+    arg: int                  # the byte, or millis() passed to controlTick
+    cycle: int
+    after: dict[str, float | int] = field(default_factory=dict)
+    pwm: tuple[int, int] = (0, 0)
+    direction: tuple[int, int] = (1, 1)
+
+
+@dataclass
+class Recording:
+    trace: Trace
+    initial: dict[str, float | int]
+    events: list[Event]
+    tx: bytes
+    end_cycle: int
+
+
+@dataclass
+class Mismatch:
+    event_index: int
+    tick: int
+    field: str
+    port: str
+    firmware: str
+
+    def __str__(self) -> str:
+        return (f"event {self.event_index} (tick {self.tick}): {self.field} "
+                f"port={self.port} firmware={self.firmware}")
+
+
+@dataclass
+class Report:
+    events: int
+    ticks: int
+    fields_compared: int
+    mismatches: list[Mismatch]
+    tx_bytes: int
+
+
+def _hexf(x: float) -> str:
+    return f"{bits(x):#010x} ({x!r})"
+
+
+def record(trace: Trace, elf: str | Path | None = None) -> Recording:
+    mega = VirtualMega(elf, millis_start=trace.millis_start)
+    for t, data in trace.serial:
+        mega.send(data, at=round(t * F_CPU))
+    for side, train in trace.encoders.items():
+        mega.encoder_edges(side, train)
+    end = round(trace.duration * F_CPU)
+    mega.break_on("processByte", "controlTick")
+    events: list[Event] = []
+    initial: dict[str, float | int] | None = None
+
+    def snapshot() -> tuple[dict[str, float | int], tuple[int, int], tuple[int, int]]:
+        return (mega.snapshot(_WATCHED), (mega.pwm("left"), mega.pwm("right")),
+                (mega.direction("left"), mega.direction("right")))
+
+    while mega.run_to_break(end):
+        hit = mega.hit_log[-1]
+        state, pwm, direction = snapshot()
+        if events:
+            events[-1].after, events[-1].pwm, events[-1].direction = state, pwm, direction
+        else:
+            initial = state
+        kind = "byte" if hit.function == "processByte" else "tick"
+        arg = (hit.arg >> 16) & 0xFF if kind == "byte" else hit.arg
+        events.append(Event(kind, arg, hit.cycle))
+    if events:
+        state, pwm, direction = snapshot()
+        events[-1].after, events[-1].pwm, events[-1].direction = state, pwm, direction
+    else:
+        initial = mega.snapshot(_WATCHED)
+    tx = bytes(b for _, b in mega.take_tx())
+    mega.close()
+    assert initial is not None
+    return Recording(trace, initial, events, tx, end)
+
+
+def initial_state(recording: Recording) -> FirmwareState:
+    """The port's state after setup(): the default state with the boot millis()."""
+    return FirmwareState(lastControlTime=int(recording.initial["lastControlTime"]))
+
+
+def _decoded_counts(trace: Trace, side: str) -> tuple[np.ndarray, np.ndarray]:
+    """Count after each edge, by the Python decoder, and the edge cycles."""
+    train = trace.encoders.get(side)
+    if train is None or train.times.size == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    states = train.states.astype(np.int64)
+    previous = np.concatenate(([0b11], states[:-1]))
+    table = np.array([0 if v == ILLEGAL else v for v in QUAD_TABLE])
+    counts = np.cumsum(table[(previous << 2) | states])
+    cycles = np.round(train.times * F_CPU).astype(np.int64)
+    return counts, cycles
+
+
+def compare(recording: Recording) -> Report:
+    fw = Firmware(initial_state(recording))
+    mismatches: list[Mismatch] = []
+    fields_compared = 0
+    # The state right after setup() must be the port's boot state.
+    for name, port_value, fw_value in _differences(fw.state, recording.initial):
+        mismatches.append(Mismatch(-1, 0, name, port_value, fw_value))
+    tx = bytearray(fw.boot_output())
+    decoded = {side: _decoded_counts(recording.trace, side) for side in ("left", "right")}
+    ticks = 0
+    events = recording.events
+    for i, ev in enumerate(events):
+        if ev.kind == "byte":
+            tx += fw.feed(bytes([ev.arg]))
+        else:
+            ticks += 1
+            count_l = int(ev.after["encTickL"])
+            count_r = int(ev.after["encTickR"])
+            exit_cycle = events[i + 1].cycle if i + 1 < len(events) else recording.end_cycle
+            for side, count in (("left", count_l), ("right", count_r)):
+                if not _count_possible(decoded[side], count, ev.cycle, exit_cycle):
+                    mismatches.append(Mismatch(i, ticks, f"encoder count {side}",
+                                               "decoder disagrees", str(count)))
+            tx += fw.tick(ev.arg, count_l, count_r)
+        diffs = _differences(fw.state, ev.after)
+        fields_compared += len(FLOAT_FIELDS) + len(INT_FIELDS) + 4
+        for name, port_value, fw_value in diffs:
+            mismatches.append(Mismatch(i, ticks, name, port_value, fw_value))
+        port_io = ((fw.state.pwmL, fw.state.pwmR), (fw.state.dirL, fw.state.dirR))
+        if port_io != (ev.pwm, ev.direction):
+            mismatches.append(Mismatch(i, ticks, "pins (pwm, dir)", str(port_io),
+                                       str((ev.pwm, ev.direction))))
+        if int(ev.after.get("txDropped", 0)) != 0:
+            mismatches.append(Mismatch(i, ticks, "txDropped", "0", str(ev.after["txDropped"])))
+    fw_tx = recording.tx
+    sent = bytes(tx)
+    # The firmware may still hold the tail of its last lines in the TX ring.
+    if not (sent.startswith(fw_tx) and len(sent) - len(fw_tx) < 256):
+        where = next((k for k, (a, b) in enumerate(zip(sent, fw_tx, strict=False)) if a != b),
+                     min(len(sent), len(fw_tx)))
+        mismatches.append(Mismatch(len(events), ticks, f"TX byte {where}",
+                                   repr(sent[max(0, where - 20):where + 20]),
+                                   repr(fw_tx[max(0, where - 20):where + 20])))
+    return Report(len(events), ticks, fields_compared, mismatches, len(fw_tx))
+
+
+def _count_possible(decoded: tuple[np.ndarray, np.ndarray], count: int, start: int,
+                    stop: int) -> bool:
+    """Was ``count`` the decoder's count at some cycle in [start, stop]? Edges that land
+    while the tick runs may or may not be latched, so every count in that window is."""
+    counts, cycles = decoded
+    if counts.size == 0:
+        return count == 0
+    hi = int(np.searchsorted(cycles, stop, "right"))
+    # An edge at cycle c is seen by the ISR a few cycles later: allow 200 cycles of latency.
+    lo = int(np.searchsorted(cycles, start - 200, "left"))
+    candidates = {int(counts[lo - 1]) if lo > 0 else 0}
+    candidates.update(int(c) for c in counts[lo:hi])
+    return count in candidates
+
+
+def _differences(state: FirmwareState, fw: dict[str, float | int]) -> list[tuple[str, str, str]]:
+    out = []
+    for name in FLOAT_FIELDS:
+        a, b = getattr(state, name), float(fw[name])
+        if bits(a) != bits(b):
+            out.append((name, _hexf(a), _hexf(b)))
+    for name in INT_FIELDS:
+        a, b = int(getattr(state, name)), int(fw[name])
+        if name in _BOOL_FIELDS:
+            a, b = int(bool(a)), int(bool(b))
+        if name in ("encTickL", "encTickR", "prevEncL", "prevEncR"):
+            a &= 0xFFFFFFFF
+            b &= 0xFFFFFFFF
+        if a != b:
+            out.append((name, f"{a:#x}", f"{b:#x}"))
+    return out

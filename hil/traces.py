@@ -1,0 +1,266 @@
+"""Input traces for the firmware: serial bytes and encoder edges on a timeline.
+
+``generate_trace(draw, duration)`` builds a random trace from any source of choices
+(``RandomDraw`` for ``python -m wcdrive.verify``, ``HypothesisDraw`` for the
+property tests, which then shrink), so both use one generator. Traces cover every
+command kind, malformed and newline-less commands, awkward decimal strings,
+reversals that start pivots and commands that interrupt them, silences past the
+watchdog, PPM loss, long saturations, illegal encoder transitions, encoder speeds up
+to 60,000 edges/s and boots with ``millis()`` just below its 2**32 wrap.
+"""
+
+from __future__ import annotations
+
+import random
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any, Protocol, TypeVar
+
+import numpy as np
+
+from wcdrive.firmware.quadrature import EdgeTrain, edges_from_trajectory, state_for_count
+
+T = TypeVar("T")
+
+#: When the first byte may arrive: setup() is done after about 2 ms.
+FIRST_COMMAND_S = 0.010
+
+
+class Draw(Protocol):
+    def integer(self, lo: int, hi: int) -> int: ...
+    def real(self, lo: float, hi: float) -> float: ...
+    def choice(self, options: Sequence[T]) -> T: ...
+    def boolean(self, p: float = 0.5) -> bool: ...
+
+
+class RandomDraw:
+    def __init__(self, seed: int) -> None:
+        self.rng = random.Random(seed)
+
+    def integer(self, lo: int, hi: int) -> int:
+        return self.rng.randint(lo, hi)
+
+    def real(self, lo: float, hi: float) -> float:
+        return self.rng.uniform(lo, hi)
+
+    def choice(self, options: Sequence[T]) -> T:
+        return options[self.rng.randrange(len(options))]
+
+    def boolean(self, p: float = 0.5) -> bool:
+        return self.rng.random() < p
+
+
+class HypothesisDraw:
+    """Choices drawn from ``st.data()``, so hypothesis can shrink a failing trace."""
+
+    def __init__(self, data: Any) -> None:
+        from hypothesis import strategies as st
+
+        self._st = st
+        self._data = data
+
+    def integer(self, lo: int, hi: int) -> int:
+        return self._data.draw(self._st.integers(lo, hi))
+
+    def real(self, lo: float, hi: float) -> float:
+        return self._data.draw(self._st.floats(lo, hi, allow_nan=False))
+
+    def choice(self, options: Sequence[T]) -> T:
+        return options[self._data.draw(self._st.integers(0, len(options) - 1))]
+
+    def boolean(self, p: float = 0.5) -> bool:
+        return self._data.draw(self._st.integers(0, 999)) < int(p * 1000)
+
+
+@dataclass
+class Trace:
+    duration: float
+    serial: list[tuple[float, bytes]] = field(default_factory=list)
+    encoders: dict[str, EdgeTrain] = field(default_factory=dict)
+    millis_start: int | None = None
+
+    def describe(self) -> str:
+        lines = [f"duration={self.duration}s millis_start={self.millis_start}"]
+        lines += [f"  t={t:.4f}s {data!r}" for t, data in self.serial]
+        for side, train in self.encoders.items():
+            lines.append(f"  {side}: {train.times.size} edges, count {train.start_count}"
+                         f" -> {train.end_count}")
+        return "\n".join(lines)
+
+
+# ---- decimal strings -------------------------------------------------------------
+def _digits(draw: Draw, lo: int, hi: int) -> str:
+    return "".join(str(draw.integer(0, 9)) for _ in range(draw.integer(lo, hi)))
+
+
+def decimal_text(draw: Draw, magnitude: float, signed: bool) -> str:
+    """A decimal string near ``[0, magnitude]``: plain, many digits, exponents, or
+    the strings avr-libc rounds differently from correct rounding."""
+    kind = draw.integer(0, 7)
+    if kind == 0:
+        text = f"{draw.real(0.0, magnitude):.3f}"          # the seed host's format
+    elif kind == 1:
+        text = f"{draw.real(0.0, magnitude):.{draw.integer(0, 9)}f}"
+    elif kind == 2:
+        text = f"{draw.integer(0, int(magnitude))}.{_digits(draw, 8, 30)}"   # many digits
+    elif kind == 3:
+        text = draw.choice(["3.14159", "2.68", "7.0000005", "1.00000005960464477539",
+                            "0.1", "0.3", "1e0", "2.5e-1", "1.0e-40", "0.0", "00000.5",
+                            "1.", ".5", "17.59", "2.68", "9.4", "0.000000000000000000001"])
+    elif kind == 4:
+        mantissa = draw.real(0.0, 9.99)
+        exponent = draw.integer(-45, 1)
+        text = f"{mantissa:.{draw.integer(0, 6)}f}e{exponent}"
+    elif kind == 5:
+        text = "0." + "0" * draw.integer(0, 12) + _digits(draw, 1, 12)
+    elif kind == 6:
+        text = _digits(draw, 1, 12) + "." + _digits(draw, 0, 12)           # often out of range
+    else:
+        text = str(draw.real(0.0, magnitude))                              # repr: may have e-05
+    if signed and draw.boolean(0.5):
+        text = "-" + text
+    elif signed and draw.boolean(0.1):
+        text = "+" + text
+    return text
+
+
+# ---- commands --------------------------------------------------------------------
+def wheel_command(draw: Draw, right: str | None = None, left: str | None = None) -> bytes:
+    r = right if right is not None else decimal_text(draw, 17.59, False)
+    lv = left if left is not None else decimal_text(draw, 17.59, False)
+    return f"r{draw.choice('pn')}{r},l{draw.choice('pn')}{lv},".encode()
+
+
+def cmdvel_command(draw: Draw, x: float | None = None) -> bytes:
+    xs = f"{x:.3f}" if x is not None else decimal_text(draw, 2.68, True)
+    return f"x:{xs},t:{decimal_text(draw, 2.0, True)},".encode()
+
+
+def ppm_command(draw: Draw, lost: bool = False) -> bytes:
+    channels = [draw.integer(1000, 2000) if draw.boolean(0.7) else 1500 for _ in range(8)]
+    if lost:
+        channels[draw.integer(0, 7)] = draw.choice([0, 899, 2101, 9999, 850])
+    return ("ppm:" + ",".join(str(c) for c in channels) + ",").encode()
+
+
+def malformed_command(draw: Draw) -> bytes:
+    kind = draw.integer(0, 13)
+    if kind == 0:
+        return bytes(draw.integer(0, 255) for _ in range(draw.integer(1, 12))) + b"\n"
+    if kind == 1:
+        return b"x:0.5\n"                                   # missing field
+    if kind == 2:
+        return b"x:0.5,y:1.0,t:0.1,"                        # extra field in the middle
+    if kind == 3:
+        return draw.choice([b"x:nan,t:0.1,", b"x:inf,t:0.0,", b"rpnan,lp1.0,", b"x:-inf,t:0,",
+                            b"rpinf,lp1,", b"x:0.1,t:NaN,", b"x:INFINITY,t:1,"])
+    if kind == 4:
+        return draw.choice([b"rp18.0,lp1.0,", b"x:2.69,t:0.0,", b"x:0.0,t:9.5,", b"rp1e3,lp0,",
+                            b"x:1e39,t:0,", b"rp99999999999,lp1,"])
+    if kind == 5:
+        return b"x:0." + b"1" * draw.integer(60, 90) + b",t:0.1,"   # overlong
+    if kind == 6:
+        return draw.choice([b"rp-1.0,lp1.0,", b"rp 1.0,lp1.0,", b"r1.0,l1.0,", b"rp1.0,rp1.0,",
+                            b"rp,lp1,", b"rp1.0x,lp1,", b"x:,t:1,", b"x:1.0.0,t:0,"])
+    if kind == 7:
+        return draw.choice([b"ppm:1500,1500\n", b"ppm:1500,1500,1500,1500,1500,1500,1500,15a0,",
+                            b"ppm:15000,1500,1500,1500,1500,1500,1500,1500,", b"ppmx,",
+                            b"ppm:,1500,1500,1500,1500,1500,1500,1500,"])
+    if kind == 8:
+        return b"t:0.1,x:0.5,"                              # fields swapped
+    if kind == 9:
+        return b"x:0.5,\x00t:0.1,"                          # NUL inside
+    if kind == 10:
+        return b"\r\n\r\n"                                  # empty lines: ignored
+    if kind == 11:
+        return b"X:0.5,T:0.1,"
+    if kind == 12:
+        return b"rp1.0,lp1.0" + bytes([draw.integer(128, 255)]) + b","
+    return b",,,"
+
+
+def command(draw: Draw, travel_sign: list[int]) -> bytes:
+    """One command of any kind; ``travel_sign`` tracks the direction so reversals
+    (and so pivots) come often."""
+    kind = draw.integer(0, 9)
+    if kind <= 1:
+        return malformed_command(draw)
+    if kind == 2:
+        return draw.choice([b"rp0,lp0,", b"x:0.000,t:0.000,", b"rp0.0,ln0.0,\n"])
+    if kind == 3:
+        return ppm_command(draw, lost=draw.boolean(0.3))
+    if kind in (4, 5):
+        travel_sign[0] = -travel_sign[0]
+        speed = draw.real(0.05, 1.2) * travel_sign[0]
+        return cmdvel_command(draw, x=speed)                # a reversal: pivot
+    if kind == 6:
+        return wheel_command(draw)
+    if kind == 7:
+        big = f"{draw.real(10.0, 17.59):.2f}"
+        return wheel_command(draw, right=big, left=big)     # saturates when the wheels stay
+    return cmdvel_command(draw)
+
+
+def terminator(draw: Draw) -> bytes:
+    return draw.choice([b"", b"", b"\n", b"\r\n", b"\r"])
+
+
+# ---- encoders ----------------------------------------------------------------
+def encoder_motion(draw: Draw, duration: float) -> EdgeTrain:
+    """Piecewise-constant speeds (counts/s, up to 60,000 edges/s), reversals,
+    pauses, and now and then an illegal transition (both channels at once). The
+    wheel rests until setup() has enabled the encoder interrupts."""
+    times = [0.0, FIRST_COMMAND_S]
+    counts = [0.0, 0.0]
+    t = FIRST_COMMAND_S
+    while t < duration:
+        step = draw.real(0.02, 0.8)
+        kind = draw.integer(0, 9)
+        if kind <= 2:
+            speed = 0.0
+        elif kind == 3:
+            speed = draw.choice([-1.0, 1.0]) * draw.real(28000.0, 60000.0)
+        else:
+            speed = draw.real(-15000.0, 15000.0)
+        t = min(duration, t + step)
+        times.append(t)
+        counts.append(counts[-1] + speed * step)
+    train = edges_from_trajectory(np.array(times), np.array(counts) + 0.5)
+    if train.times.size and draw.boolean(0.4):
+        train = _with_illegal(draw, train)
+    return train
+
+
+def _with_illegal(draw: Draw, train: EdgeTrain) -> EdgeTrain:
+    """Replaces a few edges' states by the state two phases on: both pins change."""
+    states = train.states.copy()
+    for _ in range(draw.integer(1, 3)):
+        i = draw.integer(0, states.size - 1)
+        states[i] = state_for_count(_phase(states[i]) + 2)
+    return EdgeTrain(train.times, states, train.start_count, train.end_count)
+
+
+def _phase(state: int) -> int:
+    return (0b11, 0b01, 0b00, 0b10).index(int(state))
+
+
+# ---- whole trace -------------------------------------------------------------
+def generate_trace(draw: Draw, duration: float) -> Trace:
+    millis_start = None
+    if draw.boolean(0.25):
+        millis_start = 2**32 - draw.integer(0, 4000)
+    serial: list[tuple[float, bytes]] = []
+    t = FIRST_COMMAND_S + draw.real(0.0, 0.1)
+    travel_sign = [1]
+    while t < duration - 0.05:
+        data = command(draw, travel_sign) + terminator(draw)
+        serial.append((t, data))
+        gap = draw.integer(0, 9)
+        if gap == 0:
+            t += draw.real(0.55, 1.5)        # silence past the watchdog
+        elif gap <= 2:
+            t += draw.real(0.0, 0.02)        # bursts: several commands within a tick
+        else:
+            t += draw.real(0.03, 0.35)       # inside a pivot, often
+    encoders = {side: encoder_motion(draw, duration) for side in ("left", "right")}
+    return Trace(duration=duration, serial=serial, encoders=encoders, millis_start=millis_start)

@@ -1,0 +1,49 @@
+"""Arduino's ``Print`` number formatting (ArduinoCore-avr 1.8.7, ``Print.cpp``)."""
+
+from __future__ import annotations
+
+import math
+
+from wcdrive.firmware.f32 import div, f32
+
+_OVF = 4294967040.0
+
+
+def print_long(n: int) -> bytes:
+    """``Print::print(long)`` in base 10."""
+    if n < 0:
+        return b"-" + str((-n) & 0xFFFFFFFF).encode()
+    return str(n).encode()
+
+
+def print_unsigned(n: int) -> bytes:
+    return str(n & 0xFFFFFFFF).encode()
+
+
+def print_float(number: float, digits: int = 2) -> bytes:
+    """``Print::printFloat(number, digits)`` with binary32 arithmetic throughout."""
+    if math.isnan(number):
+        return b"nan"
+    if math.isinf(number):
+        return b"inf"
+    if number > _OVF or number < -_OVF:
+        return b"ovf"
+    out = bytearray()
+    if number < 0.0:
+        out += b"-"
+        number = -number
+    rounding = 0.5
+    for _ in range(digits):
+        rounding = div(rounding, 10.0)
+    number = f32(number + rounding)
+    int_part = int(number) & 0xFFFFFFFF
+    remainder = f32(number - f32(float(int_part)))
+    out += str(int_part).encode()
+    if digits > 0:
+        out += b"."
+    for _ in range(digits):
+        remainder = f32(remainder * 10.0)
+        to_print = int(remainder) & 0xFFFF
+        out += str(to_print).encode()
+        remainder = f32(remainder - float(to_print))
+    return bytes(out)

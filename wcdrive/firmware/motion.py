@@ -1,0 +1,44 @@
+"""What a command or a stop does to the wheel targets, with the pivot state machine."""
+
+from __future__ import annotations
+
+from wcdrive.firmware.constants import PIVOT_SPEED, PIVOT_THRESHOLD, PIVOT_TICKS, WHEEL_RADIUS
+from wcdrive.firmware.f32 import f32
+from wcdrive.firmware.state import FirmwareState
+
+
+def needs_pivot(travel: float, prev_travel: float) -> bool:
+    return (prev_travel > PIVOT_THRESHOLD and travel < -PIVOT_THRESHOLD) or (
+        prev_travel < -PIVOT_THRESHOLD and travel > PIVOT_THRESHOLD
+    )
+
+
+def emergency_halt(s: FirmwareState) -> None:
+    """Targets to zero; the ramp brings the setpoints down at the emergency rate."""
+    s.targetL = s.targetR = 0.0
+    s.pivotTicksLeft = 0
+    s.lastTravel = 0.0
+    s.emergencyStop = 1
+
+
+def accept_command(s: FirmwareState, new_mode: int, right: float, left: float) -> None:
+    s.mode = new_mode
+    s.cmdSinceTick = 1
+    s.emergencyStop = 0
+    travel = f32(f32(f32(right + left) * 0.5) * WHEEL_RADIUS)
+    if right == 0.0 and left == 0.0:
+        s.pivotTicksLeft = 0
+        s.targetR = s.targetL = 0.0
+    elif needs_pivot(travel, s.lastTravel):
+        s.pivotTicksLeft = PIVOT_TICKS
+        s.pendingR = right
+        s.pendingL = left
+        s.targetR = PIVOT_SPEED
+        s.targetL = -PIVOT_SPEED
+    elif s.pivotTicksLeft > 0:
+        s.pendingR = right
+        s.pendingL = left
+    else:
+        s.targetR = right
+        s.targetL = left
+    s.lastTravel = travel

@@ -1,0 +1,80 @@
+"""The firmware's globals as one plain object.
+
+Field names are those of ``final_control.ino``, so a field of this object and the
+SRAM variable of the same name in the ELF can be compared one to one. Floats hold
+binary32 values. Tests build any state directly: ``FirmwareState(targetL=2.0, ...)``.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass, field, fields
+
+from wcdrive.firmware.constants import HIGH, MODE_CMDVEL
+
+#: The controller floats compared bit for bit against the firmware's SRAM.
+FLOAT_FIELDS = (
+    "targetL", "targetR", "setpointL", "setpointR", "rawVelL", "rawVelR", "filtVelL",
+    "filtVelR", "integralL", "integralR", "prevMeasL", "prevMeasR", "outputL", "outputR",
+    "lastTravel", "pendingL", "pendingR",
+)
+#: Integer and flag globals compared exactly.
+INT_FIELDS = (
+    "mode", "pwmL", "pwmR", "dirL", "dirR", "encTickL", "encTickR", "prevEncL", "prevEncR",
+    "lastControlTime", "tickCount", "pivotTicksLeft", "cmdSinceTick", "watchdogArmed",
+    "lastCmdTime", "emergencyStop", "ppmLost", "stillTicks", "parked", "rejectedCount",
+    "errSuppressed", "errLinesThisTick", "cmdLen", "cmdCommas", "cmdDiscarding",
+)
+
+
+@dataclass(slots=True)
+class FirmwareState:
+    mode: int = MODE_CMDVEL
+    targetL: float = 0.0
+    targetR: float = 0.0
+    setpointL: float = 0.0
+    setpointR: float = 0.0
+    rawVelL: float = 0.0
+    rawVelR: float = 0.0
+    filtVelL: float = 0.0
+    filtVelR: float = 0.0
+    integralL: float = 0.0
+    integralR: float = 0.0
+    prevMeasL: float = 0.0
+    prevMeasR: float = 0.0
+    outputL: float = 0.0
+    outputR: float = 0.0
+    pwmL: int = 0
+    pwmR: int = 0
+    dirL: int = HIGH
+    dirR: int = HIGH
+    encTickL: int = 0
+    encTickR: int = 0
+    prevEncL: int = 0
+    prevEncR: int = 0
+    lastControlTime: int = 0
+    tickCount: int = 0
+    lastTravel: float = 0.0
+    pivotTicksLeft: int = 0
+    pendingL: float = 0.0
+    pendingR: float = 0.0
+    cmdSinceTick: int = 0
+    watchdogArmed: int = 0
+    lastCmdTime: int = 0
+    emergencyStop: int = 0
+    ppmLost: int = 0
+    stillTicks: int = 0
+    parked: int = 1
+    rejectedCount: int = 0
+    errSuppressed: int = 0
+    errLinesThisTick: int = 0
+    cmdBuf: bytearray = field(default_factory=bytearray)
+    cmdLen: int = 0
+    cmdCommas: int = 0
+    cmdDiscarding: int = 0
+
+    def copy(self) -> FirmwareState:
+        return copy.deepcopy(self)
+
+    def as_dict(self) -> dict[str, object]:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
