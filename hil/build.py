@@ -56,12 +56,18 @@ def harness_library() -> Path:
     return target
 
 
-def firmware_elf(firmware_dir: Path = FIRMWARE_DIR) -> Path:
-    """Builds firmware/final_control with its Makefile (a no-op when up to date)."""
+def firmware_elf(sketch_dir: Path = FIRMWARE_DIR) -> Path:
+    """Builds a sketch folder (default firmware/final_control) with the firmware's
+    Makefile; a no-op when up to date. Returns the ELF's path."""
     if shutil.which("avr-gcc") is None:
         raise BuildError(f"avr-gcc is missing: apt-get install {DEBIAN_PACKAGES}")
-    result = subprocess.run(["make", "-s", "-C", str(firmware_dir), "build/final_control.elf"],
-                            capture_output=True, text=True)
+    sketch = sketch_dir.name
+    cmd = ["make", "-s", "-C", str(sketch_dir), "-f", str(FIRMWARE_DIR / "Makefile"),
+           f"SKETCH={sketch}", f"build/{sketch}.elf"]
+    result = subprocess.run(cmd, capture_output=True, text=True)
     if result.returncode != 0:
-        raise BuildError(f"building the firmware failed:\n{result.stdout}\n{result.stderr}")
-    return firmware_dir / "build" / "final_control.elf"
+        raise BuildError(f"building {sketch} failed:\n{result.stdout}\n{result.stderr}")
+    return sketch_dir / "build" / f"{sketch}.elf"
+
+
+FPCHECK_DIR = REPO_DIR / "firmware" / "fpcheck"

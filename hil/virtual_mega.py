@@ -54,7 +54,7 @@ VARIABLE_FORMATS = {
 _FORMAT_OF = {name: fmt for fmt, names in VARIABLE_FORMATS.items() for name in names}
 
 #: Functions whose entries are logged: (name, what the harness records).
-HOOKS = ("processByte", "controlTick", "main")
+HOOKS = ("processByte", "controlTick", "main", "doneOp")
 
 
 class HarnessError(RuntimeError):
@@ -351,19 +351,24 @@ class VirtualMega:
         address, size = self.address_of(name)
         return self.read_bytes(address, size)
 
-    def read(self, name: str) -> float | int:
+    def read(self, name: str, fmt: str | None = None) -> float | int:
         """A firmware global by name, decoded by its C type (floats as Python floats
-        holding the exact binary32 value)."""
-        fmt = _FORMAT_OF.get(name)
+        holding the exact binary32 value); ``fmt`` is a struct code for other globals."""
+        fmt = fmt or _FORMAT_OF.get(name)
         if fmt is None:
-            raise KeyError(f"no known C type for {name!r}; use read_raw()")
-        return struct.unpack("<" + fmt, self.read_raw(name))[0]
+            raise KeyError(f"no known C type for {name!r}; pass fmt or use read_raw()")
+        return struct.unpack("<" + fmt, self.read_raw(name)[:struct.calcsize(fmt)])[0]
 
-    def write(self, name: str, value: float | int) -> None:
+    def write(self, name: str, value: float | int, fmt: str | None = None) -> None:
+        data = struct.pack("<" + (fmt or _FORMAT_OF[name]), value)
+        self.write_raw(name, data)
+
+    def write_raw(self, name: str, data: bytes) -> None:
         address, size = self.address_of(name)
-        data = struct.pack("<" + _FORMAT_OF[name], value)
-        buf = (ctypes.c_uint8 * size)(*data)
-        self._c.wcsim_write(self._s, address, buf, size)
+        if len(data) > size:
+            raise ValueError(f"{len(data)} bytes do not fit in {name} ({size} bytes)")
+        buf = (ctypes.c_uint8 * len(data))(*data)
+        self._c.wcsim_write(self._s, address, buf, len(data))
 
     def pin_output(self, pin: tuple[str, int]) -> int:
         port, bit = pin

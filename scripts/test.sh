@@ -1,0 +1,31 @@
+#!/usr/bin/env bash
+# The test command (README): installs what it needs, builds the firmware and the
+# simavr harness from source, lints, and runs the whole suite with the thorough
+# hypothesis profile. Works on a fresh Debian bookworm machine as root (or with sudo).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+DEBIAN_PACKAGES=(gcc-avr avr-libc arduino-core-avr simavr libsimavr-dev libelf-dev make gcc)
+missing=()
+for pkg in "${DEBIAN_PACKAGES[@]}"; do
+  dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")
+done
+if [ ${#missing[@]} -gt 0 ]; then
+  echo "== installing Debian packages: ${missing[*]}"
+  SUDO=""
+  [ "$(id -u)" -ne 0 ] && SUDO="sudo"
+  $SUDO apt-get update -q
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -q --no-install-recommends "${missing[@]}"
+fi
+
+echo "== installing wcdrive with its test dependencies"
+python3 -m pip install -q --disable-pip-version-check -e ".[test]"
+
+echo "== building the firmware"
+make -s -C firmware/final_control
+
+echo "== ruff"
+python3 -m ruff check .
+
+echo "== pytest (hypothesis profile: ${HYPOTHESIS_PROFILE:=ci})"
+python3 -m pytest -n 2 --hypothesis-profile="$HYPOTHESIS_PROFILE" "$@"

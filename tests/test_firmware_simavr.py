@@ -1,0 +1,219 @@
+"""final_control in simavr: boot, feedback timing, every command kind, every malformed
+case, the watchdog, stops and PPM loss (issue: firmware)."""
+
+from __future__ import annotations
+
+import re
+
+import pytest
+
+from hil.virtual_mega import F_CPU, VirtualMega
+from tests.boards import FEEDBACK, boot, ms, send_and_run
+from wcdrive.firmware.board import Firmware
+from wcdrive.firmware.f32 import f32
+
+pytestmark = pytest.mark.simavr
+
+CONTROL = ("targetL", "targetR", "setpointL", "setpointR", "mode", "pivotTicksLeft",
+           "integralL", "integralR", "pwmL", "pwmR", "dirL", "dirR", "emergencyStop")
+
+
+def test_boots_and_sends_feedback_every_50ms(mega: VirtualMega) -> None:
+    mega.run_for(2.0)
+    tx = mega.take_tx()
+    text = bytes(b for _, b in tx)
+    assert text.startswith(b"BOOT:final_control\r\n")
+    starts = [cycle for k, (cycle, b) in enumerate(tx)
+              if b == ord("E") and bytes(x for _, x in tx[k:k + 4]) == b"ENC:"]
+    assert len(starts) >= 38
+    periods = [ms(b - a) for a, b in zip(starts, starts[1:], strict=False)]
+    assert all(abs(p - 50.0) <= 1.5 for p in periods), periods
+    assert len(FEEDBACK.findall(text)) == len(starts)
+    assert mega.relay() == 1
+
+
+VALID = [
+    (b"rp5.0,lp3.0,", "WHEEL", f32(5.0), f32(3.0)),
+    (b"rn2.5,ln2.5,\n", "WHEEL", f32(-2.5), f32(-2.5)),
+    (b"x:0.500,t:0.100,", "CMDVEL", None, None),          # the seed host's form, no newline
+    (b"x:0.5,t:0.2,\r\n", "CMDVEL", None, None),
+    (b"ppm:1500,2000,1500,1500,1500,1500,1500,1500,", "PPM", f32(5.0), f32(5.0)),
+    (b"ppm:1500,1500,1500,1750,1500,1500,1500,1500\n", "PPM", f32(-2.5), f32(2.5)),
+]
+
+
+@pytest.mark.parametrize(("command", "mode", "right", "left"), VALID)
+def test_answers_each_command_kind(mega: VirtualMega, command: bytes, mode: str,
+                                   right: float | None, left: float | None) -> None:
+    boot(mega)
+    out = send_and_run(mega, command, 0.12)
+    lines = FEEDBACK.findall(out)
+    assert lines and lines[-1][4].decode() == mode
+    port = Firmware()
+    port.feed(command)
+    assert mega.read("targetR") == port.state.targetR
+    assert mega.read("targetL") == port.state.targetL
+    if right is not None:
+        assert (port.state.targetR, port.state.targetL) == (right, left)
+    # The wheels stay still, so the PID drives both motors in the commanded direction.
+    expected_dir = (1 if port.state.targetL >= 0 else 0, 1 if port.state.targetR >= 0 else 0)
+    assert (mega.direction("left"), mega.direction("right")) == expected_dir
+    assert mega.pwm("left") > 0 and mega.pwm("right") > 0
+
+
+def test_seed_kinematics_example(mega: VirtualMega) -> None:
+    boot(mega)
+    send_and_run(mega, b"x:0.5,t:0.2,", 0.06)
+    assert mega.read("targetR") == pytest.approx(3.65, abs=0.005)
+    assert mega.read("targetL") == pytest.approx(2.91, abs=0.005)
+
+
+def test_newline_less_command_takes_effect_at_the_next_tick(mega: VirtualMega) -> None:
+    boot(mega, 0.075)   # between ticks
+    cycles = mega.send(b"x:0.500,t:0.100,")
+    done = cycles[-1] + 1500
+    mega.break_on("controlTick")
+    assert mega.run_to_break(done + F_CPU)
+    tick_cycle = mega.hit_log[-1].cycle
+    assert ms(tick_cycle - done) <= 51.0
+    mega.break_on()
+    mega.run_for(0.005)
+    assert mega.read("setpointR") > 0.0
+
+
+MALFORMED = [
+    (b"x:0.5\n", "fields"),
+    (b"rp1.0\r", "fields"),
+    (b"x:0.5,y:1.0,t:0.1,", "syntax"),
+    (b"t:0.1,x:0.5,", "syntax"),
+    (b"hello\n", "syntax"),
+    (b"X:0.5,T:0.1,", "syntax"),
+    (b"rp 1.0,lp1.0,", "syntax"),
+    (b"x:0.5\x00,t:0.1,", "syntax"),
+    (b"rp1.0,lp1.0\xff,", "syntax"),
+    (b",", "syntax"),
+    (b"rp1.0x,lp1.0,", "number"),
+    (b"x:,t:1,", "number"),
+    (b"x:1.0.0,t:0,", "number"),
+    (b"rp-1.0,lp1.0,", "number"),
+    (b"x:nan,t:0.1,", "number"),
+    (b"rpinf,lp1,", "number"),
+    (b"x:-nan,t:0.1,", "range"),
+    (b"x:-inf,t:0,", "range"),
+    (b"rp18.0,lp1.0,", "range"),
+    (b"x:2.69,t:0.0,", "range"),
+    (b"x:0.0,t:9.5,", "range"),
+    (b"x:1e39,t:0,", "range"),
+    (b"x:0." + b"1" * 80 + b",t:0.1,", "overlong"),
+    (b"ppm:1500,1500\n", "fields"),
+    (b"ppm:1500,15a0,1500,1500,1500,1500,1500,1500,", "number"),
+    (b"ppm:15000,1500,1500,1500,1500,1500,1500,1500,", "number"),
+    (b"ppm:,1500,1500,1500,1500,1500,1500,1500,", "number"),
+]
+
+
+@pytest.mark.parametrize(("command", "reason"), MALFORMED)
+def test_rejects_malformed_commands_at_rest(mega: VirtualMega, command: bytes, reason: str) -> None:
+    boot(mega, 0.3)
+    before = mega.snapshot(CONTROL)
+    rejected = mega.read("rejectedCount")
+    mega.send(command)
+    pwm_seen = set()
+    for _ in range(30):
+        mega.run_for(0.005)
+        pwm_seen.add((mega.pwm("left"), mega.pwm("right")))
+    out = bytes(b for _, b in mega.take_tx())
+    errors = re.findall(rb"ERR:(\w+)\r\n", out)
+    assert errors and errors[0].decode() == reason, out
+    assert mega.read("rejectedCount") > rejected
+    assert mega.snapshot(CONTROL) == before
+    assert pwm_seen == {(0, 0)}
+
+
+@pytest.mark.parametrize(("command", "reason"), MALFORMED)
+def test_malformed_commands_change_nothing_in_motion(elf, command: bytes, reason: str) -> None:
+    """The same valid command stream with and without a malformed line in it: the
+    controller ends in the same state."""
+    results = []
+    for extra in (b"", command):
+        with VirtualMega(elf) as mega:
+            boot(mega)
+            send_and_run(mega, b"x:0.400,t:0.100,", 0.22)
+            send_and_run(mega, extra, 0.1)
+            send_and_run(mega, b"x:0.400,t:0.100,", 0.1)
+            results.append(mega.snapshot(CONTROL))
+    assert results[0] == results[1]
+
+
+def _pwm_zero_time(mega: VirtualMega, until: float) -> float | None:
+    """Steps 1 ms at a time; the first time from which both PWM outputs stay 0."""
+    zero_since = None
+    while mega.time < until:
+        mega.run_for(0.001)
+        if mega.pwm("left") == 0 and mega.pwm("right") == 0:
+            if zero_since is None:
+                zero_since = mega.time
+        else:
+            zero_since = None
+    return zero_since
+
+
+@pytest.mark.parametrize("speed", [0.5, 3.0, 10.0, 17.59])
+def test_watchdog_stops_the_motors_after_the_last_command(mega: VirtualMega, speed: float) -> None:
+    boot(mega)
+    command = f"rp{speed},lp{speed},".encode()
+    settle = speed / 5.0 + 0.3
+    t = mega.time
+    while mega.time - t < settle:        # a host repeating its command until the ramp is done
+        send_and_run(mega, command, 0.1)
+    last = mega.send(command)[-1] / F_CPU
+    setpoint = mega.read("setpointR")
+    assert setpoint == pytest.approx(speed, abs=1e-4)
+    deadline = last + 0.5 + setpoint / 15.0 + 0.15
+    zero_at = _pwm_zero_time(mega, deadline + 0.5)
+    assert zero_at is not None and zero_at <= deadline, (zero_at, deadline)
+    out = bytes(b for _, b in mega.take_tx())
+    assert b"EVT:WATCHDOG\r\n" in out
+    assert mega.read("integralL") == 0.0 and mega.read("integralR") == 0.0
+    assert mega.read("parked") == 1
+
+
+def test_stop_command_leaves_the_motors_unpowered(mega: VirtualMega) -> None:
+    boot(mega)
+    for _ in range(10):                  # wheels held still: the integrators wind up
+        send_and_run(mega, b"rp2.0,lp2.0,", 0.1)
+    assert mega.pwm("left") > 0
+    send_and_run(mega, b"rp0,lp0,", 0.0)
+    zero_at = _pwm_zero_time(mega, mega.time + 1.0)
+    assert zero_at is not None
+    assert mega.read("parked") == 1 and mega.read("integralR") == 0.0
+
+
+def test_ppm_loss_stops_and_is_reported(mega: VirtualMega) -> None:
+    boot(mega)
+    frame = b"ppm:1500,1800,1500,1500,1500,1500,1500,1500,"
+    for _ in range(8):
+        send_and_run(mega, frame, 0.05)
+    assert mega.read("targetR") == f32(3.0)
+    out = send_and_run(mega, b"ppm:1500,0,1500,1500,1500,1500,1500,1500,", 0.05)
+    assert b"EVT:PPM_LOST\r\n" in out
+    assert mega.read("targetR") == 0.0 and mega.read("emergencyStop") == 1
+    assert _pwm_zero_time(mega, mega.time + 1.0) is not None
+    assert mega.read("mode") == 2
+
+
+def test_reversal_pivots_then_applies_the_command(mega: VirtualMega) -> None:
+    boot(mega)
+    send_and_run(mega, b"x:0.3,t:0,", 0.1)
+    send_and_run(mega, b"x:-0.3,t:0,", 0.03)
+    assert mega.read("pivotTicksLeft") > 0
+    assert (mega.read("targetR"), mega.read("targetL")) == (2.0, -2.0)
+    mega.run_for(0.35)
+    assert mega.read("pivotTicksLeft") == 0
+    assert mega.read("targetR") < 0 and mega.read("targetL") < 0
+
+
+def test_no_heap_and_stack_headroom(mega: VirtualMega) -> None:
+    boot(mega, 0.5)
+    assert "__brkval" not in mega.variables or mega.read_bytes(mega.address_of("__brkval")[0], 2) == b"\0\0"
+    assert mega.free_ram() > 6000

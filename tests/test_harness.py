@@ -1,0 +1,140 @@
+"""The lock-step simavr harness (issue: hil): encoder stimulus, PWM/DIR, SRAM by
+symbol, determinism, the pty and VCD output."""
+
+from __future__ import annotations
+
+import re
+import time
+
+import numpy as np
+import pytest
+import serial
+
+from hil.pty_board import PtyBoard
+from hil.virtual_mega import F_CPU, VirtualMega
+from tests.boards import FEEDBACK, boot, send_and_run
+from wcdrive.firmware.quadrature import EdgeTrain, edges_from_trajectory, state_for_count
+
+pytestmark = pytest.mark.simavr
+
+
+def ramp_counts(counts: float, start: float = 0.02, duration: float = 0.5) -> EdgeTrain:
+    return edges_from_trajectory(np.array([0.0, start, start + duration]),
+                                 np.array([0.5, 0.5, 0.5 + counts]))
+
+
+@pytest.mark.parametrize(("left", "right"), [(1000, -2500), (-3000, 777), (12345, 12345)])
+def test_encoder_edges_give_the_expected_counts(mega: VirtualMega, left: int, right: int) -> None:
+    mega.encoder_edges("left", ramp_counts(left))
+    mega.encoder_edges("right", ramp_counts(right))
+    mega.run_for(0.65)
+    lines = FEEDBACK.findall(bytes(b for _, b in mega.take_tx()))
+    assert (int(lines[-1][0]), int(lines[-1][1])) == (left, right)
+    assert mega.read("illegalL") == 0 and mega.read("illegalR") == 0
+
+
+def test_both_directions_and_reversal(mega: VirtualMega) -> None:
+    train = edges_from_trajectory(np.array([0.0, 0.02, 0.2, 0.4]), np.array([0.5, 0.5, 800.5, -300.5]))
+    mega.encoder_edges("right", train)
+    mega.run_for(0.5)
+    assert mega.read("encoderValueR") == train.end_count == -301
+
+
+def test_illegal_transitions_are_counted_not_stepped(mega: VirtualMega) -> None:
+    boot(mega, 0.02)
+    base = mega.cycle + 1000
+    # 11 -> 00 (both pins at once) -> 11: two illegal transitions, no count.
+    for k, state in enumerate([0b00, 0b11, 0b00, 0b11]):
+        train = EdgeTrain(np.array([k * 1e-4]), np.array([state]), 0, 0)
+        mega.encoder_edges("left", train, t0=base / F_CPU)
+    mega.run_for(0.01)
+    assert mega.read("illegalL") == 4
+    assert mega.read("encoderValueL") == 0
+
+
+def test_sixty_thousand_edges_per_second_on_one_wheel(mega: VirtualMega) -> None:
+    train = edges_from_trajectory(np.array([0.0, 0.01, 0.51]), np.array([0.5, 0.5, 30000.5]))
+    assert np.min(np.diff(train.times)) == pytest.approx(1 / 60000, rel=1e-6)
+    mega.encoder_edges("left", train)
+    mega.run_for(0.6)
+    assert mega.read("encoderValueL") == 30000 and mega.read("illegalL") == 0
+
+
+def test_quadrature_states_follow_the_seed_table() -> None:
+    assert [state_for_count(c) for c in range(5)] == [0b11, 0b01, 0b00, 0b10, 0b11]
+
+
+def test_commands_give_expected_pwm_and_dir(mega: VirtualMega) -> None:
+    boot(mega)
+    send_and_run(mega, b"rp4.0,ln4.0,", 0.101)    # two ticks: setpoints 0.25 and 0.5
+    # With still wheels the PID output is Kp*e + Ki*integral; the port says exactly.
+    from wcdrive.firmware.board import Firmware
+
+    port = Firmware(boot_millis=int(mega.read("lastControlTime")) - 100)
+    port.feed(b"rp4.0,ln4.0,")
+    now = port.state.lastControlTime
+    for _ in range(2):
+        now += 50
+        port.tick(now, 0, 0)
+    assert (mega.pwm("left"), mega.pwm("right")) == (port.state.pwmL, port.state.pwmR)
+    assert mega.direction("right") == 1 and mega.direction("left") == 0
+    assert 0 < mega.pwm("right") < 255
+
+
+def test_full_duty_reads_255(mega: VirtualMega) -> None:
+    boot(mega)
+    for _ in range(30):
+        send_and_run(mega, b"rp17.0,lp17.0,", 0.1)
+    assert mega.pwm("left") == 255 and mega.pwm("right") == 255   # analogWrite(255) is digitalWrite
+
+
+def test_read_named_float(mega: VirtualMega) -> None:
+    boot(mega)
+    send_and_run(mega, b"rp5.0,lp3.0,", 0.11)
+    assert mega.read("targetR") == 5.0
+    assert mega.read("setpointR") in (0.25, 0.5, 0.75)
+    assert mega.read_raw("targetL") == np.float32(3.0).tobytes()
+
+
+def _run_trace(elf) -> tuple[list, list]:
+    with VirtualMega(elf) as mega:
+        mega.encoder_edges("left", ramp_counts(5000))
+        mega.send(b"x:0.5,t:0.3,\n", at=int(0.05 * F_CPU))
+        mega.send(b"junk,rp1,lp2,", at=int(0.3 * F_CPU))
+        mega.run_for(1.0)
+        return mega.take_tx(), [(h.cycle, h.function, h.arg) for h in mega.take_hits()]
+
+
+def test_two_runs_of_one_trace_are_identical(elf) -> None:
+    first, second = _run_trace(elf), _run_trace(elf)
+    assert first == second
+    assert len(first[0]) > 500
+
+
+def test_pyserial_talks_to_the_pty(elf) -> None:
+    with PtyBoard(elf) as board:
+        port = serial.Serial(board.path, 115200, timeout=2)
+        try:
+            got = b""
+            deadline = time.monotonic() + 20
+            while b"MODE:CMDVEL" not in got and time.monotonic() < deadline:
+                got += port.read(port.in_waiting or 1)
+            port.write(b"rp1.5,lp1.5,\n")
+            got = b""
+            while b"MODE:WHEEL" not in got and time.monotonic() < deadline:
+                got += port.read(port.in_waiting or 1)
+            assert b"MODE:WHEEL" in got
+        finally:
+            port.close()
+
+
+def test_vcd_output(elf, tmp_path) -> None:
+    path = tmp_path / "run.vcd"
+    with VirtualMega(elf, vcd=path) as mega:
+        mega.encoder_edges("left", ramp_counts(200, duration=0.05))
+        boot(mega, 0.1)
+        send_and_run(mega, b"rp2,lp2,", 0.2)
+    text = path.read_text()
+    for name in ("enc_l_a", "enc_l_b", "dir_l", "uart_tx", "uart_rx", "pwm_left"):
+        assert re.search(rf"\$var wire \d+ \S+ {name} \$end", text), name
+    assert "#" in text.split("$enddefinitions")[1]
