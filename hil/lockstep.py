@@ -25,7 +25,7 @@ from hil.traces import Trace
 from hil.virtual_mega import F_CPU, VirtualMega
 from wcdrive.firmware.board import Firmware
 from wcdrive.firmware.f32 import bits
-from wcdrive.firmware.quadrature import QUAD_TABLE, ILLEGAL
+from wcdrive.firmware.quadrature import ILLEGAL, QUAD_TABLE
 from wcdrive.firmware.state import FLOAT_FIELDS, INT_FIELDS, FirmwareState
 
 _WATCHED = FLOAT_FIELDS + INT_FIELDS + ("txDropped",)

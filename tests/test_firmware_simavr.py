@@ -3,6 +3,7 @@ case, the watchdog, stops and PPM loss (issue: firmware)."""
 
 from __future__ import annotations
 
+import itertools
 import re
 
 import pytest
@@ -26,7 +27,7 @@ def test_boots_and_sends_feedback_every_50ms(mega: VirtualMega) -> None:
     starts = [cycle for k, (cycle, b) in enumerate(tx)
               if b == ord("E") and bytes(x for _, x in tx[k:k + 4]) == b"ENC:"]
     assert len(starts) >= 38
-    periods = [ms(b - a) for a, b in zip(starts, starts[1:], strict=False)]
+    periods = [ms(b - a) for a, b in itertools.pairwise(starts)]
     assert all(abs(p - 50.0) <= 1.5 for p in periods), periods
     assert len(FEEDBACK.findall(text)) == len(starts)
     assert mega.relay() == 1

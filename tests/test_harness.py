@@ -138,3 +138,25 @@ def test_vcd_output(elf, tmp_path) -> None:
     for name in ("enc_l_a", "enc_l_b", "dir_l", "uart_tx", "uart_rx", "pwm_left"):
         assert re.search(rf"\$var wire \d+ \S+ {name} \$end", text), name
     assert "#" in text.split("$enddefinitions")[1]
+
+
+def test_millis_model_matches_the_firmware(mega: VirtualMega) -> None:
+    """timer0_millis is millis_after(overflows), and overflows come every 16,384 cycles."""
+    from wcdrive.firmware.timer0 import OVERFLOW_CYCLES, millis_after
+
+    samples = []
+    rng = np.random.default_rng(3)
+    for step in rng.integers(1000, 400_000, size=300):
+        mega.run_until(mega.cycle + int(step))
+        samples.append((mega.cycle, mega.read("timer0_overflow_count"), mega.read("timer0_millis")))
+    # A sample may land inside the overflow ISR, after it stored millis and before
+    # it counted the overflow: then millis is one overflow ahead.
+    exact = 0
+    for _cycle, overflows, millis in samples:
+        assert millis in (millis_after(overflows), millis_after(overflows + 1))
+        exact += millis == millis_after(overflows)
+    assert exact >= 0.95 * len(samples)
+    # One phase c0 explains every sample: overflows == (cycle - c0) // 16384.
+    lo = max(c - (n + 1) * OVERFLOW_CYCLES for c, n, _ in samples)
+    hi = min(c - n * OVERFLOW_CYCLES for c, n, _ in samples)
+    assert lo < hi + 8   # within an instruction's length

@@ -1,0 +1,306 @@
+"""The chair as a pymunk rigid body with drive wheels, motors and swivel casters.
+
+``Plant.step(dt)`` advances one fixed physics step (1 kHz by default), ``advance(n,
+dt)`` several:
+
+* Motors: the driver applies ``duty/255 * 24 V`` with the sign of DIR. Each motor's
+  torque is ``Kt (V - Ke G w)/R`` through the gearbox (efficiency, ratio G), limited
+  by the driver's current limit, less viscous gear friction.
+* Drive wheels: spin dynamics with the wheel and reflected rotor inertia, solved
+  implicitly together with the tyre's longitudinal force (regularised Coulomb
+  friction: stiff below ``mu N``, sliding at ``mu N``); lateral tyre force likewise,
+  within the friction circle. So wheels slip when asked for more than the floor gives.
+* Casters: a trailing contact patch behind each swivel pivot. The caster swings so its
+  patch rolls without side slip, as fast as ``caster_max_swivel_rate`` allows; beyond
+  that the patch scrubs sideways against ``mu N``. Driving forward keeps the casters
+  trailing; reversing makes them swing round (an unstable equilibrium), scrubbing.
+* The chassis is a pymunk ``Body`` (mass, yaw inertia, centre of gravity ahead of the
+  axle) in a ``Space``; the forces above are applied to it each step and pymunk
+  integrates it. Walls or obstacles may be added to ``space``.
+
+The force model exists twice: ``_python_step`` here is the readable reference, and
+``csrc/chair_kernel.c`` the same lines in C, which calls pymunk's Chipmunk through
+function pointers so a step costs well under a microsecond. ``tests/test_plant.py``
+checks that both give the same trajectory. Without a C compiler the Python path runs.
+
+The body's position is the drive axle's midpoint, the odometry reference point.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import math
+from pathlib import Path
+
+import numpy as np
+import pymunk
+
+from wcdrive.native import BuildError, load
+from wcdrive.plant.params import ChairParams
+
+_D = ctypes.c_double
+_P = ctypes.c_void_p
+
+
+class ChairStruct(ctypes.Structure):
+    """``chair_t`` of chair_kernel.c: parameters, Chipmunk handles and the state."""
+
+    _fields_ = [(n, _D) for n in ("half_base", "r", "cog_x", "caster_x", "caster_y", "trail",
+                                  "swivel_max")]
+    _fields_ += [("mu", _D * 2)]
+    _fields_ += [(n, _D) for n in ("mu_c", "n_drive", "n_caster", "crr", "crr_c", "c_long", "c_lat",
+                                  "c_caster", "j", "b", "k1", "k2", "ke_g", "tau_max", "i_max_r",
+                                  "res")]
+    _fields_ += [(n, _P) for n in ("space", "body", "get_velocity", "get_angle",
+                                  "get_angular_velocity", "set_force", "set_torque", "space_step")]
+    _fields_ += [(n, _D * 2) for n in ("volts", "angle", "speed", "current", "slip", "force",
+                                      "caster_heading")]
+    _fields_ += [(n, _D) for n in ("scrub_energy", "scrub_time", "time")]
+
+
+_KERNEL_SOURCE = Path(__file__).resolve().parent / "csrc" / "chair_kernel.c"
+_kernel: ctypes.CDLL | bool | None = None
+
+
+def _load_kernel() -> ctypes.CDLL | None:
+    global _kernel
+    if _kernel is None:
+        try:
+            lib = load(_KERNEL_SOURCE, "chairkernel", ("-lm",), ("-O2", "-ffp-contract=off"))
+            lib.chair_advance.argtypes = [ctypes.POINTER(ChairStruct), ctypes.c_int32, _D,
+                                          ctypes.POINTER(_D), ctypes.POINTER(_D)]
+            lib.chair_advance.restype = None
+            _kernel = lib
+        except BuildError:
+            _kernel = False
+    return _kernel or None
+
+
+class WheelView:
+    """One drive wheel's state, read from the plant."""
+
+    def __init__(self, s: ChairStruct, i: int) -> None:
+        self._s, self._i = s, i
+
+    angle = property(lambda self: self._s.angle[self._i], doc="rad, forward +")
+    speed = property(lambda self: self._s.speed[self._i], doc="rad/s")
+    current = property(lambda self: self._s.current[self._i], doc="A")
+    slip = property(lambda self: self._s.slip[self._i], doc="m/s, tyre surface minus ground")
+    force = property(lambda self: self._s.force[self._i], doc="N on the chassis, forward +")
+
+
+class Plant:
+    def __init__(self, params: ChairParams | None = None, *, x: float = 0.0, y: float = 0.0,
+                 heading: float = 0.0, use_kernel: bool = True) -> None:
+        self.p = params or ChairParams()
+        p = self.p
+        self.space = pymunk.Space()
+        self.body = pymunk.Body(p.mass, p.yaw_inertia)
+        self.body.center_of_gravity = (p.cog_ahead_of_axle, 0.0)
+        self.body.position = (x, y)
+        self.body.angle = heading
+        self.space.add(self.body)
+        self.s = s = ChairStruct()
+        k = p.motor_constant
+        s.half_base = 0.5 * p.wheelbase
+        s.r = p.wheel_radius
+        s.cog_x = p.cog_ahead_of_axle
+        s.caster_x = p.caster_ahead_of_axle
+        s.caster_y = p.caster_half_track
+        s.trail = p.caster_trail
+        s.swivel_max = p.caster_max_swivel_rate
+        s.mu[0], s.mu[1] = p.wheel_friction("left"), p.wheel_friction("right")
+        s.mu_c = p.caster_friction
+        s.n_drive = p.drive_wheel_load
+        s.n_caster = p.caster_load
+        s.crr, s.crr_c = p.rolling_resistance, p.caster_rolling_resistance
+        s.c_long, s.c_lat, s.c_caster = p.tyre_stiffness, p.lateral_stiffness, p.caster_stiffness
+        s.j = p.wheel_total_inertia
+        s.b = p.viscous_friction
+        s.ke_g = k * p.gear_ratio
+        s.k1 = p.gear_ratio * p.gear_efficiency * k / p.armature_resistance
+        s.k2 = s.k1 * s.ke_g
+        s.tau_max = p.gear_ratio * p.gear_efficiency * k * p.current_limit
+        s.i_max_r = p.current_limit * p.armature_resistance
+        s.res = p.armature_resistance
+        s.caster_heading[0] = heading + p.caster_initial_offsets[0]
+        s.caster_heading[1] = heading + p.caster_initial_offsets[1]
+        self.left = WheelView(s, 0)
+        self.right = WheelView(s, 1)
+        self._kernel = _load_kernel() if use_kernel else None
+        if self._kernel is not None:
+            self._bind_chipmunk()
+
+    def _bind_chipmunk(self) -> None:
+        from pymunk._chipmunk import ffi, lib
+
+        def address(name: str) -> int:
+            return int(ffi.cast("uintptr_t", ffi.addressof(lib, name)))
+
+        s = self.s
+        s.space = int(ffi.cast("uintptr_t", self.space._space))
+        s.body = int(ffi.cast("uintptr_t", self.body._body))
+        s.get_velocity = address("cpBodyGetVelocity")
+        s.get_angle = address("cpBodyGetAngle")
+        s.get_angular_velocity = address("cpBodyGetAngularVelocity")
+        s.set_force = address("cpBodySetForce")
+        s.set_torque = address("cpBodySetTorque")
+        s.space_step = address("cpSpaceStep")
+
+    @property
+    def uses_kernel(self) -> bool:
+        return self._kernel is not None
+
+    # ---- inputs ------------------------------------------------------------------
+    def set_drive(self, pwm_left: int, dir_left: int, pwm_right: int, dir_right: int) -> None:
+        """The driver inputs as the firmware writes them: duty 0..255, DIR HIGH = forward."""
+        v = self.p.supply_voltage / 255.0
+        self.s.volts[0] = v * pwm_left * (1.0 if dir_left else -1.0)
+        self.s.volts[1] = v * pwm_right * (1.0 if dir_right else -1.0)
+
+    # ---- state -------------------------------------------------------------------
+    @property
+    def time(self) -> float:
+        return self.s.time
+
+    @property
+    def pose(self) -> tuple[float, float, float]:
+        """(x, y, heading) of the axle midpoint, ground truth."""
+        b = self.body
+        return b.position.x, b.position.y, b.angle
+
+    @property
+    def yaw_rate(self) -> float:
+        return self.body.angular_velocity
+
+    @property
+    def caster_heading(self) -> tuple[float, float]:
+        """World heading of each caster's rolling direction (rad)."""
+        return self.s.caster_heading[0], self.s.caster_heading[1]
+
+    @property
+    def caster_scrub_energy(self) -> float:
+        """J dissipated so far by caster patches sliding sideways."""
+        return self.s.scrub_energy
+
+    @property
+    def caster_scrub_time(self) -> float:
+        return self.s.scrub_time
+
+    def axle_velocity(self) -> tuple[float, float]:
+        """(forward, lateral) speed of the axle midpoint in m/s."""
+        b = self.body
+        th = b.angle
+        c, s = math.cos(th), math.sin(th)
+        vx, vy = b.velocity
+        w = b.angular_velocity
+        xg = self.p.cog_ahead_of_axle
+        ax, ay = vx + w * xg * s, vy - w * xg * c
+        return ax * c + ay * s, -ax * s + ay * c
+
+    # ---- dynamics ----------------------------------------------------------------
+    def step(self, dt: float = 0.001) -> None:
+        self.advance(1, dt)
+
+    def advance(self, n: int, dt: float = 0.001, *, record: bool = False
+                ) -> tuple[np.ndarray, np.ndarray] | None:
+        """``n`` steps of ``dt``. With ``record``, returns the wheel angles after each
+        step (an ``n x 2`` array, left and right) and the yaw rates (``n``)."""
+        angles = np.empty((n, 2)) if record else None
+        rates = np.empty(n) if record else None
+        if self._kernel is not None:
+            a_ptr = angles.ctypes.data_as(ctypes.POINTER(_D)) if record else None
+            r_ptr = rates.ctypes.data_as(ctypes.POINTER(_D)) if record else None
+            self._kernel.chair_advance(ctypes.byref(self.s), n, dt, a_ptr, r_ptr)
+        else:
+            for k in range(n):
+                self._python_step(dt)
+                if record:
+                    angles[k] = self.s.angle[0], self.s.angle[1]
+                    rates[k] = self.body.angular_velocity
+        return (angles, rates) if record else None
+
+    def _wheel(self, i: int, ground: float, dt: float) -> float:
+        """Implicit step of one wheel against the ground speed under it; returns the
+        forward force on the chassis less rolling resistance."""
+        s = self.s
+        r, k, j_dt, b = s.r, s.c_long, s.j / dt, s.b
+        volts, speed = s.volts[i], s.speed[i]
+        fmax = s.mu[i] * s.n_drive
+        k1v, tau = s.k1 * volts, 0.0
+        rr = s.crr * s.n_drive * math.tanh(ground / 0.01)
+        w = (j_dt * speed + k1v + r * k * ground) / (j_dt + s.k2 + b + r * r * k)
+        limited = abs(volts - s.ke_g * w) > s.i_max_r
+        if limited:
+            tau = math.copysign(s.tau_max, volts - s.ke_g * w)
+            w = (j_dt * speed + tau + r * k * ground) / (j_dt + b + r * r * k)
+        force = k * (r * w - ground)
+        if abs(force) > fmax:
+            force = math.copysign(fmax, force)
+            if limited:
+                w = (j_dt * speed + tau - r * force) / (j_dt + b)
+            else:
+                w = (j_dt * speed + k1v - r * force) / (j_dt + s.k2 + b)
+                if abs(volts - s.ke_g * w) > s.i_max_r:
+                    tau = math.copysign(s.tau_max, volts - s.ke_g * w)
+                    w = (j_dt * speed + tau - r * force) / (j_dt + b)
+        s.speed[i] = w
+        s.angle[i] += w * dt
+        s.current[i] = (volts - s.ke_g * w) / s.res
+        s.slip[i] = r * w - ground
+        s.force[i] = force
+        return force - rr
+
+    def _python_step(self, dt: float) -> None:
+        s = self.s
+        b = self.body
+        vx, vy = b.velocity
+        th = b.angle
+        w = b.angular_velocity
+        cs, sn, xg = math.cos(th), math.sin(th), s.cog_x
+        ax, ay = vx + w * xg * sn, vy - w * xg * cs
+        u = ax * cs + ay * sn
+        lat = -ax * sn + ay * cs
+        half = s.half_base
+        f_left = self._wheel(0, u - w * half, dt)
+        f_right = self._wheel(1, u + w * half, dt)
+        fx_b, fy_b = f_left + f_right, 0.0
+        torque_axle = (f_right - f_left) * half
+        for i in range(2):
+            lim = s.mu[i] * s.n_drive
+            room = math.sqrt(max(0.0, lim * lim - s.force[i] * s.force[i]))
+            fy_b += _clamp(-s.c_lat * lat, -room, room)
+        xc, d, n_c = s.caster_x, s.trail, s.n_caster
+        scrubbing = False
+        for i in range(2):
+            yc = s.caster_y if i == 0 else -s.caster_y
+            pu, pv = u - w * yc, lat + w * xc
+            psi = s.caster_heading[i] - th
+            ce, se = math.cos(psi), math.sin(psi)
+            along_n = -pu * se + pv * ce
+            rate = _clamp(along_n / d, -s.swivel_max, s.swivel_max)
+            side_slip = along_n - d * rate
+            limit = s.mu_c * n_c
+            f_side = _clamp(-s.c_caster * side_slip, -limit, limit)
+            if side_slip != 0.0:
+                s.scrub_energy += abs(f_side * side_slip) * dt
+                scrubbing = scrubbing or abs(side_slip) > 1e-3
+            roll = pu * ce + pv * se
+            f_roll = -s.crr_c * n_c * math.tanh(roll / 0.01)
+            fxc = f_roll * ce - f_side * se
+            fyc = f_roll * se + f_side * ce
+            px, py = xc - d * ce, yc - d * se
+            fx_b += fxc
+            fy_b += fyc
+            torque_axle += px * fyc - py * fxc
+            s.caster_heading[i] += (w + rate) * dt
+        if scrubbing:
+            s.scrub_time += dt
+        b.force = (fx_b * cs - fy_b * sn, fx_b * sn + fy_b * cs)
+        b.torque = torque_axle - xg * fy_b
+        self.space.step(dt)
+        s.time += dt
+
+
+def _clamp(v: float, lo: float, hi: float) -> float:
+    return hi if v > hi else (lo if v < lo else v)

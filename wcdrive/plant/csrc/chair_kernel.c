@@ -1,0 +1,134 @@
+/*
+ * chair_kernel: the inner loop of wcdrive.plant.Plant in C, for speed.
+ *
+ * chair_advance() runs n physics steps: the same force model as Plant._python_step
+ * (wcdrive/plant/chair.py, the reference; tests/test_plant.py checks the two agree),
+ * then Chipmunk's cpSpaceStep through function pointers that pymunk's own library
+ * provides, so pymunk still integrates the chassis (and any walls in its space).
+ * Built on first use by wcdrive.native (gcc -O2 -ffp-contract=off).
+ */
+#include <math.h>
+#include <stdint.h>
+
+typedef struct { double x, y; } vec_t;
+typedef vec_t (*get_vec_fn)(const void *);
+typedef double (*get_f_fn)(const void *);
+typedef void (*set_vec_fn)(void *, vec_t);
+typedef void (*set_f_fn)(void *, double);
+typedef void (*step_fn)(void *, double);
+
+typedef struct {
+    /* parameters */
+    double half_base, r, cog_x, caster_x, caster_y, trail, swivel_max;
+    double mu[2], mu_c, n_drive, n_caster, crr, crr_c, c_long, c_lat, c_caster;
+    double j, b, k1, k2, ke_g, tau_max, i_max_r, res;
+    /* chipmunk */
+    void *space, *body;
+    void *get_velocity, *get_angle, *get_angular_velocity, *set_force, *set_torque, *space_step;
+    /* state */
+    double volts[2];
+    double angle[2], speed[2], current[2], slip[2], force[2];
+    double caster_heading[2];
+    double scrub_energy, scrub_time, time;
+} chair_t;
+
+static double clampd(double v, double lo, double hi) { return v > hi ? hi : (v < lo ? lo : v); }
+
+static double wheel(chair_t *c, int i, double ground, double dt) {
+    double r = c->r, k = c->c_long, j_dt = c->j / dt, b = c->b;
+    double volts = c->volts[i], speed = c->speed[i];
+    double fmax = c->mu[i] * c->n_drive;
+    double k1v = c->k1 * volts, tau = 0.0;
+    double rr = c->crr * c->n_drive * tanh(ground / 0.01);
+    double w = (j_dt * speed + k1v + r * k * ground) / (j_dt + c->k2 + b + r * r * k);
+    int limited = fabs(volts - c->ke_g * w) > c->i_max_r;
+    if (limited) {
+        tau = copysign(c->tau_max, volts - c->ke_g * w);
+        w = (j_dt * speed + tau + r * k * ground) / (j_dt + b + r * r * k);
+    }
+    double force = k * (r * w - ground);
+    if (fabs(force) > fmax) {
+        force = copysign(fmax, force);
+        if (limited) {
+            w = (j_dt * speed + tau - r * force) / (j_dt + b);
+        } else {
+            w = (j_dt * speed + k1v - r * force) / (j_dt + c->k2 + b);
+            if (fabs(volts - c->ke_g * w) > c->i_max_r) {
+                tau = copysign(c->tau_max, volts - c->ke_g * w);
+                w = (j_dt * speed + tau - r * force) / (j_dt + b);
+            }
+        }
+    }
+    c->speed[i] = w;
+    c->angle[i] += w * dt;
+    c->current[i] = (volts - c->ke_g * w) / c->res;
+    c->slip[i] = r * w - ground;
+    c->force[i] = force;
+    return force - rr;
+}
+
+static void step(chair_t *c, double dt) {
+    vec_t v = ((get_vec_fn)c->get_velocity)(c->body);
+    double th = ((get_f_fn)c->get_angle)(c->body);
+    double w = ((get_f_fn)c->get_angular_velocity)(c->body);
+    double cs = cos(th), sn = sin(th), xg = c->cog_x;
+    double ax = v.x + w * xg * sn, ay = v.y - w * xg * cs;
+    double u = ax * cs + ay * sn;
+    double lat = -ax * sn + ay * cs;
+    double half = c->half_base;
+    double f_left = wheel(c, 0, u - w * half, dt);
+    double f_right = wheel(c, 1, u + w * half, dt);
+    double fx_b = f_left + f_right, fy_b = 0.0;
+    double torque_axle = (f_right - f_left) * half;
+    for (int i = 0; i < 2; i++) {
+        double lim = c->mu[i] * c->n_drive;
+        double room = sqrt(fmax(0.0, lim * lim - c->force[i] * c->force[i]));
+        fy_b += clampd(-c->c_lat * lat, -room, room);
+    }
+    double xc = c->caster_x, d = c->trail, n_c = c->n_caster;
+    int scrubbing = 0;
+    for (int i = 0; i < 2; i++) {
+        double yc = i == 0 ? c->caster_y : -c->caster_y;
+        double pu = u - w * yc, pv = lat + w * xc;
+        double psi = c->caster_heading[i] - th;
+        double ce = cos(psi), se = sin(psi);
+        double along_n = -pu * se + pv * ce;
+        double rate = clampd(along_n / d, -c->swivel_max, c->swivel_max);
+        double side_slip = along_n - d * rate;
+        double limit = c->mu_c * n_c;
+        double f_side = clampd(-c->c_caster * side_slip, -limit, limit);
+        if (side_slip != 0.0) {
+            c->scrub_energy += fabs(f_side * side_slip) * dt;
+            scrubbing = scrubbing || fabs(side_slip) > 1e-3;
+        }
+        double roll = pu * ce + pv * se;
+        double f_roll = -c->crr_c * n_c * tanh(roll / 0.01);
+        double fxc = f_roll * ce - f_side * se;
+        double fyc = f_roll * se + f_side * ce;
+        double px = xc - d * ce, py = yc - d * se;
+        fx_b += fxc;
+        fy_b += fyc;
+        torque_axle += px * fyc - py * fxc;
+        c->caster_heading[i] += (w + rate) * dt;
+    }
+    if (scrubbing) c->scrub_time += dt;
+    double torque_cog = torque_axle - xg * fy_b;
+    vec_t f = {fx_b * cs - fy_b * sn, fx_b * sn + fy_b * cs};
+    ((set_vec_fn)c->set_force)(c->body, f);
+    ((set_f_fn)c->set_torque)(c->body, torque_cog);
+    ((step_fn)c->space_step)(c->space, dt);
+    c->time += dt;
+}
+
+/* n steps; after each, the wheel angles (left, right) and the yaw rate are stored
+ * in the output arrays when they are not NULL. */
+void chair_advance(chair_t *c, int32_t n, double dt, double *angles, double *yaw_rates) {
+    for (int32_t k = 0; k < n; k++) {
+        step(c, dt);
+        if (angles) {
+            angles[2 * k] = c->angle[0];
+            angles[2 * k + 1] = c->angle[1];
+        }
+        if (yaw_rates) yaw_rates[k] = ((get_f_fn)c->get_angular_velocity)(c->body);
+    }
+}

@@ -1,0 +1,105 @@
+"""Physical parameters of the chair, with where each number comes from.
+
+Geometry, encoder resolution and top speed are the seed's (guide section 1.4.2).
+The rest are assumptions for a mid-size rear-wheel-drive power chair, chosen to be
+typical rather than measured; change them per chair with ``dataclasses.replace``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+G = 9.81
+
+
+@dataclass(frozen=True)
+class ChairParams:
+    # --- seed (guide 1.4.2) ---
+    wheelbase: float = 0.57            # m between the drive wheels
+    wheel_radius: float = 0.1524       # m (6 in)
+    counts_per_rev: int = 10000        # 2500 PPR x 4
+    top_wheel_speed: float = 17.59     # rad/s at full duty (2.68 m/s)
+    supply_voltage: float = 24.0       # V, 24 V brushed motors
+    current_limit: float = 13.0        # A per channel (the guide's SmartDriveDuo figure)
+
+    # --- body (assumed) ---
+    chair_mass: float = 110.0          # kg with batteries (typical mid-wheel/rear-wheel chairs: 100-140)
+    occupant_mass: float = 80.0        # kg
+    length: float = 1.0                # m, footprint used for the yaw inertia
+    width: float = 0.65                # m
+    cog_ahead_of_axle: float = 0.12    # m: centre of gravity ahead of the drive axle
+    caster_ahead_of_axle: float = 0.45  # m: caster pivots ahead of the drive axle
+    caster_half_track: float = 0.25    # m: caster pivots either side of the centre line
+    caster_trail: float = 0.05         # m: contact patch behind the pivot
+    caster_max_swivel_rate: float = 8.0  # rad/s the caster can swing (swivel friction, inertia)
+    caster_initial_offsets: tuple[float, float] = (0.02, -0.015)   # rad: no caster is perfectly aligned
+
+    # --- tyres and floor (assumed) ---
+    friction: float = 0.8              # drive tyre on a dry floor
+    friction_left: float | None = None   # per-wheel override (a wet patch, say)
+    friction_right: float | None = None
+    caster_friction: float = 0.6
+    rolling_resistance: float = 0.015  # drive wheels
+    caster_rolling_resistance: float = 0.03
+    tyre_stiffness: float = 3000.0     # N per m/s of longitudinal slip (regularised Coulomb)
+    lateral_stiffness: float = 20000.0  # N per m/s of lateral slip
+    caster_stiffness: float = 20000.0  # N per m/s of caster side slip
+
+    # --- drive train (assumed) ---
+    gear_ratio: float = 18.0
+    gear_efficiency: float = 0.85
+    armature_resistance: float = 0.3   # ohm
+    wheel_inertia: float = 0.10        # kg m^2, wheel and tyre
+    rotor_inertia: float = 1.5e-4      # kg m^2, reflected through gear_ratio**2
+    viscous_friction: float = 0.02     # N m s/rad at the wheel
+
+    # --- gyro: Bosch BMI085 figures from the seed ---
+    gyro_rate_hz: float = 400.0
+    gyro_noise_dps: float = 0.014      # deg/s rms
+    gyro_bias_dps: float = 0.05        # deg/s initial bias, drawn per run
+    gyro_bias_walk_dps_per_sqrt_s: float = 0.002
+
+    @property
+    def mass(self) -> float:
+        return self.chair_mass + self.occupant_mass
+
+    @property
+    def yaw_inertia(self) -> float:
+        """Uniform box about its centre (assumption): m (l^2 + w^2) / 12."""
+        return self.mass * (self.length**2 + self.width**2) / 12.0
+
+    @property
+    def caster_load_share(self) -> float:
+        """Static load on the casters: moments about the drive axle."""
+        return self.cog_ahead_of_axle / self.caster_ahead_of_axle
+
+    @property
+    def drive_wheel_load(self) -> float:
+        return self.mass * G * (1.0 - self.caster_load_share) / 2.0
+
+    @property
+    def caster_load(self) -> float:
+        return self.mass * G * self.caster_load_share / 2.0
+
+    @property
+    def wheel_total_inertia(self) -> float:
+        return self.wheel_inertia + self.rotor_inertia * self.gear_ratio**2
+
+    @property
+    def motor_constant(self) -> float:
+        """Ke = Kt (SI), chosen so that full duty on level ground gives the seed's top
+        speed: V = Ke G w + R i, with i carrying rolling resistance and gear friction."""
+        w = self.top_wheel_speed
+        r = self.wheel_radius
+        load = (self.rolling_resistance * self.drive_wheel_load * r
+                + self.viscous_friction * w
+                + self.caster_rolling_resistance * self.caster_load * r)   # per wheel
+        g, eta, R, V = self.gear_ratio, self.gear_efficiency, self.armature_resistance, self.supply_voltage
+        # V = k G w + R load / (k G eta)  ->  G w k^2 - V k + R load / (G eta) = 0
+        a, b, c = g * w, -V, R * load / (g * eta)
+        return (-b + math.sqrt(b * b - 4 * a * c)) / (2 * a)
+
+    def wheel_friction(self, side: str) -> float:
+        override = self.friction_left if side == "left" else self.friction_right
+        return self.friction if override is None else override
