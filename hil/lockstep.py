@@ -78,40 +78,57 @@ def _hexf(x: float) -> str:
     return f"{bits(x):#010x} ({x!r})"
 
 
+class Recorder:
+    """Runs a ``VirtualMega`` and logs every firmware event with the state it leaves:
+    ``run_until(cycle)`` stops at each ``processByte``/``controlTick`` entry, reads the
+    controller globals, PWM and DIR, and goes on."""
+
+    def __init__(self, mega: VirtualMega) -> None:
+        self.mega = mega
+        self.events: list[Event] = []
+        self.initial: dict[str, float | int] | None = None
+        mega.break_on("processByte", "controlTick")
+
+    def _snapshot(self) -> tuple[dict[str, float | int], tuple[int, int], tuple[int, int]]:
+        m = self.mega
+        return (m.snapshot(_WATCHED), (m.pwm("left"), m.pwm("right")),
+                (m.direction("left"), m.direction("right")))
+
+    def _close_last(self) -> None:
+        state, pwm, direction = self._snapshot()
+        if self.events:
+            last = self.events[-1]
+            last.after, last.pwm, last.direction = state, pwm, direction
+        elif self.initial is None:
+            self.initial = state
+
+    def run_until(self, cycle: int) -> None:
+        mega = self.mega
+        while mega.run_to_break(cycle):
+            hit = mega.hit_log[-1]
+            self._close_last()
+            kind = "byte" if hit.function == "processByte" else "tick"
+            arg = (hit.arg >> 16) & 0xFF if kind == "byte" else hit.arg
+            self.events.append(Event(kind, arg, hit.cycle))
+        self._close_last()
+
+    def recording(self, trace: Trace) -> Recording:
+        assert self.initial is not None, "run_until() first"
+        tx = bytes(b for _, b in self.mega.tx_log)
+        return Recording(trace, self.initial, self.events, tx, self.mega.cycle)
+
+
 def record(trace: Trace, elf: str | Path | None = None) -> Recording:
     mega = VirtualMega(elf, millis_start=trace.millis_start)
     for t, data in trace.serial:
         mega.send(data, at=round(t * F_CPU))
     for side, train in trace.encoders.items():
         mega.encoder_edges(side, train)
-    end = round(trace.duration * F_CPU)
-    mega.break_on("processByte", "controlTick")
-    events: list[Event] = []
-    initial: dict[str, float | int] | None = None
-
-    def snapshot() -> tuple[dict[str, float | int], tuple[int, int], tuple[int, int]]:
-        return (mega.snapshot(_WATCHED), (mega.pwm("left"), mega.pwm("right")),
-                (mega.direction("left"), mega.direction("right")))
-
-    while mega.run_to_break(end):
-        hit = mega.hit_log[-1]
-        state, pwm, direction = snapshot()
-        if events:
-            events[-1].after, events[-1].pwm, events[-1].direction = state, pwm, direction
-        else:
-            initial = state
-        kind = "byte" if hit.function == "processByte" else "tick"
-        arg = (hit.arg >> 16) & 0xFF if kind == "byte" else hit.arg
-        events.append(Event(kind, arg, hit.cycle))
-    if events:
-        state, pwm, direction = snapshot()
-        events[-1].after, events[-1].pwm, events[-1].direction = state, pwm, direction
-    else:
-        initial = mega.snapshot(_WATCHED)
-    tx = bytes(b for _, b in mega.take_tx())
+    recorder = Recorder(mega)
+    recorder.run_until(round(trace.duration * F_CPU))
+    recording = recorder.recording(trace)
     mega.close()
-    assert initial is not None
-    return Recording(trace, initial, events, tx, end)
+    return recording
 
 
 def initial_state(recording: Recording) -> FirmwareState:

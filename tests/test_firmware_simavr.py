@@ -15,7 +15,7 @@ from wcdrive.firmware.f32 import f32
 
 pytestmark = pytest.mark.simavr
 
-CONTROL = ("targetL", "targetR", "setpointL", "setpointR", "mode", "pivotTicksLeft",
+CONTROL = ("targetL", "targetR", "setpointL", "setpointR", "mode", "pivotPhase", "pivotTicksLeft",
            "integralL", "integralR", "pwmL", "pwmR", "dirL", "dirR", "emergencyStop")
 
 
@@ -203,15 +203,36 @@ def test_ppm_loss_stops_and_is_reported(mega: VirtualMega) -> None:
     assert mega.read("mode") == 2
 
 
-def test_reversal_pivots_then_applies_the_command(mega: VirtualMega) -> None:
+def test_reversal_stops_pivots_then_applies_the_command(mega: VirtualMega) -> None:
     boot(mega)
-    send_and_run(mega, b"x:0.3,t:0,", 0.1)
-    send_and_run(mega, b"x:-0.3,t:0,", 0.03)
-    assert mega.read("pivotTicksLeft") > 0
-    assert (mega.read("targetR"), mega.read("targetL")) == (2.0, -2.0)
-    mega.run_for(0.35)
-    assert mega.read("pivotTicksLeft") == 0
+    for _ in range(5):
+        send_and_run(mega, b"x:0.3,t:0,", 0.1)
+    send_and_run(mega, b"x:-0.3,t:0,", 0.01)
+    assert mega.read("pivotPhase") == 1                       # stopping first
+    assert (mega.read("targetR"), mega.read("targetL")) == (0.0, 0.0)
+    phases = []
+    for k in range(40):
+        if k % 2 == 0:                       # the host keeps sending at 10 Hz
+            mega.send(b"x:-0.3,t:0,")
+        mega.run_for(0.05)
+        phases.append((mega.read("pivotPhase"), mega.read("targetR"), mega.read("targetL")))
+        if phases[-1][0] == 0:
+            break
+    rotating = [p for p in phases if p[0] == 2]
+    assert rotating and all(p[1:] == (2.0, -2.0) for p in rotating)
+    assert 5 <= len(rotating) <= 6                            # 6 ticks, sampled every 50 ms
+    assert phases[-1][0] == 0
     assert mega.read("targetR") < 0 and mega.read("targetL") < 0
+
+
+def test_stop_command_cancels_a_pivot(mega: VirtualMega) -> None:
+    boot(mega)
+    for _ in range(5):
+        send_and_run(mega, b"x:0.3,t:0,", 0.1)
+    send_and_run(mega, b"x:-0.3,t:0,", 0.03)
+    send_and_run(mega, b"x:0,t:0,", 0.06)
+    assert mega.read("pivotPhase") == 0
+    assert (mega.read("targetR"), mega.read("targetL")) == (0.0, 0.0)
 
 
 def test_no_heap_and_stack_headroom(mega: VirtualMega) -> None:

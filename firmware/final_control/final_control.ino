@@ -100,6 +100,11 @@ uint32_t lastControlTime = 0;               // millis() of the last tick
 uint32_t tickCount = 0;
 
 float lastTravel = 0.0f;                    // m/s of travel of the last command
+// Pivot on reversal: stop, rotate in place for WC_PIVOT_TICKS, then the command.
+#define PIVOT_NONE 0
+#define PIVOT_STOPPING 1
+#define PIVOT_ROTATING 2
+uint8_t pivotPhase = PIVOT_NONE;
 uint8_t pivotTicksLeft = 0;
 float pendingL = 0.0f, pendingR = 0.0f;     // command waiting for the pivot to end
 
@@ -189,6 +194,7 @@ static void setMotor(uint8_t pwmPin, uint8_t dirPin, float output, uint8_t& pwm,
 // Targets to zero; the ramp brings the setpoints down at the emergency rate.
 static void emergencyHalt() {
   targetL = targetR = 0.0f;
+  pivotPhase = PIVOT_NONE;
   pivotTicksLeft = 0;
   lastTravel = 0.0f;
   emergencyStop = true;
@@ -201,15 +207,16 @@ static void acceptCommand(uint8_t newMode, float right, float left) {
   emergencyStop = false;
   float travel = (right + left) * 0.5f * WC_WHEEL_RADIUS;
   if (right == 0.0f && left == 0.0f) {
-    pivotTicksLeft = 0;            // a stop is honoured at once, even mid-pivot
+    pivotPhase = PIVOT_NONE;       // a stop is honoured at once, even mid-pivot
+    pivotTicksLeft = 0;
     targetR = targetL = 0.0f;
   } else if (needsPivot(travel, lastTravel)) {
-    pivotTicksLeft = WC_PIVOT_TICKS;
+    pivotPhase = PIVOT_STOPPING;   // first come to rest, then rotate
+    pivotTicksLeft = 0;
     pendingR = right;
     pendingL = left;
-    targetR = WC_PIVOT_SPEED;
-    targetL = -WC_PIVOT_SPEED;
-  } else if (pivotTicksLeft > 0) {
+    targetR = targetL = 0.0f;
+  } else if (pivotPhase != PIVOT_NONE) {
     pendingR = right;
     pendingL = left;
   } else {
@@ -275,7 +282,14 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
   setMotor(WC_PIN_PWM_L, WC_PIN_DIR_L, outputL, pwmL, dirL);
   setMotor(WC_PIN_PWM_R, WC_PIN_DIR_R, outputR, pwmR, dirR);
 
-  if (pivotTicksLeft > 0 && --pivotTicksLeft == 0) {
+  bool slow = fabs(filtVelL) < WC_PIVOT_START_SPEED && fabs(filtVelR) < WC_PIVOT_START_SPEED;
+  if (pivotPhase == PIVOT_STOPPING && setpointL == 0.0f && setpointR == 0.0f && slow) {
+    pivotPhase = PIVOT_ROTATING;   // at rest: rotate in place so the casters swing round
+    pivotTicksLeft = WC_PIVOT_TICKS;
+    targetR = WC_PIVOT_SPEED;
+    targetL = -WC_PIVOT_SPEED;
+  } else if (pivotPhase == PIVOT_ROTATING && --pivotTicksLeft == 0) {
+    pivotPhase = PIVOT_NONE;
     targetL = pendingL;
     targetR = pendingR;
   }

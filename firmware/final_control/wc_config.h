@@ -45,6 +45,7 @@
 // ---- Pivot (caster swivel) ------------------------------------------------
 #define WC_PIVOT_SPEED 2.0f        // rad/s per wheel, right +, left -
 #define WC_PIVOT_THRESHOLD 0.1f    // m/s of travel on either side of zero
+#define WC_PIVOT_START_SPEED 0.5f  // rad/s: the rotation starts once both wheels are slower
 
 // ---- PPM ------------------------------------------------------------------
 #define WC_PPM_CHANNELS 8

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from wcdrive.firmware import constants as C
 from wcdrive.firmware.f32 import constrain, div, f32, from_int
-from wcdrive.firmware.motion import emergency_halt
+from wcdrive.firmware.motion import emergency_halt, pivot_step
 from wcdrive.firmware.output import event_line, feedback_line
 from wcdrive.firmware.state import FirmwareState
 
@@ -100,11 +100,7 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
     s.pwmL, s.dirL = motor_output(s.outputL)
     s.pwmR, s.dirR = motor_output(s.outputR)
 
-    if s.pivotTicksLeft > 0:
-        s.pivotTicksLeft -= 1
-        if s.pivotTicksLeft == 0:
-            s.targetL = s.pendingL
-            s.targetR = s.pendingR
+    pivot_step(s)
 
     out += feedback_line(s)
     s.errLinesThisTick = 0

@@ -1,10 +1,23 @@
-"""What a command or a stop does to the wheel targets, with the pivot state machine."""
+"""What a command or a stop does to the wheel targets, with the pivot state machine.
+
+On a reversal the pivot first brings the chair to rest (PIVOT_STOPPING: setpoints at
+zero and both wheels below PIVOT_START_SPEED), then rotates
+it in place for PIVOT_TICKS (PIVOT_ROTATING) so the casters swing round, then applies
+the pending command. ``pivot_step`` runs once per control tick, after the outputs."""
 
 from __future__ import annotations
 
-from wcdrive.firmware.constants import PIVOT_SPEED, PIVOT_THRESHOLD, PIVOT_TICKS, WHEEL_RADIUS
+from wcdrive.firmware.constants import (
+    PIVOT_SPEED,
+    PIVOT_START_SPEED,
+    PIVOT_THRESHOLD,
+    PIVOT_TICKS,
+    WHEEL_RADIUS,
+)
 from wcdrive.firmware.f32 import f32
 from wcdrive.firmware.state import FirmwareState
+
+PIVOT_NONE, PIVOT_STOPPING, PIVOT_ROTATING = 0, 1, 2
 
 
 def needs_pivot(travel: float, prev_travel: float) -> bool:
@@ -16,6 +29,7 @@ def needs_pivot(travel: float, prev_travel: float) -> bool:
 def emergency_halt(s: FirmwareState) -> None:
     """Targets to zero; the ramp brings the setpoints down at the emergency rate."""
     s.targetL = s.targetR = 0.0
+    s.pivotPhase = PIVOT_NONE
     s.pivotTicksLeft = 0
     s.lastTravel = 0.0
     s.emergencyStop = 1
@@ -27,18 +41,34 @@ def accept_command(s: FirmwareState, new_mode: int, right: float, left: float) -
     s.emergencyStop = 0
     travel = f32(f32(f32(right + left) * 0.5) * WHEEL_RADIUS)
     if right == 0.0 and left == 0.0:
+        s.pivotPhase = PIVOT_NONE
         s.pivotTicksLeft = 0
         s.targetR = s.targetL = 0.0
     elif needs_pivot(travel, s.lastTravel):
-        s.pivotTicksLeft = PIVOT_TICKS
+        s.pivotPhase = PIVOT_STOPPING
+        s.pivotTicksLeft = 0
         s.pendingR = right
         s.pendingL = left
-        s.targetR = PIVOT_SPEED
-        s.targetL = -PIVOT_SPEED
-    elif s.pivotTicksLeft > 0:
+        s.targetR = s.targetL = 0.0
+    elif s.pivotPhase != PIVOT_NONE:
         s.pendingR = right
         s.pendingL = left
     else:
         s.targetR = right
         s.targetL = left
     s.lastTravel = travel
+
+
+def pivot_step(s: FirmwareState) -> None:
+    slow = abs(s.filtVelL) < PIVOT_START_SPEED and abs(s.filtVelR) < PIVOT_START_SPEED
+    if s.pivotPhase == PIVOT_STOPPING and s.setpointL == 0.0 and s.setpointR == 0.0 and slow:
+        s.pivotPhase = PIVOT_ROTATING
+        s.pivotTicksLeft = PIVOT_TICKS
+        s.targetR = PIVOT_SPEED
+        s.targetL = -PIVOT_SPEED
+    elif s.pivotPhase == PIVOT_ROTATING:
+        s.pivotTicksLeft -= 1
+        if s.pivotTicksLeft == 0:
+            s.pivotPhase = PIVOT_NONE
+            s.targetL = s.pendingL
+            s.targetR = s.pendingR

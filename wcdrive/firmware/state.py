@@ -21,7 +21,7 @@ FLOAT_FIELDS = (
 #: Integer and flag globals compared exactly.
 INT_FIELDS = (
     "mode", "pwmL", "pwmR", "dirL", "dirR", "encTickL", "encTickR", "prevEncL", "prevEncR",
-    "lastControlTime", "tickCount", "pivotTicksLeft", "cmdSinceTick", "watchdogArmed",
+    "lastControlTime", "tickCount", "pivotPhase", "pivotTicksLeft", "cmdSinceTick", "watchdogArmed",
     "lastCmdTime", "emergencyStop", "ppmLost", "stillTicks", "parked", "rejectedCount",
     "errSuppressed", "errLinesThisTick", "cmdLen", "cmdCommas", "cmdDiscarding",
 )
@@ -55,6 +55,7 @@ class FirmwareState:
     lastControlTime: int = 0
     tickCount: int = 0
     lastTravel: float = 0.0
+    pivotPhase: int = 0
     pivotTicksLeft: int = 0
     pendingL: float = 0.0
     pendingR: float = 0.0

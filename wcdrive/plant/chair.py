@@ -12,8 +12,10 @@ dt)`` several:
   within the friction circle. So wheels slip when asked for more than the floor gives.
 * Casters: a trailing contact patch behind each swivel pivot. The caster swings so its
   patch rolls without side slip, as fast as ``caster_max_swivel_rate`` allows; beyond
-  that the patch scrubs sideways against ``mu N``. Driving forward keeps the casters
-  trailing; reversing makes them swing round (an unstable equilibrium), scrubbing.
+  that the patch scrubs sideways against ``mu N``. Swinging takes the bearing's
+  friction torque, so a swinging caster pushes the chassis sideways with
+  ``T / trail`` (a massless caster's torque balance). Driving forward keeps the
+  casters trailing; reversing makes them swing round (an unstable equilibrium).
 * The chassis is a pymunk ``Body`` (mass, yaw inertia, centre of gravity ahead of the
   axle) in a ``Space``; the forces above are applied to it each step and pymunk
   integrates it. Walls or obstacles may be added to ``space``.
@@ -46,7 +48,7 @@ class ChairStruct(ctypes.Structure):
     """``chair_t`` of chair_kernel.c: parameters, Chipmunk handles and the state."""
 
     _fields_ = [(n, _D) for n in ("half_base", "r", "cog_x", "caster_x", "caster_y", "trail",
-                                  "swivel_max")]
+                                  "swivel_max", "swivel_friction")]
     _fields_ += [("mu", _D * 2)]
     _fields_ += [(n, _D) for n in ("mu_c", "n_drive", "n_caster", "crr", "crr_c", "c_long", "c_lat",
                                   "c_caster", "j", "b", "k1", "k2", "ke_g", "tau_max", "i_max_r",
@@ -55,8 +57,11 @@ class ChairStruct(ctypes.Structure):
                                   "get_angular_velocity", "set_force", "set_torque", "space_step")]
     _fields_ += [(n, _D * 2) for n in ("volts", "angle", "speed", "current", "slip", "force",
                                       "caster_heading")]
-    _fields_ += [(n, _D) for n in ("scrub_energy", "scrub_time", "time")]
+    _fields_ += [(n, _D) for n in ("scrub_energy", "scrub_time", "swivel_work", "side_impulse", "time")]
 
+
+#: rad/s: the swivel friction torque is regularised as ``T tanh(rate / scale)``.
+SWIVEL_RATE_SCALE = 0.2
 
 _KERNEL_SOURCE = Path(__file__).resolve().parent / "csrc" / "chair_kernel.c"
 _kernel: ctypes.CDLL | bool | None = None
@@ -109,6 +114,7 @@ class Plant:
         s.caster_y = p.caster_half_track
         s.trail = p.caster_trail
         s.swivel_max = p.caster_max_swivel_rate
+        s.swivel_friction = p.caster_swivel_friction
         s.mu[0], s.mu[1] = p.wheel_friction("left"), p.wheel_friction("right")
         s.mu_c = p.caster_friction
         s.n_drive = p.drive_wheel_load
@@ -186,6 +192,16 @@ class Plant:
     @property
     def caster_scrub_time(self) -> float:
         return self.s.scrub_time
+
+    @property
+    def caster_swivel_work(self) -> float:
+        """J spent swinging the casters against their bearing friction."""
+        return self.s.swivel_work
+
+    @property
+    def caster_side_impulse(self) -> float:
+        """N s: integral of the casters' sideways push on the chassis (both casters)."""
+        return self.s.side_impulse
 
     def axle_velocity(self) -> tuple[float, float]:
         """(forward, lateral) speed of the axle midpoint in m/s."""
@@ -281,9 +297,12 @@ class Plant:
             rate = _clamp(along_n / d, -s.swivel_max, s.swivel_max)
             side_slip = along_n - d * rate
             limit = s.mu_c * n_c
-            f_side = _clamp(-s.c_caster * side_slip, -limit, limit)
+            f_swivel = -s.swivel_friction * math.tanh(rate / SWIVEL_RATE_SCALE) / d
+            f_side = _clamp(f_swivel - s.c_caster * side_slip, -limit, limit)
+            s.swivel_work += abs(s.swivel_friction * math.tanh(rate / SWIVEL_RATE_SCALE) * rate) * dt
+            s.side_impulse += abs(f_side) * dt
             if side_slip != 0.0:
-                s.scrub_energy += abs(f_side * side_slip) * dt
+                s.scrub_energy += abs((f_side - f_swivel) * side_slip) * dt
                 scrubbing = scrubbing or abs(side_slip) > 1e-3
             roll = pu * ce + pv * se
             f_roll = -s.crr_c * n_c * math.tanh(roll / 0.01)

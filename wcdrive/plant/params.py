@@ -32,7 +32,8 @@ class ChairParams:
     caster_ahead_of_axle: float = 0.45  # m: caster pivots ahead of the drive axle
     caster_half_track: float = 0.25    # m: caster pivots either side of the centre line
     caster_trail: float = 0.05         # m: contact patch behind the pivot
-    caster_max_swivel_rate: float = 8.0  # rad/s the caster can swing (swivel friction, inertia)
+    caster_max_swivel_rate: float = 8.0  # rad/s the caster can swing (inertia)
+    caster_swivel_friction: float = 0.5  # N m of bearing friction resisting the swing
     caster_initial_offsets: tuple[float, float] = (0.02, -0.015)   # rad: no caster is perfectly aligned
 
     # --- tyres and floor (assumed) ---
@@ -42,7 +43,7 @@ class ChairParams:
     caster_friction: float = 0.6
     rolling_resistance: float = 0.015  # drive wheels
     caster_rolling_resistance: float = 0.03
-    tyre_stiffness: float = 3000.0     # N per m/s of longitudinal slip (regularised Coulomb)
+    tyre_stiffness: float = 100000.0   # N per m/s of longitudinal slip (regularised Coulomb)
     lateral_stiffness: float = 20000.0  # N per m/s of lateral slip
     caster_stiffness: float = 20000.0  # N per m/s of caster side slip
 

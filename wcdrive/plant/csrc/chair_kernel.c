@@ -10,6 +10,8 @@
 #include <math.h>
 #include <stdint.h>
 
+#define SWIVEL_RATE_SCALE 0.2   /* rad/s, as in chair.py */
+
 typedef struct { double x, y; } vec_t;
 typedef vec_t (*get_vec_fn)(const void *);
 typedef double (*get_f_fn)(const void *);
@@ -19,7 +21,7 @@ typedef void (*step_fn)(void *, double);
 
 typedef struct {
     /* parameters */
-    double half_base, r, cog_x, caster_x, caster_y, trail, swivel_max;
+    double half_base, r, cog_x, caster_x, caster_y, trail, swivel_max, swivel_friction;
     double mu[2], mu_c, n_drive, n_caster, crr, crr_c, c_long, c_lat, c_caster;
     double j, b, k1, k2, ke_g, tau_max, i_max_r, res;
     /* chipmunk */
@@ -29,7 +31,7 @@ typedef struct {
     double volts[2];
     double angle[2], speed[2], current[2], slip[2], force[2];
     double caster_heading[2];
-    double scrub_energy, scrub_time, time;
+    double scrub_energy, scrub_time, swivel_work, side_impulse, time;
 } chair_t;
 
 static double clampd(double v, double lo, double hi) { return v > hi ? hi : (v < lo ? lo : v); }
@@ -96,9 +98,12 @@ static void step(chair_t *c, double dt) {
         double rate = clampd(along_n / d, -c->swivel_max, c->swivel_max);
         double side_slip = along_n - d * rate;
         double limit = c->mu_c * n_c;
-        double f_side = clampd(-c->c_caster * side_slip, -limit, limit);
+        double f_swivel = -c->swivel_friction * tanh(rate / SWIVEL_RATE_SCALE) / d;
+        double f_side = clampd(f_swivel - c->c_caster * side_slip, -limit, limit);
+        c->swivel_work += fabs(c->swivel_friction * tanh(rate / SWIVEL_RATE_SCALE) * rate) * dt;
+        c->side_impulse += fabs(f_side) * dt;
         if (side_slip != 0.0) {
-            c->scrub_energy += fabs(f_side * side_slip) * dt;
+            c->scrub_energy += fabs((f_side - f_swivel) * side_slip) * dt;
             scrubbing = scrubbing || fabs(side_slip) > 1e-3;
         }
         double roll = pu * ce + pv * se;

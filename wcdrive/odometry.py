@@ -1,0 +1,147 @@
+"""Wheel odometry from encoder counts, as in the FRA532 report, with covariance.
+
+* ``PositionOdometry``: wheel distance increments with the midpoint heading,
+  ``x += d cos(theta + dtheta/2)``; robust to time jitter.
+* ``VelocityOdometry``: wheel speeds integrated with Euler steps,
+  ``x += v cos(theta) dt`` (the guide's section 2.0.6 and the report's type 2).
+* ``gyro`` option: the heading comes from an integrated z-gyro instead of the wheel
+  difference, so wheel slip does not turn the estimate.
+
+Covariances follow the seed's ekf.yaml conventions: a 6x6 row-major matrix over
+(x, y, z, roll, pitch, yaw) for pose and (vx, vy, vz, vroll, vpitch, vyaw) for twist,
+with the unused 3D terms set large so that a 2D filter ignores them.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+#: Variance given to the unused 3D terms (z, roll, pitch): "do not use".
+UNUSED = 1e6
+
+
+@dataclass
+class Pose2D:
+    x: float = 0.0
+    y: float = 0.0
+    theta: float = 0.0
+
+
+@dataclass
+class OdometryParams:
+    wheel_radius: float = 0.1524
+    wheelbase: float = 0.57
+    counts_per_rev: int = 10000
+    #: Per-metre variance growth of each wheel's distance (slip, radius error).
+    distance_variance_per_m: float = 1e-4
+    #: Twist variances (vx, vyaw) reported with each estimate.
+    twist_variance: tuple[float, float] = (0.1**2, 0.1**2)
+
+
+@dataclass
+class OdometryEstimate:
+    time: float
+    pose: Pose2D
+    linear: float
+    angular: float
+    pose_covariance: np.ndarray = field(repr=False)
+    twist_covariance: np.ndarray = field(repr=False)
+
+
+def _cov6(xx: float, yy: float, tt: float, xy: float = 0.0, xt: float = 0.0, yt: float = 0.0) -> np.ndarray:
+    c = np.diag([xx, yy, UNUSED, UNUSED, UNUSED, tt])
+    c[0, 1] = c[1, 0] = xy
+    c[0, 5] = c[5, 0] = xt
+    c[1, 5] = c[5, 1] = yt
+    return c
+
+
+class WheelOdometry:
+    """Integrates (time, left count, right count) samples, the left count mirrored
+    as the firmware reports it. ``method`` is "position" or "velocity"."""
+
+    def __init__(self, params: OdometryParams | None = None, method: str = "position") -> None:
+        if method not in ("position", "velocity"):
+            raise ValueError("method must be 'position' or 'velocity'")
+        self.p = params or OdometryParams()
+        self.method = method
+        self.pose = Pose2D()
+        self._cov = np.zeros((3, 3))
+        self._last: tuple[float, int, int] | None = None
+        self._rad_per_count = 2.0 * math.pi / self.p.counts_per_rev
+        self.linear = 0.0
+        self.angular = 0.0
+        self._gyro_heading: float | None = None
+
+    def use_gyro_heading(self, heading: float) -> None:
+        """From now on, the next update takes this heading (from an integrated gyro)."""
+        self._gyro_heading = heading
+
+    def update(self, time: float, count_left: int, count_right: int) -> OdometryEstimate:
+        if self._last is None:
+            self._last = (time, count_left, count_right)
+            return self.estimate(time)
+        t0, l0, r0 = self._last
+        self._last = (time, count_left, count_right)
+        dt = time - t0
+        r, base = self.p.wheel_radius, self.p.wheelbase
+        d_left = -(count_left - l0) * self._rad_per_count * r     # mirrored
+        d_right = (count_right - r0) * self._rad_per_count * r
+        d = 0.5 * (d_left + d_right)
+        dtheta = (d_right - d_left) / base
+        if self._gyro_heading is not None:
+            dtheta = self._gyro_heading - self.pose.theta
+            self._gyro_heading = None
+        th = self.pose.theta
+        if self.method == "position":
+            heading = th + 0.5 * dtheta
+        else:
+            heading = th
+        self.pose.x += d * math.cos(heading)
+        self.pose.y += d * math.sin(heading)
+        self.pose.theta = th + dtheta
+        if dt > 0:
+            self.linear, self.angular = d / dt, dtheta / dt
+        self._propagate(d, heading, d_left, d_right)
+        return self.estimate(time)
+
+    def _propagate(self, d: float, heading: float, d_left: float, d_right: float) -> None:
+        """First-order propagation of the wheel distance noise into the pose."""
+        k = self.p.distance_variance_per_m
+        q = np.diag([k * abs(d_left), k * abs(d_right)])
+        c, s, base = math.cos(heading), math.sin(heading), self.p.wheelbase
+        f = np.array([[1.0, 0.0, -d * s], [0.0, 1.0, d * c], [0.0, 0.0, 1.0]])
+        g = np.array([[0.5 * c, 0.5 * c], [0.5 * s, 0.5 * s], [-1.0 / base, 1.0 / base]])
+        self._cov = f @ self._cov @ f.T + g @ q @ g.T
+
+    def estimate(self, time: float) -> OdometryEstimate:
+        c = self._cov
+        pose_cov = _cov6(c[0, 0], c[1, 1], c[2, 2], c[0, 1], c[0, 2], c[1, 2])
+        vx, vyaw = self.p.twist_variance
+        twist_cov = _cov6(vx, UNUSED, vyaw)
+        return OdometryEstimate(time, Pose2D(self.pose.x, self.pose.y, self.pose.theta),
+                                self.linear, self.angular, pose_cov, twist_cov)
+
+
+class GyroIntegrator:
+    """Integrates z-gyro samples (trapezoid) into a heading."""
+
+    def __init__(self, heading: float = 0.0) -> None:
+        self.heading = heading
+        self._last: tuple[float, float] | None = None
+
+    def add(self, time: float, rate: float) -> None:
+        if self._last is not None:
+            t0, r0 = self._last
+            self.heading += 0.5 * (rate + r0) * (time - t0)
+        self._last = (time, rate)
+
+    def heading_at(self, time: float) -> float:
+        """The heading at ``time`` (extrapolated from the last sample)."""
+        if self._last is None:
+            return self.heading
+        t0, r0 = self._last
+        return self.heading + r0 * (time - t0)

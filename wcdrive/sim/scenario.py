@@ -1,0 +1,144 @@
+"""Scenarios: plain TOML files of what the host sends, segment by segment.
+
+    name = "square"
+    description = "..."
+    host_rate_hz = 10        # the host re-sends its current command this often
+    repeat = 4               # the segment list, this many times (default 1)
+    settle_s = 1.5           # after the last segment: a stop, then this long (default)
+    [chair]                  # optional ChairParams overrides, e.g. friction_left = 0.1
+    [[segment]]
+    cmdvel = [0.3, 0.0]      # or wheel = [right, left], ppm = [8 channels],
+    duration = 3.33          #    stop = true, silence = true (the host sends nothing)
+
+Bundled scenarios live in ``wcdrive/scenarios``; ``wcdrive sim --list`` shows them and
+any path to a file of your own works the same.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from wcdrive.codec import encode_cmdvel, encode_ppm, encode_wheel
+from wcdrive.plant.params import ChairParams
+
+BUNDLED = Path(__file__).resolve().parent.parent / "scenarios"
+_KINDS = ("cmdvel", "wheel", "ppm", "stop", "silence")
+
+
+class ScenarioError(ValueError):
+    """A scenario file is missing or malformed; the message names the field."""
+
+
+@dataclass(frozen=True)
+class Segment:
+    kind: str
+    values: tuple[float, ...]
+    duration: float
+
+    def command(self) -> bytes | None:
+        if self.kind == "cmdvel":
+            return encode_cmdvel(*self.values)
+        if self.kind == "wheel":
+            return encode_wheel(*self.values)
+        if self.kind == "ppm":
+            return encode_ppm([int(v) for v in self.values])
+        if self.kind == "stop":
+            return encode_cmdvel(0.0, 0.0)
+        return None
+
+
+@dataclass(frozen=True)
+class Scenario:
+    name: str
+    description: str
+    segments: tuple[Segment, ...]
+    host_rate_hz: float = 10.0
+    settle_s: float = 1.5
+    chair: dict[str, float] = field(default_factory=dict)
+    source: Path | None = None
+
+    @property
+    def duration(self) -> float:
+        return sum(s.duration for s in self.segments) + self.settle_s
+
+    def params(self) -> ChairParams:
+        return dataclasses.replace(ChairParams(), **self.chair)
+
+    def host_commands(self) -> list[tuple[float, bytes]]:
+        """(time, bytes) the host sends: each segment's command at ``host_rate_hz``,
+        then a stop."""
+        out: list[tuple[float, bytes]] = []
+        period = 1.0 / self.host_rate_hz
+        t0 = 0.02
+        for seg in self.segments:
+            data = seg.command()
+            n = max(1, round(seg.duration / period))
+            if data is not None:
+                out += [(t0 + k * period, data) for k in range(n)]
+            t0 += seg.duration
+        out.append((t0, encode_cmdvel(0.0, 0.0)))
+        return out
+
+
+def bundled() -> list[Path]:
+    return sorted(BUNDLED.glob("*.toml"))
+
+
+def find(name_or_path: str) -> Path:
+    path = Path(name_or_path)
+    if path.suffix == ".toml" and path.exists():
+        return path
+    candidate = BUNDLED / f"{name_or_path}.toml"
+    if candidate.exists():
+        return candidate
+    names = ", ".join(p.stem for p in bundled())
+    raise ScenarioError(f"no scenario {name_or_path!r}: give a .toml path or one of: {names}")
+
+
+def load(name_or_path: str) -> Scenario:
+    path = find(name_or_path)
+    try:
+        data = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(f"{path}: not valid TOML: {exc}") from exc
+    segments = []
+    for i, raw in enumerate(data.get("segment", [])):
+        kinds = [k for k in _KINDS if k in raw]
+        if len(kinds) != 1:
+            raise ScenarioError(f"{path}: segment {i + 1} needs exactly one of {', '.join(_KINDS)}")
+        kind = kinds[0]
+        duration = raw.get("duration")
+        if not isinstance(duration, (int, float)) or duration <= 0:
+            raise ScenarioError(f"{path}: segment {i + 1} needs a positive duration (s)")
+        value = raw[kind]
+        values: tuple[float, ...] = () if isinstance(value, bool) else tuple(float(v) for v in value)
+        expected = {"cmdvel": 2, "wheel": 2, "ppm": 8, "stop": 0, "silence": 0}[kind]
+        if len(values) != expected:
+            raise ScenarioError(f"{path}: segment {i + 1}: {kind} takes {expected} values")
+        seg = Segment(kind, values, float(duration))
+        try:
+            seg.command()
+        except ValueError as exc:
+            raise ScenarioError(f"{path}: segment {i + 1}: {exc}") from exc
+        segments.append(seg)
+    if not segments:
+        raise ScenarioError(f"{path}: no [[segment]] entries")
+    repeat = int(data.get("repeat", 1))
+    if repeat < 1:
+        raise ScenarioError(f"{path}: repeat must be >= 1")
+    chair = dict(data.get("chair", {}))
+    known = {f.name for f in dataclasses.fields(ChairParams)}
+    unknown = set(chair) - known
+    if unknown:
+        raise ScenarioError(f"{path}: unknown [chair] keys: {', '.join(sorted(unknown))}")
+    rate = float(data.get("host_rate_hz", 10.0))
+    if not 0.5 <= rate <= 100.0:
+        raise ScenarioError(f"{path}: host_rate_hz must be within 0.5..100")
+    return Scenario(
+        name=str(data.get("name", path.stem)), description=str(data.get("description", "")),
+        segments=tuple(segments) * repeat, host_rate_hz=rate,
+        settle_s=float(data.get("settle_s", 1.5)), chair=chair, source=path,
+    )
