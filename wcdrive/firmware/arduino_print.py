@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 
 from wcdrive.firmware.f32 import div, f32
@@ -20,6 +21,15 @@ def print_unsigned(n: int) -> bytes:
     return str(n & 0xFFFFFFFF).encode()
 
 
+@functools.cache
+def _rounding(digits: int) -> float:
+    """``rounding = 0.5; for (i < digits) rounding /= 10.0;`` in binary32."""
+    rounding = 0.5
+    for _ in range(digits):
+        rounding = div(rounding, 10.0)
+    return rounding
+
+
 def print_float(number: float, digits: int = 2) -> bytes:
     """``Print::printFloat(number, digits)`` with binary32 arithmetic throughout."""
     if math.isnan(number):
@@ -32,10 +42,7 @@ def print_float(number: float, digits: int = 2) -> bytes:
     if number < 0.0:
         out += b"-"
         number = -number
-    rounding = 0.5
-    for _ in range(digits):
-        rounding = div(rounding, 10.0)
-    number = f32(number + rounding)
+    number = f32(number + _rounding(digits))
     int_part = int(number) & 0xFFFFFFFF
     remainder = f32(number - f32(float(int_part)))
     out += str(int_part).encode()

@@ -9,6 +9,7 @@ first (1e32, 1e16, 1e8, 1e4, 1e2, 1e1 or their reciprocals), rounding each time.
 from __future__ import annotations
 
 import math
+import re
 
 from wcdrive.firmware.f32 import f32
 
@@ -18,9 +19,41 @@ _OVERFLOW_AT = (0xFFFFFFFF - 9) // 10
 _SPACE = b" \t\n\v\f\r"
 
 
+_PLAIN = re.compile(rb"([+-]?)([0-9]*)(?:\.([0-9]*))?")
+
+
 def strtod(text: bytes, start: int = 0) -> tuple[float, int]:
     """Parses ``text[start:]`` (stopping at a NUL as C does). Returns the value and
     the index just past the last character used (``start`` when nothing was)."""
+    plain = _PLAIN.fullmatch(text, start)
+    if plain is not None:
+        whole, frac = plain[2], plain[3] or b""
+        if 0 < len(whole) + len(frac) <= 9:
+            # At most 9 digits: no uint32 overflow, so the value is just the digits.
+            return _scale(int(whole + frac), -len(frac), plain[1] == b"-"), len(text)
+    return _strtod(text, start)
+
+
+def _scale(value: int, exp: int, negative: bool) -> float:
+    """The end of strtod: to binary32, the sign, then the powers of ten."""
+    x = f32(float(value))
+    if negative:
+        x = -x
+    if x != 0:
+        table = _POW_M10 if exp < 0 else _POW_P10
+        e = -exp if exp < 0 else exp
+        index = 5
+        power = 32
+        while power:
+            while e >= power:
+                x = f32(x * table[index])
+                e -= power
+            index -= 1
+            power >>= 1
+    return x
+
+
+def _strtod(text: bytes, start: int) -> tuple[float, int]:
     s = text
     n = len(s)
 
@@ -101,21 +134,7 @@ def strtod(text: bytes, start: int = 0) -> tuple[float, int]:
             exp += -e if exp_negative else e
 
     end = i - 1 if any_digit else start
-    x = f32(float(value))
-    if negative and any_digit:
-        x = -x
-    if x != 0:
-        table = _POW_M10 if exp < 0 else _POW_P10
-        e = -exp if exp < 0 else exp
-        index = 5
-        power = 32
-        while power:
-            while e >= power:
-                x = f32(x * table[index])
-                e -= power
-            index -= 1
-            power >>= 1
-    return x, end
+    return _scale(value, exp, negative and any_digit), end
 
 
 def _match_ci(s: bytes, i: int, word: bytes) -> bool:

@@ -12,7 +12,7 @@ returns the bytes the firmware sends for it, and the whole state is ``state``.
 
 from __future__ import annotations
 
-from wcdrive.firmware.commands import process_byte
+from wcdrive.firmware.commands import process_bytes
 from wcdrive.firmware.constants import CONTROL_PERIOD_MS
 from wcdrive.firmware.control import control_tick
 from wcdrive.firmware.state import FirmwareState
@@ -32,9 +32,7 @@ class Firmware:
 
     def feed(self, data: bytes) -> bytes:
         out = bytearray()
-        s = self.state
-        for c in data:
-            process_byte(s, c, out)
+        process_bytes(self.state, data, out)
         return bytes(out)
 
     def due(self, now: int) -> bool:

@@ -4,13 +4,14 @@ PID with back-calculation anti-windup, motor outputs, pivot and feedback."""
 from __future__ import annotations
 
 from wcdrive.firmware import constants as C
-from wcdrive.firmware.f32 import constrain, div, f32, from_int
+from wcdrive.firmware.f32 import div, f32, from_int
 from wcdrive.firmware.motion import emergency_halt, pivot_step
 from wcdrive.firmware.output import event_line, feedback_line
 from wcdrive.firmware.state import FirmwareState
 
 _HI_L = div(C.PID_OUT_MAX, C.KI_L)
 _HI_R = div(C.PID_OUT_MAX, C.KI_R)
+_OUT_MAX = C.PID_OUT_MAX
 
 
 def compute_pid(setpoint: float, measurement: float, integral: float, prev_meas: float,
@@ -19,12 +20,13 @@ def compute_pid(setpoint: float, measurement: float, integral: float, prev_meas:
     ``100 / ki``, which gcc folds at compile time."""
     error = f32(setpoint - measurement)
     integral = f32(integral + f32(error * dt))
-    integral = constrain(integral, -limit, limit)
+    # constrain(integral, -limit, limit)
+    integral = -limit if integral < -limit else (limit if integral > limit else integral)
     derivative = div(-f32(measurement - prev_meas), dt)
     p_term = f32(kp * error)
     d_term = f32(kd * derivative)
     output = f32(f32(p_term + f32(ki * integral)) + d_term)
-    clamped = constrain(output, -C.PID_OUT_MAX, C.PID_OUT_MAX)
+    clamped = -_OUT_MAX if output < -_OUT_MAX else (_OUT_MAX if output > _OUT_MAX else output)
     if output != clamped:
         integral = div(f32(f32(clamped - p_term) - d_term), ki)
     return clamped, integral

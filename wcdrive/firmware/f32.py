@@ -52,12 +52,16 @@ def mul(a: float, b: float) -> float:
     return f32(a * b)
 
 
+_TWO_MIN_NORMAL = 2.0 * MIN_NORMAL
+
+
 def div(a: float, b: float) -> float:
     """``a / b`` as avr-libc's ``__divsf3`` computes it."""
-    if b == 0.0 or a == 0.0 or math.isinf(a) or math.isinf(b) or math.isnan(a) or math.isnan(b):
-        return f32(a / b) if b != 0.0 else _div_by_zero(a, b)
-    q = a / b
-    if abs(q) >= 2.0 * MIN_NORMAL:
+    try:
+        q = a / b
+    except ZeroDivisionError:
+        return _div_by_zero(a, b)
+    if abs(q) >= _TWO_MIN_NORMAL or q == 0.0 or q != q:   # normal, inf, zero or NaN
         return f32(q)
     return _div_subnormal(a, b)
 

@@ -14,11 +14,14 @@ import numpy as np
 ILLEGAL = 2
 #: ``QUAD_TABLE[(previous << 2) | current]``, as in final_control.ino.
 QUAD_TABLE = (0, -1, +1, ILLEGAL, +1, 0, ILLEGAL, -1, -1, ILLEGAL, 0, +1, ILLEGAL, +1, -1, 0)
-_STEP = np.array([0 if v == ILLEGAL else v for v in QUAD_TABLE], dtype=np.int64)
-_IS_ILLEGAL = np.array([v == ILLEGAL for v in QUAD_TABLE], dtype=np.int64)
+#: Per transition: the step, plus 2**16 for an illegal one, so one sum gives both
+#: (bulk() works in chunks short enough that the steps never reach 2**15).
+_CODE = np.array([(1 << 16) if v == ILLEGAL else v for v in QUAD_TABLE], dtype=np.int64)
+_CHUNK = 30000
 
 #: AB state for ``count % 4``: count 0 is 11, then 01, 00, 10.
 STATE_OF_PHASE = (0b11, 0b01, 0b00, 0b10)
+_STATE_OF_PHASE = np.array(STATE_OF_PHASE, dtype=np.int8)
 
 
 @dataclass
@@ -39,14 +42,17 @@ class QuadratureDecoder:
 
     def bulk(self, states: np.ndarray) -> None:
         """Feeds a sequence of pin states at once; identical to calling ``edge`` on each."""
-        states = np.asarray(states, dtype=np.int64)
-        if states.size == 0:
-            return
-        previous = np.concatenate(([self.last], states[:-1]))
-        index = (previous << 2) | states
-        self.count = _wrap_i32(self.count + int(_STEP[index].sum()))
-        self.illegal += int(_IS_ILLEGAL[index].sum())
-        self.last = int(states[-1])
+        states = np.asarray(states)
+        if states.dtype != np.int8:
+            states = states.astype(np.int8)
+        for start in range(0, states.size, _CHUNK):
+            chunk = states[start:start + _CHUNK]
+            index = (chunk[:-1] << 2) | chunk[1:]
+            total = int(_CODE.take(index).sum()) + int(_CODE[(self.last << 2) | int(chunk[0])])
+            illegal = (total + (1 << 15)) >> 16
+            self.illegal += illegal
+            self.count = _wrap_i32(self.count + total - (illegal << 16))
+            self.last = int(chunk[-1])
 
 
 def _wrap_i32(value: int) -> int:
@@ -56,8 +62,7 @@ def _wrap_i32(value: int) -> int:
 def state_for_count(count: int | np.ndarray) -> int | np.ndarray:
     """The AB state an ideal encoder shows at a position (counts)."""
     phases = np.asarray(count) % 4
-    table = np.array(STATE_OF_PHASE)
-    result = table[phases]
+    result = _STATE_OF_PHASE[phases]
     return int(result) if np.ndim(result) == 0 else result
 
 

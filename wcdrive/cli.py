@@ -1,0 +1,100 @@
+"""``wcdrive``: the command line.
+
+    wcdrive sim [SCENARIO ...] [--backend port|simavr] [--json] [--out DIR] [--no-plots]
+    wcdrive sim --list
+    wcdrive verify --traces N --seed S [--elf PATH]      (= python -m wcdrive.verify)
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+
+class _Progress:
+    """A one-line progress bar on stderr, drawn only for runs longer than a second."""
+
+    def __init__(self, label: str, enabled: bool) -> None:
+        self.label, self.enabled, self.start, self.drawn = label, enabled, time.monotonic(), False
+
+    def __call__(self, fraction: float) -> None:
+        if not self.enabled or time.monotonic() - self.start < 1.0:
+            return
+        filled = int(30 * min(1.0, fraction))
+        sys.stderr.write(f"\r{self.label} [{'#' * filled}{'.' * (30 - filled)}] {100 * fraction:5.1f}%")
+        sys.stderr.flush()
+        self.drawn = True
+
+    def done(self) -> None:
+        if self.drawn:
+            sys.stderr.write("\r" + " " * 60 + "\r")
+            sys.stderr.flush()
+
+
+def _sim(args: argparse.Namespace) -> int:
+    from wcdrive.sim import report, runner, scenario
+
+    if args.list:
+        for path in scenario.bundled():
+            sc = scenario.load(str(path))
+            print(f"{sc.name:20s} {sc.duration:7.1f} s  {sc.description}")
+        return 0
+    names = [p.stem for p in scenario.bundled()] if args.all else (args.scenario or ["square"])
+    results = []
+    for name in names:
+        try:
+            sc = scenario.load(name)
+        except scenario.ScenarioError as exc:
+            print(f"wcdrive sim: {exc}", file=sys.stderr)
+            return 2
+        progress = _Progress(sc.name, sys.stderr.isatty() and not args.json)
+        result = runner.run(sc, backend=args.backend, seed=args.seed, dt=args.dt, progress=progress)
+        progress.done()
+        results.append(result)
+        if not args.json:
+            print(report.table(result))
+        if not args.no_plots:
+            paths = report.plots(result, Path(args.out) / sc.name)
+            if not args.json:
+                print("  plots: " + ", ".join(str(p) for p in paths))
+        if not args.json:
+            print()
+    if args.json:
+        print(report.to_json(results))
+    failed = [r for r in results if r.firmware_differences]
+    return 1 if failed else 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="wcdrive",
+                                     description="wcdrive: the wheelchair, simulated or real.")
+    sub = parser.add_subparsers(dest="command", required=True)
+    sim = sub.add_parser("sim", help="drive a simulated chair through a scenario")
+    sim.add_argument("scenario", nargs="*", help="bundled scenario name or a .toml file (default: square)")
+    sim.add_argument("--all", action="store_true", help="run every bundled scenario")
+    sim.add_argument("--list", action="store_true", help="list the bundled scenarios")
+    sim.add_argument("--backend", choices=("port", "simavr"), default="port",
+                     help="the Python port (default) or the compiled firmware in simavr")
+    sim.add_argument("--json", action="store_true", help="print the metrics as JSON")
+    sim.add_argument("--out", default="wcdrive-out", help="where the plots go (default: wcdrive-out/)")
+    sim.add_argument("--no-plots", action="store_true")
+    sim.add_argument("--seed", type=int, default=0, help="gyro noise seed")
+    sim.add_argument("--dt", type=float, default=0.001, help="physics step in s (default 0.001)")
+    sim.set_defaults(func=_sim)
+    verify = sub.add_parser("verify", help="differential check of the port against the firmware",
+                            add_help=False)
+    verify.set_defaults(func=None)
+    args, rest = parser.parse_known_args(argv)
+    if args.command == "verify":
+        from wcdrive.verify import main as verify_main
+
+        return verify_main(rest)
+    if rest:
+        parser.error(f"unrecognized arguments: {' '.join(rest)}")
+    return args.func(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,105 @@
+"""What ``wcdrive sim`` prints and draws: a table, JSON, and PNG plots."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+from wcdrive.sim.runner import SimResult
+
+
+def table(result: SimResult) -> str:
+    m = result.metrics()
+    rows = [
+        ("", "x (m)", "y (m)", "heading (deg)", "pos. error (m)", "heading error (deg)"),
+        ("ground truth", f"{m['truth_x']:.3f}", f"{m['truth_y']:.3f}",
+         f"{m['truth_heading_deg']:.2f}", "", ""),
+    ]
+    for key, label in (("odom_wheel", "wheel odometry (position)"),
+                       ("odom_velocity", "wheel odometry (velocity)"),
+                       ("odom_gyro", "wheels + gyro heading")):
+        rows.append((label, f"{m[key + '_x']:.3f}", f"{m[key + '_y']:.3f}", f"{m[key + '_heading_deg']:.2f}",
+                     f"{m[key + '_position_error_m']:.4f}", f"{m[key + '_heading_error_deg']:.3f}"))
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    lines = [f"scenario {result.scenario} ({result.backend}): {result.duration:.1f} s simulated, "
+             f"{result.ticks} ticks, {result.real_time_factor:.0f}x real time"]
+    for r in rows:
+        lines.append("  " + "  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in
+                                      enumerate(zip(r, widths, strict=True))))
+    lines.append("  wheel speed tracking error (rms, setpoint - filtered): "
+                 f"{m['tracking_rms_rad_s']:.3f} rad/s")
+    lines.append(f"  casters: swivel work {m['caster_swivel_work_j']:.2f} J, side push "
+                 f"{m['caster_side_impulse_ns']:.1f} N s, scrub {m['caster_scrub_energy_j']:.3f} J")
+    lines.append(f"  lines from the board: {m['lines_feedback']} feedback, {m['lines_error']} ERR, "
+                 f"{m['lines_event']} EVT")
+    if result.firmware_differences is not None:
+        lines.append(f"  port vs firmware: {result.firmware_differences} differences over "
+                     f"{result.firmware_events_compared} firmware events")
+    return "\n".join(lines)
+
+
+def to_json(results: list[SimResult]) -> str:
+    def clean(v):
+        if isinstance(v, float):
+            return None if math.isnan(v) or math.isinf(v) else round(v, 6)
+        return v.item() if hasattr(v, "item") else v
+
+    return json.dumps([{k: clean(v) for k, v in r.metrics().items()} for r in results], indent=2)
+
+
+def plots(result: SimResult, out: Path) -> list[Path]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out.mkdir(parents=True, exist_ok=True)
+    t = result.tick_time
+    paths = []
+
+    fig, ax = plt.subplots(figsize=(6.5, 6))
+    ax.plot(result.truth[:, 0], result.truth[:, 1], "k-", lw=2, label="ground truth")
+    ax.plot(result.odom_wheel[:, 0], result.odom_wheel[:, 1], "C0--", label="wheel odometry")
+    ax.plot(result.odom_gyro[:, 0], result.odom_gyro[:, 1], "C2:", lw=2, label="wheels + gyro")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_title(f"{result.scenario}: trajectory")
+    ax.grid(True, alpha=0.3)
+    ax.legend()
+    paths.append(_save(fig, out / "trajectory.png"))
+
+    fig, axes = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+    for i, side in enumerate(("left", "right")):
+        a = axes[i]
+        a.plot(t, result.setpoint[:, i], "k-", label="setpoint (ramped)")
+        a.plot(t, result.measured[:, i], "C0-", label="measured (filtered)")
+        a.plot(t, result.wheel_speed[:, i], "C1--", lw=1, label="true wheel speed")
+        a.set_ylabel(f"{side} wheel (rad/s)")
+        a.grid(True, alpha=0.3)
+    axes[0].legend(loc="best", fontsize=8)
+    axes[1].set_xlabel("time (s)")
+    axes[0].set_title(f"{result.scenario}: wheel speeds")
+    paths.append(_save(fig, out / "wheels.png"))
+
+    fig, ax = plt.subplots(figsize=(8, 3.5))
+    ax.step(t, result.pwm[:, 0], where="post", label="left")
+    ax.step(t, result.pwm[:, 1], where="post", label="right")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("PWM duty, signed by DIR")
+    ax.set_ylim(-260, 260)
+    ax.grid(True, alpha=0.3)
+    ax.legend()
+    ax.set_title(f"{result.scenario}: motor commands")
+    paths.append(_save(fig, out / "pwm.png"))
+    return paths
+
+
+def _save(fig, path: Path) -> Path:
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    import matplotlib.pyplot as plt
+
+    plt.close(fig)
+    return path
