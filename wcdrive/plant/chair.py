@@ -160,7 +160,7 @@ class Plant:
     # ---- inputs ------------------------------------------------------------------
     def set_drive(self, pwm_left: int, dir_left: int, pwm_right: int, dir_right: int) -> None:
         """The driver inputs as the firmware writes them: duty 0..255, DIR HIGH = forward."""
-        v = self.p.supply_voltage / 255.0
+        v = (self.p.battery_voltage or self.p.supply_voltage) / 255.0
         self.s.volts[0] = v * pwm_left * (1.0 if dir_left else -1.0)
         self.s.volts[1] = v * pwm_right * (1.0 if dir_right else -1.0)
 
@@ -263,6 +263,8 @@ class Plant:
         s.speed[i] = w
         s.angle[i] += w * dt
         s.current[i] = (volts - s.ke_g * w) / s.res
+        if limited or abs(s.current[i]) * s.res > s.i_max_r:
+            s.current[i] = math.copysign(s.i_max_r / s.res, volts - s.ke_g * w)
         s.slip[i] = r * w - ground
         s.force[i] = force
         return force - rr

@@ -20,7 +20,8 @@ class ChairParams:
     wheel_radius: float = 0.1524       # m (6 in)
     counts_per_rev: int = 10000        # 2500 PPR x 4
     top_wheel_speed: float = 17.59     # rad/s at full duty (2.68 m/s)
-    supply_voltage: float = 24.0       # V, 24 V brushed motors
+    supply_voltage: float = 24.0       # V, 24 V brushed motors (rating; sets Ke)
+    battery_voltage: float | None = None   # V at the driver now (None: the rating); a low battery
     current_limit: float = 13.0        # A per channel (the guide's SmartDriveDuo figure)
 
     # --- body (assumed) ---

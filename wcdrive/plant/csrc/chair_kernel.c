@@ -64,6 +64,8 @@ static double wheel(chair_t *c, int i, double ground, double dt) {
     c->speed[i] = w;
     c->angle[i] += w * dt;
     c->current[i] = (volts - c->ke_g * w) / c->res;
+    if (limited || fabs(c->current[i]) * c->res > c->i_max_r)
+        c->current[i] = copysign(c->i_max_r / c->res, volts - c->ke_g * w);
     c->slip[i] = r * w - ground;
     c->force[i] = force;
     return force - rr;
