@@ -1,0 +1,8 @@
+"""wcdrive: firmware-in-the-loop hardware abstraction for a Mega-2560 power wheelchair."""
+
+import serial as _serial
+
+if "wcdrive.urlhandler" not in _serial.protocol_handler_packages:
+    _serial.protocol_handler_packages.append("wcdrive.urlhandler")
+
+__version__ = "0.1.0"

@@ -1,14 +1,10 @@
 """The closed loop: a scenario's host, the firmware (the port, or the ELF in simavr),
 and the pymunk chair, at the firmware's own timing.
 
-Time runs in 16 MHz cycles. ``millis()`` advances at Timer0 overflows (every 16,384
-cycles, the first at cycle 21,250 as measured on the ELF in simavr); the firmware's
-control tick runs at the overflow that makes 50 ms due. The plant steps at a fixed
-``dt`` (1 kHz by default) and sees the PWM/DIR of the last tick.
+Time runs in 16 MHz cycles (``wcdrive.sim.port_loop``); the plant steps at a fixed
+``dt`` (1 kHz by default) and sees the PWM/DIR of the last control tick.
 
-* ``backend="port"``: the bit-exact Python port. Host bytes reach it before the
-  tick that follows their arrival on the wire; encoder counts are the plant's at the
-  tick.
+* ``backend="port"``: the bit-exact Python port (``PortLoop``).
 * ``backend="simavr"``: the compiled firmware, fed the plant's encoder edges at
   their exact times and the host's bytes at wire speed. Every firmware event is
   recorded, and at the end the port replays them (``hil.lockstep``) so the report
@@ -25,15 +21,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from wcdrive.codec import Feedback, LineDecoder
-from wcdrive.firmware.board import Firmware
-from wcdrive.firmware.timer0 import OVERFLOW_CYCLES, Timer0
 from wcdrive.odometry import GyroIntegrator, OdometryParams, WheelOdometry
-from wcdrive.plant import Gyro, Plant, encoder_counts
+from wcdrive.plant import Gyro, Plant
+from wcdrive.sim.port_loop import F_CPU, PortLoop, advance
 from wcdrive.sim.scenario import Scenario
-
-F_CPU = 16_000_000
-FIRST_OVERFLOW_CYCLE = 21_250
-UART_BYTE_CYCLES = 1496
 
 
 @dataclass
@@ -186,56 +177,25 @@ def run(scenario: Scenario, *, backend: str = "port", seed: int = 0, dt: float =
                      **extra, **log.arrays())
 
 
-def _advance(plant: Plant, gyro: Gyro, steps: int, dt: float) -> np.ndarray | None:
-    if steps <= 0:
-        return None
-    t0 = plant.time
-    angles, rates = plant.advance(steps, dt, record=True)
-    # The gyro samples the yaw rate of the step it falls in.
-    times = t0 + dt * np.arange(1, steps + 1)
-    while gyro.next_time <= times[-1] + 1e-12:
-        k = int(np.searchsorted(times, gyro.next_time - 1e-12))
-        gyro.sample(gyro.next_time, float(rates[min(k, steps - 1)]))
-    return angles
-
-
 def _run_port(plant, gyro, host, log, commands, step_cycles, end_cycle, dt, progress) -> dict:
-    fw = Firmware(boot_millis=0)
-    host.receive(0.0, fw.boot_output())
-    timer = Timer0()
-    overflow = FIRST_OVERFLOW_CYCLE
-    rx: list[tuple[int, int]] = []      # (arrival cycle, byte)
+    loop = PortLoop(plant, gyro, dt)
     for cycle, data in commands:
-        rx += [(cycle + (i + 1) * UART_BYTE_CYCLES, b) for i, b in enumerate(data)]
-    rx.sort()
-    rx_next = 0
-    steps_done = 0
-    last_progress = 0
-    while overflow <= end_cycle:
-        timer.overflow()
-        millis = timer.millis
-        if fw.due(millis):
-            target = overflow // step_cycles
-            _advance(plant, gyro, target - steps_done, dt)
-            steps_done = target
-            t = overflow / F_CPU
-            start = rx_next
-            while rx_next < len(rx) and rx[rx_next][0] <= overflow:
-                rx_next += 1
-            if rx_next > start:
-                host.receive(t, fw.feed(bytes(b for _, b in rx[start:rx_next])))
-            counts = encoder_counts(plant.left.angle, plant.right.angle, plant.p.counts_per_rev)
-            out = fw.tick(millis, *counts)
-            s = fw.state
-            plant.set_drive(s.pwmL, s.dirL, s.pwmR, s.dirR)
-            host.receive(t, out)
-            log.add(t, plant, host, (s.setpointL, s.setpointR), (s.filtVelL, s.filtVelR),
-                    (_signed(s.pwmL, s.dirL), _signed(s.pwmR, s.dirR)))
-            if progress and overflow - last_progress > F_CPU:
-                progress(overflow / end_cycle)
-                last_progress = overflow
-        overflow += OVERFLOW_CYCLES
-    _advance(plant, gyro, end_cycle // step_cycles - steps_done, dt)
+        loop.send(data, at=cycle)
+    last_progress = [0.0]
+
+    def on_tick(t: float) -> None:
+        for cycle, out in loop.take_output():
+            host.receive(cycle / F_CPU, out)
+        s = loop.fw.state
+        log.add(t, plant, host, (s.setpointL, s.setpointR), (s.filtVelL, s.filtVelR),
+                (_signed(s.pwmL, s.dirL), _signed(s.pwmR, s.dirR)))
+        if progress and t - last_progress[0] > 1.0:
+            progress(t * F_CPU / end_cycle)
+            last_progress[0] = t
+
+    loop.run_until(end_cycle, on_tick)
+    for cycle, out in loop.take_output():
+        host.receive(cycle / F_CPU, out)
     return {}
 
 
@@ -257,7 +217,7 @@ def _run_simavr(plant, gyro, host, log, commands, step_cycles, end_cycle, dt, pr
     steps = end_cycle // step_cycles
     for k in range(steps):
         t0, t1 = k * dt, (k + 1) * dt
-        angles = _advance(plant, gyro, 1, dt)
+        angles = advance(plant, gyro, 1, dt)
         new = {"left": -angles[0, 0] * scale + 0.5, "right": angles[0, 1] * scale + 0.5}
         for side in ("left", "right"):
             train = edges_from_trajectory(np.array([t0, t1]), np.array([position[side], new[side]]))
