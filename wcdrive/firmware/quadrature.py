@@ -14,10 +14,10 @@ import numpy as np
 ILLEGAL = 2
 #: ``QUAD_TABLE[(previous << 2) | current]``, as in final_control.ino.
 QUAD_TABLE = (0, -1, +1, ILLEGAL, +1, 0, ILLEGAL, -1, -1, ILLEGAL, 0, +1, ILLEGAL, +1, -1, 0)
-#: Per transition: the step, plus 2**16 for an illegal one, so one sum gives both
-#: (bulk() works in chunks short enough that the steps never reach 2**15).
-_CODE = np.array([(1 << 16) if v == ILLEGAL else v for v in QUAD_TABLE], dtype=np.int64)
-_CHUNK = 30000
+#: Transitions (indices into QUAD_TABLE) that step forward, backward, or are illegal.
+_FORWARD = tuple(i for i, v in enumerate(QUAD_TABLE) if v == +1)
+_BACKWARD = tuple(i for i, v in enumerate(QUAD_TABLE) if v == -1)
+_ILLEGALS = tuple(i for i, v in enumerate(QUAD_TABLE) if v == ILLEGAL)
 
 #: AB state for ``count % 4``: count 0 is 11, then 01, 00, 10.
 STATE_OF_PHASE = (0b11, 0b01, 0b00, 0b10)
@@ -41,18 +41,19 @@ class QuadratureDecoder:
         self.last = state
 
     def bulk(self, states: np.ndarray) -> None:
-        """Feeds a sequence of pin states at once; identical to calling ``edge`` on each."""
+        """Feeds a sequence of pin states at once; identical to calling ``edge`` on each:
+        a histogram of the 16 transitions gives the steps and the illegal ones."""
         states = np.asarray(states)
+        if states.size == 0:
+            return
         if states.dtype != np.int8:
             states = states.astype(np.int8)
-        for start in range(0, states.size, _CHUNK):
-            chunk = states[start:start + _CHUNK]
-            index = (chunk[:-1] << 2) | chunk[1:]
-            total = int(_CODE.take(index).sum()) + int(_CODE[(self.last << 2) | int(chunk[0])])
-            illegal = (total + (1 << 15)) >> 16
-            self.illegal += illegal
-            self.count = _wrap_i32(self.count + total - (illegal << 16))
-            self.last = int(chunk[-1])
+        hist = np.bincount((states[:-1] << 2) | states[1:], minlength=16).tolist()
+        hist[(self.last << 2) | int(states[0])] += 1
+        steps = sum(hist[i] for i in _FORWARD) - sum(hist[i] for i in _BACKWARD)
+        self.illegal += sum(hist[i] for i in _ILLEGALS)
+        self.count = _wrap_i32(self.count + steps)
+        self.last = int(states[-1])
 
 
 def _wrap_i32(value: int) -> int:
