@@ -61,3 +61,20 @@ def test_bad_url_options_are_clear() -> None:
         serial.serial_for_url("wcsim://?colour=red")
     with pytest.raises(serial.SerialException, match="speed"):
         serial.serial_for_url("wcsim://?speed=0")
+
+
+def test_simulated_chair_on_a_pty() -> None:
+    from wcdrive.transports.pty_bridge import PtyBridge
+    from wcdrive.transports.sim_board import SimulatedBoard
+
+    with PtyBridge(SimulatedBoard(speed=10).start()) as bridge:
+        port = serial.Serial(bridge.path, 115200, timeout=0.5)
+        try:
+            got = b""
+            deadline = time.monotonic() + 10
+            while b"MODE:WHEEL" not in got and time.monotonic() < deadline:
+                port.write(b"rp2.0,lp2.0,\n")
+                got += port.read(port.in_waiting or 1)
+            assert b"MODE:WHEEL" in got
+        finally:
+            port.close()

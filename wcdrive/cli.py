@@ -2,6 +2,7 @@
 
     wcdrive sim [SCENARIO ...] [--backend port|simavr] [--json] [--out DIR] [--no-plots]
     wcdrive sim --list
+    wcdrive pty [--speed S] [--link PATH]                 the simulated chair on a pty
     wcdrive verify --traces N --seed S [--elf PATH]      (= python -m wcdrive.verify)
 """
 
@@ -67,6 +68,22 @@ def _sim(args: argparse.Namespace) -> int:
     return 1 if failed else 0
 
 
+def _pty(args: argparse.Namespace) -> int:
+    from wcdrive.transports.pty_bridge import PtyBridge
+    from wcdrive.transports.sim_board import SimulatedBoard
+
+    bridge = PtyBridge(SimulatedBoard(speed=args.speed, seed=args.seed).start(), link=args.link).start()
+    print(bridge.path, flush=True)
+    try:
+        while True:
+            time.sleep(1)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        bridge.close()
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="wcdrive",
                                      description="wcdrive: the wheelchair, simulated or real.")
@@ -83,6 +100,11 @@ def main(argv: list[str] | None = None) -> int:
     sim.add_argument("--seed", type=int, default=0, help="gyro noise seed")
     sim.add_argument("--dt", type=float, default=0.001, help="physics step in s (default 0.001)")
     sim.set_defaults(func=_sim)
+    pty = sub.add_parser("pty", help="the simulated chair as a pseudo-terminal for outside programs")
+    pty.add_argument("--speed", type=float, default=1.0, help="simulated time per wall time")
+    pty.add_argument("--link", help="also make this symlink to the pty, e.g. /tmp/ttyWC0")
+    pty.add_argument("--seed", type=int, default=0)
+    pty.set_defaults(func=_pty)
     verify = sub.add_parser("verify", help="differential check of the port against the firmware",
                             add_help=False)
     verify.set_defaults(func=None)
