@@ -1,28 +1,27 @@
 // wc_config.h: every constant of the final_control firmware in one place.
 //
-// The Python port (wcdrive/firmware/constants.py) mirrors these names and
-// values; tests/test_firmware_constants.py parses this file and fails when the
-// two disagree.
+// GENERATED from protocol/spec.toml by `python -m wcdrive.protocol_spec --write`:
+// edit the spec, not this file. tests/test_protocol.py fails when they differ.
 #ifndef WC_CONFIG_H
 #define WC_CONFIG_H
 
-// ---- Serial link --------------------------------------------------------
+// ---- Serial link -----------------------------------------------------------
 #define WC_BAUD 115200UL
 #define WC_CMD_MAX_LEN 63          // longest command (bytes before its terminator)
 #define WC_ERR_LINES_PER_TICK 2    // ERR lines sent per 50 ms window; the rest are counted
 
-// ---- Timing --------------------------------------------------------------
+// ---- Timing ----------------------------------------------------------------
 #define WC_CONTROL_PERIOD_MS 50UL  // control tick and feedback period
 #define WC_WATCHDOG_MS 500UL       // no valid command for this long -> emergency stop
 #define WC_PIVOT_TICKS 6           // pivot length in control ticks (300 ms nominal)
 
-// ---- Geometry and encoders (seed section 1.4.2) ---------------------------
+// ---- Geometry and encoders (seed section 1.4.2) ----------------------------
 #define WC_CPR 10000.0f            // counts per wheel revolution (2500 PPR x4)
 #define WC_WHEELBASE 0.57f         // m
 #define WC_WHEEL_RADIUS 0.1524f    // m
 #define WC_TWO_PI 6.28318548f      // 2*pi rounded to binary32
 
-// ---- Limits ---------------------------------------------------------------
+// ---- Limits ----------------------------------------------------------------
 #define WC_MAX_WHEEL_SPEED 17.59f  // rad/s, WHEEL range and CMDVEL wheel limit
 #define WC_MAX_LINEAR 2.68f        // m/s, CMDVEL x range
 #define WC_MAX_ANGULAR 9.4f        // rad/s, CMDVEL t range
@@ -42,12 +41,12 @@
 #define WC_STILL_SPEED 0.05f       // rad/s: |filtered velocity| below this is "still"
 #define WC_STILL_TICKS 3           // consecutive still ticks before the motors park
 
-// ---- Pivot (caster swivel) ------------------------------------------------
+// ---- Pivot (caster swivel) -------------------------------------------------
 #define WC_PIVOT_SPEED 2.0f        // rad/s per wheel, right +, left -
 #define WC_PIVOT_THRESHOLD 0.1f    // m/s of travel on either side of zero
 #define WC_PIVOT_START_SPEED 0.5f  // rad/s: the rotation starts once both wheels are slower
 
-// ---- PPM ------------------------------------------------------------------
+// ---- PPM -------------------------------------------------------------------
 #define WC_PPM_CHANNELS 8
 #define WC_PPM_NEUTRAL 1500
 #define WC_PPM_SPAN 500            // us from neutral to full stick
@@ -58,7 +57,7 @@
 #define WC_PPM_FWD_CHANNEL 1       // zero-based: channel 2 is forward/back
 #define WC_PPM_TURN_CHANNEL 3      // zero-based: channel 4 is turn (stick right = turn right)
 
-// ---- Pins (Arduino Mega 2560 numbering) ----------------------------------
+// ---- Pins (Arduino Mega 2560 numbering) ------------------------------------
 #define WC_PIN_ENC_L_A 2           // PE4, INT4
 #define WC_PIN_ENC_L_B 3           // PE5, INT5
 #define WC_PIN_ENC_R_A 18          // PD3, INT3
@@ -69,7 +68,7 @@
 #define WC_PIN_DIR_R 11            // PB5
 #define WC_PIN_RELAY 7             // PH4, powers the SmartDriveDuo
 
-// ---- Modes (printed as MODE:WHEEL / CMDVEL / PPM) -------------------------
+// ---- Modes (printed as MODE:WHEEL / CMDVEL / PPM) --------------------------
 #define WC_MODE_WHEEL 0
 #define WC_MODE_CMDVEL 1
 #define WC_MODE_PPM 2
