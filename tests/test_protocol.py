@@ -16,7 +16,8 @@ from wcdrive.firmware import constants as C
 from wcdrive.firmware.board import Firmware
 from wcdrive.firmware.f32 import f32
 
-VECTORS = tomllib.loads((Path(__file__).resolve().parents[1] / "protocol" / "vectors.toml").read_text())["vector"]
+VECTORS_FILE = Path(__file__).resolve().parents[1] / "protocol" / "vectors.toml"
+VECTORS = tomllib.loads(VECTORS_FILE.read_text())["vector"]
 MODES = {0: "WHEEL", 1: "CMDVEL", 2: "PPM"}
 
 
