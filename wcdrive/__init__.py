@@ -6,3 +6,14 @@ if "wcdrive.urlhandler" not in _serial.protocol_handler_packages:
     _serial.protocol_handler_packages.append("wcdrive.urlhandler")
 
 __version__ = "0.1.0"
+
+from wcdrive.api import Telemetry, Wheelchair, connect
+from wcdrive.errors import (
+    WcdriveConnectionError,
+    WcdriveError,
+    WcdrivePermissionError,
+    WcdriveTimeoutError,
+)
+
+__all__ = ["Telemetry", "WcdriveConnectionError", "WcdriveError", "WcdrivePermissionError",
+           "WcdriveTimeoutError", "Wheelchair", "connect"]
