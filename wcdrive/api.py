@@ -78,7 +78,8 @@ class Wheelchair:
         try:
             self._port.write(data)
         except (serial.SerialException, OSError) as exc:
-            raise WcdriveConnectionError(f"writing to the board failed ({exc}); is it still plugged in?") from exc
+            raise WcdriveConnectionError(
+                f"writing to the board failed ({exc}); is it still plugged in?") from exc
 
     # ---- telemetry ------------------------------------------------------------------
     def wait_for_telemetry(self, timeout: float = 5.0) -> Telemetry:
