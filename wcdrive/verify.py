@@ -61,9 +61,11 @@ def main(argv: list[str] | None = None) -> int:
         for line in first:
             print(f"  {line}")
         print(described)
-    print(f"compared after each of the firmware's events: {fields} values (17 controller floats"
-          " bit for bit, 25 integers and flags, PWM duty and DIR of both motors), and the whole"
-          " TX byte stream of every trace")
+    from wcdrive.firmware.state import FLOAT_FIELDS, INT_FIELDS
+
+    print(f"compared after each of the firmware's events: {fields} values ({len(FLOAT_FIELDS)}"
+          f" controller floats bit for bit, {len(INT_FIELDS)} integers and flags, PWM duty and DIR"
+          " of both motors), and the whole TX byte stream of every trace")
     print(f"traces={args.traces} ticks={ticks} mismatches={mismatches}")
     return 1 if mismatches else 0
 
