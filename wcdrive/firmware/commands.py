@@ -8,6 +8,7 @@ and answered with ``ERR:<reason>``; they never change the targets or the mode.
 
 from __future__ import annotations
 
+import functools
 import re
 
 from wcdrive.firmware import constants as C
@@ -58,7 +59,8 @@ def parse_number(field: bytes, start: int, allow_sign: bool, limit: float) -> fl
     return value
 
 
-def parse_wheel(s: FirmwareState, buf: bytes) -> None:
+def parse_wheel(buf: bytes) -> tuple[int, float, float]:
+    """``rp5.0,lp3.0,`` -> (mode, right, left)."""
     f = split_fields(buf, 2)
     if f is None or len(f) != 2:
         raise ParseError("fields")
@@ -72,10 +74,11 @@ def parse_wheel(s: FirmwareState, buf: bytes) -> None:
         v[i] = parse_number(f[i], 2, False, C.MAX_WHEEL_SPEED)
         if sign == b"n":
             v[i] = -v[i]
-    accept_command(s, C.MODE_WHEEL, v[0], v[1])
+    return C.MODE_WHEEL, v[0], v[1]
 
 
-def parse_cmd_vel(s: FirmwareState, buf: bytes) -> None:
+def parse_cmd_vel(buf: bytes) -> tuple[int, float, float]:
+    """``x:0.5,t:0.1,`` -> (mode, right, left) through the kinematics."""
     f = split_fields(buf, 2)
     if f is None or len(f) != 2:
         raise ParseError("fields")
@@ -91,7 +94,7 @@ def parse_cmd_vel(s: FirmwareState, buf: bytes) -> None:
         k = div(C.MAX_WHEEL_SPEED, peak)
         right = f32(right * k)
         left = f32(left * k)
-    accept_command(s, C.MODE_CMDVEL, right, left)
+    return C.MODE_CMDVEL, right, left
 
 
 def shape_stick(us: int) -> int:
@@ -100,7 +103,9 @@ def shape_stick(us: int) -> int:
     return max(-C.PPM_SPAN, min(C.PPM_SPAN, us))
 
 
-def parse_ppm(s: FirmwareState, buf: bytes, out: bytearray) -> None:
+def parse_ppm(buf: bytes) -> tuple[int, float, float] | None:
+    """``ppm:c1,...,c8,`` -> (mode, right, left), or None for a frame that says the
+    receiver lost the transmitter (a channel outside the valid range)."""
     if buf[3] != 0x3A:
         raise ParseError("syntax")
     f = split_fields(buf[:3] + b"," + buf[4:], C.PPM_CHANNELS + 1)
@@ -115,20 +120,32 @@ def parse_ppm(s: FirmwareState, buf: bytes, out: bytearray) -> None:
         channels.append(value)
         if value < C.PPM_VALID_MIN or value > C.PPM_VALID_MAX:
             lost = True
-    s.mode = C.MODE_PPM
-    s.cmdSinceTick = 1
     if lost:
-        emergency_halt(s)
-        if not s.ppmLost:
-            out += event_line("PPM_LOST")
-        s.ppmLost = 1
-        return
-    s.ppmLost = 0
+        return None
     fwd = f32(from_int(shape_stick(channels[C.PPM_FWD_CHANNEL] - C.PPM_NEUTRAL)) * _PPM_PER_US)
     turn = f32(from_int(shape_stick(channels[C.PPM_TURN_CHANNEL] - C.PPM_NEUTRAL)) * _PPM_PER_US)
     right = constrain(f32(fwd - turn), -C.PPM_MAX_WHEEL, C.PPM_MAX_WHEEL)
     left = constrain(f32(fwd + turn), -C.PPM_MAX_WHEEL, C.PPM_MAX_WHEEL)
-    accept_command(s, C.MODE_PPM, right, left)
+    return C.MODE_PPM, right, left
+
+
+@functools.lru_cache(maxsize=1024)
+def parse(buf: bytes) -> tuple[int, float, float] | str | None:
+    """A complete command's meaning, which depends on its bytes alone (so hosts that
+    repeat a command are parsed once): (mode, right, left), None for a PPM frame that
+    signals loss, or the ERR reason."""
+    try:
+        if any(c <= 0x20 or c >= 0x7F for c in buf):
+            raise ParseError("syntax")
+        if buf[:1] == b"r":
+            return parse_wheel(buf)
+        if buf[:1] == b"x":
+            return parse_cmd_vel(buf)
+        if len(buf) >= 4 and buf[:3] == b"ppm":
+            return parse_ppm(buf)
+        raise ParseError("syntax")
+    except ParseError as error:
+        return error.reason
 
 
 def fields_expected(s: FirmwareState) -> int:
@@ -141,20 +158,21 @@ def fields_expected(s: FirmwareState) -> int:
 
 
 def finish_command(s: FirmwareState, out: bytearray) -> None:
-    buf = bytes(s.cmdBuf)
-    try:
-        if any(c <= 0x20 or c >= 0x7F for c in buf):
-            raise ParseError("syntax")
-        if buf[:1] == b"r":
-            parse_wheel(s, buf)
-        elif buf[:1] == b"x":
-            parse_cmd_vel(s, buf)
-        elif len(buf) >= 4 and buf[:3] == b"ppm":
-            parse_ppm(s, buf, out)
-        else:
-            raise ParseError("syntax")
-    except ParseError as error:
-        reject(s, error.reason, out)
+    result = parse(bytes(s.cmdBuf))
+    if isinstance(result, str):
+        reject(s, result, out)
+    elif result is None:                       # PPM: signal lost
+        s.mode = C.MODE_PPM
+        s.cmdSinceTick = 1
+        emergency_halt(s)
+        if not s.ppmLost:
+            out += event_line("PPM_LOST")
+        s.ppmLost = 1
+    else:
+        mode, right, left = result
+        if mode == C.MODE_PPM:
+            s.ppmLost = 0
+        accept_command(s, mode, right, left)
     _reset(s)
 
 
