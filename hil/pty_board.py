@@ -12,69 +12,44 @@ from __future__ import annotations
 
 import argparse
 import sys
-import threading
 import time
 from pathlib import Path
 
 from hil.virtual_mega import F_CPU, VirtualMega
-from wcdrive.transports.pty_bridge import PtyBridge
+from wcdrive.transports.pty_bridge import PtyBridge, serve
+from wcdrive.transports.threaded import ThreadedBoard
 
 #: Simulated time per step of the board's thread.
 STEP_S = 0.002
 
 
-class MegaBoard:
+class MegaBoard(ThreadedBoard):
     """A ``VirtualMega`` run by a background thread, with the serial-like interface
     (``write``, ``read``, ``close``) that ``PtyBridge`` expects."""
 
     def __init__(self, elf: str | Path | None = None, *, realtime: bool = False) -> None:
+        super().__init__("virtual-mega")
         self.mega = VirtualMega(elf)
         self.realtime = realtime
-        self._lock = threading.Lock()
-        self._data = threading.Condition(self._lock)
-        self._rx = bytearray()
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="virtual-mega", daemon=True)
+        self._wall0: float | None = None
 
-    def start(self) -> MegaBoard:
-        self._thread.start()
-        return self
+    def _send(self, data: bytes) -> None:
+        self.mega.send(data)
 
-    def write(self, data: bytes) -> int:
-        with self._lock:
-            self.mega.send(bytes(data))
-        return len(data)
+    def _advance(self) -> bytes:
+        if self._wall0 is None:
+            self._wall0 = time.monotonic()
+        self.mega.run_for(STEP_S)
+        return bytes(b for _, b in self.mega.take_tx())
 
-    def read(self, size: int = 1, timeout: float | None = None) -> bytes:
-        with self._data:
-            if not self._rx and not self._stop.is_set():
-                self._data.wait(timeout)
-            out = bytes(self._rx[:size])
-            del self._rx[:size]
-            return out
+    def _pause(self) -> float:
+        """Real time: wait until the wall clock catches up; else run flat out."""
+        if not self.realtime or self._wall0 is None:
+            return 0.0
+        return self.mega.time - (time.monotonic() - self._wall0)
 
-    def close(self) -> None:
-        self._stop.set()
-        if self._thread.is_alive():
-            self._thread.join(timeout=5)
+    def _shutdown(self) -> None:
         self.mega.close()
-
-    def _run(self) -> None:
-        wall0 = time.monotonic()
-        while not self._stop.is_set():
-            with self._lock:
-                self.mega.run_for(STEP_S)
-                out = bytes(b for _, b in self.mega.take_tx())
-                if out:
-                    self._rx += out
-                    self._data.notify_all()
-                sim = self.mega.time
-            if self.realtime:
-                ahead = sim - (time.monotonic() - wall0)
-                if ahead > 0:
-                    time.sleep(ahead)
-            else:
-                time.sleep(0)   # as fast as it can; let clients have the CPU
 
 
 class PtyBoard(PtyBridge):
@@ -105,16 +80,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--link", help="also make this symlink to the pty, e.g. /tmp/ttyWC0")
     args = parser.parse_args(argv)
     board = PtyBoard(args.elf, realtime=args.realtime, link=args.link).start()
-    print(board.path, flush=True)
-    try:
-        while True:
-            time.sleep(1)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        simulated = board.mega.cycle / F_CPU
-        board.stop()
-    print(f"stopped at {simulated:.3f} s simulated", file=sys.stderr)
+    serve(board)
+    print(f"stopped at {board.mega.cycle / F_CPU:.3f} s simulated", file=sys.stderr)
     return 0
 
 

@@ -152,6 +152,7 @@ class VirtualMega:
                 if index >= 0:
                     self._hook_names.append(name)
         self._uart_free_at = 0
+        self._closed_cycle = 0
         self._pin_level: dict[tuple[str, int], int] = {}
         self.tx_log: list[tuple[int, int]] = []
         self.hit_log: list[Hit] = []
@@ -172,6 +173,7 @@ class VirtualMega:
     # ---- lifecycle -----------------------------------------------------------------
     def close(self) -> None:
         if self._s:
+            self._closed_cycle = self.cycle
             if self._vcd:
                 self._c.wcsim_vcd_close(self._s)
             self._c.wcsim_free(self._s)
@@ -192,6 +194,9 @@ class VirtualMega:
     # ---- time --------------------------------------------------------------------
     @property
     def cycle(self) -> int:
+        """Cycles since reset (after close(), where it stopped)."""
+        if not self._s:
+            return self._closed_cycle
         return int(self._c.wcsim_cycle(self._s))
 
     @property

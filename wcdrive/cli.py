@@ -69,18 +69,10 @@ def _sim(args: argparse.Namespace) -> int:
 
 
 def _pty(args: argparse.Namespace) -> int:
-    from wcdrive.transports.pty_bridge import PtyBridge
+    from wcdrive.transports.pty_bridge import PtyBridge, serve
     from wcdrive.transports.sim_board import SimulatedBoard
 
-    bridge = PtyBridge(SimulatedBoard(speed=args.speed, seed=args.seed).start(), link=args.link).start()
-    print(bridge.path, flush=True)
-    try:
-        while True:
-            time.sleep(1)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        bridge.close()
+    serve(PtyBridge(SimulatedBoard(speed=args.speed, seed=args.seed).start(), link=args.link).start())
     return 0
 
 

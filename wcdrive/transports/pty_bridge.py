@@ -12,6 +12,7 @@ import os
 import select
 import termios
 import threading
+import time
 import tty
 from pathlib import Path
 from typing import Protocol
@@ -88,3 +89,15 @@ class PtyBridge:
                     os.write(self._master, data)
                 except OSError:
                     pass
+
+
+def serve(bridge: PtyBridge) -> None:
+    """Prints the device path, then serves until Ctrl-C; closes the bridge."""
+    print(bridge.path, flush=True)
+    try:
+        while True:
+            time.sleep(1)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        bridge.close()

@@ -1,0 +1,95 @@
+"""A simulated board advanced by a background thread, with serial-like I/O.
+
+Subclasses say how to take bytes (``_send``), how to advance the simulation one
+step and what it sent meanwhile (``_advance``), how long to wait between steps
+(``_pause``) and how to release what they hold (``_shutdown``). ``SimulatedBoard``
+(the port + plant) and ``hil.pty_board.MegaBoard`` (the ELF in simavr) are two.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+
+
+class ThreadedBoard:
+    def __init__(self, name: str) -> None:
+        self._lock = threading.Lock()
+        self._data = threading.Condition(self._lock)
+        self._rx = bytearray()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
+
+    # ---- for subclasses -----------------------------------------------------------
+    def _send(self, data: bytes) -> None:
+        raise NotImplementedError
+
+    def _advance(self) -> bytes:
+        raise NotImplementedError
+
+    def _pause(self) -> float:
+        return 0.002
+
+    def _shutdown(self) -> None:
+        pass
+
+    # ---- lifecycle ---------------------------------------------------------------
+    def start(self):
+        self._thread.start()
+        return self
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._thread.is_alive() and threading.current_thread() is not self._thread:
+            self._thread.join(timeout=5)
+        with self._data:
+            self._data.notify_all()
+        self._shutdown()
+
+    @property
+    def closed(self) -> bool:
+        return self._stop.is_set()
+
+    def __enter__(self):
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # ---- I/O -----------------------------------------------------------------------
+    def write(self, data: bytes) -> int:
+        with self._lock:
+            self._send(bytes(data))
+        return len(data)
+
+    def read(self, size: int = 1, timeout: float | None = None) -> bytes:
+        """Up to ``size`` bytes; waits up to ``timeout`` s for the first (None: forever)."""
+        deadline = None if timeout is None else time.monotonic() + timeout
+        with self._data:
+            while not self._rx and not self._stop.is_set():
+                left = None if deadline is None else deadline - time.monotonic()
+                if left is not None and left <= 0:
+                    break
+                self._data.wait(left)
+            out = bytes(self._rx[:size])
+            del self._rx[:size]
+            return out
+
+    @property
+    def in_waiting(self) -> int:
+        with self._lock:
+            return len(self._rx)
+
+    def reset_input(self) -> None:
+        with self._lock:
+            self._rx.clear()
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            with self._lock:
+                out = self._advance()
+                if out:
+                    self._rx += out
+                    self._data.notify_all()
+            pause = self._pause()
+            time.sleep(pause if pause > 0 else 0)
