@@ -10,8 +10,9 @@ from the firmware's own state after ``setup()``, and compares after every event:
 every controller float bit for bit, every integer and flag, PWM duty and DIR per
 motor, and, at the end, the whole TX byte stream. The only inputs the port takes
 from the run are what the firmware's loop reads: the bytes, ``millis()`` at each
-tick and the encoder counts the tick latched; those counts are themselves checked
-against the Python quadrature decoder run over the trace's edges.
+tick, the encoder and illegal-transition counts the tick latched (themselves checked
+against the Python quadrature decoder run over the trace's edges) and the free RAM
+loop() measured before the tick.
 """
 
 from __future__ import annotations
@@ -26,11 +27,11 @@ from hil.virtual_mega import F_CPU, VirtualMega
 from wcdrive.firmware.board import Firmware
 from wcdrive.firmware.f32 import bits
 from wcdrive.firmware.quadrature import ILLEGAL, QUAD_TABLE
-from wcdrive.firmware.state import FLOAT_FIELDS, INT_FIELDS, FirmwareState
+from wcdrive.firmware.state import FLOAT_FIELDS, INPUT_FIELDS, INT_FIELDS, FirmwareState
 
-_WATCHED = FLOAT_FIELDS + INT_FIELDS + ("txDropped",)
+_WATCHED = FLOAT_FIELDS + INT_FIELDS + INPUT_FIELDS + ("txDropped",)
 _BOOL_FIELDS = {"cmdSinceTick", "watchdogArmed", "emergencyStop", "ppmLost", "parked",
-                "cmdDiscarding"}
+                "estopLatched", "tlmEnabled"}
 
 
 @dataclass
@@ -136,17 +137,21 @@ def initial_state(recording: Recording) -> FirmwareState:
     return FirmwareState(lastControlTime=int(recording.initial["lastControlTime"]))
 
 
-def _decoded_counts(trace: Trace, side: str) -> tuple[np.ndarray, np.ndarray]:
-    """Count after each edge, by the Python decoder, and the edge cycles."""
+def _decoded_counts(trace: Trace, side: str) -> tuple[tuple[np.ndarray, np.ndarray],
+                                                     tuple[np.ndarray, np.ndarray]]:
+    """(count, edge cycle) and (illegal-transition count, edge cycle) after each edge, by
+    the Python decoder."""
     train = trace.encoders.get(side)
     if train is None or train.times.size == 0:
-        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+        empty = np.zeros(0, dtype=np.int64)
+        return (empty, empty), (empty, empty)
     states = train.states.astype(np.int64)
     previous = np.concatenate(([0b11], states[:-1]))
+    transitions = (previous << 2) | states
     table = np.array([0 if v == ILLEGAL else v for v in QUAD_TABLE])
-    counts = np.cumsum(table[(previous << 2) | states])
+    illegal = np.array([1 if v == ILLEGAL else 0 for v in QUAD_TABLE])
     cycles = np.round(train.times * F_CPU).astype(np.int64)
-    return counts, cycles
+    return (np.cumsum(table[transitions]), cycles), (np.cumsum(illegal[transitions]), cycles)
 
 
 def compare(recording: Recording) -> Report:
@@ -165,14 +170,19 @@ def compare(recording: Recording) -> Report:
             tx += fw.feed(bytes([ev.arg]))
         else:
             ticks += 1
-            count_l = int(ev.after["encTickL"])
-            count_r = int(ev.after["encTickR"])
+            latched = {name: int(ev.after[name])
+                       for name in ("encTickL", "encTickR", "illTickL", "illTickR")}
             exit_cycle = events[i + 1].cycle if i + 1 < len(events) else recording.end_cycle
-            for side, count in (("left", count_l), ("right", count_r)):
-                if not _count_possible(decoded[side], count, ev.cycle, exit_cycle):
-                    mismatches.append(Mismatch(i, ticks, f"encoder count {side}",
-                                               "decoder disagrees", str(count)))
-            tx += fw.tick(ev.arg, count_l, count_r)
+            for side, suffix in (("left", "L"), ("right", "R")):
+                for what, k in (("encTick", 0), ("illTick", 1)):
+                    value = latched[what + suffix]
+                    if not _count_possible(decoded[side][k], value, ev.cycle, exit_cycle):
+                        mismatches.append(Mismatch(i, ticks, f"{what} {side}",
+                                                   "decoder disagrees", str(value)))
+            # freeRam is measured by loop() just before the call: the state at entry.
+            before = events[i - 1].after if i > 0 else recording.initial
+            tx += fw.tick(ev.arg, latched["encTickL"], latched["encTickR"], latched["illTickL"],
+                          latched["illTickR"], free_ram=int(before["freeRam"]))
         diffs = _differences(fw.state, ev.after)
         fields_compared += len(FLOAT_FIELDS) + len(INT_FIELDS) + 4
         for name, port_value, fw_value in diffs:

@@ -6,7 +6,10 @@ property tests, which then shrink), so both use one generator. Traces cover ever
 command kind, malformed and newline-less commands, awkward decimal strings,
 reversals that start pivots and commands that interrupt them, silences past the
 watchdog, PPM loss, long saturations, illegal encoder transitions, encoder speeds up
-to 40,000 edges/s and boots with ``millis()`` just below its 2**32 wrap.
+to 40,000 edges/s and boots with ``millis()`` just below its 2**32 wrap; and protocol
+v2: framed lines with sequence numbers and good, bad or missing checksums, hello
+(which turns the TLM lines on), get/set of every parameter in and out of range,
+estop and reset.
 """
 
 from __future__ import annotations
@@ -18,6 +21,8 @@ from typing import Any, Protocol, TypeVar
 
 import numpy as np
 
+from wcdrive.codec import SEQ_MAX, checksum, frame
+from wcdrive.firmware.params import PARAMS
 from wcdrive.firmware.quadrature import EdgeTrain, edges_from_trajectory, state_for_count
 
 T = TypeVar("T")
@@ -184,10 +189,73 @@ def malformed_command(draw: Draw) -> bytes:
     return b",,,"
 
 
+def param_command(draw: Draw) -> bytes:
+    """``get:``/``set:`` of any parameter: in range, out of range, malformed, unknown."""
+    p = draw.choice(PARAMS)
+    name = p.name if draw.boolean(0.9) else draw.choice(["kp", "kp_x", "", "KP_L", p.name + "_"])
+    if draw.boolean(0.25):
+        return f"get:{name}".encode()
+    kind = draw.integer(0, 5)
+    if p.integer:
+        value = draw.choice([str(draw.integer(int(p.low), int(p.high))), str(draw.integer(0, 9999)),
+                             "0500", "00500", "", "5e2", "-200", "1500.0"])
+    elif kind <= 2:
+        value = f"{draw.real(float(p.low), float(p.high)):.{draw.integer(0, 6)}f}"
+    elif kind == 3:
+        value = decimal_text(draw, float(p.high) * 1.2, False)
+    else:
+        value = draw.choice(["", "-1", "nan", "inf", "1e2", "0", "1x", str(p.high), str(p.low)])
+    sep = "=" if draw.boolean(0.95) else ":"
+    return f"set:{name}{sep}{value}".encode()
+
+
+def protocol_v2_command(draw: Draw) -> bytes:
+    kind = draw.integer(0, 9)
+    if kind == 0:
+        return b"hello"
+    if kind == 1:
+        return b"estop"
+    if kind <= 3:
+        return b"reset"
+    return param_command(draw)
+
+
+def framed(draw: Draw, body: bytes) -> bytes:
+    """``body`` as a framed v2 line, sometimes damaged (wrong or missing checksum,
+    lower-case hex, a bad sequence number, a flipped byte, overlong)."""
+    seq = draw.integer(0, SEQ_MAX) if draw.boolean(0.8) else None
+    line = frame(body.rstrip(b"\r\n"), seq)
+    damage = draw.integer(0, 11)
+    if damage == 0:
+        i = draw.integer(1, len(line) - 2)
+        line = line[:i] + bytes([line[i] ^ (1 << draw.integer(0, 6))]) + line[i + 1:]
+    elif damage == 1:
+        line = line[:-4] + b"\n"                           # no checksum
+    elif damage == 2:
+        line = line[:-3] + line[-3:-1].lower() + b"\n"    # lower-case hex: accepted
+    elif damage == 3:
+        inner = draw.choice([b"123456:", b"70000:", b"12", b"7:"]) + body.rstrip(b"\r\n")
+        line = b"$" + inner + b"*%02X\n" % checksum(inner)
+    elif damage == 4:
+        inner = b"1:" + body.rstrip(b"\r\n") + b"," + b"9" * draw.integer(40, 70)
+        line = b"$" + inner + b"*%02X\n" % checksum(inner)
+    return line
+
+
 def command(draw: Draw, travel_sign: list[int]) -> bytes:
     """One command of any kind; ``travel_sign`` tracks the direction so reversals
-    (and so pivots) come often."""
-    kind = draw.integer(0, 9)
+    (and so pivots) come often. A quarter are protocol v2: framed lines and the
+    hello/estop/reset/get/set commands."""
+    body = _command(draw, travel_sign)
+    if draw.boolean(0.25):
+        return framed(draw, body)
+    return body
+
+
+def _command(draw: Draw, travel_sign: list[int]) -> bytes:
+    kind = draw.integer(0, 11)
+    if kind >= 10:
+        return protocol_v2_command(draw) + b"\n"
     if kind <= 1:
         return malformed_command(draw)
     if kind == 2:

@@ -42,14 +42,17 @@ _PORT_REG = {"B": 0x25, "D": 0x2B, "E": 0x2E, "H": 0x102}
 VARIABLE_FORMATS = {
     "f": ("targetL", "targetR", "setpointL", "setpointR", "rawVelL", "rawVelR", "filtVelL",
           "filtVelR", "integralL", "integralR", "prevMeasL", "prevMeasR", "outputL", "outputR",
-          "lastTravel", "pendingL", "pendingR"),
+          "lastTravel", "pendingL", "pendingR", "kpL", "kiL", "kdL", "kpR", "kiR", "kdR",
+          "maxWheel", "maxAccel", "estopDecel"),
     "i": ("encoderValueL", "encoderValueR", "encTickL", "encTickR", "prevEncL", "prevEncR"),
     "I": ("illegalL", "illegalR", "lastControlTime", "tickCount", "lastCmdTime", "rejectedCount",
-          "errSuppressed", "txDropped", "timer0_millis", "timer0_overflow_count"),
+          "errSuppressed", "txDropped", "timer0_millis", "timer0_overflow_count", "illTickL",
+          "illTickR", "rxCount", "crcRejected"),
+    "H": ("freeRam", "watchdogMs", "lastSeq"),
     "B": ("mode", "pwmL", "pwmR", "dirL", "dirR", "pivotPhase", "pivotTicksLeft", "cmdSinceTick",
           "watchdogArmed", "emergencyStop", "ppmLost", "stillTicks", "parked", "cmdLen",
           "cmdCommas", "cmdDiscarding", "errLinesThisTick", "lastEncodedL", "lastEncodedR",
-          "timer0_fract"),
+          "timer0_fract", "estopLatched", "tlmEnabled"),
 }
 _FORMAT_OF = {name: fmt for fmt, names in VARIABLE_FORMATS.items() for name in names}
 

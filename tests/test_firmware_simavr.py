@@ -87,7 +87,7 @@ MALFORMED = [
     (b"rp1.0\r", "fields"),
     (b"x:0.5,y:1.0,t:0.1,", "syntax"),
     (b"t:0.1,x:0.5,", "syntax"),
-    (b"hello\n", "syntax"),
+    (b"howdy\n", "syntax"),
     (b"X:0.5,T:0.1,", "syntax"),
     (b"rp 1.0,lp1.0,", "syntax"),
     (b"x:0.5\x00,t:0.1,", "syntax"),

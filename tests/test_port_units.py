@@ -72,7 +72,7 @@ def test_pid_back_calculation_holds_output_at_the_limit() -> None:
     integral = 0.0
     for _ in range(200):
         out, integral = compute_pid(f32(17.0), 0.0, integral, 0.0, C.KP_R, C.KI_R, C.KD_R,
-                                    f32(0.05), f32(100.0 / 8.0))
+                                    f32(0.05))
     assert out == 100.0
     # Back-calculated: Kp*e + Ki*I == 100 (to rounding), so no windup beyond saturation.
     assert abs(C.KP_R * 17.0 + C.KI_R * integral - 100.0) < 1e-3

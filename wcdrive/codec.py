@@ -2,8 +2,11 @@
 
 Host to board:  ``encode_cmdvel(v, w)`` -> ``b"x:0.500,t:0.100,"`` (the seed host's
 format), ``encode_wheel(right, left)`` -> ``b"rp5.000,lp3.000,"``, ``encode_ppm``.
+Protocol v2:    ``frame(command, seq)`` -> ``b"$17:x:0.500,t:0.100,*5C\\n"``,
+``encode_get(name)``, ``encode_set(name, value)``, ``HELLO``, ``ESTOP``, ``RESET``.
 Board to host:  ``LineDecoder.feed(data)`` returns the complete lines' messages:
-``Feedback``, ``Error``, ``Event``, ``Boot`` or ``Unknown``.
+``Feedback``, ``ExtendedTelemetry``, ``Error``, ``Event``, ``Boot``, ``Hello``,
+``Param``, ``Ack``, ``Nak`` or ``Unknown``.
 """
 
 from __future__ import annotations
@@ -16,6 +19,7 @@ MAX_LINEAR = 2.68
 MAX_ANGULAR = 9.4
 MAX_WHEEL = 17.59
 MAX_LINE = 256
+SEQ_MAX = 65535
 
 
 def _finite(name: str, value: float, limit: float) -> float:
@@ -25,6 +29,58 @@ def _finite(name: str, value: float, limit: float) -> float:
     if abs(value) > limit:
         raise ValueError(f"{name}={value} is outside ±{limit}")
     return value
+
+
+def checksum(data: bytes) -> int:
+    """XOR of the bytes: the ``*hh`` of a framed line covers those between ``$`` and ``*``."""
+    value = 0
+    for b in data:
+        value ^= b
+    return value
+
+
+def frame(command: bytes, seq: int | None = None) -> bytes:
+    """A protocol v2 framed line: ``$[<seq>:]<command>*<hh>\\n``. The command may keep
+    its trailing comma; the board acts on it at the line end only."""
+    if seq is not None and not 0 <= seq <= SEQ_MAX:
+        raise ValueError(f"sequence number {seq} is outside 0..{SEQ_MAX}")
+    inner = (b"%d:" % seq if seq is not None else b"") + command
+    return b"$" + inner + b"*%02X\n" % checksum(inner)
+
+
+HELLO = b"hello\n"
+ESTOP = b"estop\n"
+RESET = b"reset\n"
+#: The runtime parameters and their ranges (protocol/PROTOCOL.md, "Parameters").
+PARAM_RANGES: dict[str, tuple[float, float]] = {
+    "kp_l": (0.0, 100.0), "ki_l": (0.01, 100.0), "kd_l": (0.0, 10.0),
+    "kp_r": (0.0, 100.0), "ki_r": (0.01, 100.0), "kd_r": (0.0, 10.0),
+    "max_wheel": (0.1, 17.59), "max_accel": (0.5, 20.0), "estop_decel": (5.0, 50.0),
+    "watchdog_ms": (100, 2000),
+}
+
+
+def _param_name(name: str) -> str:
+    if name not in PARAM_RANGES:
+        raise ValueError(f"unknown parameter {name!r}; one of {', '.join(PARAM_RANGES)}")
+    return name
+
+
+def encode_get(name: str) -> bytes:
+    return f"get:{_param_name(name)}".encode()
+
+
+def encode_set(name: str, value: float) -> bytes:
+    """``set:<name>=<value>``; checked against the range the firmware enforces."""
+    low, high = PARAM_RANGES[_param_name(name)]
+    value = float(value)
+    if not (low <= value <= high):
+        raise ValueError(f"{name}={value} is outside {low} .. {high}")
+    if name == "watchdog_ms":
+        if value != int(value):
+            raise ValueError("watchdog_ms is a whole number of milliseconds")
+        return f"set:{name}={int(value)}".encode()
+    return f"set:{name}={value:.6g}".encode()
 
 
 def encode_cmdvel(linear: float, angular: float) -> bytes:
@@ -81,7 +137,74 @@ class Unknown:
     line: bytes
 
 
-Message = Feedback | Error | Event | Boot | Unknown
+@dataclass(frozen=True)
+class ExtendedTelemetry:
+    """``TLM:`` (v2): the tick's inputs and outputs beyond the feedback line."""
+
+    millis: int
+    rx: int
+    seq: int
+    pwm_left: int
+    pwm_right: int
+    dir_left: int
+    dir_right: int
+    illegal_left: int
+    illegal_right: int
+    flags: int
+    rejected: int
+    crc_rejected: int
+    free_ram: int
+
+    @property
+    def watchdog_armed(self) -> bool:
+        return bool(self.flags & 1)
+
+    @property
+    def emergency_ramp(self) -> bool:
+        return bool(self.flags & 2)
+
+    @property
+    def estop_latched(self) -> bool:
+        return bool(self.flags & 4)
+
+    @property
+    def ppm_lost(self) -> bool:
+        return bool(self.flags & 8)
+
+    @property
+    def parked(self) -> bool:
+        return bool(self.flags & 16)
+
+    @property
+    def pivot_phase(self) -> int:
+        return (self.flags >> 5) & 3
+
+
+@dataclass(frozen=True)
+class Hello:
+    version: int
+    firmware: str
+
+
+@dataclass(frozen=True)
+class Param:
+    name: str
+    value: float
+
+
+@dataclass(frozen=True)
+class Ack:
+    seq: int
+
+
+@dataclass(frozen=True)
+class Nak:
+    seq: int
+    reason: str
+
+
+Message = (Feedback | ExtendedTelemetry | Error | Event | Boot | Hello | Param | Ack | Nak
+           | Unknown)
 
 _NUMBER = rb"-?(?:\d+(?:\.\d*)?|nan|inf|ovf)"
 _FEEDBACK = re.compile(
@@ -97,11 +220,33 @@ def _float(text: bytes) -> float:
     return -value if text.startswith(b"-") else value
 
 
+_TLM = re.compile(rb"TLM:(\d+(?:,\d+){12})")
+_HELLO = re.compile(rb"HELLO:(\d+),([\w.-]+)")
+_PARAM = re.compile(rb"PAR:(\w+),(\d+(?:\.\d+)?)")
+_ACK = re.compile(rb"ACK:(\d+)")
+_NAK = re.compile(rb"NAK:(\d+),(\w+)")
+
+
 def parse_line(line: bytes) -> Message:
     """One line without its ``\\r\\n``."""
     m = _FEEDBACK.fullmatch(line)
     if m:
         return Feedback(int(m[1]), int(m[2]), _float(m[3]), _float(m[4]), m[5].decode())
+    m = _TLM.fullmatch(line)
+    if m:
+        return ExtendedTelemetry(*(int(v) for v in m[1].split(b",")))
+    m = _ACK.fullmatch(line)
+    if m:
+        return Ack(int(m[1]))
+    m = _NAK.fullmatch(line)
+    if m:
+        return Nak(int(m[1]), m[2].decode())
+    m = _PARAM.fullmatch(line)
+    if m:
+        return Param(m[1].decode(), float(m[2]))
+    m = _HELLO.fullmatch(line)
+    if m:
+        return Hello(int(m[1]), m[2].decode())
     if line.startswith(b"ERR:"):
         return Error(line[4:].decode("ascii", "replace"))
     if line.startswith(b"EVT:"):

@@ -17,13 +17,15 @@
 
 #include <Arduino.h>
 #include <math.h>
+#include <avr/pgmspace.h>
 #include <stdlib.h>
+#include <string.h>
 #include <util/atomic.h>
 
 #include "wc_config.h"
 
-#if SERIAL_TX_BUFFER_SIZE < 256
-#warning "build with -DSERIAL_TX_BUFFER_SIZE=256 (see README.md): feedback lines may be dropped"
+#if SERIAL_TX_BUFFER_SIZE < 512
+#warning "build with -DSERIAL_TX_BUFFER_SIZE=512 (see README.md): output lines may be dropped"
 #endif
 
 // ---------------------------------------------------------------------------
@@ -96,8 +98,18 @@ uint8_t pwmL = 0, pwmR = 0;                 // duty written to the driver
 uint8_t dirL = HIGH, dirR = HIGH;
 int32_t encTickL = 0, encTickR = 0;         // counts latched at the last tick
 int32_t prevEncL = 0, prevEncR = 0;
+uint32_t illTickL = 0, illTickR = 0;        // illegal-transition counts latched at the last tick
 uint32_t lastControlTime = 0;               // millis() of the last tick
 uint32_t tickCount = 0;
+uint16_t freeRam = 0;                       // bytes between the heap and the stack, before a tick
+
+// Runtime parameters (get:/set:, protocol v2), the compile-time values at boot.
+float kpL = WC_KP_L, kiL = WC_KI_L, kdL = WC_KD_L;
+float kpR = WC_KP_R, kiR = WC_KI_R, kdR = WC_KD_R;
+float maxWheel = WC_MAX_WHEEL_SPEED;        // rad/s: WHEEL range, CMDVEL and PPM cap
+float maxAccel = WC_MAX_ACCEL;              // rad/s^2: normal setpoint ramp
+float estopDecel = WC_EMERGENCY_DECEL;      // rad/s^2: watchdog, PPM loss and e-stop ramp
+uint16_t watchdogMs = WC_WATCHDOG_MS;
 
 float lastTravel = 0.0f;                    // m/s of travel of the last command
 // Pivot on reversal: stop, rotate in place for WC_PIVOT_TICKS, then the command.
@@ -116,8 +128,14 @@ bool ppmLost = false;
 uint8_t stillTicks = 0;
 volatile bool parked = true;                       // motors held at zero with integrators reset
 
-uint32_t rejectedCount = 0;                 // every malformed command
-uint32_t errSuppressed = 0;                 // ERR lines not sent (rate limit)
+bool estopLatched = false;                  // e-stop: motion refused until "reset"
+bool tlmEnabled = false;                    // TLM lines after each ENC line (after "hello")
+uint16_t lastSeq = 0;                       // sequence number of the last framed line
+uint32_t rxCount = 0;                       // bytes received (through processByte)
+
+uint32_t rejectedCount = 0;                 // every rejected command
+uint32_t crcRejected = 0;                   // framed lines with a bad or missing checksum
+uint32_t errSuppressed = 0;                 // replies not sent (rate limit)
 uint32_t txDropped = 0;                     // lines not sent for lack of TX room
 uint8_t errLinesThisTick = 0;
 
@@ -143,7 +161,7 @@ class LineBuffer : public Print {
   }
 
  private:
-  uint8_t buf_[96];
+  uint8_t buf_[112];
   uint8_t len_ = 0;
 };
 
@@ -162,7 +180,8 @@ static float computePID(float setpoint, float measurement, float& integral, floa
                         float kp, float ki, float kd, float dt) {
   float error = setpoint - measurement;
   integral += error * dt;
-  integral = constrain(integral, -WC_PID_OUT_MAX / ki, WC_PID_OUT_MAX / ki);
+  float limit = WC_PID_OUT_MAX / ki;
+  integral = constrain(integral, -limit, limit);
   float derivative = -(measurement - prevMeas) / dt;   // on measurement: no setpoint kick
   float output = kp * error + ki * integral + kd * derivative;
   float clamped = constrain(output, -WC_PID_OUT_MAX, WC_PID_OUT_MAX);
@@ -226,6 +245,40 @@ static void acceptCommand(uint8_t newMode, float right, float left) {
   lastTravel = travel;
 }
 
+// TLM:<millis>,<rx bytes>,<seq>,<pwmL>,<pwmR>,<dirL>,<dirR>,<illegalL>,<illegalR>,
+//     <flags>,<rejected>,<crc rejected>,<free RAM>   (protocol/PROTOCOL.md)
+static void sendTelemetry(uint32_t now) {
+  uint8_t flags = (watchdogArmed ? 1 : 0) | (emergencyStop ? 2 : 0) | (estopLatched ? 4 : 0) |
+                  (ppmLost ? 8 : 0) | (parked ? 16 : 0) | (uint8_t)(pivotPhase << 5);
+  line.print(F("TLM:"));
+  line.print(now);
+  line.print(',');
+  line.print(rxCount);
+  line.print(',');
+  line.print(lastSeq);
+  line.print(',');
+  line.print(pwmL);
+  line.print(',');
+  line.print(pwmR);
+  line.print(',');
+  line.print(dirL);
+  line.print(',');
+  line.print(dirR);
+  line.print(',');
+  line.print(illTickL);
+  line.print(',');
+  line.print(illTickR);
+  line.print(',');
+  line.print(flags);
+  line.print(',');
+  line.print(rejectedCount);
+  line.print(',');
+  line.print(crcRejected);
+  line.print(',');
+  line.println(freeRam);
+  line.send();
+}
+
 extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
   float dt = (float)(now - lastControlTime) / 1000.0f;
   lastControlTime = now;
@@ -234,6 +287,8 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
   ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
     encTickL = encoderValueL;
     encTickR = encoderValueR;
+    illTickL = illegalL;
+    illTickR = illegalR;
   }
   int32_t deltaL = (int32_t)((uint32_t)encTickL - (uint32_t)prevEncL);
   int32_t deltaR = (int32_t)((uint32_t)encTickR - (uint32_t)prevEncR);
@@ -251,13 +306,13 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
     lastCmdTime = now;
     watchdogArmed = true;
   }
-  if (watchdogArmed && now - lastCmdTime >= WC_WATCHDOG_MS) {
+  if (watchdogArmed && now - lastCmdTime >= watchdogMs) {
     watchdogArmed = false;
     emergencyHalt();
     sendEvent(F("WATCHDOG"));
   }
 
-  float maxChange = (emergencyStop ? WC_EMERGENCY_DECEL : WC_MAX_ACCEL) * dt;
+  float maxChange = (emergencyStop ? estopDecel : maxAccel) * dt;
   setpointL = rampToward(setpointL, targetL, maxChange);
   setpointR = rampToward(setpointR, targetR, maxChange);
 
@@ -276,8 +331,8 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
     outputL = outputR = 0.0f;
   } else {
     parked = false;
-    outputL = computePID(setpointL, filtVelL, integralL, prevMeasL, WC_KP_L, WC_KI_L, WC_KD_L, dt);
-    outputR = computePID(setpointR, filtVelR, integralR, prevMeasR, WC_KP_R, WC_KI_R, WC_KD_R, dt);
+    outputL = computePID(setpointL, filtVelL, integralL, prevMeasL, kpL, kiL, kdL, dt);
+    outputR = computePID(setpointR, filtVelR, integralR, prevMeasR, kpR, kiR, kdR, dt);
   }
   setMotor(WC_PIN_PWM_L, WC_PIN_DIR_L, outputL, pwmL, dirL);
   setMotor(WC_PIN_PWM_R, WC_PIN_DIR_R, outputR, pwmR, dirR);
@@ -305,6 +360,7 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
   line.print(F(",MODE:"));
   line.println(mode == WC_MODE_WHEEL ? F("WHEEL") : mode == WC_MODE_CMDVEL ? F("CMDVEL") : F("PPM"));
   line.send();
+  if (tlmEnabled) sendTelemetry(now);
 
   errLinesThisTick = 0;
 }
@@ -312,29 +368,110 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
 // ---------------------------------------------------------------------------
 // Command framing and parsing (protocol/PROTOCOL.md)
 // ---------------------------------------------------------------------------
-enum ParseResult : uint8_t { PARSE_OK, ERR_SYNTAX, ERR_NUMBER, ERR_RANGE, ERR_FIELDS, ERR_OVERLONG };
+enum ParseResult : uint8_t {
+  PARSE_OK, ERR_SYNTAX, ERR_NUMBER, ERR_RANGE, ERR_FIELDS, ERR_OVERLONG, ERR_CHECKSUM, ERR_ESTOP,
+  ERR_BUSY, ERR_PARAM
+};
+// What a command answers besides ACK/ERR.
+enum DataReply : uint8_t { DATA_NONE, DATA_HELLO, DATA_PARAM };
+
+#define DISCARD_NONE 0
+#define DISCARD_TO_COMMA 1      // an overlong seed command: up to ',' or the line end
+#define DISCARD_TO_EOL 2        // an overlong framed ($) line: up to the line end
 
 static char cmdBuf[WC_CMD_MAX_LEN + 1];
 uint8_t cmdLen = 0;
 uint8_t cmdCommas = 0;
-bool cmdDiscarding = false;   // after an overlong command: drop bytes up to ',' or line end
+uint8_t cmdDiscarding = DISCARD_NONE;
+static uint8_t replyParam = 0;          // the parameter a get:/set: names
 
-static void reject(ParseResult why) {
-  rejectedCount++;
+// Reason words of ERR: and NAK: lines, in ParseResult order (PARSE_OK has none).
+static const char R_SYNTAX[] PROGMEM = "syntax";
+static const char R_NUMBER[] PROGMEM = "number";
+static const char R_RANGE[] PROGMEM = "range";
+static const char R_FIELDS[] PROGMEM = "fields";
+static const char R_OVERLONG[] PROGMEM = "overlong";
+static const char R_CHECKSUM[] PROGMEM = "checksum";
+static const char R_ESTOP[] PROGMEM = "estop";
+static const char R_BUSY[] PROGMEM = "busy";
+static const char R_PARAM[] PROGMEM = "param";
+static const char* const REASONS[] = {
+  R_SYNTAX, R_SYNTAX, R_NUMBER, R_RANGE, R_FIELDS, R_OVERLONG, R_CHECKSUM, R_ESTOP, R_BUSY,
+  R_PARAM,
+};
+
+// Runtime parameters: name, variable, range. watchdog_ms (the last) is an integer.
+#define PARAM_COUNT 10
+#define PARAM_WATCHDOG 9
+static const char P_KP_L[] PROGMEM = "kp_l";
+static const char P_KI_L[] PROGMEM = "ki_l";
+static const char P_KD_L[] PROGMEM = "kd_l";
+static const char P_KP_R[] PROGMEM = "kp_r";
+static const char P_KI_R[] PROGMEM = "ki_r";
+static const char P_KD_R[] PROGMEM = "kd_r";
+static const char P_MAX_WHEEL[] PROGMEM = "max_wheel";
+static const char P_MAX_ACCEL[] PROGMEM = "max_accel";
+static const char P_ESTOP_DECEL[] PROGMEM = "estop_decel";
+static const char P_WATCHDOG[] PROGMEM = "watchdog_ms";
+static const char* const PARAM_NAMES[PARAM_COUNT] = {
+  P_KP_L, P_KI_L, P_KD_L, P_KP_R, P_KI_R, P_KD_R, P_MAX_WHEEL, P_MAX_ACCEL, P_ESTOP_DECEL,
+  P_WATCHDOG,
+};
+static float* const PARAM_VARS[PARAM_COUNT - 1] = {
+  &kpL, &kiL, &kdL, &kpR, &kiR, &kdR, &maxWheel, &maxAccel, &estopDecel,
+};
+static const float PARAM_MIN[PARAM_COUNT - 1] = {
+  0.0f, WC_GAIN_I_MIN, 0.0f, 0.0f, WC_GAIN_I_MIN, 0.0f, WC_MAX_WHEEL_MIN, WC_ACCEL_MIN, WC_DECEL_MIN,
+};
+static const float PARAM_MAX[PARAM_COUNT - 1] = {
+  WC_GAIN_P_MAX, WC_GAIN_I_MAX, WC_GAIN_D_MAX, WC_GAIN_P_MAX, WC_GAIN_I_MAX, WC_GAIN_D_MAX,
+  WC_MAX_WHEEL_SPEED, WC_ACCEL_MAX, WC_DECEL_MAX,
+};
+
+// One answer per command: an optional data line, then ACK:/NAK: for a framed line
+// with a sequence number, ERR: for any other rejected command. At most
+// WC_ERR_LINES_PER_TICK commands are answered per tick; the rest are counted.
+static void answer(ParseResult r, int32_t seq, uint8_t data) {
   if (errLinesThisTick >= WC_ERR_LINES_PER_TICK) {
     errSuppressed++;
     return;
   }
   errLinesThisTick++;
-  line.print(F("ERR:"));
-  switch (why) {
-    case ERR_NUMBER: line.println(F("number")); break;
-    case ERR_RANGE: line.println(F("range")); break;
-    case ERR_FIELDS: line.println(F("fields")); break;
-    case ERR_OVERLONG: line.println(F("overlong")); break;
-    default: line.println(F("syntax")); break;
+  if (r == PARSE_OK && data == DATA_HELLO) {
+    line.print(F("HELLO:"));
+    line.print(WC_PROTOCOL_VERSION);
+    line.println(F(",final_control"));
+    line.send();
+  } else if (r == PARSE_OK && data == DATA_PARAM) {
+    line.print(F("PAR:"));
+    line.print((const __FlashStringHelper*)PARAM_NAMES[replyParam]);
+    line.print(',');
+    if (replyParam == PARAM_WATCHDOG) {
+      line.println(watchdogMs);
+    } else {
+      line.println(*PARAM_VARS[replyParam], 4);
+    }
+    line.send();
   }
-  line.send();
+  if (seq >= 0) {
+    line.print(r == PARSE_OK ? F("ACK:") : F("NAK:"));
+    line.print((uint16_t)seq);
+    if (r != PARSE_OK) {
+      line.print(',');
+      line.print((const __FlashStringHelper*)REASONS[r]);
+    }
+    line.println();
+    line.send();
+  } else if (r != PARSE_OK) {
+    line.print(F("ERR:"));
+    line.println((const __FlashStringHelper*)REASONS[r]);
+    line.send();
+  }
+}
+
+static void reject(ParseResult why) {
+  rejectedCount++;
+  answer(why, -1, DATA_NONE);
 }
 
 // Splits the command at its commas (replaced by NULs). Returns the number of
@@ -353,14 +490,38 @@ static uint8_t splitFields(char* fields[], uint8_t maxFields) {
 }
 
 // A decimal number through avr-libc strtod, the whole field consumed.
-static ParseResult parseNumber(const char* s, bool allowSign, float max, float& value) {
+static ParseResult parseNumber(const char* s, bool allowSign, float& value) {
   char c = s[0];
   bool digitOrPoint = (c >= '0' && c <= '9') || c == '.';
   if (!digitOrPoint && !(allowSign && (c == '+' || c == '-'))) return ERR_NUMBER;
   char* end;
   value = (float)strtod(s, &end);
   if (end == s || *end != '\0') return ERR_NUMBER;
+  return PARSE_OK;
+}
+
+static ParseResult parseBounded(const char* s, bool allowSign, float max, float& value) {
+  ParseResult r = parseNumber(s, allowSign, value);
+  if (r != PARSE_OK) return r;
   if (!(value >= -max && value <= max)) return ERR_RANGE;   // also catches inf and NaN
+  return PARSE_OK;
+}
+
+// 1 to 4 (or 5) decimal digits and nothing else; -1 when it is not.
+static int32_t parseDigits(const char* s, uint8_t maxDigits) {
+  int32_t v = 0;
+  uint8_t n = 0;
+  for (; *s; s++, n++) {
+    if (*s < '0' || *s > '9' || n == maxDigits) return -1;
+    v = v * 10 + (*s - '0');
+  }
+  return n == 0 ? -1 : v;
+}
+
+// A motion command: the wheel targets, unless the e-stop is latched.
+static ParseResult moveTo(uint8_t newMode, float right, float left) {
+  if (estopLatched) return ERR_ESTOP;
+  acceptCommand(newMode, right, left);
   return PARSE_OK;
 }
 
@@ -373,12 +534,11 @@ static ParseResult parseWheel() {
   for (uint8_t i = 0; i < 2; i++) {
     char sign = f[i][1];
     if (sign != 'p' && sign != 'n') return ERR_SYNTAX;
-    ParseResult r = parseNumber(f[i] + 2, false, WC_MAX_WHEEL_SPEED, v[i]);
+    ParseResult r = parseBounded(f[i] + 2, false, maxWheel, v[i]);
     if (r != PARSE_OK) return r;
     if (sign == 'n') v[i] = -v[i];
   }
-  acceptCommand(WC_MODE_WHEEL, v[0], v[1]);
-  return PARSE_OK;
+  return moveTo(WC_MODE_WHEEL, v[0], v[1]);
 }
 
 // x:0.5,t:0.1,  (m/s, rad/s; seed section 1.7)
@@ -387,20 +547,19 @@ static ParseResult parseCmdVel() {
   if (splitFields(f, 2) != 2) return ERR_FIELDS;
   if (f[0][0] != 'x' || f[0][1] != ':' || f[1][0] != 't' || f[1][1] != ':') return ERR_SYNTAX;
   float x, t;
-  ParseResult r = parseNumber(f[0] + 2, true, WC_MAX_LINEAR, x);
+  ParseResult r = parseBounded(f[0] + 2, true, WC_MAX_LINEAR, x);
   if (r != PARSE_OK) return r;
-  r = parseNumber(f[1] + 2, true, WC_MAX_ANGULAR, t);
+  r = parseBounded(f[1] + 2, true, WC_MAX_ANGULAR, t);
   if (r != PARSE_OK) return r;
   float right = (x + t * WC_WHEELBASE / 2.0f) / WC_WHEEL_RADIUS;
   float left = (x - t * WC_WHEELBASE / 2.0f) / WC_WHEEL_RADIUS;
   float peak = fabs(right) > fabs(left) ? fabs(right) : fabs(left);
-  if (peak > WC_MAX_WHEEL_SPEED) {   // keep the curvature, cap the faster wheel
-    float k = WC_MAX_WHEEL_SPEED / peak;
+  if (peak > maxWheel) {   // keep the curvature, cap the faster wheel
+    float k = maxWheel / peak;
     right *= k;
     left *= k;
   }
-  acceptCommand(WC_MODE_CMDVEL, right, left);
-  return PARSE_OK;
+  return moveTo(WC_MODE_CMDVEL, right, left);
 }
 
 static int16_t shapeStick(int16_t us) {
@@ -417,16 +576,12 @@ static ParseResult parsePpm() {
   int16_t ch[WC_PPM_CHANNELS];
   bool lost = false;
   for (uint8_t i = 0; i < WC_PPM_CHANNELS; i++) {
-    uint8_t n = 0;
-    int16_t v = 0;
-    for (const char* p = f[i + 1]; *p; p++, n++) {
-      if (*p < '0' || *p > '9' || n == 4) return ERR_NUMBER;
-      v = (int16_t)(v * 10 + (*p - '0'));
-    }
-    if (n == 0) return ERR_NUMBER;
-    ch[i] = v;
+    int32_t v = parseDigits(f[i + 1], 4);
+    if (v < 0) return ERR_NUMBER;
+    ch[i] = (int16_t)v;
     if (v < WC_PPM_VALID_MIN || v > WC_PPM_VALID_MAX) lost = true;
   }
+  if (estopLatched) return ERR_ESTOP;
   mode = WC_MODE_PPM;
   cmdSinceTick = true;
   if (lost) {
@@ -437,11 +592,69 @@ static ParseResult parsePpm() {
   }
   ppmLost = false;
   float perUs = WC_PPM_MAX_WHEEL / WC_PPM_SPAN;
+  float cap = maxWheel < WC_PPM_MAX_WHEEL ? maxWheel : WC_PPM_MAX_WHEEL;
   float fwd = (float)shapeStick(ch[WC_PPM_FWD_CHANNEL] - WC_PPM_NEUTRAL) * perUs;
   float turn = (float)shapeStick(ch[WC_PPM_TURN_CHANNEL] - WC_PPM_NEUTRAL) * perUs;
-  float right = constrain(fwd - turn, -WC_PPM_MAX_WHEEL, WC_PPM_MAX_WHEEL);
-  float left = constrain(fwd + turn, -WC_PPM_MAX_WHEEL, WC_PPM_MAX_WHEEL);
+  float right = constrain(fwd - turn, -cap, cap);
+  float left = constrain(fwd + turn, -cap, cap);
   acceptCommand(WC_MODE_PPM, right, left);
+  return PARSE_OK;
+}
+
+// estop: stop at the emergency rate and refuse motion until "reset".
+static ParseResult latchEstop() {
+  emergencyHalt();
+  cmdSinceTick = false;
+  watchdogArmed = false;       // stopped on purpose: no watchdog event on top
+  if (!estopLatched) sendEvent(F("ESTOP"));
+  estopLatched = true;
+  return PARSE_OK;
+}
+
+// reset: release the e-stop once the chair is parked (at rest, motors off).
+static ParseResult resetEstop() {
+  if (estopLatched && !parked) return ERR_BUSY;
+  estopLatched = false;
+  return PARSE_OK;
+}
+
+static int8_t findParam(const char* name) {
+  for (uint8_t i = 0; i < PARAM_COUNT; i++) {
+    if (strcmp_P(name, PARAM_NAMES[i]) == 0) return (int8_t)i;
+  }
+  return -1;
+}
+
+// get:<name>
+static ParseResult parseGet(uint8_t& data) {
+  int8_t i = findParam(cmdBuf + 4);
+  if (i < 0) return ERR_PARAM;
+  replyParam = (uint8_t)i;
+  data = DATA_PARAM;
+  return PARSE_OK;
+}
+
+// set:<name>=<value>
+static ParseResult parseSet(uint8_t& data) {
+  char* eq = strchr(cmdBuf + 4, '=');
+  if (eq == NULL) return ERR_SYNTAX;
+  *eq = '\0';
+  int8_t i = findParam(cmdBuf + 4);
+  if (i < 0) return ERR_PARAM;
+  if (i == PARAM_WATCHDOG) {
+    int32_t ms = parseDigits(eq + 1, 4);
+    if (ms < 0) return ERR_NUMBER;
+    if (ms < WC_WATCHDOG_MIN_MS || ms > WC_WATCHDOG_MAX_MS) return ERR_RANGE;
+    watchdogMs = (uint16_t)ms;
+  } else {
+    float v;
+    ParseResult r = parseNumber(eq + 1, false, v);
+    if (r != PARSE_OK) return r;
+    if (!(v >= PARAM_MIN[i] && v <= PARAM_MAX[i])) return ERR_RANGE;
+    *PARAM_VARS[i] = v;
+  }
+  replyParam = (uint8_t)i;
+  data = DATA_PARAM;
   return PARSE_OK;
 }
 
@@ -465,47 +678,104 @@ static bool allPrintable() {
   return true;
 }
 
+static int8_t hexValue(char c) {
+  if (c >= '0' && c <= '9') return c - '0';
+  if (c >= 'A' && c <= 'F') return c - 'A' + 10;
+  if (c >= 'a' && c <= 'f') return c - 'a' + 10;
+  return -1;
+}
+
+// A framed line: $[<seq>:]<command>*<hh>, hh the XOR of the bytes between $ and *.
+// Checks the checksum, takes the sequence number and leaves the bare command in
+// cmdBuf.
+static ParseResult unframe(int32_t& seq) {
+  if (cmdLen < 4 || cmdBuf[cmdLen - 3] != '*') return ERR_CHECKSUM;
+  int8_t hi = hexValue(cmdBuf[cmdLen - 2]);
+  int8_t lo = hexValue(cmdBuf[cmdLen - 1]);
+  if (hi < 0 || lo < 0) return ERR_CHECKSUM;
+  uint8_t sum = 0;
+  for (uint8_t i = 1; i < cmdLen - 3; i++) sum ^= (uint8_t)cmdBuf[i];
+  if (sum != (uint8_t)((hi << 4) | lo)) return ERR_CHECKSUM;
+  uint8_t start = 1;
+  if (cmdBuf[1] >= '0' && cmdBuf[1] <= '9') {
+    int32_t v = 0;
+    uint8_t p = 1;
+    while (cmdBuf[p] >= '0' && cmdBuf[p] <= '9') {
+      if (p == 6) return ERR_SYNTAX;          // more than 5 digits
+      v = v * 10 + (cmdBuf[p] - '0');
+      p++;
+    }
+    if (cmdBuf[p] != ':' || v > (int32_t)WC_SEQ_MAX) return ERR_SYNTAX;
+    seq = v;
+    lastSeq = (uint16_t)v;
+    start = p + 1;
+  }
+  cmdLen = cmdLen - 3 - start;
+  memmove(cmdBuf, cmdBuf + start, cmdLen);
+  cmdBuf[cmdLen] = '\0';
+  return PARSE_OK;
+}
+
+static ParseResult dispatch(uint8_t& data) {
+  if (!allPrintable()) return ERR_SYNTAX;
+  if (strcmp_P(cmdBuf, PSTR("hello")) == 0) {
+    tlmEnabled = true;
+    data = DATA_HELLO;
+    return PARSE_OK;
+  }
+  if (strcmp_P(cmdBuf, PSTR("estop")) == 0) return latchEstop();
+  if (strcmp_P(cmdBuf, PSTR("reset")) == 0) return resetEstop();
+  if (strncmp_P(cmdBuf, PSTR("get:"), 4) == 0) return parseGet(data);
+  if (strncmp_P(cmdBuf, PSTR("set:"), 4) == 0) return parseSet(data);
+  if (cmdBuf[0] == 'r') return parseWheel();
+  if (cmdBuf[0] == 'x') return parseCmdVel();
+  if (cmdLen >= 4 && cmdBuf[0] == 'p' && cmdBuf[1] == 'p' && cmdBuf[2] == 'm') return parsePpm();
+  return ERR_SYNTAX;
+}
+
 static void finishCommand() {
   cmdBuf[cmdLen] = '\0';
-  ParseResult r;
-  if (!allPrintable()) {
-    r = ERR_SYNTAX;
-  } else if (cmdBuf[0] == 'r') {
-    r = parseWheel();
-  } else if (cmdBuf[0] == 'x') {
-    r = parseCmdVel();
-  } else if (cmdLen >= 4 && cmdBuf[0] == 'p' && cmdBuf[1] == 'p' && cmdBuf[2] == 'm') {
-    r = parsePpm();
-  } else {
-    r = ERR_SYNTAX;
+  int32_t seq = -1;
+  uint8_t data = DATA_NONE;
+  ParseResult r = PARSE_OK;
+  if (cmdBuf[0] == '$') {
+    r = unframe(seq);
+    if (r == ERR_CHECKSUM) crcRejected++;
   }
-  if (r != PARSE_OK) reject(r);
+  if (r == PARSE_OK) r = dispatch(data);
+  if (r != PARSE_OK) rejectedCount++;
+  if (r != PARSE_OK || seq >= 0 || data != DATA_NONE) answer(r, seq, data);
   cmdLen = 0;
   cmdCommas = 0;
 }
 
 extern "C" __attribute__((noinline)) void processByte(uint8_t c) {
+  rxCount++;
   if (c == '\n' || c == '\r') {
-    if (cmdDiscarding) {
-      cmdDiscarding = false;
+    if (cmdDiscarding != DISCARD_NONE) {
+      cmdDiscarding = DISCARD_NONE;
     } else if (cmdLen > 0) {
       finishCommand();
     }
     return;
   }
-  if (cmdDiscarding) {
-    if (c == ',') cmdDiscarding = false;
+  if (cmdDiscarding != DISCARD_NONE) {
+    if (c == ',' && cmdDiscarding == DISCARD_TO_COMMA) cmdDiscarding = DISCARD_NONE;
     return;
   }
   if (cmdLen >= WC_CMD_MAX_LEN) {
     reject(ERR_OVERLONG);
+    if (cmdBuf[0] == '$') {
+      cmdDiscarding = DISCARD_TO_EOL;
+    } else {
+      cmdDiscarding = c == ',' ? DISCARD_NONE : DISCARD_TO_COMMA;
+    }
     cmdLen = 0;
     cmdCommas = 0;
-    cmdDiscarding = (c != ',');
     return;
   }
   cmdBuf[cmdLen++] = (char)c;
-  if (c != ',') return;
+  if (c != ',' || cmdBuf[0] == '$') return;   // a framed line ends at its line end only
   cmdCommas++;
   uint8_t expected = fieldsExpected();
   if (expected == 0) {
@@ -548,11 +818,22 @@ void setup() {
   lastControlTime = millis();
 }
 
+// Bytes between the top of the heap and the stack pointer, as loop() runs.
+static uint16_t measureFreeRam() {
+  extern char __heap_start;
+  extern char* __brkval;
+  char top;
+  return (uint16_t)(&top - (__brkval != 0 ? __brkval : &__heap_start));
+}
+
 void loop() {
   // Bounded: at most one RX buffer's worth per pass.
   for (uint8_t n = 0; n < 64 && Serial.available() > 0; n++) {
     processByte((uint8_t)Serial.read());
   }
   uint32_t now = millis();
-  if (now - lastControlTime >= WC_CONTROL_PERIOD_MS) controlTick(now);
+  if (now - lastControlTime >= WC_CONTROL_PERIOD_MS) {
+    freeRam = measureFreeRam();
+    controlTick(now);
+  }
 }

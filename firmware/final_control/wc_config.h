@@ -8,11 +8,13 @@
 // ---- Serial link -----------------------------------------------------------
 #define WC_BAUD 115200UL
 #define WC_CMD_MAX_LEN 63          // longest command (bytes before its terminator)
-#define WC_ERR_LINES_PER_TICK 2    // ERR lines sent per 50 ms window; the rest are counted
+#define WC_ERR_LINES_PER_TICK 3    // commands answered per 50 ms window (ERR, ACK/NAK, data); the rest are counted
+#define WC_PROTOCOL_VERSION 2      // sent in the HELLO reply
+#define WC_SEQ_MAX 65535UL         // largest sequence number of a framed line
 
 // ---- Timing ----------------------------------------------------------------
 #define WC_CONTROL_PERIOD_MS 50UL  // control tick and feedback period
-#define WC_WATCHDOG_MS 500UL       // no valid command for this long -> emergency stop
+#define WC_WATCHDOG_MS 500UL       // default of watchdog_ms: no valid command for this long -> emergency stop
 #define WC_PIVOT_TICKS 6           // pivot length in control ticks (300 ms nominal)
 
 // ---- Geometry and encoders (seed section 1.4.2) ----------------------------
@@ -72,5 +74,18 @@
 #define WC_MODE_WHEEL 0
 #define WC_MODE_CMDVEL 1
 #define WC_MODE_PPM 2
+
+// ---- Ranges of the runtime parameters (get:/set:; the defaults are the constants above) ---
+#define WC_GAIN_P_MAX 100.0f       // kp_l, kp_r in [0, GAIN_P_MAX]
+#define WC_GAIN_I_MIN 0.01f        // ki_l, ki_r in [GAIN_I_MIN, GAIN_I_MAX] (the anti-windup divides by ki)
+#define WC_GAIN_I_MAX 100.0f
+#define WC_GAIN_D_MAX 10.0f        // kd_l, kd_r in [0, GAIN_D_MAX]
+#define WC_MAX_WHEEL_MIN 0.1f      // max_wheel in [MAX_WHEEL_MIN, MAX_WHEEL_SPEED] rad/s
+#define WC_ACCEL_MIN 0.5f          // max_accel in [ACCEL_MIN, ACCEL_MAX] rad/s^2
+#define WC_ACCEL_MAX 20.0f
+#define WC_DECEL_MIN 5.0f          // estop_decel in [DECEL_MIN, DECEL_MAX] rad/s^2
+#define WC_DECEL_MAX 50.0f
+#define WC_WATCHDOG_MIN_MS 100     // watchdog_ms in [WATCHDOG_MIN_MS, WATCHDOG_MAX_MS]
+#define WC_WATCHDOG_MAX_MS 2000
 
 #endif

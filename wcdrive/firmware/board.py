@@ -18,6 +18,10 @@ from wcdrive.firmware.control import control_tick
 from wcdrive.firmware.state import FirmwareState
 
 BOOT_LINE = b"BOOT:final_control\r\n"
+#: What ``measureFreeRam()`` reports on the Mega build (bytes between the heap and the
+#: stack in loop()); the simulated board reports it too. tests/test_protocol.py checks it
+#: against the ELF running in simavr, so a firmware change that moves it fails there.
+FREE_RAM = 6987
 
 
 class Firmware:
@@ -25,6 +29,7 @@ class Firmware:
         """A board just out of ``setup()`` (which ends with ``lastControlTime =
         millis()``), or one in any given ``state``."""
         self.state = state if state is not None else FirmwareState(lastControlTime=boot_millis)
+        self.free_ram = FREE_RAM
 
     @staticmethod
     def boot_output() -> bytes:
@@ -38,7 +43,12 @@ class Firmware:
     def due(self, now: int) -> bool:
         return ((now - self.state.lastControlTime) & 0xFFFFFFFF) >= CONTROL_PERIOD_MS
 
-    def tick(self, now: int, count_l: int, count_r: int) -> bytes:
+    def tick(self, now: int, count_l: int, count_r: int, illegal_l: int = 0, illegal_r: int = 0,
+             free_ram: int | None = None) -> bytes:
+        """``controlTick(now)``. The latched counts are inputs, and so is ``free_ram``
+        (what loop() measured before the tick; None: ``self.free_ram``, which starts at
+        the figure of the Mega build, ``FREE_RAM``)."""
+        self.state.freeRam = self.free_ram if free_ram is None else free_ram
         out = bytearray()
-        control_tick(self.state, now, count_l, count_r, out)
+        control_tick(self.state, now, count_l, count_r, out, illegal_l, illegal_r)
         return bytes(out)

@@ -2,8 +2,10 @@
 
 A command ends at a line end (``\\n`` or ``\\r``) or at the comma of its last field
 (WHEEL and CMDVEL: the 2nd, PPM: the 8th), so the seed host's newline-less
-``x:0.500,t:0.100,`` takes effect at the next tick. Malformed commands are counted
-and answered with ``ERR:<reason>``; they never change the targets or the mode.
+``x:0.500,t:0.100,`` takes effect at the next tick. A framed line
+``$[<seq>:]<command>*<hh>`` (protocol v2) ends at its line end only. Malformed
+commands are counted and answered with ``ERR:<reason>`` (``NAK:<seq>,<reason>`` when
+framed with a sequence number); they never change the targets or the mode.
 """
 
 from __future__ import annotations
@@ -11,14 +13,17 @@ from __future__ import annotations
 import functools
 import re
 
+from wcdrive.codec import checksum
 from wcdrive.firmware import constants as C
 from wcdrive.firmware.avrlibc import strtod
 from wcdrive.firmware.f32 import constrain, div, f32, from_int
 from wcdrive.firmware.motion import accept_command, emergency_halt
-from wcdrive.firmware.output import event_line, reject
+from wcdrive.firmware.output import DATA_HELLO, DATA_NONE, DATA_PARAM, answer, event_line, reject
+from wcdrive.firmware.params import BY_NAME, PARAMS
 from wcdrive.firmware.state import FirmwareState
 
-NEWLINE, RETURN, COMMA = 0x0A, 0x0D, 0x2C
+NEWLINE, RETURN, COMMA, DOLLAR = 0x0A, 0x0D, 0x2C, 0x24
+DISCARD_NONE, DISCARD_TO_COMMA, DISCARD_TO_EOL = 0, 1, 2
 _PPM_PER_US = div(C.PPM_MAX_WHEEL, float(C.PPM_SPAN))
 
 
@@ -46,7 +51,7 @@ def split_fields(buf: bytes, max_fields: int) -> list[bytes] | None:
     return fields
 
 
-def parse_number(field: bytes, start: int, allow_sign: bool, limit: float) -> float:
+def parse_unbounded(field: bytes, start: int, allow_sign: bool) -> float:
     c = field[start] if start < len(field) else 0
     digit_or_point = 0x30 <= c <= 0x39 or c == 0x2E
     if not digit_or_point and not (allow_sign and c in (0x2B, 0x2D)):
@@ -54,12 +59,24 @@ def parse_number(field: bytes, start: int, allow_sign: bool, limit: float) -> fl
     value, end = strtod(field, start)
     if end == start or end != len(field):
         raise ParseError("number")
+    return value
+
+
+def parse_number(field: bytes, start: int, allow_sign: bool, limit: float) -> float:
+    value = parse_unbounded(field, start, allow_sign)
     if not (value >= -limit and value <= limit):
         raise ParseError("range")
     return value
 
 
-def parse_wheel(buf: bytes) -> tuple[int, float, float]:
+def parse_digits(field: bytes, max_digits: int) -> int:
+    """``parseDigits``: 1 to ``max_digits`` decimal digits and nothing else, or -1."""
+    if not field or len(field) > max_digits or not all(0x30 <= c <= 0x39 for c in field):
+        return -1
+    return int(field)
+
+
+def parse_wheel(buf: bytes, max_wheel: float) -> tuple[int, float, float]:
     """``rp5.0,lp3.0,`` -> (mode, right, left)."""
     f = split_fields(buf, 2)
     if f is None or len(f) != 2:
@@ -71,13 +88,13 @@ def parse_wheel(buf: bytes) -> tuple[int, float, float]:
         sign = f[i][1:2]
         if sign not in (b"p", b"n"):
             raise ParseError("syntax")
-        v[i] = parse_number(f[i], 2, False, C.MAX_WHEEL_SPEED)
+        v[i] = parse_number(f[i], 2, False, max_wheel)
         if sign == b"n":
             v[i] = -v[i]
     return C.MODE_WHEEL, v[0], v[1]
 
 
-def parse_cmd_vel(buf: bytes) -> tuple[int, float, float]:
+def parse_cmd_vel(buf: bytes, max_wheel: float) -> tuple[int, float, float]:
     """``x:0.5,t:0.1,`` -> (mode, right, left) through the kinematics."""
     f = split_fields(buf, 2)
     if f is None or len(f) != 2:
@@ -90,8 +107,8 @@ def parse_cmd_vel(buf: bytes) -> tuple[int, float, float]:
     right = div(f32(x + half_turn), C.WHEEL_RADIUS)
     left = div(f32(x - half_turn), C.WHEEL_RADIUS)
     peak = abs(right) if abs(right) > abs(left) else abs(left)
-    if peak > C.MAX_WHEEL_SPEED:
-        k = div(C.MAX_WHEEL_SPEED, peak)
+    if peak > max_wheel:
+        k = div(max_wheel, peak)
         right = f32(right * k)
         left = f32(left * k)
     return C.MODE_CMDVEL, right, left
@@ -103,7 +120,7 @@ def shape_stick(us: int) -> int:
     return max(-C.PPM_SPAN, min(C.PPM_SPAN, us))
 
 
-def parse_ppm(buf: bytes) -> tuple[int, float, float] | None:
+def parse_ppm(buf: bytes, max_wheel: float) -> tuple[int, float, float] | None:
     """``ppm:c1,...,c8,`` -> (mode, right, left), or None for a frame that says the
     receiver lost the transmitter (a channel outside the valid range)."""
     if buf[3] != 0x3A:
@@ -114,9 +131,9 @@ def parse_ppm(buf: bytes) -> tuple[int, float, float] | None:
     channels = []
     lost = False
     for field in f[1:]:
-        if not field or len(field) > 4 or not all(0x30 <= c <= 0x39 for c in field):
+        value = parse_digits(field, 4)
+        if value < 0:
             raise ParseError("number")
-        value = int(field)
         channels.append(value)
         if value < C.PPM_VALID_MIN or value > C.PPM_VALID_MAX:
             lost = True
@@ -124,28 +141,153 @@ def parse_ppm(buf: bytes) -> tuple[int, float, float] | None:
         return None
     fwd = f32(from_int(shape_stick(channels[C.PPM_FWD_CHANNEL] - C.PPM_NEUTRAL)) * _PPM_PER_US)
     turn = f32(from_int(shape_stick(channels[C.PPM_TURN_CHANNEL] - C.PPM_NEUTRAL)) * _PPM_PER_US)
-    right = constrain(f32(fwd - turn), -C.PPM_MAX_WHEEL, C.PPM_MAX_WHEEL)
-    left = constrain(f32(fwd + turn), -C.PPM_MAX_WHEEL, C.PPM_MAX_WHEEL)
+    cap = max_wheel if max_wheel < C.PPM_MAX_WHEEL else C.PPM_MAX_WHEEL
+    right = constrain(f32(fwd - turn), -cap, cap)
+    left = constrain(f32(fwd + turn), -cap, cap)
     return C.MODE_PPM, right, left
 
 
 @functools.lru_cache(maxsize=1024)
-def parse(buf: bytes) -> tuple[int, float, float] | str | None:
-    """A complete command's meaning, which depends on its bytes alone (so hosts that
-    repeat a command are parsed once): (mode, right, left), None for a PPM frame that
-    signals loss, or the ERR reason."""
+def parse(buf: bytes, max_wheel: float = C.MAX_WHEEL_SPEED) -> tuple[int, float, float] | str | None:
+    """A motion command's meaning, which depends on its bytes and the ``max_wheel``
+    parameter alone (so hosts that repeat a command are parsed once): (mode, right,
+    left), None for a PPM frame that signals loss, or the ERR reason."""
     try:
         if any(c <= 0x20 or c >= 0x7F for c in buf):
             raise ParseError("syntax")
         if buf[:1] == b"r":
-            return parse_wheel(buf)
+            return parse_wheel(buf, max_wheel)
         if buf[:1] == b"x":
-            return parse_cmd_vel(buf)
+            return parse_cmd_vel(buf, max_wheel)
         if len(buf) >= 4 and buf[:3] == b"ppm":
-            return parse_ppm(buf)
+            return parse_ppm(buf, max_wheel)
         raise ParseError("syntax")
     except ParseError as error:
         return error.reason
+
+
+def _hex_value(c: int) -> int:
+    if 0x30 <= c <= 0x39:
+        return c - 0x30
+    if 0x41 <= c <= 0x46:
+        return c - 0x41 + 10
+    if 0x61 <= c <= 0x66:
+        return c - 0x61 + 10
+    return -1
+
+
+def unframe(buf: bytes) -> tuple[str | None, int, bytes]:
+    """``$[<seq>:]<command>*<hh>`` -> (reason or None, seq or -1, command). A sequence
+    number is returned (and taken as the last one) only once the checksum is right and
+    the number well formed."""
+    n = len(buf)
+    if n < 4 or buf[n - 3] != 0x2A:
+        return "checksum", -1, buf
+    hi, lo = _hex_value(buf[n - 2]), _hex_value(buf[n - 1])
+    if hi < 0 or lo < 0 or checksum(buf[1:n - 3]) != (hi << 4) | lo:
+        return "checksum", -1, buf
+    start, seq = 1, -1
+    if 0x30 <= buf[1] <= 0x39:
+        p = 1
+        while 0x30 <= buf[p] <= 0x39:
+            if p == 6:
+                return "syntax", -1, buf
+            p += 1
+        value = int(buf[1:p])
+        if buf[p] != 0x3A or value > C.SEQ_MAX:
+            return "syntax", -1, buf
+        seq, start = value, p + 1
+    return None, seq, buf[start:n - 3]
+
+
+def _param_index(name: bytes) -> int:
+    return BY_NAME.get(name, -1)
+
+
+def _get(body: bytes) -> tuple[str | None, int]:
+    i = _param_index(body[4:])
+    return ("param", 0) if i < 0 else (None, i)
+
+
+def _set(s: FirmwareState, body: bytes) -> tuple[str | None, int]:
+    eq = body.find(b"=", 4)
+    if eq < 0:
+        return "syntax", 0
+    i = _param_index(body[4:eq])
+    if i < 0:
+        return "param", 0
+    p = PARAMS[i]
+    text = body[eq + 1:]
+    if p.integer:
+        ms = parse_digits(text, 4)
+        if ms < 0:
+            return "number", 0
+        if ms < p.low or ms > p.high:
+            return "range", 0
+        setattr(s, p.field, ms)
+        return None, i
+    try:
+        value = parse_unbounded(text, 0, False)
+    except ParseError as error:
+        return error.reason, 0
+    if not (value >= p.low and value <= p.high):
+        return "range", 0
+    setattr(s, p.field, value)
+    return None, i
+
+
+def _move(s: FirmwareState, body: bytes, out: bytearray) -> str | None:
+    result = parse(body, s.maxWheel)
+    if isinstance(result, str):
+        return result
+    if s.estopLatched:
+        return "estop"
+    if result is None:                       # PPM: signal lost
+        s.mode = C.MODE_PPM
+        s.cmdSinceTick = 1
+        emergency_halt(s)
+        if not s.ppmLost:
+            out += event_line("PPM_LOST")
+        s.ppmLost = 1
+        return None
+    mode, right, left = result
+    if mode == C.MODE_PPM:
+        s.ppmLost = 0
+    accept_command(s, mode, right, left)
+    return None
+
+
+def latch_estop(s: FirmwareState, out: bytearray) -> None:
+    emergency_halt(s)
+    s.cmdSinceTick = 0
+    s.watchdogArmed = 0
+    if not s.estopLatched:
+        out += event_line("ESTOP")
+    s.estopLatched = 1
+
+
+def _dispatch(s: FirmwareState, body: bytes, out: bytearray) -> tuple[str | None, int, int]:
+    """``dispatch``: (reason or None, data reply, parameter index)."""
+    if any(c <= 0x20 or c >= 0x7F for c in body):
+        return "syntax", DATA_NONE, 0
+    if body == b"hello":
+        s.tlmEnabled = 1
+        return None, DATA_HELLO, 0
+    if body == b"estop":
+        latch_estop(s, out)
+        return None, DATA_NONE, 0
+    if body == b"reset":
+        if s.estopLatched and not s.parked:
+            return "busy", DATA_NONE, 0
+        s.estopLatched = 0
+        return None, DATA_NONE, 0
+    if body[:4] == b"get:":
+        reason, i = _get(body)
+        return reason, DATA_PARAM, i
+    if body[:4] == b"set:":
+        reason, i = _set(s, body)
+        return reason, DATA_PARAM, i
+    return _move(s, body, out), DATA_NONE, 0
 
 
 def fields_expected(s: FirmwareState) -> int:
@@ -158,21 +300,21 @@ def fields_expected(s: FirmwareState) -> int:
 
 
 def finish_command(s: FirmwareState, out: bytearray) -> None:
-    result = parse(bytes(s.cmdBuf))
-    if isinstance(result, str):
-        reject(s, result, out)
-    elif result is None:                       # PPM: signal lost
-        s.mode = C.MODE_PPM
-        s.cmdSinceTick = 1
-        emergency_halt(s)
-        if not s.ppmLost:
-            out += event_line("PPM_LOST")
-        s.ppmLost = 1
-    else:
-        mode, right, left = result
-        if mode == C.MODE_PPM:
-            s.ppmLost = 0
-        accept_command(s, mode, right, left)
+    body = bytes(s.cmdBuf)
+    seq, data, param = -1, DATA_NONE, 0
+    reason: str | None = None
+    if body[:1] == b"$":
+        reason, seq, body = unframe(body)
+        if seq >= 0:
+            s.lastSeq = seq
+        if reason == "checksum":
+            s.crcRejected = (s.crcRejected + 1) & 0xFFFFFFFF
+    if reason is None:
+        reason, data, param = _dispatch(s, body, out)
+    if reason is not None:
+        s.rejectedCount = (s.rejectedCount + 1) & 0xFFFFFFFF
+    if reason is not None or seq >= 0 or data != DATA_NONE:
+        answer(s, reason, seq, data, param, out)
     _reset(s)
 
 
@@ -184,24 +326,28 @@ def _reset(s: FirmwareState) -> None:
 
 def process_byte(s: FirmwareState, c: int, out: bytearray) -> None:
     """One received byte, as ``processByte`` handles it."""
+    s.rxCount = (s.rxCount + 1) & 0xFFFFFFFF
     if c == NEWLINE or c == RETURN:
         if s.cmdDiscarding:
-            s.cmdDiscarding = 0
+            s.cmdDiscarding = DISCARD_NONE
         elif s.cmdLen > 0:
             finish_command(s, out)
         return
     if s.cmdDiscarding:
-        if c == COMMA:
-            s.cmdDiscarding = 0
+        if c == COMMA and s.cmdDiscarding == DISCARD_TO_COMMA:
+            s.cmdDiscarding = DISCARD_NONE
         return
     if s.cmdLen >= C.CMD_MAX_LEN:
         reject(s, "overlong", out)
+        if s.cmdBuf[0] == DOLLAR:
+            s.cmdDiscarding = DISCARD_TO_EOL
+        else:
+            s.cmdDiscarding = DISCARD_NONE if c == COMMA else DISCARD_TO_COMMA
         _reset(s)
-        s.cmdDiscarding = 0 if c == COMMA else 1
         return
     s.cmdBuf.append(c)
     s.cmdLen += 1
-    if c != COMMA:
+    if c != COMMA or s.cmdBuf[0] == DOLLAR:
         return
     s.cmdCommas += 1
     expected = fields_expected(s)
@@ -226,6 +372,7 @@ def process_bytes(s: FirmwareState, data: bytes, out: bytearray) -> None:
             if i < j <= i + C.CMD_MAX_LEN - s.cmdLen:
                 s.cmdBuf += data[i:j]
                 s.cmdLen += j - i
+                s.rxCount = (s.rxCount + j - i) & 0xFFFFFFFF
                 i = j
                 continue
         process_byte(s, data[i], out)

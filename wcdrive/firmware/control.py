@@ -6,20 +6,18 @@ from __future__ import annotations
 from wcdrive.firmware import constants as C
 from wcdrive.firmware.f32 import div, f32, from_int
 from wcdrive.firmware.motion import emergency_halt, pivot_step
-from wcdrive.firmware.output import event_line, feedback_line
+from wcdrive.firmware.output import event_line, feedback_line, telemetry_line
 from wcdrive.firmware.state import FirmwareState
 
-_HI_L = div(C.PID_OUT_MAX, C.KI_L)
-_HI_R = div(C.PID_OUT_MAX, C.KI_R)
 _OUT_MAX = C.PID_OUT_MAX
 
 
 def compute_pid(setpoint: float, measurement: float, integral: float, prev_meas: float,
-                kp: float, ki: float, kd: float, dt: float, limit: float) -> tuple[float, float]:
-    """``computePID``: returns ``(clamped output, new integral)``; ``limit`` is
-    ``100 / ki``, which gcc folds at compile time."""
+                kp: float, ki: float, kd: float, dt: float) -> tuple[float, float]:
+    """``computePID``: returns ``(clamped output, new integral)``."""
     error = f32(setpoint - measurement)
     integral = f32(integral + f32(error * dt))
+    limit = div(_OUT_MAX, ki)
     # constrain(integral, -limit, limit)
     integral = -limit if integral < -limit else (limit if integral > limit else integral)
     derivative = div(-f32(measurement - prev_meas), dt)
@@ -49,13 +47,16 @@ def _i32(x: int) -> int:
     return (x + 2**31) % 2**32 - 2**31
 
 
-def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: bytearray) -> None:
-    """``controlTick(now)`` with the encoder counts it latches atomically."""
+def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: bytearray,
+                 illegal_l: int = 0, illegal_r: int = 0) -> None:
+    """``controlTick(now)`` with the encoder and illegal-transition counts it latches
+    atomically."""
     dt = div(from_int((now - s.lastControlTime) & 0xFFFFFFFF), 1000.0)
     s.lastControlTime = now & 0xFFFFFFFF
     s.tickCount = (s.tickCount + 1) & 0xFFFFFFFF
 
     s.encTickL, s.encTickR = _i32(count_l), _i32(count_r)
+    s.illTickL, s.illTickR = illegal_l & 0xFFFFFFFF, illegal_r & 0xFFFFFFFF
     delta_l = _i32(s.encTickL - s.prevEncL)
     delta_r = _i32(s.encTickR - s.prevEncR)
     s.prevEncL, s.prevEncR = s.encTickL, s.encTickR
@@ -70,12 +71,12 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
         s.cmdSinceTick = 0
         s.lastCmdTime = now & 0xFFFFFFFF
         s.watchdogArmed = 1
-    if s.watchdogArmed and ((now - s.lastCmdTime) & 0xFFFFFFFF) >= C.WATCHDOG_MS:
+    if s.watchdogArmed and ((now - s.lastCmdTime) & 0xFFFFFFFF) >= s.watchdogMs:
         s.watchdogArmed = 0
         emergency_halt(s)
         out += event_line("WATCHDOG")
 
-    max_change = f32((C.EMERGENCY_DECEL if s.emergencyStop else C.MAX_ACCEL) * dt)
+    max_change = f32((s.estopDecel if s.emergencyStop else s.maxAccel) * dt)
     s.setpointL = ramp_toward(s.setpointL, s.targetL, max_change)
     s.setpointR = ramp_toward(s.setpointR, s.targetR, max_change)
 
@@ -94,10 +95,10 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
     else:
         s.parked = 0
         s.outputL, s.integralL = compute_pid(s.setpointL, s.filtVelL, s.integralL, s.prevMeasL,
-                                             C.KP_L, C.KI_L, C.KD_L, dt, _HI_L)
+                                             s.kpL, s.kiL, s.kdL, dt)
         s.prevMeasL = s.filtVelL
         s.outputR, s.integralR = compute_pid(s.setpointR, s.filtVelR, s.integralR, s.prevMeasR,
-                                             C.KP_R, C.KI_R, C.KD_R, dt, _HI_R)
+                                             s.kpR, s.kiR, s.kdR, dt)
         s.prevMeasR = s.filtVelR
     s.pwmL, s.dirL = motor_output(s.outputL)
     s.pwmR, s.dirR = motor_output(s.outputR)
@@ -105,4 +106,6 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
     pivot_step(s)
 
     out += feedback_line(s)
+    if s.tlmEnabled:
+        out += telemetry_line(s, now & 0xFFFFFFFF)
     s.errLinesThisTick = 0

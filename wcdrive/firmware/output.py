@@ -7,8 +7,9 @@ port appends every line. ``txDropped`` staying 0 is checked against the firmware
 
 from __future__ import annotations
 
-from wcdrive.firmware.arduino_print import print_float, print_long
-from wcdrive.firmware.constants import ERR_LINES_PER_TICK, MODE_NAMES
+from wcdrive.firmware.arduino_print import print_float, print_long, print_unsigned
+from wcdrive.firmware.constants import ERR_LINES_PER_TICK, MODE_NAMES, PROTOCOL_VERSION
+from wcdrive.firmware.params import PARAMS
 from wcdrive.firmware.state import FirmwareState
 
 CRLF = b"\r\n"
@@ -26,11 +27,45 @@ def event_line(what: str) -> bytes:
     return b"EVT:" + what.encode() + CRLF
 
 
-def reject(s: FirmwareState, reason: str, out: bytearray) -> None:
-    """Counts a malformed command and reports it, at most ERR_LINES_PER_TICK a tick."""
-    s.rejectedCount = (s.rejectedCount + 1) & 0xFFFFFFFF
+def telemetry_line(s: FirmwareState, now: int) -> bytes:
+    """``TLM:`` (protocol v2), sent after each feedback line once a host said hello."""
+    flags = ((1 if s.watchdogArmed else 0) | (2 if s.emergencyStop else 0)
+             | (4 if s.estopLatched else 0) | (8 if s.ppmLost else 0) | (16 if s.parked else 0)
+             | ((s.pivotPhase << 5) & 0xFF))
+    values = (now, s.rxCount, s.lastSeq, s.pwmL, s.pwmR, s.dirL, s.dirR, s.illTickL, s.illTickR,
+              flags, s.rejectedCount, s.crcRejected, s.freeRam)
+    return b"TLM:" + b",".join(print_unsigned(v) for v in values) + CRLF
+
+
+DATA_NONE, DATA_HELLO, DATA_PARAM = 0, 1, 2
+
+
+def answer(s: FirmwareState, reason: str | None, seq: int, data: int, param: int,
+           out: bytearray) -> None:
+    """One command's answer: a data line (HELLO/PAR), then ``ACK:``/``NAK:`` for a framed
+    line with a sequence number (``seq >= 0``), ``ERR:`` for other rejected commands. At
+    most ERR_LINES_PER_TICK commands are answered per tick; the rest are counted."""
     if s.errLinesThisTick >= ERR_LINES_PER_TICK:
         s.errSuppressed = (s.errSuppressed + 1) & 0xFFFFFFFF
         return
     s.errLinesThisTick += 1
-    out += b"ERR:" + reason.encode() + CRLF
+    if reason is None and data == DATA_HELLO:
+        out += b"HELLO:%d,final_control\r\n" % PROTOCOL_VERSION
+    elif reason is None and data == DATA_PARAM:
+        p = PARAMS[param]
+        value = getattr(s, p.field)
+        text = print_unsigned(value) if p.integer else print_float(value, 4)
+        out += b"PAR:" + p.name.encode() + b"," + text + CRLF
+    if seq >= 0:
+        if reason is None:
+            out += b"ACK:%d\r\n" % seq
+        else:
+            out += b"NAK:%d,%s\r\n" % (seq, reason.encode())
+    elif reason is not None:
+        out += b"ERR:" + reason.encode() + CRLF
+
+
+def reject(s: FirmwareState, reason: str, out: bytearray) -> None:
+    """Counts a malformed command and reports it."""
+    s.rejectedCount = (s.rejectedCount + 1) & 0xFFFFFFFF
+    answer(s, reason, -1, DATA_NONE, 0, out)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import copy
 from dataclasses import dataclass, field, fields
 
+from wcdrive.firmware import constants as C
 from wcdrive.firmware.constants import HIGH, MODE_CMDVEL
 
 #: The controller floats compared bit for bit against the firmware's SRAM.
@@ -17,6 +18,7 @@ FLOAT_FIELDS = (
     "targetL", "targetR", "setpointL", "setpointR", "rawVelL", "rawVelR", "filtVelL",
     "filtVelR", "integralL", "integralR", "prevMeasL", "prevMeasR", "outputL", "outputR",
     "lastTravel", "pendingL", "pendingR",
+    "kpL", "kiL", "kdL", "kpR", "kiR", "kdR", "maxWheel", "maxAccel", "estopDecel",
 )
 #: Integer and flag globals compared exactly.
 INT_FIELDS = (
@@ -24,7 +26,12 @@ INT_FIELDS = (
     "lastControlTime", "tickCount", "pivotPhase", "pivotTicksLeft", "cmdSinceTick", "watchdogArmed",
     "lastCmdTime", "emergencyStop", "ppmLost", "stillTicks", "parked", "rejectedCount",
     "errSuppressed", "errLinesThisTick", "cmdLen", "cmdCommas", "cmdDiscarding",
+    "illTickL", "illTickR", "watchdogMs", "estopLatched", "tlmEnabled", "lastSeq",
+    "rxCount", "crcRejected",
 )
+
+#: Globals the tick takes as inputs rather than computes (loop() measures them).
+INPUT_FIELDS = ("freeRam",)
 
 
 @dataclass(slots=True)
@@ -52,8 +59,21 @@ class FirmwareState:
     encTickR: int = 0
     prevEncL: int = 0
     prevEncR: int = 0
+    illTickL: int = 0
+    illTickR: int = 0
     lastControlTime: int = 0
     tickCount: int = 0
+    freeRam: int = 0
+    kpL: float = C.KP_L
+    kiL: float = C.KI_L
+    kdL: float = C.KD_L
+    kpR: float = C.KP_R
+    kiR: float = C.KI_R
+    kdR: float = C.KD_R
+    maxWheel: float = C.MAX_WHEEL_SPEED
+    maxAccel: float = C.MAX_ACCEL
+    estopDecel: float = C.EMERGENCY_DECEL
+    watchdogMs: int = C.WATCHDOG_MS
     lastTravel: float = 0.0
     pivotPhase: int = 0
     pivotTicksLeft: int = 0
@@ -66,7 +86,12 @@ class FirmwareState:
     ppmLost: int = 0
     stillTicks: int = 0
     parked: int = 1
+    estopLatched: int = 0
+    tlmEnabled: int = 0
+    lastSeq: int = 0
+    rxCount: int = 0
     rejectedCount: int = 0
+    crcRejected: int = 0
     errSuppressed: int = 0
     errLinesThisTick: int = 0
     cmdBuf: bytearray = field(default_factory=bytearray)
