@@ -1,20 +1,26 @@
 """One API suite, run against every way to reach a chair: sim://, a pty device path to
-the simulated chair (the real-port code path) and simavr:// (the firmware in simavr,
-also through a pty)."""
+the simulated chair (the real-port code path), simavr:// (the firmware in simavr,
+also through a pty) and can://virtual/... (the simulated chair behind a CAN gateway on
+python-can's virtual bus)."""
 
 from __future__ import annotations
 
+import itertools
 import time
 
+import can
 import numpy as np
 import pytest
 
 import wcdrive
+from wcdrive.can.link import CanGateway
 from wcdrive.transports.pty_bridge import PtyBridge
 from wcdrive.transports.sim_board import SimulatedBoard
 
+_channels = itertools.count()
 
-@pytest.fixture(params=["sim", "pty", "simavr"])
+
+@pytest.fixture(params=["sim", "pty", "simavr", "can"])
 def chair(request, elf):
     if request.param == "sim":
         c = wcdrive.connect("sim://?speed=10")
@@ -26,6 +32,15 @@ def chair(request, elf):
         yield c
         c.close()
         bridge.close()
+    elif request.param == "can":
+        channel = f"wc-api-{next(_channels)}"
+        board = SimulatedBoard(speed=10).start()
+        gateway = CanGateway(can.Bus(interface="virtual", channel=channel), board).start()
+        c = wcdrive.connect(f"can://virtual/{channel}")
+        yield c
+        c.close()
+        gateway.close()
+        board.close()
     else:
         c = wcdrive.connect(f"simavr://{elf}")
         yield c
@@ -89,3 +104,50 @@ def test_errors_say_what_to_do(tmp_path) -> None:
         wcdrive.connect(str(tmp_path / "ttyNOPE"))
     with pytest.raises(ValueError, match="unsupported URL"):
         wcdrive.connect("ftp://chair")
+
+
+def test_handshake_finds_a_v2_board_and_telemetry_carries_tlm(chair) -> None:
+    assert chair.protocol_version == 2 and chair.firmware == "final_control"
+    t = next(t for t in chair.telemetry(timeout=5) if t.extended is not None)
+    assert t.extended.free_ram > 0 and t.extended.crc_rejected == 0
+    later = chair.wait_for_telemetry()
+    assert later.extended is not None and later.extended.millis >= t.extended.millis + 50
+
+
+def test_parameters_get_and_set(chair) -> None:
+    assert chair.get_param("kp_l") == pytest.approx(7.2)
+    assert chair.set_param("max_wheel", 4.5) == 4.5
+    assert chair.get_param("max_wheel") == 4.5
+    assert chair.set_param("watchdog_ms", 800) == 800
+    with pytest.raises(ValueError, match="outside"):
+        chair.set_param("ki_l", 0.0)          # the codec refuses what the board would
+    with pytest.raises(ValueError, match="unknown parameter"):
+        chair.get_param("kp")
+
+
+def test_estop_latches_refuses_motion_and_resets_once_parked(chair) -> None:
+    _drive(chair, 0.4, 0.3, 0.0)
+    chair.estop()
+    assert chair.estop_latched
+    with pytest.raises(wcdrive.WcdriveEstopError):
+        chair.set_velocity(0.3, 0.0)
+    chair.stop()                               # a stop is always allowed
+    deadline = time.monotonic() + 10
+    while "ESTOP" not in chair.events and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert "ESTOP" in chair.events
+    chair.reset_estop(timeout=10)
+    assert not chair.estop_latched
+    _drive(chair, 0.2, 0.2, 0.0)
+    assert "estop" not in chair.errors
+
+
+def test_odometry_is_published_at_50_hz(chair) -> None:
+    estimates = []
+    chair.on_odometry(estimates.append)
+    time.sleep(1.0)
+    stamps = np.array([e.time for e in estimates])
+    assert len(stamps) >= 25                      # loaded CI machines run late, never early
+    steps = np.diff(stamps) / 0.02
+    assert np.allclose(steps, np.round(steps), atol=1e-6) and np.all(steps >= 1 - 1e-6)
+    assert np.mean(np.round(steps) == 1) > 0.8    # a 50 Hz grid, rarely a skipped slot

@@ -67,3 +67,13 @@ def test_vector_on_the_firmware(elf, v: dict) -> None:
         text = bytes(b for _, b in mega.take_tx())
         _check(v, _lines(text), mega.read("mode"), mega.read("targetR"), mega.read("targetL"),
                mega.read)
+
+
+def test_codec_parameter_table_matches_the_port() -> None:
+    from wcdrive.codec import PARAM_RANGES
+    from wcdrive.firmware.params import PARAMS
+
+    assert list(PARAM_RANGES) == [p.name for p in PARAMS]
+    for p in PARAMS:
+        low, high = PARAM_RANGES[p.name]
+        assert (f32(low), f32(high)) == (f32(p.low), f32(p.high)), p.name

@@ -8,7 +8,7 @@ from types import SimpleNamespace
 import pytest
 import serial
 
-import wcdrive  # noqa: F401  (registers wcsim://)
+import wcdrive
 from wcdrive.codec import Feedback, LineDecoder
 
 
@@ -78,3 +78,83 @@ def test_simulated_chair_on_a_pty() -> None:
             assert b"MODE:WHEEL" in got
         finally:
             port.close()
+
+
+def test_unplug_is_detected_and_the_device_reopened(tmp_path) -> None:
+    """A device path that vanishes (USB unplugged) and comes back (a fresh board, as
+    a Mega resets on plug-in): commands fail clearly meanwhile, then all resumes."""
+    from wcdrive.transports.pty_bridge import PtyBridge
+    from wcdrive.transports.sim_board import SimulatedBoard
+
+    link = tmp_path / "ttyWC0"
+    first = PtyBridge(SimulatedBoard(speed=10).start(), link=link).start()
+    chair = wcdrive.connect(str(link), reconnect_timeout=20)
+    try:
+        assert chair.protocol_version == 2
+        first.close()                                   # unplugged
+        deadline = time.monotonic() + 5
+        while "LINK_LOST" not in chair.events and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert "LINK_LOST" in chair.events
+        with pytest.raises(wcdrive.WcdriveConnectionError, match="lost"):
+            chair.set_velocity(0.2, 0.0)
+        second = PtyBridge(SimulatedBoard(speed=10).start(), link=link).start()   # plugged back
+        try:
+            deadline = time.monotonic() + 10
+            while "RECONNECTED" not in chair.events and time.monotonic() < deadline:
+                time.sleep(0.01)
+            assert "RECONNECTED" in chair.events
+            assert chair.wait_for_handshake(10) == 2
+            chair.set_wheels(1.0, 1.0)
+            modes = set()
+            deadline = time.monotonic() + 10
+            while "WHEEL" not in modes and time.monotonic() < deadline:
+                chair.set_wheels(1.0, 1.0)
+                modes.add(chair.wait_for_telemetry().mode)
+            assert "WHEEL" in modes
+        finally:
+            chair.close()
+            second.close()
+    finally:
+        chair.close()
+
+
+def test_pyserial_miniterm_opens_wcsim_without_importing_wcdrive() -> None:
+    """``python -m serial.tools.miniterm wcsim://``: the installed .pth hook lets plain
+    pyserial find the handler. Runs miniterm on a pty as a person would."""
+    import os
+    import subprocess
+    import sys
+
+    master, slave = os.openpty()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "serial.tools.miniterm", "wcsim://?speed=5", "115200"],
+        stdin=slave, stdout=slave, stderr=slave, start_new_session=True, cwd="/")
+    os.close(slave)
+    seen = b""
+    try:
+        deadline = time.monotonic() + 20
+        while b"MODE:WHEEL" not in seen and time.monotonic() < deadline:
+            ready = __import__("select").select([master], [], [], 0.2)[0]
+            if ready:
+                seen += os.read(master, 65536)
+            if b"ENC:" in seen:
+                os.write(master, b"rp1.0,lp1.0,")
+        assert b"ENC:" in seen and b"MODE:WHEEL" in seen, seen[-500:]
+        os.write(master, b"\x1d")                         # Ctrl-]: quit
+        assert proc.wait(timeout=10) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        os.close(master)
+
+
+def test_plain_pyserial_finds_wcsim_in_a_fresh_interpreter() -> None:
+    import subprocess
+    import sys
+
+    code = ("import serial, sys; p = serial.serial_for_url('wcsim://?speed=5', timeout=2); "
+            "print(p.readline().decode().strip()); print('wcdrive' in sys.modules); p.close()")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
+                         cwd="/", check=True).stdout.split()
+    assert out == ["BOOT:final_control", "True"]

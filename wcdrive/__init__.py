@@ -9,11 +9,15 @@ __version__ = "0.1.0"
 
 from wcdrive.api import Telemetry, Wheelchair, connect
 from wcdrive.errors import (
+    WcdriveCommandError,
     WcdriveConnectionError,
     WcdriveError,
+    WcdriveEstopError,
     WcdrivePermissionError,
+    WcdriveProtocolError,
     WcdriveTimeoutError,
 )
 
-__all__ = ["Telemetry", "WcdriveConnectionError", "WcdriveError", "WcdrivePermissionError",
+__all__ = ["Telemetry", "WcdriveCommandError", "WcdriveConnectionError", "WcdriveError",
+           "WcdriveEstopError", "WcdrivePermissionError", "WcdriveProtocolError",
            "WcdriveTimeoutError", "Wheelchair", "connect"]

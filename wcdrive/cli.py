@@ -3,6 +3,8 @@
     wcdrive sim [SCENARIO ...] [--backend port|simavr] [--json] [--out DIR] [--no-plots]
     wcdrive sim --list
     wcdrive pty [--speed S] [--link PATH]                 the simulated chair on a pty
+    wcdrive can-gateway --chair URL_OR_PATH --interface I --channel C
+                                                         a chair's serial port on a CAN bus
     wcdrive verify --traces N --seed S [--elf PATH]      (= python -m wcdrive.verify)
 """
 
@@ -76,6 +78,25 @@ def _pty(args: argparse.Namespace) -> int:
     return 0
 
 
+def _can_gateway(args: argparse.Namespace) -> int:
+    import serial
+
+    from wcdrive.can.link import CanGateway, open_bus
+
+    port = serial.serial_for_url(args.chair, 115200, timeout=0.1)
+    gateway = CanGateway(open_bus(args.interface, args.channel), port).start()
+    print(f"{args.chair} <-> CAN {args.interface}/{args.channel} (Ctrl-C to stop)", flush=True)
+    try:
+        while True:
+            time.sleep(1.0)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        gateway.close()
+        port.close()
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="wcdrive",
                                      description="wcdrive: the wheelchair, simulated or real.")
@@ -97,6 +118,12 @@ def main(argv: list[str] | None = None) -> int:
     pty.add_argument("--link", help="also make this symlink to the pty, e.g. /tmp/ttyWC0")
     pty.add_argument("--seed", type=int, default=0)
     pty.set_defaults(func=_pty)
+    gw = sub.add_parser("can-gateway", help="put a chair's serial port on a CAN bus (protocol/CAN.md)")
+    gw.add_argument("--chair", required=True,
+                    help="the chair's port: /dev/ttyACM0, or wcsim://?speed=1 for the simulated one")
+    gw.add_argument("--interface", default="socketcan", help="python-can interface (default socketcan)")
+    gw.add_argument("--channel", default="can0", help="CAN channel (default can0)")
+    gw.set_defaults(func=_can_gateway)
     verify = sub.add_parser("verify", help="differential check of the port against the firmware",
                             add_help=False)
     verify.set_defaults(func=None)

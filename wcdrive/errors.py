@@ -17,3 +17,19 @@ class WcdrivePermissionError(WcdriveConnectionError, PermissionError):
 
 class WcdriveTimeoutError(WcdriveError, TimeoutError):
     """The board did not answer in time."""
+
+
+class WcdriveProtocolError(WcdriveError):
+    """The board does not speak what was asked (e.g. a protocol-v1 board and estop())."""
+
+
+class WcdriveCommandError(WcdriveError):
+    """The board refused a command (a NAK); ``reason`` is its word for why."""
+
+    def __init__(self, message: str, reason: str) -> None:
+        super().__init__(message)
+        self.reason = reason
+
+
+class WcdriveEstopError(WcdriveCommandError):
+    """Motion refused: the e-stop is latched. Call ``reset_estop()`` once it is safe."""

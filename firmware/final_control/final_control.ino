@@ -518,9 +518,10 @@ static int32_t parseDigits(const char* s, uint8_t maxDigits) {
   return n == 0 ? -1 : v;
 }
 
-// A motion command: the wheel targets, unless the e-stop is latched.
+// A motion command: the wheel targets, unless the e-stop is latched (then a stop
+// is accepted and changes nothing, and anything else is refused).
 static ParseResult moveTo(uint8_t newMode, float right, float left) {
-  if (estopLatched) return ERR_ESTOP;
+  if (estopLatched) return right == 0.0f && left == 0.0f ? PARSE_OK : ERR_ESTOP;
   acceptCommand(newMode, right, left);
   return PARSE_OK;
 }
@@ -581,22 +582,23 @@ static ParseResult parsePpm() {
     ch[i] = (int16_t)v;
     if (v < WC_PPM_VALID_MIN || v > WC_PPM_VALID_MAX) lost = true;
   }
-  if (estopLatched) return ERR_ESTOP;
-  mode = WC_MODE_PPM;
-  cmdSinceTick = true;
   if (lost) {
+    if (estopLatched) return PARSE_OK;   // stopped already
+    mode = WC_MODE_PPM;
+    cmdSinceTick = true;
     emergencyHalt();
     if (!ppmLost) sendEvent(F("PPM_LOST"));
     ppmLost = true;
     return PARSE_OK;
   }
-  ppmLost = false;
   float perUs = WC_PPM_MAX_WHEEL / WC_PPM_SPAN;
   float cap = maxWheel < WC_PPM_MAX_WHEEL ? maxWheel : WC_PPM_MAX_WHEEL;
   float fwd = (float)shapeStick(ch[WC_PPM_FWD_CHANNEL] - WC_PPM_NEUTRAL) * perUs;
   float turn = (float)shapeStick(ch[WC_PPM_TURN_CHANNEL] - WC_PPM_NEUTRAL) * perUs;
   float right = constrain(fwd - turn, -cap, cap);
   float left = constrain(fwd + turn, -cap, cap);
+  if (estopLatched) return right == 0.0f && left == 0.0f ? PARSE_OK : ERR_ESTOP;
+  ppmLost = false;
   acceptCommand(WC_MODE_PPM, right, left);
   return PARSE_OK;
 }

@@ -240,7 +240,9 @@ def _move(s: FirmwareState, body: bytes, out: bytearray) -> str | None:
     result = parse(body, s.maxWheel)
     if isinstance(result, str):
         return result
-    if s.estopLatched:
+    if s.estopLatched:                       # a stop (or a PPM loss) changes nothing
+        if result is None or (result[1] == 0.0 and result[2] == 0.0):
+            return None
         return "estop"
     if result is None:                       # PPM: signal lost
         s.mode = C.MODE_PPM

@@ -1,0 +1,171 @@
+"""The two ends of a chair on CAN.
+
+``CanLink``: what ``wcdrive.connect("can://<interface>/<channel>")`` talks to; a
+serial-like object (``write``/``read``/``in_waiting``/``close``) that turns the host's
+protocol lines into command frames and the chair's frames back into the board's
+lines, so ``Wheelchair`` works over CAN unchanged.
+
+``CanGateway``: puts a chair (a serial port: a real Mega, ``wcsim://``, a pty) on a
+bus: command frames become framed protocol lines to the board, and every line the
+board sends becomes frames. ``wcdrive can-gateway`` runs one.
+
+Both take any ``can.BusABC``: ``socketcan`` on a real bus, python-can's ``virtual``
+interface in tests.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import can
+
+from wcdrive.can.codec import (
+    CHAIR_TO_HOST,
+    HOST_TO_CHAIR,
+    CanCodecError,
+    TelemetryAssembler,
+    command_to_frames,
+    frame_to_command,
+    message_to_frames,
+)
+from wcdrive.codec import LineDecoder
+
+
+def open_bus(interface: str, channel: str) -> can.BusABC:
+    try:
+        return can.Bus(interface=interface, channel=channel)
+    except (can.CanError, OSError, ValueError, ImportError) as exc:
+        from wcdrive.errors import WcdriveConnectionError
+
+        raise WcdriveConnectionError(
+            f"cannot open CAN {interface}/{channel}: {exc} (for socketcan: "
+            "sudo ip link set can0 up type can bitrate 500000)") from exc
+
+
+class CanLink:
+    """Host end: serial-like, over a bus."""
+
+    def __init__(self, bus: can.BusABC) -> None:
+        self.bus = bus
+        self._lines = TelemetryAssembler()
+        self._rx = bytearray()
+        self._data = threading.Condition()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._receive, name="wcdrive-can-link", daemon=True)
+        self._thread.start()
+
+    def write(self, data: bytes) -> int:
+        for line in data.splitlines(keepends=True) or [data]:
+            if not line.strip():
+                continue
+            try:
+                frames = command_to_frames(line)
+            except CanCodecError as exc:
+                raise ValueError(str(exc)) from exc
+            for can_id, payload in frames:
+                self.bus.send(can.Message(arbitration_id=can_id, data=payload, is_extended_id=False))
+        return len(data)
+
+    def flush(self) -> None:
+        pass
+
+    def read(self, size: int = 1, timeout: float | None = 0.1) -> bytes:
+        deadline = None if timeout is None else time.monotonic() + timeout
+        with self._data:
+            while not self._rx and not self._stop.is_set():
+                left = None if deadline is None else deadline - time.monotonic()
+                if left is not None and left <= 0:
+                    break
+                self._data.wait(left)
+            out = bytes(self._rx[:size])
+            del self._rx[:size]
+            return out
+
+    @property
+    def in_waiting(self) -> int:
+        with self._data:
+            return len(self._rx)
+
+    def _receive(self) -> None:
+        while not self._stop.is_set():
+            msg = self.bus.recv(0.05)
+            if msg is None or msg.arbitration_id not in CHAIR_TO_HOST:
+                continue
+            text = self._lines.feed(msg.arbitration_id, bytes(msg.data))
+            if text:
+                with self._data:
+                    self._rx += text
+                    self._data.notify_all()
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=2)
+        self.bus.shutdown()
+
+
+def open_can_link(interface: str, channel: str) -> CanLink:
+    if not interface or not channel:
+        raise ValueError("use can://<interface>/<channel>, e.g. can://socketcan/can0 or "
+                         "can://virtual/chair")
+    return CanLink(open_bus(interface, channel))
+
+
+class CanGateway:
+    """Chair end: a serial port (``read``/``write``) bridged onto ``bus``."""
+
+    def __init__(self, bus: can.BusABC, port) -> None:
+        self.bus = bus
+        self.port = port
+        self.dropped = 0            # frames or lines with no counterpart
+        self._stop = threading.Event()
+        self._threads = [threading.Thread(target=self._to_chair, name="can-gw-in", daemon=True),
+                         threading.Thread(target=self._to_bus, name="can-gw-out", daemon=True)]
+
+    def start(self) -> CanGateway:
+        for t in self._threads:
+            t.start()
+        return self
+
+    def _to_chair(self) -> None:
+        while not self._stop.is_set():
+            msg = self.bus.recv(0.05)
+            if msg is None or msg.arbitration_id not in HOST_TO_CHAIR:
+                continue
+            try:
+                line = frame_to_command(msg.arbitration_id, bytes(msg.data))
+            except (CanCodecError, ValueError):
+                self.dropped += 1
+                continue
+            self.port.write(line)
+
+    def _to_bus(self) -> None:
+        decoder = LineDecoder()
+        while not self._stop.is_set():
+            try:
+                data = self.port.read(256)
+            except Exception:
+                if self._stop.is_set():
+                    return
+                time.sleep(0.05)
+                continue
+            for message in decoder.feed(data or b""):
+                frames = message_to_frames(message)
+                if not frames:
+                    self.dropped += 1
+                for can_id, payload in frames:
+                    self.bus.send(can.Message(arbitration_id=can_id, data=payload,
+                                              is_extended_id=False))
+
+    def close(self) -> None:
+        """Stops both directions and shuts the bus down (the gateway owns it)."""
+        self._stop.set()
+        for t in self._threads:
+            t.join(timeout=2)
+        self.bus.shutdown()
+
+    def __enter__(self) -> CanGateway:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
