@@ -197,6 +197,19 @@ class Wheelchair:
             raise WcdriveProtocolError(f"expected a PAR: line, got {data!r}")
         return data.value
 
+    def send_command(self, command: bytes) -> None:
+        """Any protocol command (``encode_ppm(...)``, ``b"rp1.0,lp1.0,"``), framed with a
+        checksum on a v2 board: for tools; navigation code uses the methods above."""
+        self._move(command)
+
+    @property
+    def recording(self):
+        """The session so far (``connect(..., record=True)``), a ``wcdrive.recording.Recording``."""
+        recording = getattr(self._port, "recording", None)
+        if recording is None:
+            raise WcdriveProtocolError("not recording: connect(url, record=True)")
+        return recording
+
     def _move(self, command: bytes) -> None:
         if self.estop_latched:
             raise WcdriveEstopError("the e-stop is latched: call reset_estop() once it is safe",
@@ -478,23 +491,36 @@ def _open_serial(path: str) -> serial.Serial:
     return port
 
 
-def connect(url: str = "sim://", *, boot_timeout: float = 10.0, **options) -> Wheelchair:
+def connect(url: str = "sim://", *, boot_timeout: float = 10.0, record: bool = False,
+            **options) -> Wheelchair:
+    """Opens ``url``, waits for the board's boot and feedback, says hello. ``record``:
+    keep every byte both ways (``chair.recording``) for ``wcdrive.replay``."""
     parts = urllib.parse.urlsplit(url)
+
+    def wrap(port):
+        if not record:
+            return port
+        from wcdrive.recording import RecordingPort
+
+        return RecordingPort(port)
+
     if parts.scheme == "sim":
         port = serial.serial_for_url("wcsim://" + (f"?{parts.query}" if parts.query else ""), timeout=0.1)
-        chair = Wheelchair(port, **options)
+        chair = Wheelchair(wrap(port), **options)
     elif parts.scheme == "simavr":
         from hil.pty_board import PtyBoard
 
         elf = (parts.netloc + parts.path) or None
-        board = PtyBoard(elf).start()
-        chair = Wheelchair(_open_serial(board.path), on_close=board.stop, **options)
+        board = PtyBoard(elf).start(run_board=False)
+        port = wrap(_open_serial(board.path))
+        board.run_board()                  # like a Mega that resets when its port opens
+        chair = Wheelchair(port, on_close=board.stop, **options)
     elif parts.scheme == "can":
         from wcdrive.can.link import open_can_link
 
-        chair = Wheelchair(open_can_link(parts.netloc, parts.path.lstrip("/")), **options)
+        chair = Wheelchair(wrap(open_can_link(parts.netloc, parts.path.lstrip("/"))), **options)
     elif parts.scheme == "" and url.startswith("/"):
-        chair = Wheelchair(_open_serial(url), reopen=lambda: _open_serial(url), **options)
+        chair = Wheelchair(wrap(_open_serial(url)), reopen=lambda: _open_serial(url), **options)
     else:
         raise ValueError(f"unsupported URL {url!r}: use sim://, simavr://[elf], "
                          "can://<interface>/<channel> or a device path")

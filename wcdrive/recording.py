@@ -1,0 +1,86 @@
+"""Recordings of a serial session: every byte the host wrote and every byte the board
+sent, with host timestamps, from the board's boot on. ``wcdrive.replay`` runs one
+through the Python port; ``python -m hil.bench`` makes them on a real board.
+
+    chair = wcdrive.connect("/dev/ttyACM0", record=True)
+    ...
+    chair.recording.save("run.wcrec.json")
+
+The file is JSON: ``{"meta": {...}, "sent": [[t, "hex"], ...], "received": [...]}``.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+FORMAT = "wcdrive-recording/1"
+
+
+@dataclass
+class Recording:
+    sent: list[tuple[float, bytes]] = field(default_factory=list)
+    received: list[tuple[float, bytes]] = field(default_factory=list)
+    meta: dict[str, object] = field(default_factory=dict)
+
+    @property
+    def sent_bytes(self) -> bytes:
+        return b"".join(data for _, data in self.sent)
+
+    @property
+    def received_bytes(self) -> bytes:
+        return b"".join(data for _, data in self.received)
+
+    def save(self, path: str | Path) -> Path:
+        path = Path(path)
+        path.write_text(json.dumps({
+            "format": FORMAT, "meta": self.meta,
+            "sent": [[t, d.hex()] for t, d in self.sent],
+            "received": [[t, d.hex()] for t, d in self.received],
+        }))
+        return path
+
+    @classmethod
+    def load(cls, path: str | Path) -> Recording:
+        data = json.loads(Path(path).read_text())
+        if data.get("format") != FORMAT:
+            raise ValueError(f"{path} is not a {FORMAT} file")
+        return cls([(t, bytes.fromhex(h)) for t, h in data["sent"]],
+                   [(t, bytes.fromhex(h)) for t, h in data["received"]], data.get("meta", {}))
+
+
+class RecordingPort:
+    """Wraps a serial-like port; logs what goes through it into ``recording``."""
+
+    def __init__(self, port, recording: Recording | None = None) -> None:
+        self.port = port
+        self.recording = recording if recording is not None else Recording()
+        self._lock = threading.Lock()
+
+    def write(self, data: bytes) -> int:
+        n = self.port.write(data)
+        with self._lock:
+            self.recording.sent.append((time.monotonic(), bytes(data)))
+        return n
+
+    def read(self, size: int = 1) -> bytes:
+        data = self.port.read(size)
+        if data:
+            with self._lock:
+                self.recording.received.append((time.monotonic(), bytes(data)))
+        return data
+
+    @property
+    def in_waiting(self) -> int:
+        return self.port.in_waiting
+
+    def flush(self) -> None:
+        flush = getattr(self.port, "flush", None)
+        if flush:
+            flush()
+
+    def close(self) -> None:
+        self.port.close()

@@ -1,0 +1,169 @@
+"""Replay a recorded session through the Python port: proof that a board (a real Mega
+on USB, or the firmware in simavr) and the port agree, byte for byte.
+
+    python -m wcdrive.replay run.wcrec.json
+
+The board's ``TLM:`` lines (protocol v2) carry every input of a tick that the host
+cannot see: ``millis()``, how many received bytes the board had processed (``rx``),
+the illegal-transition counts and the free RAM; the ``ENC:`` line carries the latched
+encoder counts. So the port, started in its boot state, is fed the host's bytes up to
+``rx`` and ticked with those inputs, and everything it sends (feedback, TLM with PWM
+and DIR, replies, events) must equal what the board sent. Ticks before the hello
+handshake have no TLM: their ``millis()`` follows from the Timer0 model from boot,
+checked against the first TLM, and only the hello itself may be sent before it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from wcdrive.codec import ExtendedTelemetry, Feedback, parse_line
+from wcdrive.firmware.board import Firmware
+from wcdrive.firmware.constants import CONTROL_PERIOD_MS
+from wcdrive.firmware.timer0 import millis_after
+from wcdrive.recording import Recording
+
+
+class ReplayError(ValueError):
+    """The recording cannot be replayed (no boot line, commands before hello, ...)."""
+
+
+@dataclass
+class ReplayReport:
+    ticks: int = 0
+    bytes_compared: int = 0
+    bytes_fed: int = 0
+    mismatch: str | None = None
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def agrees(self) -> bool:
+        return self.mismatch is None
+
+    def __str__(self) -> str:
+        verdict = "board and port agree" if self.agrees else f"MISMATCH: {self.mismatch}"
+        return (f"ticks={self.ticks} bytes_compared={self.bytes_compared} "
+                f"host_bytes_fed={self.bytes_fed}: {verdict}")
+
+
+def _boot_tick_millis(start: int, count: int) -> list[int]:
+    """``millis()`` of the first ``count`` ticks of a board whose setup() ended at
+    ``millis() == start``: each tick at the first value >= the last + 50."""
+    out, last, n = [], start, 0
+    while len(out) < count:
+        n += 1
+        m = millis_after(n)
+        if m - last >= CONTROL_PERIOD_MS:
+            out.append(m)
+            last = m
+    return out
+
+
+def _lines(data: bytes) -> list[bytes]:
+    """Complete lines, each with its ``\\r\\n``."""
+    parts = data.split(b"\r\n")
+    return [p + b"\r\n" for p in parts[:-1]]
+
+
+def replay(recording: Recording) -> ReplayReport:
+    report = ReplayReport()
+    received = recording.received_bytes
+    boot = received.rfind(b"BOOT:final_control\r\n")
+    if boot < 0:
+        raise ReplayError("no BOOT line: the recording must start at the board's reset "
+                          "(open the port so that the Mega resets, as connect() does)")
+    lines = _lines(received[boot:])[1:]
+    sent = recording.sent_bytes
+    # Ticks: each ENC line, its TLM (if any) and the lines between it and the next.
+    tick_starts = [i for i, line in enumerate(lines) if line.startswith(b"ENC:")]
+    while tick_starts and tick_starts[-1] + 1 >= len(lines):
+        tick_starts.pop()                      # the last tick may be cut off
+    if not tick_starts:
+        raise ReplayError("no complete tick in the recording")
+    tlm_of = {}
+    for i in tick_starts:
+        msg = parse_line(lines[i + 1].rstrip(b"\r\n")) if i + 1 < len(lines) else None
+        if isinstance(msg, ExtendedTelemetry):
+            tlm_of[i] = msg
+    first_tlm = next((i for i in tick_starts if i in tlm_of), None)
+    pre = tick_starts.index(first_tlm) if first_tlm is not None else len(tick_starts)
+    # setup() ends within the first few ms: which millis() it saw decides the ticks.
+    candidates = [s for s in range(0, 4)
+                  if first_tlm is None
+                  or _boot_tick_millis(s, pre + 1)[-1] == tlm_of[first_tlm].millis]
+    if not candidates:
+        raise ReplayError("the ticks before hello do not fit the Timer0 model")
+    millis_pre = _boot_tick_millis(candidates[0], pre) if pre else []
+    if pre:
+        report.notes.append(f"{pre} ticks before hello, millis() from the Timer0 model")
+
+    fw = Firmware()
+    fw.state.lastControlTime = candidates[0]
+    produced = bytearray()
+    recorded = b"".join(lines[:tick_starts[-1] + (2 if tick_starts[-1] in tlm_of else 1)])
+    pos = 0
+    event_lines = (b"EVT:WATCHDOG\r\n",)
+    for k, i in enumerate(tick_starts):
+        # Replies recorded before this tick's lines (the watchdog event belongs to the tick).
+        start = tick_starts[k - 1] + (2 if tick_starts[k - 1] in tlm_of else 1) if k else 0
+        end = i - 1 if i > 0 and lines[i - 1] in event_lines else i
+        between = b"".join(lines[start:end])
+        if i in tlm_of:
+            rx = tlm_of[i].rx
+            if rx < pos or rx > len(sent):
+                report.mismatch = f"tick {k}: the board had received {rx} bytes, the host sent {len(sent)}"
+                break
+            produced += fw.feed(sent[pos:rx])
+            pos = rx
+        else:
+            # Before hello: whole lines, only as many as the replies in this interval need.
+            target = len(produced) + len(between)
+            while len(produced) < target and pos < len(sent):
+                nl = sent.find(b"\n", pos)
+                nxt = len(sent) if nl < 0 else nl + 1
+                produced += fw.feed(sent[pos:nxt])
+                pos = nxt
+        enc = parse_line(lines[i].rstrip(b"\r\n"))
+        if not isinstance(enc, Feedback):
+            report.mismatch = f"tick {k}: unreadable feedback line {lines[i]!r}"
+            break
+        tlm = tlm_of.get(i)
+        now = tlm.millis if tlm else millis_pre[k]
+        produced += fw.tick(now, enc.count_left, enc.count_right,
+                            tlm.illegal_left if tlm else 0, tlm.illegal_right if tlm else 0,
+                            free_ram=tlm.free_ram if tlm else None)
+        report.ticks += 1
+        upto = len(produced)
+        if bytes(produced) != recorded[:upto]:
+            where = next(j for j in range(upto) if j >= len(recorded) or produced[j] != recorded[j])
+            report.mismatch = (f"tick {k} (millis {now}): byte {where}: port "
+                               f"{bytes(produced[max(0, where - 40):where + 40])!r} board "
+                               f"{recorded[max(0, where - 40):where + 40]!r}")
+            break
+    if report.agrees and pre and pos and first_tlm is None:
+        report.notes.append("no TLM lines: bytes placed by their replies only")
+    report.bytes_compared = len(produced)
+    report.bytes_fed = pos
+    return report
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m wcdrive.replay", description=__doc__.split("\n\n")[0])
+    parser.add_argument("recording", type=Path)
+    args = parser.parse_args(argv)
+    try:
+        report = replay(Recording.load(args.recording))
+    except ReplayError as exc:
+        print(f"cannot replay {args.recording}: {exc}", file=sys.stderr)
+        return 2
+    for note in report.notes:
+        print(f"note: {note}")
+    print(report)
+    return 0 if report.agrees else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
