@@ -5,14 +5,17 @@ vectors and the differential traces (which include every v2 command)."""
 
 from __future__ import annotations
 
+import math
 import re
 
+import numpy as np
 import pytest
 
 from hil.virtual_mega import VirtualMega
 from tests.boards import boot, send_and_run
 from wcdrive.codec import ExtendedTelemetry, frame, parse_line
 from wcdrive.firmware.board import FREE_RAM, Firmware
+from wcdrive.firmware.quadrature import edges_from_trajectory
 
 pytestmark = pytest.mark.simavr
 
@@ -106,3 +109,22 @@ def test_a_flood_of_answers_never_drops_a_line(mega) -> None:
     assert mega.read("errSuppressed") > 0
     assert re.search(rb"PAR:estop_decel,50.0000\r\nACK:600\d\d\r\n", out)
     assert re.search(rb"NAK:650\d\d,range\r\n", out)
+
+
+def test_emergency_stops_end_with_the_motors_unpowered(mega) -> None:
+    """After the e-stop's ramp the PID no longer drives the motors on its integrators:
+    PWM 0 as soon as the setpoints reach zero, even while the wheels still turn."""
+    boot(mega, 0.1)
+    _drive(mega, b"rp3.0,lp3.0,\n", 1.0)
+    # The wheels keep turning at 1 rad/s (a chair rolling on), whatever the motors do.
+    t0 = mega.time
+    counts_per_rad = 10000 / (2 * math.pi)
+    for side, sign in (("left", -1), ("right", 1)):
+        travel = np.array([0.5, 0.5 + sign * 2.0 * counts_per_rad])
+        mega.encoder_edges(side, edges_from_trajectory(np.array([0.0, 2.0]), travel), t0)
+    send_and_run(mega, b"estop\n", 0.0)
+    ramp = mega.read("setpointR") / 15.0
+    mega.run_for(ramp + 0.1)
+    assert mega.read("setpointR") == 0.0 and mega.read("parked") == 1
+    assert mega.pwm("left") == 0 and mega.pwm("right") == 0
+    assert abs(mega.read("filtVelR")) > 0.5                 # still rolling: parked anyway

@@ -323,7 +323,9 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
     stillTicks++;
   }
   bool atRest = targetL == 0.0f && targetR == 0.0f && setpointL == 0.0f && setpointR == 0.0f;
-  if (atRest && stillTicks >= WC_STILL_TICKS) {
+  // Park: at rest and still for a few ticks; after an emergency ramp (watchdog, PPM
+  // loss, e-stop) at once, so the motors are not driven on by the integrators.
+  if (atRest && (stillTicks >= WC_STILL_TICKS || emergencyStop)) {
     parked = true;
     integralL = integralR = 0.0f;
     prevMeasL = filtVelL;

@@ -86,7 +86,7 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
     elif s.stillTicks < 255:
         s.stillTicks += 1
     at_rest = s.targetL == 0.0 and s.targetR == 0.0 and s.setpointL == 0.0 and s.setpointR == 0.0
-    if at_rest and s.stillTicks >= C.STILL_TICKS:
+    if at_rest and (s.stillTicks >= C.STILL_TICKS or s.emergencyStop):
         s.parked = 1
         s.integralL = s.integralR = 0.0
         s.prevMeasL = s.filtVelL
