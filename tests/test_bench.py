@@ -24,7 +24,7 @@ def simavr_recording(elf) -> Recording:
 def test_a_session_on_the_firmware_replays_through_the_port(simavr_recording) -> None:
     report = replay(simavr_recording)
     assert report.agrees, report.mismatch
-    assert report.ticks > 30 and report.bytes_fed == len(simavr_recording.sent_bytes) - _unread_tail(
+    assert report.ticks > 10 and report.bytes_fed == len(simavr_recording.sent_bytes) - _unread_tail(
         simavr_recording)
     received = simavr_recording.received_bytes
     assert b"HELLO:2,final_control" in received and b"TLM:" in received

@@ -30,6 +30,7 @@ from wcdrive.can.codec import (
     message_to_frames,
 )
 from wcdrive.codec import LineDecoder
+from wcdrive.transports.receive_buffer import ReceiveBuffer
 
 
 def open_bus(interface: str, channel: str) -> can.BusABC:
@@ -49,8 +50,7 @@ class CanLink:
     def __init__(self, bus: can.BusABC) -> None:
         self.bus = bus
         self._lines = TelemetryAssembler()
-        self._rx = bytearray()
-        self._data = threading.Condition()
+        self._rx = ReceiveBuffer()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._receive, name="wcdrive-can-link", daemon=True)
         self._thread.start()
@@ -71,21 +71,11 @@ class CanLink:
         pass
 
     def read(self, size: int = 1, timeout: float | None = 0.1) -> bytes:
-        deadline = None if timeout is None else time.monotonic() + timeout
-        with self._data:
-            while not self._rx and not self._stop.is_set():
-                left = None if deadline is None else deadline - time.monotonic()
-                if left is not None and left <= 0:
-                    break
-                self._data.wait(left)
-            out = bytes(self._rx[:size])
-            del self._rx[:size]
-            return out
+        return self._rx.read(size, timeout)
 
     @property
     def in_waiting(self) -> int:
-        with self._data:
-            return len(self._rx)
+        return len(self._rx)
 
     def _receive(self) -> None:
         while not self._stop.is_set():
@@ -94,13 +84,12 @@ class CanLink:
                 continue
             text = self._lines.feed(msg.arbitration_id, bytes(msg.data))
             if text:
-                with self._data:
-                    self._rx += text
-                    self._data.notify_all()
+                self._rx.put(text)
 
     def close(self) -> None:
         self._stop.set()
         self._thread.join(timeout=2)
+        self._rx.close()
         self.bus.shutdown()
 
 

@@ -11,12 +11,13 @@ from __future__ import annotations
 import threading
 import time
 
+from wcdrive.transports.receive_buffer import ReceiveBuffer
+
 
 class ThreadedBoard:
     def __init__(self, name: str) -> None:
         self._lock = threading.Lock()
-        self._data = threading.Condition(self._lock)
-        self._rx = bytearray()
+        self._rx = ReceiveBuffer()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
 
@@ -42,8 +43,7 @@ class ThreadedBoard:
         self._stop.set()
         if self._thread.is_alive() and threading.current_thread() is not self._thread:
             self._thread.join(timeout=5)
-        with self._data:
-            self._data.notify_all()
+        self._rx.close()
         self._shutdown()
 
     @property
@@ -64,32 +64,20 @@ class ThreadedBoard:
 
     def read(self, size: int = 1, timeout: float | None = None) -> bytes:
         """Up to ``size`` bytes; waits up to ``timeout`` s for the first (None: forever)."""
-        deadline = None if timeout is None else time.monotonic() + timeout
-        with self._data:
-            while not self._rx and not self._stop.is_set():
-                left = None if deadline is None else deadline - time.monotonic()
-                if left is not None and left <= 0:
-                    break
-                self._data.wait(left)
-            out = bytes(self._rx[:size])
-            del self._rx[:size]
-            return out
+        return self._rx.read(size, timeout)
 
     @property
     def in_waiting(self) -> int:
-        with self._lock:
-            return len(self._rx)
+        return len(self._rx)
 
     def reset_input(self) -> None:
-        with self._lock:
-            self._rx.clear()
+        self._rx.clear()
 
     def _run(self) -> None:
         while not self._stop.is_set():
             with self._lock:
                 out = self._advance()
-                if out:
-                    self._rx += out
-                    self._data.notify_all()
+            if out:
+                self._rx.put(out)
             pause = self._pause()
             time.sleep(pause if pause > 0 else 0)
