@@ -8,6 +8,8 @@
    on the same scenario, in this run (real-time factors side by side).
 3. Harness: simavr simulated seconds per wall second with both encoders at 28,000
    edges/s each.
+4. Protocol v2 host: the same period with a framed (checksummed) command and the TLM
+   line on; replay of a recorded session through the port (ticks per wall second).
 """
 
 from __future__ import annotations
@@ -19,8 +21,9 @@ import time
 import numpy as np
 
 
-def bench_port_tick(periods: int, vary: bool = False) -> dict[str, float]:
-    """``vary``: a different command every period, so the parse cache never helps."""
+def bench_port_tick(periods: int, vary: bool = False, v2: bool = False) -> dict[str, float]:
+    """``vary``: a different command every period, so the parse cache never helps.
+    ``v2``: the command framed with a checksum and the TLM line on (after hello)."""
     from wcdrive.firmware.board import Firmware
     from wcdrive.firmware.quadrature import QuadratureDecoder, state_for_count
 
@@ -31,6 +34,11 @@ def bench_port_tick(periods: int, vary: bool = False) -> dict[str, float]:
     states_r = np.asarray(state_for_count(counts))
     states_l = np.asarray(state_for_count(-counts))
     command = b"x:0.500,t:0.100,"
+    if v2:
+        from wcdrive.codec import frame
+
+        fw.feed(b"hello\n")
+        command = frame(command)
     samples = []
     now = 0
     for k in range(periods):
@@ -77,6 +85,31 @@ def bench_harness(seconds: float) -> dict[str, float]:
     return {"sim_s_per_wall_s": seconds / wall, "counts": counted}
 
 
+def bench_replay(seconds: float) -> dict[str, float]:
+    """Records a session on the simulated chair, then times its replay."""
+    import serial
+
+    import wcdrive  # noqa: F401  (wcsim://)
+    from wcdrive.codec import frame
+    from wcdrive.recording import RecordingPort
+    from wcdrive.replay import replay
+
+    port = RecordingPort(serial.serial_for_url("wcsim://?speed=20", timeout=0.05))
+    port.write(b"hello\n")
+    end = time.monotonic() + seconds / 20
+    k = 0
+    while time.monotonic() < end:
+        port.write(frame(b"x:0.500,t:0.%03d," % (k % 300), k % 65536))
+        port.read(65536)
+        k += 1
+        time.sleep(0.005)
+    port.close()
+    t0 = time.perf_counter()
+    report = replay(port.recording)
+    wall = time.perf_counter() - t0
+    return {"ticks": report.ticks, "ticks_per_s": report.ticks / wall, "agrees": report.agrees}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--quick", action="store_true", help="smaller runs")
@@ -88,6 +121,12 @@ def main() -> None:
     new = bench_port_tick(200 if args.quick else 2000, vary=True)
     print(f"port tick, a different command every period: median {new['median_us']:.1f} us, "
           f"p95 {new['p95_us']:.1f} us")
+    v2 = bench_port_tick(200 if args.quick else 2000, v2=True)
+    print(f"port tick, v2 host (framed command, TLM line on): median {v2['median_us']:.1f} us, "
+          f"p95 {v2['p95_us']:.1f} us")
+    rp = bench_replay(5.0 if args.quick else 30.0)
+    print(f"replay of a recorded session through the port: {rp['ticks']} ticks, "
+          f"{rp['ticks_per_s']:.0f} ticks per wall s (agrees: {rp['agrees']})")
     loop = bench_closed_loop("square" if args.quick else "corridor_100m", False)
     print(f"closed loop port + plant at 1 kHz, {loop['scenario_s']:.0f} s scenario: "
           f"{loop['port_rtf']:.0f}x real time  (target >= 200x)")

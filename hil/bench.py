@@ -5,7 +5,7 @@
     python -m hil.bench replay run.wcrec.json            # the port must agree, byte for byte
     python -m hil.bench plot   run.wcrec.json --out DIR
 
-``--port`` takes what ``wcdrive.connect`` takes: a device path, ``simavr://`` (the
+``--port`` takes what ``wcdrive.connect`` takes: a device path, ``simavr://?realtime=1`` (the
 compiled firmware in simavr with the chair behind its pins: what CI uses in place of
 a board) or ``sim://``. ``run`` drives a scenario (``wcdrive sim --list``) the way a
 host would, in real time, recording every byte both ways from the board's reset;

@@ -9,8 +9,9 @@
     # leaving the block stops the chair and closes the link
 
 URLs: ``sim://[?speed=S&seed=N]`` (in process: the bit-exact port + pymunk plant),
-``simavr://[path/to.elf]`` (the compiled firmware in simavr, through a pty, so the
-real-port code path runs), a device path such as ``/dev/ttyACM0``, and
+``simavr://[path/to.elf][?realtime=1]`` (the compiled firmware in simavr driving the
+pymunk chair, through a pty, so the real-port code path runs; as fast as it can
+unless ``realtime=1``), a device path such as ``/dev/ttyACM0``, and
 ``can://<interface>/<channel>`` (a chair behind a ``wcdrive can-gateway``).
 
 On connect the board resets (a real Mega does when its port opens); the API waits
@@ -511,7 +512,9 @@ def connect(url: str = "sim://", *, boot_timeout: float = 10.0, record: bool = F
         from hil.pty_board import PtyBoard
 
         elf = (parts.netloc + parts.path) or None
-        board = PtyBoard(elf).start(run_board=False)
+        query = urllib.parse.parse_qs(parts.query)
+        realtime = query.get("realtime", ["0"])[0] in ("1", "true", "yes")
+        board = PtyBoard(elf, realtime=realtime).start(run_board=False)
         port = wrap(_open_serial(board.path))
         board.run_board()                  # like a Mega that resets when its port opens
         chair = Wheelchair(port, on_close=board.stop, **options)
