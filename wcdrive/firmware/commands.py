@@ -147,13 +147,18 @@ def parse_ppm(buf: bytes, max_wheel: float) -> tuple[int, float, float] | None:
     return C.MODE_PPM, right, left
 
 
+def _printable(body: bytes) -> bool:
+    """Printable ASCII without spaces (``allPrintable``)."""
+    return not any(c <= 0x20 or c >= 0x7F for c in body)
+
+
 @functools.lru_cache(maxsize=1024)
 def parse(buf: bytes, max_wheel: float = C.MAX_WHEEL_SPEED) -> tuple[int, float, float] | str | None:
     """A motion command's meaning, which depends on its bytes and the ``max_wheel``
     parameter alone (so hosts that repeat a command are parsed once): (mode, right,
     left), None for a PPM frame that signals loss, or the ERR reason."""
     try:
-        if any(c <= 0x20 or c >= 0x7F for c in buf):
+        if not _printable(buf):
             raise ParseError("syntax")
         if buf[:1] == b"r":
             return parse_wheel(buf, max_wheel)
@@ -176,10 +181,11 @@ def _hex_value(c: int) -> int:
     return -1
 
 
+@functools.lru_cache(maxsize=1024)
 def unframe(buf: bytes) -> tuple[str | None, int, bytes]:
     """``$[<seq>:]<command>*<hh>`` -> (reason or None, seq or -1, command). A sequence
     number is returned (and taken as the last one) only once the checksum is right and
-    the number well formed."""
+    the number well formed. Pure, so cached like ``parse``."""
     n = len(buf)
     if n < 4 or buf[n - 3] != 0x2A:
         return "checksum", -1, buf
@@ -205,11 +211,15 @@ def _param_index(name: bytes) -> int:
 
 
 def _get(body: bytes) -> tuple[str | None, int]:
+    if not _printable(body):
+        return "syntax", 0
     i = _param_index(body[4:])
     return ("param", 0) if i < 0 else (None, i)
 
 
 def _set(s: FirmwareState, body: bytes) -> tuple[str | None, int]:
+    if not _printable(body):
+        return "syntax", 0
     eq = body.find(b"=", 4)
     if eq < 0:
         return "syntax", 0
@@ -269,9 +279,9 @@ def latch_estop(s: FirmwareState, out: bytearray) -> None:
 
 
 def _dispatch(s: FirmwareState, body: bytes, out: bytearray) -> tuple[str | None, int, int]:
-    """``dispatch``: (reason or None, data reply, parameter index)."""
-    if any(c <= 0x20 or c >= 0x7F for c in body):
-        return "syntax", DATA_NONE, 0
+    """``dispatch``: (reason or None, data reply, parameter index). The firmware checks
+    that the command is printable first; here each branch does (``parse`` for motion,
+    cached), which gives the same answer: a keyword with a bad byte matches nothing."""
     if body == b"hello":
         s.tlmEnabled = 1
         return None, DATA_HELLO, 0
