@@ -183,3 +183,23 @@ def test_line_decoder_reads_what_the_link_assembles() -> None:
     text = b"".join(assembler.feed(i, d) for i, d in frames)
     [msg] = LineDecoder().feed(text)
     assert msg == Feedback(-5, 7, -0.25, 0.5, "WHEEL")
+
+
+def test_can_gateway_command_serves_a_host() -> None:
+    """``wcdrive can-gateway --chair wcsim://...``, reached with ``connect("can://...")``."""
+    import threading
+
+    import wcdrive
+    from wcdrive.cli import main
+
+    channel = f"wc-cli-{next(_channels)}"
+    gateway = threading.Thread(target=main, args=(["can-gateway", "--chair", "wcsim://?speed=5",
+                                                    "--interface", "virtual", "--channel", channel,
+                                                    "--seconds", "5"],))
+    gateway.start()
+    try:
+        with wcdrive.connect(f"can://virtual/{channel}") as chair:
+            assert chair.protocol_version == 2
+            assert chair.set_param("max_accel", 2.5) == 2.5
+    finally:
+        gateway.join()

@@ -86,9 +86,10 @@ def _can_gateway(args: argparse.Namespace) -> int:
     port = serial.serial_for_url(args.chair, 115200, timeout=0.1)
     gateway = CanGateway(open_bus(args.interface, args.channel), port).start()
     print(f"{args.chair} <-> CAN {args.interface}/{args.channel} (Ctrl-C to stop)", flush=True)
+    end = time.monotonic() + args.seconds if args.seconds else None
     try:
-        while True:
-            time.sleep(1.0)
+        while end is None or time.monotonic() < end:
+            time.sleep(0.1)
     except KeyboardInterrupt:
         pass
     finally:
@@ -123,6 +124,7 @@ def main(argv: list[str] | None = None) -> int:
                     help="the chair's port: /dev/ttyACM0, or wcsim://?speed=1 for the simulated one")
     gw.add_argument("--interface", default="socketcan", help="python-can interface (default socketcan)")
     gw.add_argument("--channel", default="can0", help="CAN channel (default can0)")
+    gw.add_argument("--seconds", type=float, help="stop after this long (default: run until Ctrl-C)")
     gw.set_defaults(func=_can_gateway)
     verify = sub.add_parser("verify", help="differential check of the port against the firmware",
                             add_help=False)
