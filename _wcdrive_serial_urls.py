@@ -1,4 +1,4 @@
-"""Makes wcdrive's pyserial URL handlers (``wcsim://``) visible to any program that uses
+"""Makes wcdrive's pyserial URL handlers (``wcsim://``, ``wcavr://``) visible to any program that uses
 pyserial, without importing wcdrive first: ``python -m serial.tools.miniterm wcsim://``.
 
 pyserial imports ``serial.urlhandler.protocol_<scheme>`` for a URL. The
@@ -14,7 +14,7 @@ import importlib
 import sys
 from importlib.machinery import ModuleSpec
 
-SCHEMES = ("wcsim",)
+SCHEMES = ("wcsim", "wcavr")
 _PREFIX = "serial.urlhandler.protocol_"
 
 

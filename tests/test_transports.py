@@ -158,3 +158,23 @@ def test_plain_pyserial_finds_wcsim_in_a_fresh_interpreter() -> None:
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
                          cwd="/", check=True).stdout.split()
     assert out == ["BOOT:final_control", "True"]
+
+
+@pytest.mark.simavr
+def test_wcavr_url_opens_the_firmware_in_simavr_driving_the_chair(elf) -> None:
+    """``serial_for_url("wcavr://<elf>")``: the compiled firmware behind a pyserial port."""
+    port = serial.serial_for_url(f"wcavr://{elf}", timeout=0.5)
+    try:
+        assert port.readline() == b"BOOT:final_control\r\n"
+        got = b""
+        deadline = time.monotonic() + 20
+        while b"MODE:WHEEL" not in got and time.monotonic() < deadline:
+            port.write(b"rp2.0,lp2.0,")
+            got += port.read(port.in_waiting or 1)
+        assert b"MODE:WHEEL" in got
+        time.sleep(0.5)
+        assert port.board.pose()[0] > 0.0                 # the firmware drove the chair
+    finally:
+        port.close()
+    with pytest.raises(serial.SerialException, match="unknown option"):
+        serial.serial_for_url("wcavr://?colour=red")

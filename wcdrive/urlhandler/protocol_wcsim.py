@@ -7,29 +7,18 @@ settings are accepted and ignored, as on a USB CDC port.
 
 from __future__ import annotations
 
-import time
 import urllib.parse
 
-from serial.serialutil import PortNotOpenError, SerialBase, SerialException, to_bytes
+from serial.serialutil import SerialException
 
 from wcdrive.transports.sim_board import SimulatedBoard
+from wcdrive.urlhandler.board_serial import BoardSerial
 
 
-class Serial(SerialBase):
-    BAUDRATES = (9600, 19200, 38400, 57600, 115200, 230400)
-
-    def __init__(self, *args, **kwargs) -> None:
-        self.board: SimulatedBoard | None = None
-        super().__init__(*args, **kwargs)
-
-    def open(self) -> None:
-        if self.is_open:
-            raise SerialException("Port is already open.")
-        if self._port is None:
-            raise SerialException("Port must be configured before it can be used.")
-        speed, seed = self._parse(self.portstr)
-        self.board = SimulatedBoard(speed=speed, seed=seed).start()
-        self.is_open = True
+class Serial(BoardSerial):
+    def _open_board(self, url: str) -> SimulatedBoard:
+        speed, seed = self._parse(url)
+        return SimulatedBoard(speed=speed, seed=seed)
 
     @staticmethod
     def _parse(url: str) -> tuple[float, int]:
@@ -50,71 +39,3 @@ class Serial(SerialBase):
         if not 0.01 <= speed <= 1000.0:
             raise SerialException("wcsim:// speed must be within 0.01 .. 1000")
         return speed, seed
-
-    def close(self) -> None:
-        if self.board is not None:
-            self.board.close()
-            self.board = None
-        self.is_open = False
-
-    def _reconfigure_port(self) -> None:
-        pass
-
-    @property
-    def in_waiting(self) -> int:
-        if not self.is_open or self.board is None:
-            raise PortNotOpenError()
-        return self.board.in_waiting
-
-    def read(self, size: int = 1) -> bytes:
-        if not self.is_open or self.board is None:
-            raise PortNotOpenError()
-        data = bytearray()
-        deadline = None if self._timeout is None else time.monotonic() + self._timeout
-        while len(data) < size:
-            left = None if deadline is None else max(0.0, deadline - time.monotonic())
-            chunk = self.board.read(size - len(data), timeout=left)
-            data += chunk
-            if not chunk and (deadline is None or time.monotonic() >= deadline):
-                if deadline is not None or self.board.closed:
-                    break
-        return bytes(data)
-
-    def write(self, data) -> int:
-        if not self.is_open or self.board is None:
-            raise PortNotOpenError()
-        return self.board.write(to_bytes(data))
-
-    def reset_input_buffer(self) -> None:
-        if not self.is_open or self.board is None:
-            raise PortNotOpenError()
-        self.board.reset_input()
-
-    def reset_output_buffer(self) -> None:
-        if not self.is_open:
-            raise PortNotOpenError()
-
-    @property
-    def cts(self) -> bool:
-        return True
-
-    @property
-    def dsr(self) -> bool:
-        return True
-
-    @property
-    def ri(self) -> bool:
-        return False
-
-    @property
-    def cd(self) -> bool:
-        return True
-
-    def _update_rts_state(self) -> None:
-        pass
-
-    def _update_dtr_state(self) -> None:
-        pass
-
-    def _update_break_state(self) -> None:
-        pass

@@ -1,0 +1,100 @@
+"""A simulated board as a pyserial port: the part every ``wc*://`` handler shares.
+
+Subclasses open their board (a ``ThreadedBoard``) from the URL in ``_open_board``.
+Baud rate and framing settings are accepted and ignored, as on a USB CDC port.
+"""
+
+from __future__ import annotations
+
+import time
+
+from serial.serialutil import PortNotOpenError, SerialBase, SerialException, to_bytes
+
+from wcdrive.transports.threaded import ThreadedBoard
+
+
+class BoardSerial(SerialBase):
+    BAUDRATES = (9600, 19200, 38400, 57600, 115200, 230400)
+
+    def __init__(self, *args, **kwargs) -> None:
+        self.board: ThreadedBoard | None = None
+        super().__init__(*args, **kwargs)
+
+    def _open_board(self, url: str) -> ThreadedBoard:
+        raise NotImplementedError
+
+    def open(self) -> None:
+        if self.is_open:
+            raise SerialException("Port is already open.")
+        if self._port is None:
+            raise SerialException("Port must be configured before it can be used.")
+        self.board = self._open_board(self.portstr).start()
+        self.is_open = True
+
+    def close(self) -> None:
+        if self.board is not None:
+            self.board.close()
+            self.board = None
+        self.is_open = False
+
+    def _reconfigure_port(self) -> None:
+        pass
+
+    @property
+    def in_waiting(self) -> int:
+        if not self.is_open or self.board is None:
+            raise PortNotOpenError()
+        return self.board.in_waiting
+
+    def read(self, size: int = 1) -> bytes:
+        if not self.is_open or self.board is None:
+            raise PortNotOpenError()
+        data = bytearray()
+        deadline = None if self._timeout is None else time.monotonic() + self._timeout
+        while len(data) < size:
+            left = None if deadline is None else max(0.0, deadline - time.monotonic())
+            chunk = self.board.read(size - len(data), timeout=left)
+            data += chunk
+            if not chunk and (deadline is None or time.monotonic() >= deadline):
+                if deadline is not None or self.board.closed:
+                    break
+        return bytes(data)
+
+    def write(self, data) -> int:
+        if not self.is_open or self.board is None:
+            raise PortNotOpenError()
+        return self.board.write(to_bytes(data))
+
+    def reset_input_buffer(self) -> None:
+        if not self.is_open or self.board is None:
+            raise PortNotOpenError()
+        self.board.reset_input()
+
+    def reset_output_buffer(self) -> None:
+        if not self.is_open:
+            raise PortNotOpenError()
+
+    @property
+    def cts(self) -> bool:
+        return True
+
+    @property
+    def dsr(self) -> bool:
+        return True
+
+    @property
+    def ri(self) -> bool:
+        return False
+
+    @property
+    def cd(self) -> bool:
+        return True
+
+    def _update_rts_state(self) -> None:
+        pass
+
+    def _update_dtr_state(self) -> None:
+        pass
+
+    def _update_break_state(self) -> None:
+        pass
