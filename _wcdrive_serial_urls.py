@@ -1,5 +1,6 @@
-"""Makes wcdrive's pyserial URL handlers (``wcsim://``, ``wcavr://``) visible to any program that uses
-pyserial, without importing wcdrive first: ``python -m serial.tools.miniterm wcsim://``.
+"""Makes wcdrive's pyserial URL handlers (``wcsim://``, ``wcavr://``, ``wccan://``)
+visible to any program that uses pyserial, without importing wcdrive first:
+``python -m serial.tools.miniterm wcsim://``.
 
 pyserial imports ``serial.urlhandler.protocol_<scheme>`` for a URL. The
 ``wcdrive-serial-urls.pth`` file installed beside this module puts a finder on
@@ -14,7 +15,7 @@ import importlib
 import sys
 from importlib.machinery import ModuleSpec
 
-SCHEMES = ("wcsim", "wcavr")
+SCHEMES = ("wcsim", "wcavr", "wccan")
 _PREFIX = "serial.urlhandler.protocol_"
 
 

@@ -24,8 +24,9 @@ import numpy as np
 def bench_port_tick(periods: int, vary: bool = False, v2: bool = False) -> dict[str, float]:
     """``vary``: a different command every period, so the parse cache never helps.
     ``v2``: the command framed with a checksum and the TLM line on (after hello)."""
-    from wcdrive.firmware.board import Firmware
-    from wcdrive.firmware.quadrature import QuadratureDecoder, state_for_count
+    from wcdrive.firmware.final_control import Firmware
+    from wcdrive.firmware.quadrature import QuadratureDecoder
+    from wcdrive.plant.encoders import state_for_count
 
     fw = Firmware()
     left, right = QuadratureDecoder(), QuadratureDecoder()
@@ -35,7 +36,7 @@ def bench_port_tick(periods: int, vary: bool = False, v2: bool = False) -> dict[
     states_l = np.asarray(state_for_count(-counts))
     command = b"x:0.500,t:0.100,"
     if v2:
-        from wcdrive.codec import frame
+        from wcdrive.protocol.codec import frame
 
         fw.feed(b"hello\n")
         command = frame(command)
@@ -68,8 +69,8 @@ def bench_closed_loop(scenario_name: str, with_simavr: bool) -> dict[str, float]
 
 
 def bench_harness(seconds: float) -> dict[str, float]:
-    from hil.virtual_mega import F_CPU, VirtualMega
-    from wcdrive.firmware.quadrature import edges_from_trajectory
+    from wcdrive.boards.simavr.virtual_mega import F_CPU, VirtualMega
+    from wcdrive.plant.encoders import edges_from_trajectory
 
     mega = VirtualMega()
     rate = 28000.0
@@ -90,9 +91,9 @@ def bench_replay(seconds: float) -> dict[str, float]:
     import serial
 
     import wcdrive  # noqa: F401  (wcsim://)
-    from wcdrive.codec import frame
-    from wcdrive.recording import RecordingPort
+    from wcdrive.protocol.codec import frame
     from wcdrive.replay import replay
+    from wcdrive.transports.recording import RecordingPort
 
     port = RecordingPort(serial.serial_for_url("wcsim://?speed=20", timeout=0.05))
     port.write(b"hello\n")

@@ -7,15 +7,16 @@ port's binary32 helpers, ``strtod`` and ``printFloat`` are checked against.
 
 from __future__ import annotations
 
-from hil.build import FPCHECK_DIR, firmware_elf
-from hil.virtual_mega import VirtualMega
+from wcdrive.boards.simavr.build import firmware_elf
+from wcdrive.boards.simavr.virtual_mega import VirtualMega
+from wcdrive.resources import firmware_dir
 
 OPS = {"div": 1, "mul": 2, "add": 3, "sub": 4, "strtod": 5, "print": 6, "from_int": 7, "to_int": 8}
 
 
 class AvrMath:
     def __init__(self) -> None:
-        self.mega = VirtualMega(firmware_elf(FPCHECK_DIR))
+        self.mega = VirtualMega(firmware_elf(firmware_dir("fpcheck")))
         self.mega.break_on("doneOp")
         self.mega.run_for(0.001)
 
@@ -38,13 +39,13 @@ class AvrMath:
             raise ValueError("text must be shorter than 80 bytes, without NUL")
         self.mega.write_raw("text", text + b"\0")
         self._run("strtod")
-        return self.mega.read("result", "f"), self.mega.read("consumed", "h")
+        return float(self.mega.read("result", "f")), int(self.mega.read("consumed", "h"))
 
     def print_float(self, x: float, digits: int) -> bytes:
         self.mega.write("argA", x, "f")
         self.mega.write("argDigits", digits, "B")
         self._run("print")
-        n = self.mega.read("printedLen", "B")
+        n = int(self.mega.read("printedLen", "B"))
         return self.mega.read_raw("printed")[:n]
 
     def from_int(self, n: int) -> float:

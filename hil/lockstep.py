@@ -22,12 +22,12 @@ from pathlib import Path
 
 import numpy as np
 
-from hil.traces import Trace
-from hil.virtual_mega import F_CPU, VirtualMega
-from wcdrive.firmware.board import Firmware
-from wcdrive.firmware.f32 import bits
+from wcdrive.avr.f32 import bits
+from wcdrive.boards.simavr.virtual_mega import F_CPU, VirtualMega
+from wcdrive.firmware.final_control import Firmware
 from wcdrive.firmware.quadrature import ILLEGAL, QUAD_TABLE
 from wcdrive.firmware.state import FLOAT_FIELDS, INPUT_FIELDS, INT_FIELDS, FirmwareState
+from wcdrive.hil.traces import Trace
 
 _WATCHED = FLOAT_FIELDS + INT_FIELDS + INPUT_FIELDS + ("txDropped",)
 _BOOL_FIELDS = {"cmdSinceTick", "watchdogArmed", "emergencyStop", "ppmLost", "parked",

@@ -1,7 +1,7 @@
 """Input traces for the firmware: serial bytes and encoder edges on a timeline.
 
 ``generate_trace(draw, duration)`` builds a random trace from any source of choices
-(``RandomDraw`` for ``python -m wcdrive.verify``, ``HypothesisDraw`` for the
+(``RandomDraw`` for ``python -m wcdrive.hil.verify``, ``HypothesisDraw`` for the
 property tests, which then shrink), so both use one generator. Traces cover every
 command kind, malformed and newline-less commands, awkward decimal strings,
 reversals that start pivots and commands that interrupt them, silences past the
@@ -21,9 +21,9 @@ from typing import Any, Protocol, TypeVar
 
 import numpy as np
 
-from wcdrive.codec import SEQ_MAX, checksum, frame
 from wcdrive.firmware.params import PARAMS
-from wcdrive.firmware.quadrature import EdgeTrain, edges_from_trajectory, state_for_count
+from wcdrive.plant.encoders import EdgeTrain, edges_from_trajectory, state_for_count
+from wcdrive.protocol.codec import SEQ_MAX, checksum, frame
 
 T = TypeVar("T")
 

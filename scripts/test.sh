@@ -1,11 +1,12 @@
 #!/usr/bin/env bash
 # The test command (README): installs what it needs, builds the firmware and the
-# simavr harness from source, lints, and runs the whole suite with the thorough
-# hypothesis profile. Works on a fresh Debian bookworm machine as root (or with sudo).
+# simavr harness from source, lints (ruff, with the layering rule) and type-checks
+# (mypy), and runs the whole suite with the thorough hypothesis profile. Works on a
+# fresh Debian bookworm machine as root (or with sudo).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-DEBIAN_PACKAGES=(gcc-avr avr-libc arduino-core-avr simavr libsimavr-dev libelf-dev make gcc)
+DEBIAN_PACKAGES=(gcc-avr avr-libc arduino-core-avr simavr libsimavr-dev libelf-dev make gcc avrdude)
 missing=()
 for pkg in "${DEBIAN_PACKAGES[@]}"; do
   dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")
@@ -26,6 +27,9 @@ make -s -C firmware/final_control
 
 echo "== ruff"
 python3 -m ruff check .
+
+echo "== mypy"
+python3 -m mypy
 
 echo "== pytest (hypothesis profile: ${HYPOTHESIS_PROFILE:=ci})"
 python3 -m pytest -n 2 --hypothesis-profile="$HYPOTHESIS_PROFILE" "$@"

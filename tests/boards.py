@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import re
 
-from hil.virtual_mega import F_CPU, VirtualMega
+from wcdrive.boards.simavr.virtual_mega import F_CPU, VirtualMega
 
 FEEDBACK = re.compile(rb"ENC:(-?\d+),(-?\d+),VEL:(-?[\d.]+|nan|inf|ovf),(-?[\d.]+|nan|inf|ovf),"
                       rb"MODE:(WHEEL|CMDVEL|PPM)\r\n")

@@ -26,14 +26,14 @@ def thorough() -> bool:
 
 @pytest.fixture(scope="session")
 def elf() -> Path:
-    from hil.build import firmware_elf
+    from wcdrive.boards.simavr.build import firmware_elf
 
     return firmware_elf()
 
 
 @pytest.fixture
 def mega(elf: Path):
-    from hil.virtual_mega import VirtualMega
+    from wcdrive.boards.simavr.virtual_mega import VirtualMega
 
     board = VirtualMega(elf)
     yield board

@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 import wcdrive
-from wcdrive.can.link import CanGateway
+from wcdrive.boards.sim_board import SimulatedBoard
+from wcdrive.transports.can_link import CanGateway
 from wcdrive.transports.pty_bridge import PtyBridge
-from wcdrive.transports.sim_board import SimulatedBoard
 
 _channels = itertools.count()
 
@@ -111,7 +111,7 @@ def test_close_stops_and_is_idempotent(chair) -> None:
 def test_errors_say_what_to_do(tmp_path) -> None:
     with pytest.raises(wcdrive.WcdriveConnectionError, match="cannot open"):
         wcdrive.connect(str(tmp_path / "ttyNOPE"))
-    with pytest.raises(ValueError, match="unsupported URL"):
+    with pytest.raises(wcdrive.WcdriveConnectionError, match="cannot open ftp://chair"):
         wcdrive.connect("ftp://chair")
 
 

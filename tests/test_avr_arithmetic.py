@@ -11,10 +11,10 @@ import pytest
 from hypothesis import assume, example, given
 from hypothesis import strategies as st
 
-from hil.fpcheck import AvrMath
-from wcdrive.firmware import f32 as F
-from wcdrive.firmware.arduino_print import print_float
-from wcdrive.firmware.avrlibc import strtod
+from wcdrive.avr import f32 as F
+from wcdrive.avr.arduino_print import print_float
+from wcdrive.avr.avrlibc import strtod
+from wcdrive.hil.fpcheck import AvrMath
 
 pytestmark = pytest.mark.simavr
 

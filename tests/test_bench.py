@@ -9,10 +9,11 @@ import time
 import pytest
 import serial
 
-from hil import bench
-from wcdrive.codec import frame
-from wcdrive.recording import Recording, RecordingPort
+from wcdrive import bench
+from wcdrive.cli import main as wcdrive_main
+from wcdrive.protocol.codec import frame
 from wcdrive.replay import ReplayError, replay
+from wcdrive.transports.recording import Recording, RecordingPort
 
 
 @pytest.fixture(scope="module")
@@ -107,11 +108,13 @@ def test_bench_cli_records_replays_and_plots(tmp_path, elf, capsys) -> None:
     scenario.write_text(SILENCE)
     out = tmp_path / "wd.wcrec.json"
     # 2 s of wall-clock silence is > 0.55 s of board time even on a loaded machine.
-    assert bench.main(["run", str(scenario), "--port", f"simavr://{elf}", "--record", str(out),
-                       "--plot", str(tmp_path / "plots")]) == 0
+    assert wcdrive_main(["bench", "run", str(scenario), "--port", f"simavr://{elf}", "--record",
+                         str(out), "--plot", str(tmp_path / "plots")]) == 0
     assert (tmp_path / "plots" / "bench.png").stat().st_size > 10000
-    assert bench.main(["replay", str(out)]) == 0
+    assert wcdrive_main(["bench", "replay", str(out)]) == 0
     assert "board and port agree" in capsys.readouterr().out
     assert b"EVT:WATCHDOG" in Recording.load(out).received_bytes
-    assert bench.main(["flash", "--port", "/dev/ttyACM7", "--dry-run"]) == 0
-    assert "upload PORT=/dev/ttyACM7" in capsys.readouterr().out
+    assert wcdrive_main(["bench", "flash", "--port", "/dev/ttyACM7", "--dry-run"]) == 0
+    flash = capsys.readouterr().out
+    assert "avrdude -p atmega2560 -c wiring -P /dev/ttyACM7" in flash and "final_control.hex:i" in flash
+    assert wcdrive_main(["bench", "flash", "--port", "simavr://", "--dry-run"]) == 2

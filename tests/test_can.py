@@ -14,9 +14,13 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from wcdrive.can import codec as cc
-from wcdrive.can.link import CanGateway
-from wcdrive.codec import (
+from wcdrive.avr.avrlibc import strtod
+from wcdrive.avr.f32 import bits
+from wcdrive.boards.sim_board import SimulatedBoard
+from wcdrive.firmware.final_control import Firmware
+from wcdrive.firmware.params import PARAMS
+from wcdrive.protocol import can_frames as cc
+from wcdrive.protocol.codec import (
     PARAM_RANGES,
     ExtendedTelemetry,
     Feedback,
@@ -27,11 +31,7 @@ from wcdrive.codec import (
     frame,
     parse_line,
 )
-from wcdrive.firmware.avrlibc import strtod
-from wcdrive.firmware.board import Firmware
-from wcdrive.firmware.f32 import bits
-from wcdrive.firmware.params import PARAMS
-from wcdrive.transports.sim_board import SimulatedBoard
+from wcdrive.transports.can_link import CanGateway
 
 DBC = cantools.database.load_file(Path(__file__).resolve().parents[1] / "protocol" / "wcdrive.dbc")
 _channels = itertools.count()

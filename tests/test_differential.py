@@ -9,11 +9,11 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from hil.lockstep import compare, record
-from hil.traces import MAX_TRACE_EDGE_RATE, HypothesisDraw, RandomDraw, Trace, generate_trace
-from hil.virtual_mega import F_CPU, VirtualMega
 from tests.conftest import thorough
-from wcdrive.firmware.quadrature import edges_from_trajectory
+from wcdrive.boards.simavr.virtual_mega import F_CPU, VirtualMega
+from wcdrive.hil.lockstep import compare, record
+from wcdrive.hil.traces import MAX_TRACE_EDGE_RATE, HypothesisDraw, RandomDraw, Trace, generate_trace
+from wcdrive.plant.encoders import edges_from_trajectory
 
 pytestmark = pytest.mark.simavr
 

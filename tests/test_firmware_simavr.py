@@ -8,10 +8,10 @@ import re
 
 import pytest
 
-from hil.virtual_mega import F_CPU, VirtualMega
 from tests.boards import FEEDBACK, boot, ms, send_and_run
-from wcdrive.firmware.board import Firmware
-from wcdrive.firmware.f32 import f32
+from wcdrive.avr.f32 import f32
+from wcdrive.boards.simavr.virtual_mega import F_CPU, VirtualMega
+from wcdrive.firmware.final_control import Firmware
 
 pytestmark = pytest.mark.simavr
 

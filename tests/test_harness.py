@@ -10,10 +10,11 @@ import numpy as np
 import pytest
 import serial
 
-from hil.pty_board import PtyBoard
-from hil.virtual_mega import F_CPU, VirtualMega
 from tests.boards import FEEDBACK, boot, send_and_run
-from wcdrive.firmware.quadrature import EdgeTrain, edges_from_trajectory, state_for_count
+from wcdrive.boards.simavr.mega_board import MegaBoard
+from wcdrive.boards.simavr.virtual_mega import F_CPU, VirtualMega
+from wcdrive.plant.encoders import EdgeTrain, edges_from_trajectory, state_for_count
+from wcdrive.transports.pty_bridge import PtyBridge
 
 pytestmark = pytest.mark.simavr
 
@@ -68,7 +69,7 @@ def test_commands_give_expected_pwm_and_dir(mega: VirtualMega) -> None:
     boot(mega)
     send_and_run(mega, b"rp4.0,ln4.0,", 0.101)    # two ticks: setpoints 0.25 and 0.5
     # With still wheels the PID output is Kp*e + Ki*integral; the port says exactly.
-    from wcdrive.firmware.board import Firmware
+    from wcdrive.firmware.final_control import Firmware
 
     port = Firmware(boot_millis=int(mega.read("lastControlTime")) - 100)
     port.feed(b"rp4.0,ln4.0,")
@@ -112,7 +113,7 @@ def test_two_runs_of_one_trace_are_identical(elf) -> None:
 
 
 def test_pyserial_talks_to_the_pty(elf) -> None:
-    with PtyBoard(elf) as board:
+    with PtyBridge(MegaBoard(elf).start()) as board:
         port = serial.Serial(board.path, 115200, timeout=2)
         try:
             got = b""
@@ -142,7 +143,7 @@ def test_vcd_output(elf, tmp_path) -> None:
 
 def test_millis_model_matches_the_firmware(mega: VirtualMega) -> None:
     """timer0_millis is millis_after(overflows), and overflows come every 16,384 cycles."""
-    from wcdrive.firmware.timer0 import OVERFLOW_CYCLES, millis_after
+    from wcdrive.avr.timer0 import OVERFLOW_CYCLES, millis_after
 
     samples = []
     rng = np.random.default_rng(3)

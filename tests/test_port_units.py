@@ -10,13 +10,14 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from wcdrive.avr.f32 import f32
+from wcdrive.avr.timer0 import Timer0, millis_after, overflows_until
 from wcdrive.firmware import constants as C
-from wcdrive.firmware.board import Firmware
 from wcdrive.firmware.control import compute_pid, ramp_toward
-from wcdrive.firmware.f32 import f32
-from wcdrive.firmware.quadrature import QuadratureDecoder, edges_from_trajectory
+from wcdrive.firmware.final_control import Firmware
+from wcdrive.firmware.quadrature import QuadratureDecoder
 from wcdrive.firmware.state import FirmwareState
-from wcdrive.firmware.timer0 import Timer0, millis_after, overflows_until
+from wcdrive.plant.encoders import edges_from_trajectory
 
 REPO = Path(__file__).resolve().parents[1]
 

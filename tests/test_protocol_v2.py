@@ -11,11 +11,11 @@ import re
 import numpy as np
 import pytest
 
-from hil.virtual_mega import VirtualMega
 from tests.boards import boot, send_and_run
-from wcdrive.codec import ExtendedTelemetry, frame, parse_line
-from wcdrive.firmware.board import FREE_RAM, Firmware
-from wcdrive.firmware.quadrature import edges_from_trajectory
+from wcdrive.boards.simavr.virtual_mega import VirtualMega
+from wcdrive.firmware.final_control import FREE_RAM, Firmware
+from wcdrive.plant.encoders import edges_from_trajectory
+from wcdrive.protocol.codec import ExtendedTelemetry, frame, parse_line
 
 pytestmark = pytest.mark.simavr
 

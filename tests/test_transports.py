@@ -9,7 +9,7 @@ import pytest
 import serial
 
 import wcdrive
-from wcdrive.codec import Feedback, LineDecoder
+from wcdrive.protocol.codec import Feedback, LineDecoder
 
 
 class SeedHost:
@@ -64,8 +64,8 @@ def test_bad_url_options_are_clear() -> None:
 
 
 def test_simulated_chair_on_a_pty() -> None:
+    from wcdrive.boards.sim_board import SimulatedBoard
     from wcdrive.transports.pty_bridge import PtyBridge
-    from wcdrive.transports.sim_board import SimulatedBoard
 
     with PtyBridge(SimulatedBoard(speed=10).start()) as bridge:
         port = serial.Serial(bridge.path, 115200, timeout=0.5)
@@ -83,8 +83,8 @@ def test_simulated_chair_on_a_pty() -> None:
 def test_unplug_is_detected_and_the_device_reopened(tmp_path) -> None:
     """A device path that vanishes (USB unplugged) and comes back (a fresh board, as
     a Mega resets on plug-in): commands fail clearly meanwhile, then all resumes."""
+    from wcdrive.boards.sim_board import SimulatedBoard
     from wcdrive.transports.pty_bridge import PtyBridge
-    from wcdrive.transports.sim_board import SimulatedBoard
 
     link = tmp_path / "ttyWC0"
     first = PtyBridge(SimulatedBoard(speed=10).start(), link=link).start()

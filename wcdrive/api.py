@@ -8,11 +8,14 @@
         print(chair.odometry.pose)
     # leaving the block stops the chair and closes the link
 
-URLs: ``sim://[?speed=S&seed=N]`` (in process: the bit-exact port + pymunk plant),
-``simavr://[path/to.elf][?realtime=1]`` (the compiled firmware in simavr driving the
-pymunk chair, through a pty, so the real-port code path runs; as fast as it can
-unless ``realtime=1``), a device path such as ``/dev/ttyACM0``, and
-``can://<interface>/<channel>`` (a chair behind a ``wcdrive can-gateway``).
+URLs map onto pyserial (the query goes to the handler, which alone parses it):
+
+- ``sim://[?speed=S&seed=N]`` -> ``wcsim://``: in process, the bit-exact port + pymunk plant;
+- ``simavr://[path/to.elf][?realtime=1]`` -> ``wcavr://``: the compiled firmware in
+  simavr driving the pymunk chair, as fast as it can unless ``realtime=1``;
+- ``can://<interface>/<channel>`` -> ``wccan://``: a chair behind a ``wcdrive can-gateway``;
+- any ``scheme://`` pyserial opens (``wcsim://``, ``socket://``, ``rfc2217://``);
+- a device path such as ``/dev/ttyACM0``: reopened after an unplug.
 
 On connect the board resets (a real Mega does when its port opens); the API waits
 for it to boot, then says hello. A protocol-v2 board answers, and from then on
@@ -28,63 +31,61 @@ meanwhile commands raise ``WcdriveConnectionError``.
 
 from __future__ import annotations
 
-import urllib.parse
+from typing import Any
 
 import serial
 
 from wcdrive.errors import WcdriveConnectionError, WcdrivePermissionError, WcdriveTimeoutError
+from wcdrive.transports.port import Port
+from wcdrive.transports.recording import RecordingPort
 from wcdrive.wheelchair import Telemetry, Wheelchair
 
-__all__ = ["Telemetry", "Wheelchair", "connect"]
+__all__ = ["SCHEMES", "Telemetry", "Wheelchair", "connect"]
+
+#: wcdrive's short URL schemes and the pyserial scheme each one is.
+SCHEMES = {"sim": "wcsim", "simavr": "wcavr", "can": "wccan"}
+#: How long a read waits: the session's reader thread polls at this period.
+READ_TIMEOUT = 0.1
 
 
-def _open_serial(path: str) -> serial.Serial:
+def _open_device(path: str) -> serial.Serial:
     try:
-        port = serial.Serial(path, 115200, timeout=0.1)
+        return serial.Serial(path, 115200, timeout=READ_TIMEOUT)
     except serial.SerialException as exc:
         if isinstance(exc.__context__, PermissionError) or "Permission denied" in str(exc):
             raise WcdrivePermissionError(
                 f"permission denied on {path}: add yourself to the dialout group "
                 "(sudo usermod -aG dialout $USER, then log in again)") from exc
         raise WcdriveConnectionError(f"cannot open {path}: {exc}") from exc
+
+
+def _open_url(url: str) -> Port:
+    scheme, sep, rest = url.partition("://")
+    if sep:
+        url = f"{SCHEMES.get(scheme, scheme)}://{rest}"
+    try:
+        port: Port = serial.serial_for_url(url, timeout=READ_TIMEOUT)
+    except (serial.SerialException, ValueError, OSError) as exc:
+        raise WcdriveConnectionError(f"cannot open {url}: {exc}") from exc
     return port
 
 
 def connect(url: str = "sim://", *, boot_timeout: float = 10.0, record: bool = False,
-            **options) -> Wheelchair:
+            **options: Any) -> Wheelchair:
     """Opens ``url``, waits for the board's boot and feedback, says hello. ``record``:
-    keep every byte both ways (``chair.recording``) for ``wcdrive.replay``."""
-    parts = urllib.parse.urlsplit(url)
+    keep every byte both ways (``chair.recording``) for ``wcdrive.replay``.
+    ``options`` go to ``Wheelchair`` (``odometry_method``, ``reconnect_timeout``)."""
+    def wrap(port: Port) -> Port:
+        return RecordingPort(port) if record else port
 
-    def wrap(port):
-        if not record:
-            return port
-        from wcdrive.recording import RecordingPort
-
-        return RecordingPort(port)
-
-    if parts.scheme == "sim":
-        port = serial.serial_for_url("wcsim://" + (f"?{parts.query}" if parts.query else ""), timeout=0.1)
-        chair = Wheelchair(wrap(port), **options)
-    elif parts.scheme == "simavr":
-        from hil.pty_board import PtyBoard
-
-        elf = (parts.netloc + parts.path) or None
-        query = urllib.parse.parse_qs(parts.query)
-        realtime = query.get("realtime", ["0"])[0] in ("1", "true", "yes")
-        board = PtyBoard(elf, realtime=realtime).start(run_board=False)
-        port = wrap(_open_serial(board.path))
-        board.run_board()                  # like a Mega that resets when its port opens
-        chair = Wheelchair(port, on_close=board.stop, **options)
-    elif parts.scheme == "can":
-        from wcdrive.can.link import open_can_link
-
-        chair = Wheelchair(wrap(open_can_link(parts.netloc, parts.path.lstrip("/"))), **options)
-    elif parts.scheme == "" and url.startswith("/"):
-        chair = Wheelchair(wrap(_open_serial(url)), reopen=lambda: _open_serial(url), **options)
+    if "://" in url:
+        chair = Wheelchair(wrap(_open_url(url)), **options)
+    elif url.startswith("/"):
+        chair = Wheelchair(wrap(_open_device(url)), reopen=lambda: _open_device(url), **options)
     else:
-        raise ValueError(f"unsupported URL {url!r}: use sim://, simavr://[elf], "
-                         "can://<interface>/<channel> or a device path")
+        raise WcdriveConnectionError(
+            f"unsupported URL {url!r}: use sim://, simavr://[elf], can://<interface>/<channel>, "
+            "another pyserial URL, or a device path")
     try:
         chair.wait_for_telemetry(boot_timeout)   # the Mega resets on open: wait for it
         chair.wait_for_handshake(boot_timeout)

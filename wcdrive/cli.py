@@ -1,11 +1,13 @@
-"""``wcdrive``: the command line.
+"""``wcdrive``: the one command line.
 
+    wcdrive --version                                    package and protocol versions
     wcdrive sim [SCENARIO ...] [--backend port|simavr] [--json] [--out DIR] [--no-plots]
     wcdrive sim --list
-    wcdrive pty [--speed S] [--link PATH]                 the simulated chair on a pty
+    wcdrive verify --traces N --seed S [--elf PATH]      the port against the firmware in simavr
+    wcdrive bench {flash,run,record,replay,plot} ...     a real board on USB
+    wcdrive pty [--avr [--realtime]] [--speed S] [--link PATH]   a simulated chair on a pty
     wcdrive can-gateway --chair URL_OR_PATH --interface I --channel C
                                                          a chair's serial port on a CAN bus
-    wcdrive verify --traces N --seed S [--elf PATH]      (= python -m wcdrive.verify)
 """
 
 from __future__ import annotations
@@ -14,6 +16,16 @@ import argparse
 import sys
 import time
 from pathlib import Path
+
+import serial
+
+from wcdrive import __version__, bench
+from wcdrive.boards.sim_board import SimulatedBoard
+from wcdrive.hil import verify
+from wcdrive.protocol.spec import integer
+from wcdrive.sim import report, runner, scenario
+from wcdrive.transports.can_link import CanGateway, open_bus
+from wcdrive.transports.pty_bridge import PtyBridge, serve
 
 
 class _Progress:
@@ -37,8 +49,6 @@ class _Progress:
 
 
 def _sim(args: argparse.Namespace) -> int:
-    from wcdrive.sim import report, runner, scenario
-
     if args.list:
         for path in scenario.bundled():
             sc = scenario.load(str(path))
@@ -71,18 +81,20 @@ def _sim(args: argparse.Namespace) -> int:
 
 
 def _pty(args: argparse.Namespace) -> int:
-    from wcdrive.transports.pty_bridge import PtyBridge, serve
-    from wcdrive.transports.sim_board import SimulatedBoard
+    if args.avr:
+        from wcdrive.boards.simavr.mega_board import MegaBoard
 
+        board = MegaBoard(args.elf, realtime=args.realtime, plant=not args.no_plant)
+        bridge = PtyBridge(board, link=args.link).start()
+        board.start()
+        serve(bridge)
+        print(f"stopped at {board.mega.time:.3f} s simulated", file=sys.stderr)
+        return 0
     serve(PtyBridge(SimulatedBoard(speed=args.speed, seed=args.seed).start(), link=args.link).start())
     return 0
 
 
 def _can_gateway(args: argparse.Namespace) -> int:
-    import serial
-
-    from wcdrive.can.link import CanGateway, open_bus
-
     port = serial.serial_for_url(args.chair, 115200, timeout=0.1)
     gateway = CanGateway(open_bus(args.interface, args.channel), port).start()
     print(f"{args.chair} <-> CAN {args.interface}/{args.channel} (Ctrl-C to stop)", flush=True)
@@ -98,10 +110,13 @@ def _can_gateway(args: argparse.Namespace) -> int:
     return 0
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="wcdrive",
-                                     description="wcdrive: the wheelchair, simulated or real.")
-    sub = parser.add_subparsers(dest="command", required=True)
+def parser() -> argparse.ArgumentParser:
+    """The whole command line."""
+    top = argparse.ArgumentParser(prog="wcdrive", description="wcdrive: the wheelchair, simulated or real.")
+    top.add_argument("--version", action="version",
+                     version=f"wcdrive {__version__} (protocol v{integer('PROTOCOL_VERSION')})")
+    sub = top.add_subparsers(dest="command", required=True)
+
     sim = sub.add_parser("sim", help="drive a simulated chair through a scenario")
     sim.add_argument("scenario", nargs="*", help="bundled scenario name or a .toml file (default: square)")
     sim.add_argument("--all", action="store_true", help="run every bundled scenario")
@@ -110,15 +125,30 @@ def main(argv: list[str] | None = None) -> int:
                      help="the Python port (default) or the compiled firmware in simavr")
     sim.add_argument("--json", action="store_true", help="print the metrics as JSON")
     sim.add_argument("--out", default="wcdrive-out", help="where the plots go (default: wcdrive-out/)")
-    sim.add_argument("--no-plots", action="store_true")
+    sim.add_argument("--no-plots", action="store_true", help="write no PNG plots")
     sim.add_argument("--seed", type=int, default=0, help="gyro noise seed")
     sim.add_argument("--dt", type=float, default=0.001, help="physics step in s (default 0.001)")
     sim.set_defaults(func=_sim)
-    pty = sub.add_parser("pty", help="the simulated chair as a pseudo-terminal for outside programs")
-    pty.add_argument("--speed", type=float, default=1.0, help="simulated time per wall time")
+
+    ver = sub.add_parser("verify", help="differential check of the port against the firmware in simavr",
+                         description=(verify.__doc__ or "").split("\n\n")[0])
+    verify.add_arguments(ver)
+    ver.set_defaults(func=verify.run)
+
+    bench.add_parser(sub)
+
+    pty = sub.add_parser("pty", help="a simulated chair as a pseudo-terminal for outside programs")
+    pty.add_argument("--avr", action="store_true",
+                     help="the compiled firmware in simavr (default: the Python port)")
+    pty.add_argument("--speed", type=float, default=1.0, help="simulated time per wall time (the port)")
+    pty.add_argument("--realtime", action="store_true",
+                     help="--avr: pace to the wall clock (default: as fast as simavr runs)")
     pty.add_argument("--link", help="also make this symlink to the pty, e.g. /tmp/ttyWC0")
-    pty.add_argument("--seed", type=int, default=0)
+    pty.add_argument("--seed", type=int, default=0, help="gyro noise seed")
+    pty.add_argument("--elf", help="--avr: firmware ELF (default: build the bundled firmware)")
+    pty.add_argument("--no-plant", action="store_true", help="--avr: leave the encoder pins still")
     pty.set_defaults(func=_pty)
+
     gw = sub.add_parser("can-gateway", help="put a chair's serial port on a CAN bus (protocol/CAN.md)")
     gw.add_argument("--chair", required=True,
                     help="the chair's port: /dev/ttyACM0, or wcsim://?speed=1 for the simulated one")
@@ -126,18 +156,11 @@ def main(argv: list[str] | None = None) -> int:
     gw.add_argument("--channel", default="can0", help="CAN channel (default can0)")
     gw.add_argument("--seconds", type=float, help="stop after this long (default: run until Ctrl-C)")
     gw.set_defaults(func=_can_gateway)
-    verify = sub.add_parser("verify", help="differential check of the port against the firmware",
-                            add_help=False)
-    verify.set_defaults(func=None)
-    args, rest = parser.parse_known_args(argv)
-    if args.command == "verify":
-        from wcdrive.verify import main as verify_main
-
-        return verify_main(rest)
-    if rest:
-        parser.error(f"unrecognized arguments: {' '.join(rest)}")
-    return args.func(args)
+    return top
 
 
-if __name__ == "__main__":
-    sys.exit(main())
+def main(argv: list[str] | None = None) -> int:
+    """The ``wcdrive`` command; returns the exit status."""
+    args = parser().parse_args(argv)
+    status: int = args.func(args)
+    return status

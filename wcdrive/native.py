@@ -1,7 +1,7 @@
 """Compiles small C helpers from source on first use and loads them with ctypes.
 
 The library is built with the system C compiler into a cache directory keyed by the
-source's hash (``$WCDRIVE_CACHE``, else ``~/.cache/wcdrive``); nothing prebuilt ships.
+source's hash (``wcdrive.resources.cache_dir()``); nothing prebuilt ships.
 """
 
 from __future__ import annotations
@@ -12,17 +12,11 @@ import os
 import subprocess
 from pathlib import Path
 
+from wcdrive.resources import cache_dir
+
 
 class BuildError(RuntimeError):
     """A C helper could not be compiled; the message says what to install."""
-
-
-def cache_dir() -> Path:
-    base = os.environ.get("WCDRIVE_CACHE") or os.path.join(
-        os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache"), "wcdrive")
-    path = Path(base)
-    path.mkdir(parents=True, exist_ok=True)
-    return path
 
 
 def compile_shared(source: Path, name: str, libs: tuple[str, ...] = (),
@@ -48,4 +42,5 @@ def compile_shared(source: Path, name: str, libs: tuple[str, ...] = (),
 
 def load(source: Path, name: str, libs: tuple[str, ...] = (),
          flags: tuple[str, ...] = ("-O2",)) -> ctypes.CDLL:
+    """``compile_shared`` then load the library with ctypes."""
     return ctypes.CDLL(str(compile_shared(source, name, libs, flags)))

@@ -19,6 +19,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from wcdrive.protocol.spec import real
+
 #: Variance given to the unused 3D terms (z, roll, pitch): "do not use".
 UNUSED = 1e6
 
@@ -32,9 +34,9 @@ class Pose2D:
 
 @dataclass
 class OdometryParams:
-    wheel_radius: float = 0.1524
-    wheelbase: float = 0.57
-    counts_per_rev: int = 10000
+    wheel_radius: float = real("WHEEL_RADIUS")
+    wheelbase: float = real("WHEELBASE")
+    counts_per_rev: int = round(real("CPR"))
     #: Per-metre variance growth of each wheel's distance (slip, radius error).
     distance_variance_per_m: float = 1e-4
     #: Twist variances (vx, vyaw) reported with each estimate.

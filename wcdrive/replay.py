@@ -1,7 +1,7 @@
 """Replay a recorded session through the Python port: proof that a board (a real Mega
 on USB, or the firmware in simavr) and the port agree, byte for byte.
 
-    python -m wcdrive.replay run.wcrec.json
+    wcdrive bench replay run.wcrec.json
 
 The board's ``TLM:`` lines (protocol v2) carry every input of a tick that the host
 cannot see: ``millis()``, how many received bytes the board had processed (``rx``),
@@ -15,16 +15,15 @@ checked against the first TLM, and only the hello itself may be sent before it.
 
 from __future__ import annotations
 
-import argparse
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from wcdrive.codec import ExtendedTelemetry, Feedback, parse_line
-from wcdrive.firmware.board import Firmware
+from wcdrive.avr.timer0 import millis_after
 from wcdrive.firmware.constants import CONTROL_PERIOD_MS
-from wcdrive.firmware.timer0 import millis_after
-from wcdrive.recording import Recording
+from wcdrive.firmware.final_control import Firmware
+from wcdrive.protocol.codec import ExtendedTelemetry, Feedback, parse_line
+from wcdrive.transports.recording import Recording
 
 
 class ReplayError(ValueError):
@@ -52,7 +51,8 @@ class ReplayReport:
 def _boot_tick_millis(start: int, count: int) -> list[int]:
     """``millis()`` of the first ``count`` ticks of a board whose setup() ended at
     ``millis() == start``: each tick at the first value >= the last + 50."""
-    out, last, n = [], start, 0
+    out: list[int] = []
+    last, n = start, 0
     while len(out) < count:
         n += 1
         m = millis_after(n)
@@ -150,20 +150,14 @@ def replay(recording: Recording) -> ReplayReport:
     return report
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m wcdrive.replay", description=__doc__.split("\n\n")[0])
-    parser.add_argument("recording", type=Path)
-    args = parser.parse_args(argv)
+def main(path: Path) -> int:
+    """``wcdrive bench replay PATH``: prints the report; 0 agree, 1 mismatch, 2 error."""
     try:
-        report = replay(Recording.load(args.recording))
+        report = replay(Recording.load(path))
     except ReplayError as exc:
-        print(f"cannot replay {args.recording}: {exc}", file=sys.stderr)
+        print(f"cannot replay {path}: {exc}", file=sys.stderr)
         return 2
     for note in report.notes:
         print(f"note: {note}")
     print(report)
     return 0 if report.agrees else 1
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -1,6 +1,6 @@
 // wc_config.h: every constant of the final_control firmware in one place.
 //
-// GENERATED from protocol/spec.toml by `python -m wcdrive.protocol_spec --write`:
+// GENERATED from protocol/spec.toml by `python -m wcdrive.protocol.spec --write`:
 // edit the spec, not this file. tests/test_protocol.py fails when they differ.
 #ifndef WC_CONFIG_H
 #define WC_CONFIG_H

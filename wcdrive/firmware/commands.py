@@ -13,14 +13,14 @@ from __future__ import annotations
 import functools
 import re
 
-from wcdrive.codec import checksum
+from wcdrive.avr.avrlibc import strtod
+from wcdrive.avr.f32 import constrain, div, f32, from_int
 from wcdrive.firmware import constants as C
-from wcdrive.firmware.avrlibc import strtod
-from wcdrive.firmware.f32 import constrain, div, f32, from_int
 from wcdrive.firmware.motion import accept_command, emergency_halt
-from wcdrive.firmware.output import DATA_HELLO, DATA_NONE, DATA_PARAM, answer, event_line, reject
+from wcdrive.firmware.output import DATA_HELLO, DATA_NONE, DATA_PARAM, answer, reject, send_event
 from wcdrive.firmware.params import BY_NAME, PARAMS
 from wcdrive.firmware.state import FirmwareState
+from wcdrive.protocol.codec import checksum
 
 NEWLINE, RETURN, COMMA, DOLLAR = 0x0A, 0x0D, 0x2C, 0x24
 DISCARD_NONE, DISCARD_TO_COMMA, DISCARD_TO_EOL = 0, 1, 2
@@ -51,7 +51,7 @@ def split_fields(buf: bytes, max_fields: int) -> list[bytes] | None:
     return fields
 
 
-def parse_unbounded(field: bytes, start: int, allow_sign: bool) -> float:
+def parse_number(field: bytes, start: int, allow_sign: bool) -> float:
     c = field[start] if start < len(field) else 0
     digit_or_point = 0x30 <= c <= 0x39 or c == 0x2E
     if not digit_or_point and not (allow_sign and c in (0x2B, 0x2D)):
@@ -62,8 +62,8 @@ def parse_unbounded(field: bytes, start: int, allow_sign: bool) -> float:
     return value
 
 
-def parse_number(field: bytes, start: int, allow_sign: bool, limit: float) -> float:
-    value = parse_unbounded(field, start, allow_sign)
+def parse_bounded(field: bytes, start: int, allow_sign: bool, limit: float) -> float:
+    value = parse_number(field, start, allow_sign)
     if not (value >= -limit and value <= limit):
         raise ParseError("range")
     return value
@@ -88,7 +88,7 @@ def parse_wheel(buf: bytes, max_wheel: float) -> tuple[int, float, float]:
         sign = f[i][1:2]
         if sign not in (b"p", b"n"):
             raise ParseError("syntax")
-        v[i] = parse_number(f[i], 2, False, max_wheel)
+        v[i] = parse_bounded(f[i], 2, False, max_wheel)
         if sign == b"n":
             v[i] = -v[i]
     return C.MODE_WHEEL, v[0], v[1]
@@ -101,8 +101,8 @@ def parse_cmd_vel(buf: bytes, max_wheel: float) -> tuple[int, float, float]:
         raise ParseError("fields")
     if f[0][:2] != b"x:" or f[1][:2] != b"t:":
         raise ParseError("syntax")
-    x = parse_number(f[0], 2, True, C.MAX_LINEAR)
-    t = parse_number(f[1], 2, True, C.MAX_ANGULAR)
+    x = parse_bounded(f[0], 2, True, C.MAX_LINEAR)
+    t = parse_bounded(f[1], 2, True, C.MAX_ANGULAR)
     half_turn = div(f32(t * C.WHEELBASE), 2.0)
     right = div(f32(x + half_turn), C.WHEEL_RADIUS)
     left = div(f32(x - half_turn), C.WHEEL_RADIUS)
@@ -147,7 +147,7 @@ def parse_ppm(buf: bytes, max_wheel: float) -> tuple[int, float, float] | None:
     return C.MODE_PPM, right, left
 
 
-def _printable(body: bytes) -> bool:
+def all_printable(body: bytes) -> bool:
     """Printable ASCII without spaces (``allPrintable``)."""
     return not any(c <= 0x20 or c >= 0x7F for c in body)
 
@@ -158,7 +158,7 @@ def parse(buf: bytes, max_wheel: float = C.MAX_WHEEL_SPEED) -> tuple[int, float,
     parameter alone (so hosts that repeat a command are parsed once): (mode, right,
     left), None for a PPM frame that signals loss, or the ERR reason."""
     try:
-        if not _printable(buf):
+        if not all_printable(buf):
             raise ParseError("syntax")
         if buf[:1] == b"r":
             return parse_wheel(buf, max_wheel)
@@ -171,7 +171,7 @@ def parse(buf: bytes, max_wheel: float = C.MAX_WHEEL_SPEED) -> tuple[int, float,
         return error.reason
 
 
-def _hex_value(c: int) -> int:
+def hex_value(c: int) -> int:
     if 0x30 <= c <= 0x39:
         return c - 0x30
     if 0x41 <= c <= 0x46:
@@ -189,7 +189,7 @@ def unframe(buf: bytes) -> tuple[str | None, int, bytes]:
     n = len(buf)
     if n < 4 or buf[n - 3] != 0x2A:
         return "checksum", -1, buf
-    hi, lo = _hex_value(buf[n - 2]), _hex_value(buf[n - 1])
+    hi, lo = hex_value(buf[n - 2]), hex_value(buf[n - 1])
     if hi < 0 or lo < 0 or checksum(buf[1:n - 3]) != (hi << 4) | lo:
         return "checksum", -1, buf
     start, seq = 1, -1
@@ -206,24 +206,24 @@ def unframe(buf: bytes) -> tuple[str | None, int, bytes]:
     return None, seq, buf[start:n - 3]
 
 
-def _param_index(name: bytes) -> int:
+def find_param(name: bytes) -> int:
     return BY_NAME.get(name, -1)
 
 
-def _get(body: bytes) -> tuple[str | None, int]:
-    if not _printable(body):
+def parse_get(body: bytes) -> tuple[str | None, int]:
+    if not all_printable(body):
         return "syntax", 0
-    i = _param_index(body[4:])
+    i = find_param(body[4:])
     return ("param", 0) if i < 0 else (None, i)
 
 
-def _set(s: FirmwareState, body: bytes) -> tuple[str | None, int]:
-    if not _printable(body):
+def parse_set(s: FirmwareState, body: bytes) -> tuple[str | None, int]:
+    if not all_printable(body):
         return "syntax", 0
     eq = body.find(b"=", 4)
     if eq < 0:
         return "syntax", 0
-    i = _param_index(body[4:eq])
+    i = find_param(body[4:eq])
     if i < 0:
         return "param", 0
     p = PARAMS[i]
@@ -237,7 +237,7 @@ def _set(s: FirmwareState, body: bytes) -> tuple[str | None, int]:
         setattr(s, p.field, ms)
         return None, i
     try:
-        value = parse_unbounded(text, 0, False)
+        value = parse_number(text, 0, False)
     except ParseError as error:
         return error.reason, 0
     if not (value >= p.low and value <= p.high):
@@ -246,7 +246,7 @@ def _set(s: FirmwareState, body: bytes) -> tuple[str | None, int]:
     return None, i
 
 
-def _move(s: FirmwareState, body: bytes, out: bytearray) -> str | None:
+def move_to(s: FirmwareState, body: bytes, out: bytearray) -> str | None:
     result = parse(body, s.maxWheel)
     if isinstance(result, str):
         return result
@@ -259,7 +259,7 @@ def _move(s: FirmwareState, body: bytes, out: bytearray) -> str | None:
         s.cmdSinceTick = 1
         emergency_halt(s)
         if not s.ppmLost:
-            out += event_line("PPM_LOST")
+            out += send_event("PPM_LOST")
         s.ppmLost = 1
         return None
     mode, right, left = result
@@ -274,11 +274,19 @@ def latch_estop(s: FirmwareState, out: bytearray) -> None:
     s.cmdSinceTick = 0
     s.watchdogArmed = 0
     if not s.estopLatched:
-        out += event_line("ESTOP")
+        out += send_event("ESTOP")
     s.estopLatched = 1
 
 
-def _dispatch(s: FirmwareState, body: bytes, out: bytearray) -> tuple[str | None, int, int]:
+def reset_estop(s: FirmwareState) -> str | None:
+    """``resetEstop``: releases the latch once the chair has parked."""
+    if s.estopLatched and not s.parked:
+        return "busy"
+    s.estopLatched = 0
+    return None
+
+
+def dispatch(s: FirmwareState, body: bytes, out: bytearray) -> tuple[str | None, int, int]:
     """``dispatch``: (reason or None, data reply, parameter index). The firmware checks
     that the command is printable first; here each branch does (``parse`` for motion,
     cached), which gives the same answer: a keyword with a bad byte matches nothing."""
@@ -289,17 +297,14 @@ def _dispatch(s: FirmwareState, body: bytes, out: bytearray) -> tuple[str | None
         latch_estop(s, out)
         return None, DATA_NONE, 0
     if body == b"reset":
-        if s.estopLatched and not s.parked:
-            return "busy", DATA_NONE, 0
-        s.estopLatched = 0
-        return None, DATA_NONE, 0
+        return reset_estop(s), DATA_NONE, 0
     if body[:4] == b"get:":
-        reason, i = _get(body)
+        reason, i = parse_get(body)
         return reason, DATA_PARAM, i
     if body[:4] == b"set:":
-        reason, i = _set(s, body)
+        reason, i = parse_set(s, body)
         return reason, DATA_PARAM, i
-    return _move(s, body, out), DATA_NONE, 0
+    return move_to(s, body, out), DATA_NONE, 0
 
 
 def fields_expected(s: FirmwareState) -> int:
@@ -322,7 +327,7 @@ def finish_command(s: FirmwareState, out: bytearray) -> None:
         if reason == "checksum":
             s.crcRejected = (s.crcRejected + 1) & 0xFFFFFFFF
     if reason is None:
-        reason, data, param = _dispatch(s, body, out)
+        reason, data, param = dispatch(s, body, out)
     if reason is not None:
         s.rejectedCount = (s.rejectedCount + 1) & 0xFFFFFFFF
     if reason is not None or seq >= 0 or data != DATA_NONE:

@@ -1,70 +1,96 @@
-"""The firmware's constants (``firmware/final_control/wc_config.h``), as binary32
-where the firmware uses float. ``tests/test_constants_sync.py`` fails when the two
-files disagree."""
+"""The firmware's constants, from ``protocol/spec.toml`` (the file that generates
+``firmware/final_control/wc_config.h``), as binary32 where the firmware uses float.
+``tests/test_protocol.py`` checks that every constant of the spec is here."""
 
 from __future__ import annotations
 
-from wcdrive.firmware.f32 import f32
+from wcdrive.avr.f32 import f32
+from wcdrive.protocol.spec import integer, real
 
-BAUD = 115200
-CMD_MAX_LEN = 63
-ERR_LINES_PER_TICK = 3
-PROTOCOL_VERSION = 2
-SEQ_MAX = 65535
+# Serial link
+BAUD = integer("BAUD")
+CMD_MAX_LEN = integer("CMD_MAX_LEN")
+ERR_LINES_PER_TICK = integer("ERR_LINES_PER_TICK")
+PROTOCOL_VERSION = integer("PROTOCOL_VERSION")
+SEQ_MAX = integer("SEQ_MAX")
 
-CONTROL_PERIOD_MS = 50
-WATCHDOG_MS = 500
-PIVOT_TICKS = 6
+# Timing
+CONTROL_PERIOD_MS = integer("CONTROL_PERIOD_MS")
+WATCHDOG_MS = integer("WATCHDOG_MS")
+PIVOT_TICKS = integer("PIVOT_TICKS")
 
-CPR = f32(10000.0)
-WHEELBASE = f32(0.57)
-WHEEL_RADIUS = f32(0.1524)
-TWO_PI = f32(6.28318548)
+# Geometry and encoders (seed section 1.4.2)
+CPR = f32(real("CPR"))
+WHEELBASE = f32(real("WHEELBASE"))
+WHEEL_RADIUS = f32(real("WHEEL_RADIUS"))
+TWO_PI = f32(real("TWO_PI"))
 
-MAX_WHEEL_SPEED = f32(17.59)
-MAX_LINEAR = f32(2.68)
-MAX_ANGULAR = f32(9.4)
+# Limits
+MAX_WHEEL_SPEED = f32(real("MAX_WHEEL_SPEED"))
+MAX_LINEAR = f32(real("MAX_LINEAR"))
+MAX_ANGULAR = f32(real("MAX_ANGULAR"))
 
-ALPHA = f32(0.8)
+# Controller
+ALPHA = f32(real("ALPHA"))
+MAX_ACCEL = f32(real("MAX_ACCEL"))
+EMERGENCY_DECEL = f32(real("EMERGENCY_DECEL"))
+PID_OUT_MAX = f32(real("PID_OUT_MAX"))
+PWM_SCALE = f32(real("PWM_SCALE"))
+KP_R = f32(real("KP_R"))
+KI_R = f32(real("KI_R"))
+KD_R = f32(real("KD_R"))
+KP_L = f32(real("KP_L"))
+KI_L = f32(real("KI_L"))
+KD_L = f32(real("KD_L"))
+STILL_SPEED = f32(real("STILL_SPEED"))
+STILL_TICKS = integer("STILL_TICKS")
+
+# Pivot (caster swivel)
+PIVOT_SPEED = f32(real("PIVOT_SPEED"))
+PIVOT_THRESHOLD = f32(real("PIVOT_THRESHOLD"))
+PIVOT_START_SPEED = f32(real("PIVOT_START_SPEED"))
+
+# PPM
+PPM_CHANNELS = integer("PPM_CHANNELS")
+PPM_NEUTRAL = integer("PPM_NEUTRAL")
+PPM_SPAN = integer("PPM_SPAN")
+PPM_DEADBAND = integer("PPM_DEADBAND")
+PPM_VALID_MIN = integer("PPM_VALID_MIN")
+PPM_VALID_MAX = integer("PPM_VALID_MAX")
+PPM_MAX_WHEEL = f32(real("PPM_MAX_WHEEL"))
+PPM_FWD_CHANNEL = integer("PPM_FWD_CHANNEL")
+PPM_TURN_CHANNEL = integer("PPM_TURN_CHANNEL")
+
+# Pins (Arduino Mega 2560 numbering)
+PIN_ENC_L_A = integer("PIN_ENC_L_A")
+PIN_ENC_L_B = integer("PIN_ENC_L_B")
+PIN_ENC_R_A = integer("PIN_ENC_R_A")
+PIN_ENC_R_B = integer("PIN_ENC_R_B")
+PIN_PWM_L = integer("PIN_PWM_L")
+PIN_PWM_R = integer("PIN_PWM_R")
+PIN_DIR_L = integer("PIN_DIR_L")
+PIN_DIR_R = integer("PIN_DIR_R")
+PIN_RELAY = integer("PIN_RELAY")
+
+# Modes (printed as MODE:WHEEL / CMDVEL / PPM)
+MODE_WHEEL = integer("MODE_WHEEL")
+MODE_CMDVEL = integer("MODE_CMDVEL")
+MODE_PPM = integer("MODE_PPM")
+
+# Ranges of the runtime parameters (get:/set:; the defaults are the constants above)
+GAIN_P_MAX = f32(real("GAIN_P_MAX"))
+GAIN_I_MIN = f32(real("GAIN_I_MIN"))
+GAIN_I_MAX = f32(real("GAIN_I_MAX"))
+GAIN_D_MAX = f32(real("GAIN_D_MAX"))
+MAX_WHEEL_MIN = f32(real("MAX_WHEEL_MIN"))
+ACCEL_MIN = f32(real("ACCEL_MIN"))
+ACCEL_MAX = f32(real("ACCEL_MAX"))
+DECEL_MIN = f32(real("DECEL_MIN"))
+DECEL_MAX = f32(real("DECEL_MAX"))
+WATCHDOG_MIN_MS = integer("WATCHDOG_MIN_MS")
+WATCHDOG_MAX_MS = integer("WATCHDOG_MAX_MS")
+
 ONE_MINUS_ALPHA = f32(1.0 - ALPHA)   # folded by gcc: 1.0f - 0.8f is exact
-MAX_ACCEL = f32(5.0)
-EMERGENCY_DECEL = f32(15.0)
-PID_OUT_MAX = f32(100.0)
-PWM_SCALE = f32(2.55)
-KP_R, KI_R, KD_R = f32(7.0), f32(8.0), f32(0.15)
-KP_L, KI_L, KD_L = f32(7.2), f32(8.5), f32(0.15)
-STILL_SPEED = f32(0.05)
-STILL_TICKS = 3
-
-PIVOT_SPEED = f32(2.0)
-PIVOT_THRESHOLD = f32(0.1)
-PIVOT_START_SPEED = f32(0.5)
-
-PPM_CHANNELS = 8
-PPM_NEUTRAL = 1500
-PPM_SPAN = 500
-PPM_DEADBAND = 10
-PPM_VALID_MIN = 900
-PPM_VALID_MAX = 2100
-PPM_MAX_WHEEL = f32(5.0)
-PPM_FWD_CHANNEL = 1
-PPM_TURN_CHANNEL = 3
-
-GAIN_P_MAX = f32(100.0)
-GAIN_I_MIN = f32(0.01)
-GAIN_I_MAX = f32(100.0)
-GAIN_D_MAX = f32(10.0)
-MAX_WHEEL_MIN = f32(0.1)
-ACCEL_MIN = f32(0.5)
-ACCEL_MAX = f32(20.0)
-DECEL_MIN = f32(5.0)
-DECEL_MAX = f32(50.0)
-WATCHDOG_MIN_MS = 100
-WATCHDOG_MAX_MS = 2000
-
-MODE_WHEEL = 0
-MODE_CMDVEL = 1
-MODE_PPM = 2
 MODE_NAMES = {MODE_WHEEL: "WHEEL", MODE_CMDVEL: "CMDVEL", MODE_PPM: "PPM"}
 
 HIGH = 1

@@ -3,10 +3,10 @@ PID with back-calculation anti-windup, motor outputs, pivot and feedback."""
 
 from __future__ import annotations
 
+from wcdrive.avr.f32 import div, f32, from_int
 from wcdrive.firmware import constants as C
-from wcdrive.firmware.f32 import div, f32, from_int
 from wcdrive.firmware.motion import emergency_halt, pivot_step
-from wcdrive.firmware.output import event_line, feedback_line, telemetry_line
+from wcdrive.firmware.output import feedback_line, send_event, send_telemetry
 from wcdrive.firmware.state import FirmwareState
 
 _OUT_MAX = C.PID_OUT_MAX
@@ -37,7 +37,7 @@ def ramp_toward(current: float, target: float, max_change: float) -> float:
     return f32(current + (max_change if diff > 0.0 else -max_change))
 
 
-def motor_output(output: float) -> tuple[int, int]:
+def set_motor(output: float) -> tuple[int, int]:
     """``setMotor``: ``(pwm duty, dir level)`` for a PID output."""
     direction = C.HIGH if output >= 0.0 else C.LOW
     return int(f32(abs(output) * C.PWM_SCALE)) & 0xFF, direction
@@ -74,7 +74,7 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
     if s.watchdogArmed and ((now - s.lastCmdTime) & 0xFFFFFFFF) >= s.watchdogMs:
         s.watchdogArmed = 0
         emergency_halt(s)
-        out += event_line("WATCHDOG")
+        out += send_event("WATCHDOG")
 
     max_change = f32((s.estopDecel if s.emergencyStop else s.maxAccel) * dt)
     s.setpointL = ramp_toward(s.setpointL, s.targetL, max_change)
@@ -100,12 +100,12 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
         s.outputR, s.integralR = compute_pid(s.setpointR, s.filtVelR, s.integralR, s.prevMeasR,
                                              s.kpR, s.kiR, s.kdR, dt)
         s.prevMeasR = s.filtVelR
-    s.pwmL, s.dirL = motor_output(s.outputL)
-    s.pwmR, s.dirR = motor_output(s.outputR)
+    s.pwmL, s.dirL = set_motor(s.outputL)
+    s.pwmR, s.dirR = set_motor(s.outputR)
 
     pivot_step(s)
 
     out += feedback_line(s)
     if s.tlmEnabled:
-        out += telemetry_line(s, now & 0xFFFFFFFF)
+        out += send_telemetry(s, now & 0xFFFFFFFF)
     s.errLinesThisTick = 0

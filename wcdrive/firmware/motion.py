@@ -7,6 +7,7 @@ the pending command. ``pivot_step`` runs once per control tick, after the output
 
 from __future__ import annotations
 
+from wcdrive.avr.f32 import f32
 from wcdrive.firmware.constants import (
     PIVOT_SPEED,
     PIVOT_START_SPEED,
@@ -14,7 +15,6 @@ from wcdrive.firmware.constants import (
     PIVOT_TICKS,
     WHEEL_RADIUS,
 )
-from wcdrive.firmware.f32 import f32
 from wcdrive.firmware.state import FirmwareState
 
 PIVOT_NONE, PIVOT_STOPPING, PIVOT_ROTATING = 0, 1, 2

@@ -7,7 +7,7 @@ port appends every line. ``txDropped`` staying 0 is checked against the firmware
 
 from __future__ import annotations
 
-from wcdrive.firmware.arduino_print import print_float, print_long, print_unsigned
+from wcdrive.avr.arduino_print import print_float, print_long, print_unsigned
 from wcdrive.firmware.constants import ERR_LINES_PER_TICK, MODE_NAMES, PROTOCOL_VERSION
 from wcdrive.firmware.params import PARAMS
 from wcdrive.firmware.state import FirmwareState
@@ -23,11 +23,11 @@ def feedback_line(s: FirmwareState) -> bytes:
     ))
 
 
-def event_line(what: str) -> bytes:
+def send_event(what: str) -> bytes:
     return b"EVT:" + what.encode() + CRLF
 
 
-def telemetry_line(s: FirmwareState, now: int) -> bytes:
+def send_telemetry(s: FirmwareState, now: int) -> bytes:
     """``TLM:`` (protocol v2), sent after each feedback line once a host said hello."""
     flags = ((1 if s.watchdogArmed else 0) | (2 if s.emergencyStop else 0)
              | (4 if s.estopLatched else 0) | (8 if s.ppmLost else 0) | (16 if s.parked else 0)

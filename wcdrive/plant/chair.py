@@ -68,6 +68,7 @@ _kernel: ctypes.CDLL | bool | None = None
 
 
 def _load_kernel() -> ctypes.CDLL | None:
+    """The C kernel, compiled on first use; None when no compiler is there."""
     global _kernel
     if _kernel is None:
         try:
@@ -78,7 +79,7 @@ def _load_kernel() -> ctypes.CDLL | None:
             _kernel = lib
         except BuildError:
             _kernel = False
-    return _kernel or None
+    return _kernel if isinstance(_kernel, ctypes.CDLL) else None
 
 
 class WheelView:
@@ -222,8 +223,8 @@ class Plant:
                 ) -> tuple[np.ndarray, np.ndarray] | None:
         """``n`` steps of ``dt``. With ``record``, returns the wheel angles after each
         step (an ``n x 2`` array, left and right) and the yaw rates (``n``)."""
-        angles = np.empty((n, 2)) if record else None
-        rates = np.empty(n) if record else None
+        angles = np.empty((n if record else 0, 2))
+        rates = np.empty(n if record else 0)
         if self._kernel is not None:
             a_ptr = angles.ctypes.data_as(ctypes.POINTER(_D)) if record else None
             r_ptr = rates.ctypes.data_as(ctypes.POINTER(_D)) if record else None

@@ -10,16 +10,18 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from wcdrive.protocol.spec import real
+
 G = 9.81
 
 
 @dataclass(frozen=True)
 class ChairParams:
     # --- seed (guide 1.4.2) ---
-    wheelbase: float = 0.57            # m between the drive wheels
-    wheel_radius: float = 0.1524       # m (6 in)
-    counts_per_rev: int = 10000        # 2500 PPR x 4
-    top_wheel_speed: float = 17.59     # rad/s at full duty (2.68 m/s)
+    wheelbase: float = real("WHEELBASE")            # m between the drive wheels
+    wheel_radius: float = real("WHEEL_RADIUS")      # m (6 in)
+    counts_per_rev: int = round(real("CPR"))        # 2500 PPR x 4
+    top_wheel_speed: float = real("MAX_WHEEL_SPEED")  # rad/s at full duty (2.68 m/s)
     supply_voltage: float = 24.0       # V, 24 V brushed motors (rating; sets Ke)
     battery_voltage: float | None = None   # V at the driver now (None: the rating); a low battery
     current_limit: float = 13.0        # A per channel (the guide's SmartDriveDuo figure)

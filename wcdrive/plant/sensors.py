@@ -7,9 +7,10 @@ import math
 import numpy as np
 
 from wcdrive.plant.params import ChairParams
+from wcdrive.protocol.spec import real
 
 
-def encoder_counts(angle_left: float, angle_right: float, cpr: int = 10000) -> tuple[int, int]:
+def encoder_counts(angle_left: float, angle_right: float, cpr: int = round(real("CPR"))) -> tuple[int, int]:
     """Counts the firmware's decoders hold for these wheel angles (rad, forward +).
     The left encoder is mounted mirrored, so it counts down going forward."""
     scale = cpr / (2.0 * math.pi)

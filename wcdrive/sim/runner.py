@@ -1,13 +1,13 @@
 """The closed loop: a scenario's host, the firmware (the port, or the ELF in simavr),
 and the pymunk chair, at the firmware's own timing.
 
-Time runs in 16 MHz cycles (``wcdrive.sim.port_loop``); the plant steps at a fixed
+Time runs in 16 MHz cycles (``wcdrive.boards.port_loop``); the plant steps at a fixed
 ``dt`` (1 kHz by default) and sees the PWM/DIR of the last control tick.
 
 * ``backend="port"``: the bit-exact Python port (``PortLoop``).
 * ``backend="simavr"``: the compiled firmware, fed the plant's encoder edges at
   their exact times and the host's bytes at wire speed. Every firmware event is
-  recorded, and at the end the port replays them (``hil.lockstep``) so the report
+  recorded, and at the end the port replays them (``wcdrive.hil.lockstep``) so the report
   gives the differences in the firmware outputs between the two (expected: none).
 """
 
@@ -20,10 +20,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from wcdrive.codec import Feedback, LineDecoder
+from wcdrive.boards.port_loop import F_CPU, PortLoop
+from wcdrive.boards.simavr.plant_on_pins import PlantOnPins
+from wcdrive.boards.simavr.virtual_mega import VirtualMega
+from wcdrive.hil.lockstep import Recorder, compare
+from wcdrive.hil.traces import Trace
 from wcdrive.odometry import GyroIntegrator, OdometryParams, WheelOdometry
 from wcdrive.plant import Gyro, Plant
-from wcdrive.sim.port_loop import F_CPU, PortLoop, advance
+from wcdrive.plant.encoders import EdgeTrain
+from wcdrive.protocol.codec import Feedback, LineDecoder
 from wcdrive.sim.scenario import Scenario
 
 
@@ -174,7 +179,7 @@ def run(scenario: Scenario, *, backend: str = "port", seed: int = 0, dt: float =
                      ticks=len(log.rows), caster_scrub_energy=plant.caster_scrub_energy,
                      caster_scrub_time=plant.caster_scrub_time, caster_swivel_work=plant.caster_swivel_work,
                      caster_side_impulse=plant.caster_side_impulse, lines=dict(host.lines),
-                     **extra, **log.arrays())
+                     **extra, **log.arrays())  # type: ignore[arg-type]
 
 
 def _run_port(plant, gyro, host, log, commands, step_cycles, end_cycle, dt, progress) -> dict:
@@ -200,34 +205,20 @@ def _run_port(plant, gyro, host, log, commands, step_cycles, end_cycle, dt, prog
 
 
 def _run_simavr(plant, gyro, host, log, commands, step_cycles, end_cycle, dt, progress, elf) -> dict:
-    from hil.lockstep import Recorder, compare
-    from hil.traces import Trace
-    from hil.virtual_mega import VirtualMega
-    from wcdrive.firmware.quadrature import EdgeTrain, edges_from_trajectory
-
     mega = VirtualMega(elf)
     for cycle, data in commands:
         mega.send(data, at=cycle)
     recorder = Recorder(mega)
-    scale = plant.p.counts_per_rev / (2.0 * math.pi)
+    pins = PlantOnPins(mega, plant, gyro)
     trains: dict[str, list[EdgeTrain]] = {"left": [], "right": []}
-    position = {"left": 0.5, "right": 0.5}     # counts, offset so floor() is the count
     tx_seen = 0
     n_events_logged = 0
     steps = end_cycle // step_cycles
     for k in range(steps):
         t0, t1 = k * dt, (k + 1) * dt
-        angles = advance(plant, gyro, 1, dt)
-        new = {"left": -angles[0, 0] * scale + 0.5, "right": angles[0, 1] * scale + 0.5}
-        for side in ("left", "right"):
-            train = edges_from_trajectory(np.array([t0, t1]), np.array([position[side], new[side]]))
+        for side, train in pins.step(t0, t1, recorder.run_until).items():
             if train.times.size:
-                mega.encoder_edges(side, train)
                 trains[side].append(train)
-            position[side] = new[side]
-        recorder.run_until((k + 1) * step_cycles)
-        plant.set_drive(mega.pwm("left"), mega.direction("left"), mega.pwm("right"),
-                        mega.direction("right"))
         if len(mega.tx_log) > tx_seen:
             host.receive(t1, bytes(b for _, b in mega.tx_log[tx_seen:]))
             tx_seen = len(mega.tx_log)

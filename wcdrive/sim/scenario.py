@@ -10,7 +10,7 @@
     cmdvel = [0.3, 0.0]      # or wheel = [right, left], ppm = [8 channels],
     duration = 3.33          #    stop = true, silence = true (the host sends nothing)
 
-Bundled scenarios live in ``wcdrive/scenarios``; ``wcdrive sim --list`` shows them and
+Bundled scenarios live in ``wcdrive/sim/scenarios``; ``wcdrive sim --list`` shows them and
 any path to a file of your own works the same.
 """
 
@@ -21,10 +21,10 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from wcdrive.codec import encode_cmdvel, encode_ppm, encode_wheel
 from wcdrive.plant.params import ChairParams
+from wcdrive.protocol.codec import encode_cmdvel, encode_ppm, encode_wheel
 
-BUNDLED = Path(__file__).resolve().parent.parent / "scenarios"
+BUNDLED = Path(__file__).resolve().parent / "scenarios"
 _KINDS = ("cmdvel", "wheel", "ppm", "stop", "silence")
 
 
@@ -65,7 +65,7 @@ class Scenario:
         return sum(s.duration for s in self.segments) + self.settle_s
 
     def params(self) -> ChairParams:
-        return dataclasses.replace(ChairParams(), **self.chair)
+        return dataclasses.replace(ChairParams(), **self.chair)  # type: ignore[arg-type]
 
     def host_commands(self) -> list[tuple[float, bytes]]:
         """(time, bytes) the host sends: each segment's command at ``host_rate_hz``,

@@ -1,6 +1,10 @@
-"""pyserial URL handlers of wcdrive: ``wcsim://`` (see ``protocol_wcsim``).
+"""pyserial URL handlers of wcdrive: ``wcsim://`` (the simulated chair: the port and the
+plant), ``wcavr://`` (the compiled firmware in simavr driving the plant) and
+``wccan://`` (a chair on a CAN bus).
 
-Importing ``wcdrive`` registers this package with pyserial, so
-``serial.serial_for_url("wcsim://")`` works in any program that imported wcdrive;
-``python -m wcdrive.miniterm wcsim://`` is miniterm with it registered.
+``serial.serial_for_url("wcsim://")`` works in any program: the
+``wcdrive-serial-urls.pth`` hook installed with wcdrive answers pyserial's import of
+``serial.urlhandler.protocol_<scheme>`` with these modules, so
+``python -m serial.tools.miniterm wcsim://`` needs no import of wcdrive. Importing
+``wcdrive`` also registers this package with pyserial.
 """

@@ -1,26 +1,43 @@
-"""A simulated board as a pyserial port: the part every ``wc*://`` handler shares.
+"""A board or link as a pyserial port: the part every ``wc*://`` handler shares.
 
-Subclasses open their board (a ``ThreadedBoard``) from the URL in ``_open_board``.
-Baud rate and framing settings are accepted and ignored, as on a USB CDC port.
+Subclasses open their board (a ``ThreadedBoard``, or the CAN link) from the URL in
+``_open_board``; the URL's query is parsed there and nowhere else. Baud rate and
+framing settings are accepted and ignored, as on a USB CDC port.
 """
 
 from __future__ import annotations
 
 import time
+from typing import Any, Protocol
 
 from serial.serialutil import PortNotOpenError, SerialBase, SerialException, to_bytes
 
-from wcdrive.transports.threaded import ThreadedBoard
+
+class BoardLike(Protocol):
+    """What a handler opens: a ``ThreadedBoard`` or a ``CanLink``."""
+
+    def start(self) -> Any: ...
+    def close(self) -> None: ...
+    @property
+    def closed(self) -> bool: ...
+    @property
+    def in_waiting(self) -> int: ...
+    def read(self, size: int = 1, timeout: float | None = None) -> bytes: ...
+    def write(self, data: bytes) -> int: ...
+    def reset_input(self) -> None: ...
 
 
 class BoardSerial(SerialBase):
+    """pyserial's ``SerialBase`` over a ``BoardLike``; ``read`` honours ``timeout``."""
+
     BAUDRATES = (9600, 19200, 38400, 57600, 115200, 230400)
 
-    def __init__(self, *args, **kwargs) -> None:
-        self.board: ThreadedBoard | None = None
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        self.board: BoardLike | None = None
+        self.is_open: bool = False
         super().__init__(*args, **kwargs)
 
-    def _open_board(self, url: str) -> ThreadedBoard:
+    def _open_board(self, url: str) -> BoardLike:
         raise NotImplementedError
 
     def open(self) -> None:
@@ -60,7 +77,7 @@ class BoardSerial(SerialBase):
                     break
         return bytes(data)
 
-    def write(self, data) -> int:
+    def write(self, data: Any) -> int:
         if not self.is_open or self.board is None:
             raise PortNotOpenError()
         return self.board.write(to_bytes(data))

@@ -16,7 +16,7 @@ from wcdrive.urlhandler.board_serial import BoardSerial
 
 class Serial(BoardSerial):
     def _open_board(self, url: str):
-        from hil.pty_board import MegaBoard
+        from wcdrive.boards.simavr.mega_board import MegaBoard
 
         parts = urllib.parse.urlsplit(url)
         if parts.scheme != "wcavr":

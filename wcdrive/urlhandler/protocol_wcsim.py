@@ -11,7 +11,7 @@ import urllib.parse
 
 from serial.serialutil import SerialException
 
-from wcdrive.transports.sim_board import SimulatedBoard
+from wcdrive.boards.sim_board import SimulatedBoard
 from wcdrive.urlhandler.board_serial import BoardSerial
 
 

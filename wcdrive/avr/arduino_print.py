@@ -5,7 +5,7 @@ from __future__ import annotations
 import functools
 import math
 
-from wcdrive.firmware.f32 import div, f32
+from wcdrive.avr.f32 import div, f32
 
 _OVF = 4294967040.0
 

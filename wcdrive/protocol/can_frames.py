@@ -19,7 +19,9 @@ import re
 import struct
 from dataclasses import dataclass
 
-from wcdrive.codec import (
+from wcdrive.avr.avrlibc import strtod
+from wcdrive.avr.f32 import bits
+from wcdrive.protocol.codec import (
     PARAM_RANGES,
     Ack,
     Boot,
@@ -34,8 +36,6 @@ from wcdrive.codec import (
     checksum,
     frame,
 )
-from wcdrive.firmware.avrlibc import strtod
-from wcdrive.firmware.f32 import bits
 
 # Host -> chair
 CMD_VEL = 0x300

@@ -1,6 +1,6 @@
 """Recordings of a serial session: every byte the host wrote and every byte the board
 sent, with host timestamps, from the board's boot on. ``wcdrive.replay`` runs one
-through the Python port; ``python -m hil.bench`` makes them on a real board.
+through the Python port; ``wcdrive bench run --record`` makes them on a real board.
 
     chair = wcdrive.connect("/dev/ttyACM0", record=True)
     ...
@@ -16,6 +16,8 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+
+from wcdrive.transports.port import Port
 
 FORMAT = "wcdrive-recording/1"
 
@@ -53,14 +55,23 @@ class Recording:
 
 
 class RecordingPort:
-    """Wraps a serial-like port; logs what goes through it into ``recording``."""
+    """Wraps a ``Port``; logs what goes through it into ``recording``. It is a ``Port``
+    itself: ``timeout`` is the wrapped port's."""
 
-    def __init__(self, port, recording: Recording | None = None) -> None:
+    def __init__(self, port: Port, recording: Recording | None = None) -> None:
         self.port = port
         self.recording = recording if recording is not None else Recording()
         self._lock = threading.Lock()
 
-    def write(self, data: bytes) -> int:
+    @property
+    def timeout(self) -> float | None:
+        return self.port.timeout
+
+    @timeout.setter
+    def timeout(self, value: float | None) -> None:
+        self.port.timeout = value
+
+    def write(self, data: bytes) -> int | None:
         n = self.port.write(data)
         with self._lock:
             self.recording.sent.append((time.monotonic(), bytes(data)))
@@ -78,9 +89,7 @@ class RecordingPort:
         return self.port.in_waiting
 
     def flush(self) -> None:
-        flush = getattr(self.port, "flush", None)
-        if flush:
-            flush()
+        self.port.flush()
 
     def close(self) -> None:
         self.port.close()

@@ -21,21 +21,32 @@ import numpy as np
 from elftools.elf.elffile import ELFFile
 from elftools.elf.sections import SymbolTableSection
 
-from hil.build import firmware_elf, harness_library
-from wcdrive.firmware.quadrature import EdgeTrain
+from wcdrive.avr.timer0 import F_CPU
+from wcdrive.avr.uart import UART_BYTE_CYCLES
+from wcdrive.boards.simavr.build import firmware_elf, harness_library
+from wcdrive.plant.encoders import EdgeTrain
+from wcdrive.protocol.spec import integer
 
-F_CPU = 16_000_000
 SRAM_OFFSET = 0x800000
-#: 115200 baud with U2X (UBRR 16) is 117,647 baud; simavr spends 11 bit times a byte.
-UART_BYTE_CYCLES = 1496
 
-# Pins of final_control (wc_config.h) as (port letter, bit).
-ENCODER_PINS = {"left": (("E", 4), ("E", 5)), "right": (("D", 3), ("D", 2))}
-DIR_PINS = {"left": ("H", 5), "right": ("B", 5)}
-RELAY_PIN = ("H", 4)
+#: The Mega 2560's Arduino pin numbers (variants/mega/pins_arduino.h) as (port letter,
+#: bit), for the pins the spec assigns.
+MEGA_PORT_BIT = {2: ("E", 4), 3: ("E", 5), 7: ("H", 4), 8: ("H", 5), 9: ("H", 6), 10: ("B", 4),
+                 11: ("B", 5), 18: ("D", 3), 19: ("D", 2)}
+
+
+def _pin(name: str) -> tuple[str, int]:
+    return MEGA_PORT_BIT[integer(name)]
+
+
+# Pins of final_control (protocol/spec.toml, [pins]) as (port letter, bit).
+ENCODER_PINS = {"left": (_pin("PIN_ENC_L_A"), _pin("PIN_ENC_L_B")),
+                "right": (_pin("PIN_ENC_R_A"), _pin("PIN_ENC_R_B"))}
+DIR_PINS = {"left": _pin("PIN_DIR_L"), "right": _pin("PIN_DIR_R")}
+RELAY_PIN = _pin("PIN_RELAY")
 # PWM: pin 9 = OC2B on PH6, pin 10 = OC2A on PB4 (Timer2, phase-correct).
 _TCCR2A, _OCR2A, _OCR2B = 0xB0, 0xB3, 0xB4
-_PWM = {"left": (_OCR2B, 1 << 5, ("H", 6)), "right": (_OCR2A, 1 << 7, ("B", 4))}
+_PWM = {"left": (_OCR2B, 1 << 5, _pin("PIN_PWM_L")), "right": (_OCR2A, 1 << 7, _pin("PIN_PWM_R"))}
 _PORT_REG = {"B": 0x25, "D": 0x2B, "E": 0x2E, "H": 0x102}
 
 #: C types of the controller globals, for ``read(name)``.

@@ -3,7 +3,7 @@
 Subclasses say how to take bytes (``_send``), how to advance the simulation one
 step and what it sent meanwhile (``_advance``), how long to wait between steps
 (``_pause``) and how to release what they hold (``_shutdown``). ``SimulatedBoard``
-(the port + plant) and ``hil.pty_board.MegaBoard`` (the ELF in simavr) are two.
+(the port + plant) and ``wcdrive.boards.simavr.mega_board.MegaBoard`` (the ELF in simavr) are two.
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from __future__ import annotations
 import threading
 import time
 
-from wcdrive.transports.receive_buffer import ReceiveBuffer
+from wcdrive.boards.receive_buffer import ReceiveBuffer
 
 
 class ThreadedBoard:

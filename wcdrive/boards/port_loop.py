@@ -15,15 +15,18 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Callable
 
-from wcdrive.firmware.board import Firmware
-from wcdrive.firmware.timer0 import OVERFLOW_CYCLES, Timer0
+import numpy as np
+
+from wcdrive.avr.timer0 import F_CPU, OVERFLOW_CYCLES, Timer0
+from wcdrive.avr.uart import UART_BYTE_CYCLES
+from wcdrive.firmware.final_control import Firmware
 from wcdrive.plant import Gyro, Plant, encoder_counts
 
-F_CPU = 16_000_000
+__all__ = ["FIRST_OVERFLOW_CYCLE", "F_CPU", "PortLoop", "advance"]
+
+#: The first Timer0 overflow completes at this cycle after reset (measured on the ELF
+#: in simavr).
 FIRST_OVERFLOW_CYCLE = 21_250
-#: 115200 baud with U2X is 117,647 baud: 10 bits a byte on a real wire; the harness
-#: uses simavr's 11 bit times so both backends see a command complete at the same time.
-UART_BYTE_CYCLES = 1496
 
 
 class PortLoop:
@@ -85,13 +88,15 @@ class PortLoop:
         self._steps_done = max(self._steps_done, target)
 
 
-def advance(plant: Plant, gyro: Gyro | None, steps: int, dt: float):
+def advance(plant: Plant, gyro: Gyro | None, steps: int, dt: float) -> np.ndarray | None:
     """``steps`` plant steps; the gyro samples the yaw rate of the step it falls in.
     Returns the wheel angles after each step (or None for no steps)."""
     if steps <= 0:
         return None
     t0 = plant.time
-    angles, rates = plant.advance(steps, dt, record=True)
+    recorded = plant.advance(steps, dt, record=True)
+    assert recorded is not None
+    angles, rates = recorded
     if gyro is not None:
         end = t0 + dt * steps
         while gyro.next_time <= end + 1e-12:

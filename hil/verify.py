@@ -1,9 +1,9 @@
 """Checks the Python port against a built firmware, trace by trace.
 
-    python -m wcdrive.verify --traces 200 --seed 1 [--elf PATH] [--duration 5] [--jobs 2]
+    wcdrive verify --traces 200 --seed 1 [--elf PATH] [--duration 5] [--jobs 2]
 
-Runs N random traces (hil.traces) on the firmware in simavr and through the port
-(hil.lockstep), and ends with one line:
+Runs N random traces (wcdrive.hil.traces) on the firmware in simavr and through the port
+(wcdrive.hil.lockstep), and ends with one line:
 
     traces=N ticks=M mismatches=K
 
@@ -18,11 +18,13 @@ import sys
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
+from wcdrive.boards.simavr.build import firmware_elf
+from wcdrive.firmware.state import FLOAT_FIELDS, INT_FIELDS
+from wcdrive.hil.lockstep import compare, record
+from wcdrive.hil.traces import RandomDraw, generate_trace
+
 
 def _check(args: tuple[int, float, str | None]) -> tuple[int, int, int, int, list[str], str]:
-    from hil.lockstep import compare, record
-    from hil.traces import RandomDraw, generate_trace
-
     seed, duration, elf = args
     trace = generate_trace(RandomDraw(seed), duration)
     report = compare(record(trace, elf))
@@ -30,20 +32,20 @@ def _check(args: tuple[int, float, str | None]) -> tuple[int, int, int, int, lis
     return seed, report.ticks, report.fields_compared, len(report.mismatches), first, trace.describe()
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m wcdrive.verify",
-                                     description="Differential check of the port against the firmware.")
-    parser.add_argument("--traces", type=int, default=20)
-    parser.add_argument("--seed", type=int, default=0)
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options of ``wcdrive verify``."""
+    parser.add_argument("--traces", type=int, default=20, help="how many random traces (default 20)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the first trace")
     parser.add_argument("--elf", type=Path, help="firmware ELF (default: build firmware/final_control)")
     parser.add_argument("--duration", type=float, default=5.0, help="simulated seconds per trace")
-    parser.add_argument("--jobs", type=int, default=2)
-    args = parser.parse_args(argv)
+    parser.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Runs the check; exit status 1 on any mismatch, 2 on bad arguments."""
     if args.traces < 1 or args.duration <= 0:
-        parser.error("--traces must be >= 1 and --duration > 0")
-
-    from hil.build import firmware_elf
-
+        print("wcdrive verify: --traces must be >= 1 and --duration > 0", file=sys.stderr)
+        return 2
     elf = str(args.elf) if args.elf else str(firmware_elf())
     work = [(args.seed * 1_000_003 + k, args.duration, elf) for k in range(args.traces)]
     ticks = fields = mismatches = 0
@@ -61,14 +63,9 @@ def main(argv: list[str] | None = None) -> int:
         for line in first:
             print(f"  {line}")
         print(described)
-    from wcdrive.firmware.state import FLOAT_FIELDS, INT_FIELDS
-
     print(f"compared after each of the firmware's events: {fields} values ({len(FLOAT_FIELDS)}"
           f" controller floats bit for bit, {len(INT_FIELDS)} integers and flags, PWM duty and DIR"
           " of both motors), and the whole TX byte stream of every trace")
     print(f"traces={args.traces} ticks={ticks} mismatches={mismatches}")
     return 1 if mismatches else 0
 
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -1,6 +1,6 @@
 """The two ends of a chair on CAN.
 
-``CanLink``: what ``wcdrive.connect("can://<interface>/<channel>")`` talks to; a
+``CanLink``: what ``wccan://<interface>/<channel>`` (and ``wcdrive.connect("can://...")``) opens; a
 serial-like object (``write``/``read``/``in_waiting``/``close``) that turns the host's
 protocol lines into command frames and the chair's frames back into the board's
 lines, so ``Wheelchair`` works over CAN unchanged.
@@ -20,7 +20,9 @@ import time
 
 import can
 
-from wcdrive.can.codec import (
+from wcdrive.boards.receive_buffer import ReceiveBuffer
+from wcdrive.errors import WcdriveConnectionError
+from wcdrive.protocol.can_frames import (
     CHAIR_TO_HOST,
     HOST_TO_CHAIR,
     CanCodecError,
@@ -29,16 +31,13 @@ from wcdrive.can.codec import (
     frame_to_command,
     message_to_frames,
 )
-from wcdrive.codec import LineDecoder
-from wcdrive.transports.receive_buffer import ReceiveBuffer
+from wcdrive.protocol.codec import LineDecoder
 
 
 def open_bus(interface: str, channel: str) -> can.BusABC:
     try:
         return can.Bus(interface=interface, channel=channel)
     except (can.CanError, OSError, ValueError, ImportError) as exc:
-        from wcdrive.errors import WcdriveConnectionError
-
         raise WcdriveConnectionError(
             f"cannot open CAN {interface}/{channel}: {exc} (for socketcan: "
             "sudo ip link set can0 up type can bitrate 500000)") from exc
@@ -55,7 +54,21 @@ class CanLink:
         self._thread = threading.Thread(target=self._receive, name="wcdrive-can-link", daemon=True)
         self._thread.start()
 
+    def start(self) -> CanLink:
+        """The receiver runs from construction: for the interface of threaded boards."""
+        return self
+
+    @property
+    def closed(self) -> bool:
+        return self._stop.is_set()
+
+    def reset_input(self) -> None:
+        """Drops what was received and not yet read."""
+        self._rx.clear()
+
     def write(self, data: bytes) -> int:
+        """Each complete protocol line becomes its command frames (ValueError for a
+        line that has no CAN form)."""
         for line in data.splitlines(keepends=True) or [data]:
             if not line.strip():
                 continue
@@ -71,6 +84,7 @@ class CanLink:
         pass
 
     def read(self, size: int = 1, timeout: float | None = 0.1) -> bytes:
+        """Up to ``size`` bytes of the board's lines; waits up to ``timeout`` s for the first."""
         return self._rx.read(size, timeout)
 
     @property
@@ -94,9 +108,10 @@ class CanLink:
 
 
 def open_can_link(interface: str, channel: str) -> CanLink:
+    """The host end on ``interface``/``channel`` (python-can's names)."""
     if not interface or not channel:
-        raise ValueError("use can://<interface>/<channel>, e.g. can://socketcan/can0 or "
-                         "can://virtual/chair")
+        raise ValueError("use wccan://<interface>/<channel>, e.g. wccan://socketcan/can0 or "
+                         "wccan://virtual/chair")
     return CanLink(open_bus(interface, channel))
 
 

@@ -1,16 +1,18 @@
 """The bench tool: a real board on USB (or a stand-in) through its whole cycle.
 
-    python -m hil.bench flash  --port /dev/ttyACM0 [--dry-run]
-    python -m hil.bench run    SCENARIO --port /dev/ttyACM0 --record run.wcrec.json [--plot DIR]
-    python -m hil.bench replay run.wcrec.json            # the port must agree, byte for byte
-    python -m hil.bench plot   run.wcrec.json --out DIR
+    wcdrive bench flash  --port /dev/ttyACM0 [--dry-run]
+    wcdrive bench run    SCENARIO --port /dev/ttyACM0 [--record run.wcrec.json] [--plot DIR]
+    wcdrive bench record SCENARIO --port /dev/ttyACM0 --out run.wcrec.json
+    wcdrive bench replay run.wcrec.json            # the port must agree, byte for byte
+    wcdrive bench plot   run.wcrec.json --out DIR
 
 ``--port`` takes what ``wcdrive.connect`` takes: a device path, ``simavr://?realtime=1`` (the
 compiled firmware in simavr with the chair behind its pins: what CI uses in place of
 a board) or ``sim://``. ``run`` drives a scenario (``wcdrive sim --list``) the way a
 host would, in real time, recording every byte both ways from the board's reset;
-``replay`` then feeds that recording to the Python port (``wcdrive.replay``) and
-proves the board and the port agree. Exit status: 0 agree, 1 mismatch, 2 error.
+``record`` is ``run`` with the recording required. ``replay`` then feeds that recording
+to the Python port (``wcdrive.replay``) and proves the board and the port agree. Exit
+status: 0 agree, 1 mismatch, 2 error.
 With the wheels on the ground the chair moves: run scenarios with it on blocks.
 """
 
@@ -19,29 +21,43 @@ from __future__ import annotations
 import argparse
 import shlex
 import subprocess
-import sys
 import time
 from pathlib import Path
+from typing import Any
 
-FIRMWARE_DIR = Path(__file__).resolve().parents[1] / "firmware" / "final_control"
+import wcdrive
+from wcdrive.boards.simavr.build import build_dir, firmware_elf
+from wcdrive.protocol.codec import ExtendedTelemetry, Feedback, LineDecoder
+from wcdrive.replay import main as replay_main
+from wcdrive.resources import firmware_dir
+from wcdrive.sim import scenario
+from wcdrive.transports.recording import Recording
 
 
 def flash_command(port: str) -> list[str]:
-    return ["make", "-C", str(FIRMWARE_DIR), "upload", f"PORT={port}"]
+    """The avrdude command that uploads the built firmware's HEX through the Mega's
+    stk500v2 bootloader on ``port``."""
+    hex_path = build_dir(firmware_dir()) / "final_control.hex"
+    return ["avrdude", "-p", "atmega2560", "-c", "wiring", "-P", port, "-b", "115200", "-D",
+            "-U", f"flash:w:{hex_path}:i"]
 
 
 def _flash(args: argparse.Namespace) -> int:
+    if "://" in args.port:
+        print(f"wcdrive bench flash: {args.port} is not a serial device; avrdude needs a "
+              "path such as /dev/ttyACM0")
+        return 2
     cmd = flash_command(args.port)
+    if not args.dry_run:
+        firmware_elf()
     print("$ " + shlex.join(cmd), flush=True)
     if args.dry_run:
         return 0
     return subprocess.call(cmd)
 
 
-def run_scenario(name: str, url: str, *, speed: float = 1.0):
+def run_scenario(name: str, url: str, *, speed: float = 1.0) -> Recording:
     """Drives scenario ``name`` on the board at ``url`` and returns the recording."""
-    import wcdrive
-    from wcdrive.sim import scenario
 
     sc = scenario.load(name)
     period = 1.0 / (sc.host_rate_hz * speed)
@@ -63,9 +79,9 @@ def run_scenario(name: str, url: str, *, speed: float = 1.0):
 
 def _run(args: argparse.Namespace) -> int:
     recording = run_scenario(args.scenario, args.port, speed=args.speed)
-    path = recording.save(args.record)
-    print(f"recorded {len(recording.sent_bytes)} bytes sent, {len(recording.received_bytes)} "
-          f"received: {path}")
+    print(f"recorded {len(recording.sent_bytes)} bytes sent, {len(recording.received_bytes)} received")
+    if args.record:
+        print(f"recording: {recording.save(args.record)}")
     if args.plot:
         for p in plot(recording, Path(args.plot)):
             print(f"plot: {p}")
@@ -73,21 +89,18 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _replay(args: argparse.Namespace) -> int:
-    from wcdrive.replay import main
-
-    return main([str(args.recording)])
+    return replay_main(args.recording)
 
 
-def plot(recording, out: Path) -> list[Path]:
+def plot(recording: Recording, out: Path) -> list[Path]:
     """Wheel speeds, PWM (signed by DIR) and encoder counts against the board's millis()."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from wcdrive.codec import ExtendedTelemetry, Feedback, LineDecoder
-
-    rows, feedback = [], None
+    rows: list[tuple[float, float, float, int, int]] = []
+    feedback = None
     for msg in LineDecoder().feed(recording.received_bytes):
         if isinstance(msg, Feedback):
             feedback = msg
@@ -118,38 +131,38 @@ def plot(recording, out: Path) -> list[Path]:
 
 
 def _plot(args: argparse.Namespace) -> int:
-    from wcdrive.recording import Recording
-
     for p in plot(Recording.load(args.recording), Path(args.out)):
         print(f"plot: {p}")
     return 0
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m hil.bench", description=__doc__.split("\n\n")[0])
-    sub = parser.add_subparsers(dest="command", required=True)
-    f = sub.add_parser("flash", help="build the firmware and upload it with avrdude")
-    f.add_argument("--port", default="/dev/ttyACM0")
+def add_parser(sub: Any) -> None:
+    """``wcdrive bench ...``: adds the subcommand to the CLI's subparsers."""
+    bench = sub.add_parser("bench", help="a real board on USB: flash, run, record, replay, plot",
+                           description=__doc__.split("\n\n")[0])
+    verbs = bench.add_subparsers(dest="bench_command", required=True)
+    f = verbs.add_parser("flash", help="build the firmware and upload it with avrdude")
+    f.add_argument("--port", default="/dev/ttyACM0", help="the board's serial device")
     f.add_argument("--dry-run", action="store_true", help="print the command only")
     f.set_defaults(func=_flash)
-    r = sub.add_parser("run", help="drive a scenario on the board and record the session")
-    r.add_argument("scenario")
-    r.add_argument("--port", default="/dev/ttyACM0", help="device path, simavr:// or sim://")
-    r.add_argument("--record", required=True, help="where the recording goes (.wcrec.json)")
-    r.add_argument("--plot", help="also write plots to this directory")
-    r.add_argument("--speed", type=float, default=1.0,
-                   help="scenario time per wall time (only for simulated boards)")
-    r.set_defaults(func=_run)
-    p = sub.add_parser("replay", help="replay a recording through the Python port")
+    for verb in ("run", "record"):
+        r = verbs.add_parser(verb, help="drive a scenario on the board" + (
+            " and record the session" if verb == "record" else " (optionally recording it)"))
+        r.add_argument("scenario", help="bundled scenario name or a .toml file")
+        r.add_argument("--port", default="/dev/ttyACM0",
+                       help="device path, simavr:// or sim:// (what wcdrive.connect takes)")
+        if verb == "record":
+            r.add_argument("--out", dest="record", required=True, help="the recording (.wcrec.json)")
+        else:
+            r.add_argument("--record", help="where the recording goes (.wcrec.json)")
+        r.add_argument("--plot", help="also write plots to this directory")
+        r.add_argument("--speed", type=float, default=1.0,
+                       help="scenario time per wall time (only for simulated boards)")
+        r.set_defaults(func=_run)
+    p = verbs.add_parser("replay", help="replay a recording through the Python port")
     p.add_argument("recording", type=Path)
     p.set_defaults(func=_replay)
-    q = sub.add_parser("plot", help="plot a recording")
+    q = verbs.add_parser("plot", help="plot a recording")
     q.add_argument("recording", type=Path)
     q.add_argument("--out", default="wcdrive-out/bench")
     q.set_defaults(func=_plot)
-    args = parser.parse_args(argv)
-    return args.func(args)
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -1,13 +1,19 @@
-"""``Firmware``: the port of final_control as one object with explicit inputs.
+"""``final_control.ino``'s ``setup()`` and ``loop()``: the port of the sketch as one
+object with explicit inputs. One module per section of the sketch sits beside this one:
+``commands`` (the serial parser), ``control`` (the control tick), ``motion`` (modes,
+pivot, emergency halt), ``output`` (feedback, TLM and replies), ``quadrature`` (the
+encoder ISRs), ``params``, ``constants`` and ``state`` (the globals).
 
-The firmware's ``loop()`` does two things, and so does this class:
+``setup()`` returns a ``Firmware`` just out of the sketch's ``setup()``. The sketch's
+``loop()`` does two things, and so does ``Firmware.loop``:
 
 * ``feed(data)``: bytes read from the UART, each through ``processByte``;
 * ``tick(now, count_l, count_r)``: ``controlTick(now)`` with the encoder counts it
-  latched.
+  latched, when ``due(now)``.
 
-``due(now)`` says whether a loop pass at ``millis() == now`` runs a tick. Every call
-returns the bytes the firmware sends for it, and the whole state is ``state``.
+Every call returns the bytes the firmware sends for it, and the whole state is
+``state``. What the sketch reads from hardware (pin states, ``millis()``, the free
+RAM) is an argument here.
 """
 
 from __future__ import annotations
@@ -25,6 +31,8 @@ FREE_RAM = 6987
 
 
 class Firmware:
+    """The sketch's globals (``state``) and its ``loop()``, one call per input."""
+
     def __init__(self, state: FirmwareState | None = None, *, boot_millis: int = 0) -> None:
         """A board just out of ``setup()`` (which ends with ``lastControlTime =
         millis()``), or one in any given ``state``."""
@@ -33,14 +41,26 @@ class Firmware:
 
     @staticmethod
     def boot_output() -> bytes:
+        """What ``setup()`` sent."""
         return BOOT_LINE
 
+    def loop(self, now: int, data: bytes, count_l: int, count_r: int, illegal_l: int = 0,
+             illegal_r: int = 0) -> bytes:
+        """One pass of ``loop()`` at ``millis() == now``: the received ``data``, then the
+        control tick when it is due (with the latched counts)."""
+        out = self.feed(data)
+        if self.due(now):
+            out += self.tick(now, count_l, count_r, illegal_l, illegal_r)
+        return out
+
     def feed(self, data: bytes) -> bytes:
+        """Received bytes, each through ``processByte``."""
         out = bytearray()
         process_bytes(self.state, data, out)
         return bytes(out)
 
     def due(self, now: int) -> bool:
+        """Whether a ``loop()`` pass at ``millis() == now`` runs the control tick."""
         return ((now - self.state.lastControlTime) & 0xFFFFFFFF) >= CONTROL_PERIOD_MS
 
     def tick(self, now: int, count_l: int, count_r: int, illegal_l: int = 0, illegal_r: int = 0,
@@ -52,3 +72,9 @@ class Firmware:
         out = bytearray()
         control_tick(self.state, now, count_l, count_r, out, illegal_l, illegal_r)
         return bytes(out)
+
+
+def setup(boot_millis: int = 0) -> Firmware:
+    """The sketch's ``setup()``: a board that has just sent ``BOOT_LINE`` and whose
+    ``lastControlTime`` is ``millis()`` at the end of ``setup()``."""
+    return Firmware(boot_millis=boot_millis)

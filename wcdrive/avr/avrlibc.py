@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 import re
 
-from wcdrive.firmware.f32 import f32
+from wcdrive.avr.f32 import f32
 
 _POW_P10 = tuple(f32(float(f"1e{p}")) for p in (1, 2, 4, 8, 16, 32))
 _POW_M10 = tuple(f32(float(f"1e-{p}")) for p in (1, 2, 4, 8, 16, 32))

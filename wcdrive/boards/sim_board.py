@@ -15,9 +15,9 @@ from __future__ import annotations
 
 import time
 
+from wcdrive.boards.port_loop import F_CPU, PortLoop
+from wcdrive.boards.threaded import ThreadedBoard
 from wcdrive.plant import ChairParams, Gyro, Plant
-from wcdrive.sim.port_loop import F_CPU, PortLoop
-from wcdrive.transports.threaded import ThreadedBoard
 
 #: Simulated time between two looks at the wall clock.
 STEP_S = 0.002

@@ -15,11 +15,13 @@ import math
 import re
 from dataclasses import dataclass
 
-MAX_LINEAR = 2.68
-MAX_ANGULAR = 9.4
-MAX_WHEEL = 17.59
+from wcdrive.protocol.spec import PARAMETERS, integer, real
+
+MAX_LINEAR = real("MAX_LINEAR")
+MAX_ANGULAR = real("MAX_ANGULAR")
+MAX_WHEEL = real("MAX_WHEEL_SPEED")
 MAX_LINE = 256
-SEQ_MAX = 65535
+SEQ_MAX = integer("SEQ_MAX")
 
 
 def _finite(name: str, value: float, limit: float) -> float:
@@ -52,12 +54,7 @@ HELLO = b"hello\n"
 ESTOP = b"estop\n"
 RESET = b"reset\n"
 #: The runtime parameters and their ranges (protocol/PROTOCOL.md, "Parameters").
-PARAM_RANGES: dict[str, tuple[float, float]] = {
-    "kp_l": (0.0, 100.0), "ki_l": (0.01, 100.0), "kd_l": (0.0, 10.0),
-    "kp_r": (0.0, 100.0), "ki_r": (0.01, 100.0), "kd_r": (0.0, 10.0),
-    "max_wheel": (0.1, 17.59), "max_accel": (0.5, 20.0), "estop_decel": (5.0, 50.0),
-    "watchdog_ms": (100, 2000),
-}
+PARAM_RANGES: dict[str, tuple[float, float]] = {p.name: (p.low, p.high) for p in PARAMETERS}
 
 
 def _param_name(name: str) -> str:

@@ -1,0 +1,7 @@
+"""``python -m wcdrive``: the same as the ``wcdrive`` command."""
+
+import sys
+
+from wcdrive.cli import main
+
+sys.exit(main())

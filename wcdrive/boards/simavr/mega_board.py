@@ -1,0 +1,75 @@
+"""The simulated Mega as a live board: the compiled firmware in simavr, run by a
+background thread, with the pymunk chair wired to its pins.
+
+``MegaBoard`` has the serial-like interface of every threaded board (``write``,
+``read``, ``close``): ``wcavr://`` opens it as a pyserial port, and
+``wcdrive.transports.pty_bridge.PtyBridge`` puts it behind a pseudo-terminal that any
+program opens like /dev/ttyACM0 (``wcdrive pty --avr``). ``realtime=True`` paces simulated time
+to the wall clock; otherwise the board runs as fast as it can.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+from wcdrive.boards.simavr.plant_on_pins import PlantOnPins
+from wcdrive.boards.simavr.virtual_mega import VirtualMega
+from wcdrive.boards.threaded import ThreadedBoard
+from wcdrive.plant import ChairParams, Gyro, Plant
+
+__all__ = ["MegaBoard"]
+
+#: Simulated time per step of the board's thread.
+STEP_S = 0.002
+#: Physics step of the plant behind the pins.
+PLANT_DT = 0.001
+
+
+class MegaBoard(ThreadedBoard):
+    """A ``VirtualMega`` run by a background thread, with the serial-like interface
+    (``write``, ``read``, ``close``) that ``PtyBridge`` expects."""
+
+    def __init__(self, elf: str | Path | None = None, *, realtime: bool = False,
+                 plant: ChairParams | bool = True) -> None:
+        super().__init__("virtual-mega")
+        self.mega = VirtualMega(elf)
+        self.realtime = realtime
+        self._wall0: float | None = None
+        self.plant: Plant | None = None
+        self._pins: PlantOnPins | None = None
+        if plant:
+            params = plant if isinstance(plant, ChairParams) else ChairParams()
+            self.plant = Plant(params)
+            self._pins = PlantOnPins(self.mega, self.plant, Gyro(params, 0))
+
+    def pose(self) -> tuple[float, float, float]:
+        """Ground truth (x, y, heading) of the chair behind the pins."""
+        if self.plant is None:
+            raise RuntimeError("this board has no plant (plant=False)")
+        with self._lock:
+            return self.plant.pose
+
+    def _send(self, data: bytes) -> None:
+        self.mega.send(data)
+
+    def _advance(self) -> bytes:
+        if self._wall0 is None:
+            self._wall0 = time.monotonic()
+        if self._pins is None:
+            self.mega.run_for(STEP_S)
+        else:
+            for _ in range(round(STEP_S / PLANT_DT)):
+                t0 = self.mega.time
+                self._pins.step(t0, t0 + PLANT_DT)
+        return bytes(b for _, b in self.mega.take_tx())
+
+    def _pause(self) -> float:
+        """Real time: wait until the wall clock catches up; else run flat out."""
+        if not self.realtime or self._wall0 is None:
+            return 0.0
+        return self.mega.time - (time.monotonic() - self._wall0)
+
+    def _shutdown(self) -> None:
+        self.mega.close()
+

@@ -1,0 +1,150 @@
+"""The protocol's machine-readable spec (``protocol/spec.toml``): every constant that the
+firmware and the Python side share, the parameter table, and the firmware header
+generated from them. Every shared constant in Python comes from here.
+
+    python -m wcdrive.protocol.spec            # print the header
+    python -m wcdrive.protocol.spec --write    # write firmware/final_control/wc_config.h
+    python -m wcdrive.protocol.spec --check    # exit 1 when the header is out of date
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import sys
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from wcdrive.resources import firmware_dir, protocol_dir
+
+__all__ = ["PARAMETERS", "Parameter", "constants", "header", "load", "value"]
+
+
+def spec_path() -> Path:
+    """``protocol/spec.toml``."""
+    return protocol_dir() / "spec.toml"
+
+
+def header_path() -> Path:
+    """``firmware/final_control/wc_config.h``, generated from the spec."""
+    return firmware_dir() / "wc_config.h"
+
+
+@functools.cache
+def load(path: Path | None = None) -> dict[str, Any]:
+    """The spec as parsed TOML (cached)."""
+    return tomllib.loads((path or spec_path()).read_text())
+
+
+def _sections(spec: dict[str, Any]) -> list[dict[str, Any]]:
+    return [s for s in spec.values() if isinstance(s, dict)]
+
+
+def constants(spec: dict[str, Any] | None = None) -> dict[str, int | float]:
+    """Every constant by name (without the WC_ prefix): ints for ``int``/``ulong``,
+    Python floats for ``float`` (the port rounds them to binary32 itself)."""
+    spec = spec or load()
+    out: dict[str, int | float] = {}
+    for section in _sections(spec):
+        for name, entry in section.items():
+            if isinstance(entry, dict):
+                out[name] = float(entry["value"]) if entry["type"] == "float" else int(entry["value"])
+    return out
+
+
+def value(name: str) -> int | float:
+    """One constant of the spec by name."""
+    return constants()[name]
+
+
+def integer(name: str) -> int:
+    """An integer constant of the spec by name."""
+    v = value(name)
+    if not isinstance(v, int):
+        raise TypeError(f"{name} is a float in spec.toml")
+    return v
+
+
+def real(name: str) -> float:
+    """A constant of the spec by name, as a float."""
+    return float(value(name))
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """A runtime parameter (``get:<name>`` / ``set:<name>=<value>``)."""
+
+    name: str          # as on the wire
+    field: str         # the firmware global (FirmwareState field) that holds it
+    low: float         # range, as the spec writes it (binary32 rounding is the port's)
+    high: float
+    integer: bool = False
+
+
+def _bound(entry: float | str) -> float:
+    return real(entry) if isinstance(entry, str) else float(entry)
+
+
+def parameters(spec: dict[str, Any] | None = None) -> tuple[Parameter, ...]:
+    """The parameter table in the firmware's order."""
+    spec = spec or load()
+    return tuple(Parameter(p["name"], p["field"], _bound(p["low"]), _bound(p["high"]),
+                           bool(p.get("integer", False))) for p in spec["parameter"])
+
+
+PARAMETERS: tuple[Parameter, ...] = parameters()
+
+
+def _literal(entry: dict[str, Any]) -> str:
+    value, kind = entry["value"], entry["type"]
+    if kind == "float":
+        return f"{float(value)!r}f"
+    if kind == "ulong":
+        return f"{int(value)}UL"
+    return str(int(value))
+
+
+def header(spec: dict[str, Any] | None = None) -> str:
+    """The text of ``wc_config.h``."""
+    spec = spec or load()
+    lines = [
+        "// wc_config.h: every constant of the final_control firmware in one place.",
+        "//",
+        "// GENERATED from protocol/spec.toml by `python -m wcdrive.protocol.spec --write`:",
+        "// edit the spec, not this file. tests/test_protocol.py fails when they differ.",
+        "#ifndef WC_CONFIG_H",
+        "#define WC_CONFIG_H",
+    ]
+    for section in _sections(spec):
+        lines += ["", f"// ---- {section['title']} " + "-" * max(3, 70 - len(section["title"]))]
+        for name, entry in section.items():
+            if not isinstance(entry, dict):
+                continue
+            define = f"#define WC_{name} {_literal(entry)}"
+            lines.append(f"{define:<34} // {entry['doc']}" if entry.get("doc") else define)
+    lines += ["", "#endif", ""]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m wcdrive.protocol.spec [--write | --check]``."""
+    parser = argparse.ArgumentParser(prog="python -m wcdrive.protocol.spec")
+    parser.add_argument("--write", action="store_true")
+    parser.add_argument("--check", action="store_true")
+    args = parser.parse_args(argv)
+    text = header()
+    if args.write:
+        header_path().write_text(text)
+    elif args.check:
+        if header_path().read_text() != text:
+            print(f"{header_path()} is out of date: run python -m wcdrive.protocol.spec --write")
+            return 1
+    else:
+        sys.stdout.write(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,104 @@
+"""Telemetry: what the board reports each tick, kept and fanned out to subscribers, and
+the odometry computed from it.
+
+``TelemetryHub.deliver`` is called by the session's reader thread for every feedback
+line (with the ``TLM:`` line of the same tick on a v2 board); iterators, callbacks,
+the history arrays and the odometry all read from here.
+"""
+
+from __future__ import annotations
+
+import queue
+import threading
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+
+import numpy as np
+
+from wcdrive.odometry import OdometryEstimate, WheelOdometry
+from wcdrive.protocol.codec import ExtendedTelemetry, Feedback
+
+__all__ = ["Telemetry", "TelemetryHub"]
+
+
+@dataclass(frozen=True)
+class Telemetry:
+    """One tick's feedback as the host received it."""
+
+    time: float              # host monotonic time of arrival (s)
+    count_left: int
+    count_right: int
+    vel_left: float          # rad/s, forward positive (the firmware un-mirrors the left wheel)
+    vel_right: float
+    mode: str
+    extended: ExtendedTelemetry | None = None   # the TLM line of the same tick (v2)
+
+
+class TelemetryHub:
+    """Keeps every tick's feedback, feeds the odometry, and fans out to subscribers."""
+
+    def __init__(self, odometry_method: str = "position") -> None:
+        self._lock = threading.Lock()
+        self._odometry = WheelOdometry(method=odometry_method)
+        self._history: list[tuple[float, int, int, float, float]] = []
+        self._subscribers: list[queue.Queue[Telemetry]] = []
+        self._callbacks: list[Callable[[Telemetry], None]] = []
+
+    def deliver(self, now: float, msg: Feedback, extended: ExtendedTelemetry | None) -> None:
+        """One tick arrived at host time ``now``."""
+        t = Telemetry(now, msg.count_left, msg.count_right, msg.vel_left, msg.vel_right, msg.mode,
+                      extended)
+        with self._lock:
+            self._odometry.update(now, msg.count_left, msg.count_right)
+            self._history.append((now, msg.count_left, msg.count_right, msg.vel_left, msg.vel_right))
+            subscribers, callbacks = list(self._subscribers), list(self._callbacks)
+        for q in subscribers:
+            q.put(t)
+        for cb in callbacks:
+            cb(t)
+
+    def stream(self, closed: threading.Event, timeout: float | None = None) -> Iterator[Telemetry]:
+        """Telemetry as it arrives, until ``closed`` is set or ``timeout`` s pass without any."""
+        q: queue.Queue[Telemetry] = queue.Queue()
+        with self._lock:
+            self._subscribers.append(q)
+        try:
+            while not closed.is_set():
+                try:
+                    yield q.get(timeout=timeout)
+                except queue.Empty:
+                    return
+        finally:
+            with self._lock:
+                self._subscribers.remove(q)
+
+    def on_telemetry(self, callback: Callable[[Telemetry], None]) -> None:
+        """Calls ``callback`` from the reader thread with every tick."""
+        with self._lock:
+            self._callbacks.append(callback)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """Everything received so far as numpy arrays."""
+        with self._lock:
+            rows = np.array(self._history, dtype=float).reshape(-1, 5)
+        return {"time": rows[:, 0], "count_left": rows[:, 1].astype(np.int64),
+                "count_right": rows[:, 2].astype(np.int64), "vel_left": rows[:, 3], "vel_right": rows[:, 4]}
+
+    def odometry(self, at: float | None = None) -> OdometryEstimate:
+        """The odometry extrapolated to host time ``at`` (default: now)."""
+        with self._lock:
+            return self._odometry.estimate(time.monotonic() if at is None else at)
+
+    def odometry_stream(self, closed: threading.Event, rate_hz: float = 50.0) -> Iterator[OdometryEstimate]:
+        """The odometry at ``rate_hz`` on a steady grid of host times, until ``closed``."""
+        period = 1.0 / rate_hz
+        next_at = time.monotonic()
+        while not closed.is_set():
+            next_at += period
+            delay = next_at - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+            elif delay < -period:               # fell behind: skip, do not burst
+                next_at += period * int(-delay / period)
+            yield self.odometry(next_at)

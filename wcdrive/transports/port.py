@@ -1,0 +1,35 @@
+"""``Port``: the byte-level interface every backend offers the session.
+
+It is pyserial's, so a ``serial.Serial`` on a device path, anything
+``serial.serial_for_url`` opens (``wcsim://``, ``wcavr://``, ``wccan://``) and the
+``RecordingPort`` wrapper all are Ports. ``tests/contract/`` runs one suite over every
+backend.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol, runtime_checkable
+
+__all__ = ["Port"]
+
+
+@runtime_checkable
+class Port(Protocol):
+    """A serial-like byte stream to a board.
+
+    - ``read(size)`` returns up to ``size`` bytes, waiting at most ``timeout`` s for
+      them (``None``: until ``size`` bytes came); fewer (maybe none) on a timeout.
+    - ``write(data)`` queues all of ``data`` and returns its length.
+    - ``in_waiting``: bytes that a ``read`` returns without waiting.
+    - ``flush()`` waits until written data has left; ``close()`` releases the port,
+      and a ``read`` blocked in another thread returns or raises.
+    """
+
+    timeout: float | None
+
+    @property
+    def in_waiting(self) -> int: ...
+    def read(self, size: int = 1) -> bytes: ...
+    def write(self, data: bytes) -> int | None: ...
+    def flush(self) -> None: ...
+    def close(self) -> None: ...
