@@ -22,26 +22,27 @@ __all__ = ["cache_dir", "firmware_dir", "protocol_dir"]
 _CHECKOUT = Path(__file__).resolve().parent.parent
 
 
-def _package_dir(package: str, checkout_folder: str) -> Path:
+def _package_dir(package: str, checkout_folder: str, marker: str) -> Path:
     """The folder of a data package as a real path: the wheel's package data, else the
-    checkout's own folder."""
+    checkout's own folder. ``marker`` is a file the folder holds: the data packages are
+    namespace packages, whose ``files()`` is a multiplexed path; a file in it is real."""
     try:
-        path = Path(str(resources.files(package)))
+        path = Path(str(resources.files(package).joinpath(marker))).parent
     except ModuleNotFoundError:
         path = _CHECKOUT / checkout_folder
-    if not path.is_dir():
-        raise FileNotFoundError(f"{package} ({checkout_folder}) is missing: reinstall wcdrive")
+    if not (path / marker).is_file():
+        raise FileNotFoundError(f"{package} ({checkout_folder}/{marker}) is missing: reinstall wcdrive")
     return path
 
 
 def protocol_dir() -> Path:
     """``protocol/``: spec.toml, vectors.toml, wcdrive.dbc, PROTOCOL.md, CAN.md."""
-    return _package_dir("wcdrive._data.protocol", "protocol")
+    return _package_dir("wcdrive._data.protocol", "protocol", "spec.toml")
 
 
 def firmware_dir(sketch: str = "final_control") -> Path:
     """A sketch folder of ``firmware/`` (``final_control`` or ``fpcheck``)."""
-    return _package_dir(f"wcdrive._data.firmware.{sketch}", f"firmware/{sketch}")
+    return _package_dir(f"wcdrive._data.firmware.{sketch}", f"firmware/{sketch}", f"{sketch}.ino")
 
 
 def cache_dir(*parts: str) -> Path:
