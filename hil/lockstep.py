@@ -5,8 +5,10 @@
 byte, or the tick's ``millis()``) and the controller state the previous event left,
 read from SRAM by symbol, with PWM and DIR from the I/O registers.
 
-``compare(recording)`` feeds the same events to ``wcdrive.firmware.Firmware`` started
-from the firmware's own state after ``setup()``, and compares after every event:
+``compare(recording)`` feeds the same events to
+``wcdrive.firmware.final_control.Firmware``, started in the port's boot state with the
+firmware's ``lastControlTime`` (the rest of the state after ``setup()`` is compared
+too), and compares after every event:
 every controller float bit for bit, every integer and flag, PWM duty and DIR per
 motor, and, at the end, the whole TX byte stream. The only inputs the port takes
 from the run are what the firmware's loop reads: the bytes, ``millis()`` at each
@@ -36,6 +38,10 @@ _BOOL_FIELDS = {"cmdSinceTick", "watchdogArmed", "emergencyStop", "ppmLost", "pa
 
 @dataclass
 class Event:
+    """One firmware event: an entry to ``processByte`` (``arg`` the byte) or to
+    ``controlTick`` (``arg`` its ``millis()``) at ``cycle``, with the globals, PWM and
+    DIR it left (read at the next event)."""
+
     kind: str                 # "byte" or "tick"
     arg: int                  # the byte, or millis() passed to controlTick
     cycle: int
@@ -46,6 +52,9 @@ class Event:
 
 @dataclass
 class Recording:
+    """One run on the virtual Mega: the trace, the globals after ``setup()``, every
+    event, the TX bytes and the last cycle."""
+
     trace: Trace
     initial: dict[str, float | int]
     events: list[Event]
@@ -55,6 +64,9 @@ class Recording:
 
 @dataclass
 class Mismatch:
+    """One difference: the event's index (-1: the state after ``setup()``), the ticks so
+    far, the field and both values."""
+
     event_index: int
     tick: int
     field: str
@@ -68,6 +80,9 @@ class Mismatch:
 
 @dataclass
 class Report:
+    """What ``compare`` found: events, ticks and values compared, the mismatches and the
+    firmware's TX byte count."""
+
     events: int
     ticks: int
     fields_compared: int
@@ -104,6 +119,7 @@ class Recorder:
             self.initial = state
 
     def run_until(self, cycle: int) -> None:
+        """Runs the Mega to ``cycle``, logging every event on the way."""
         mega = self.mega
         while mega.run_to_break(cycle):
             hit = mega.hit_log[-1]
@@ -114,12 +130,15 @@ class Recorder:
         self._close_last()
 
     def recording(self, trace: Trace) -> Recording:
+        """What was logged so far, as the ``Recording`` of ``trace``."""
         assert self.initial is not None, "run_until() first"
         tx = bytes(b for _, b in self.mega.tx_log)
         return Recording(trace, self.initial, self.events, tx, self.mega.cycle)
 
 
 def record(trace: Trace, elf: str | Path | None = None) -> Recording:
+    """Runs ``trace`` on the firmware ``elf`` (default: the bundled one, built if
+    needed) in simavr and logs every event."""
     mega = VirtualMega(elf, millis_start=trace.millis_start)
     for t, data in trace.serial:
         mega.send(data, at=round(t * F_CPU))
@@ -155,6 +174,8 @@ def _decoded_counts(trace: Trace, side: str) -> tuple[tuple[np.ndarray, np.ndarr
 
 
 def compare(recording: Recording) -> Report:
+    """Replays the recording's events on the port and lists every difference (the
+    module docstring says what is compared)."""
     fw = Firmware(initial_state(recording))
     mismatches: list[Mismatch] = []
     fields_compared = 0

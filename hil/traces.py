@@ -1,7 +1,7 @@
 """Input traces for the firmware: serial bytes and encoder edges on a timeline.
 
 ``generate_trace(draw, duration)`` builds a random trace from any source of choices
-(``RandomDraw`` for ``python -m wcdrive.hil.verify``, ``HypothesisDraw`` for the
+(``RandomDraw`` for ``wcdrive verify``, ``HypothesisDraw`` for the
 property tests, which then shrink), so both use one generator. Traces cover every
 command kind, malformed and newline-less commands, awkward decimal strings,
 reversals that start pivots and commands that interrupt them, silences past the
@@ -37,26 +37,41 @@ MAX_TRACE_EDGE_RATE = 40000.0
 
 
 class Draw(Protocol):
-    def integer(self, lo: int, hi: int) -> int: ...
-    def real(self, lo: float, hi: float) -> float: ...
-    def choice(self, options: Sequence[T]) -> T: ...
-    def boolean(self, p: float = 0.5) -> bool: ...
+    """A source of choices: ``RandomDraw`` or ``HypothesisDraw``."""
+
+    def integer(self, lo: int, hi: int) -> int:
+        """An integer in [lo, hi]."""
+
+    def real(self, lo: float, hi: float) -> float:
+        """A float in [lo, hi]."""
+
+    def choice(self, options: Sequence[T]) -> T:
+        """One of ``options``."""
+
+    def boolean(self, p: float = 0.5) -> bool:
+        """True with probability ``p``."""
 
 
 class RandomDraw:
+    """Choices from ``random.Random(seed)``: one seed, one trace."""
+
     def __init__(self, seed: int) -> None:
         self.rng = random.Random(seed)
 
     def integer(self, lo: int, hi: int) -> int:
+        """An integer in [lo, hi]."""
         return self.rng.randint(lo, hi)
 
     def real(self, lo: float, hi: float) -> float:
+        """A float in [lo, hi]."""
         return self.rng.uniform(lo, hi)
 
     def choice(self, options: Sequence[T]) -> T:
+        """One of ``options``."""
         return options[self.rng.randrange(len(options))]
 
     def boolean(self, p: float = 0.5) -> bool:
+        """True with probability ``p``."""
         return self.rng.random() < p
 
 
@@ -70,26 +85,34 @@ class HypothesisDraw:
         self._data = data
 
     def integer(self, lo: int, hi: int) -> int:
+        """An integer in [lo, hi]."""
         return self._data.draw(self._st.integers(lo, hi))
 
     def real(self, lo: float, hi: float) -> float:
+        """A float in [lo, hi] (never NaN)."""
         return self._data.draw(self._st.floats(lo, hi, allow_nan=False))
 
     def choice(self, options: Sequence[T]) -> T:
+        """One of ``options``."""
         return options[self._data.draw(self._st.integers(0, len(options) - 1))]
 
     def boolean(self, p: float = 0.5) -> bool:
+        """True with probability ``p`` (in steps of 0.001)."""
         return self._data.draw(self._st.integers(0, 999)) < int(p * 1000)
 
 
 @dataclass
 class Trace:
+    """The firmware's inputs: serial writes as (s, bytes), an encoder edge train per
+    side, and ``millis_start``, the ``millis()`` set at ``main()`` (None: boot at 0)."""
+
     duration: float
     serial: list[tuple[float, bytes]] = field(default_factory=list)
     encoders: dict[str, EdgeTrain] = field(default_factory=dict)
     millis_start: int | None = None
 
     def describe(self) -> str:
+        """The trace as text for a failure report, one serial write a line."""
         lines = [f"duration={self.duration}s millis_start={self.millis_start}"]
         lines += [f"  t={t:.4f}s {data!r}" for t, data in self.serial]
         for side, train in self.encoders.items():
@@ -136,17 +159,20 @@ def decimal_text(draw: Draw, magnitude: float, signed: bool) -> str:
 
 # ---- commands --------------------------------------------------------------------
 def wheel_command(draw: Draw, right: str | None = None, left: str | None = None) -> bytes:
+    """A WHEEL command; the speeds' texts are drawn unless given."""
     r = right if right is not None else decimal_text(draw, 17.59, False)
     lv = left if left is not None else decimal_text(draw, 17.59, False)
     return f"r{draw.choice('pn')}{r},l{draw.choice('pn')}{lv},".encode()
 
 
 def cmdvel_command(draw: Draw, x: float | None = None) -> bytes:
+    """A CMDVEL command; ``x`` fixes the linear speed (printed with 3 decimals)."""
     xs = f"{x:.3f}" if x is not None else decimal_text(draw, 2.68, True)
     return f"x:{xs},t:{decimal_text(draw, 2.0, True)},".encode()
 
 
 def ppm_command(draw: Draw, lost: bool = False) -> bytes:
+    """A PPM frame; with ``lost`` one channel is outside the valid range."""
     channels = [draw.integer(1000, 2000) if draw.boolean(0.7) else 1500 for _ in range(8)]
     if lost:
         channels[draw.integer(0, 7)] = draw.choice([0, 899, 2101, 9999, 850])
@@ -154,6 +180,7 @@ def ppm_command(draw: Draw, lost: bool = False) -> bytes:
 
 
 def malformed_command(draw: Draw) -> bytes:
+    """A command the firmware must reject (or, empty lines, ignore)."""
     kind = draw.integer(0, 13)
     if kind == 0:
         return bytes(draw.integer(0, 255) for _ in range(draw.integer(1, 12))) + b"\n"
@@ -210,6 +237,7 @@ def param_command(draw: Draw) -> bytes:
 
 
 def protocol_v2_command(draw: Draw) -> bytes:
+    """``hello``, ``estop``, ``reset``, or a ``get:``/``set:`` (``param_command``)."""
     kind = draw.integer(0, 9)
     if kind == 0:
         return b"hello"
@@ -275,6 +303,7 @@ def _command(draw: Draw, travel_sign: list[int]) -> bytes:
 
 
 def terminator(draw: Draw) -> bytes:
+    """What ends a command: nothing (often), ``\\n``, ``\\r\\n`` or ``\\r``."""
     return draw.choice([b"", b"", b"\n", b"\r\n", b"\r"])
 
 
@@ -320,6 +349,7 @@ def _phase(state: int) -> int:
 
 # ---- whole trace -------------------------------------------------------------
 def generate_trace(draw: Draw, duration: float) -> Trace:
+    """A random trace of ``duration`` s (the module docstring lists what it covers)."""
     millis_start = None
     if draw.boolean(0.25):
         millis_start = 2**32 - draw.integer(0, 4000)

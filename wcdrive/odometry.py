@@ -1,11 +1,16 @@
 """Wheel odometry from encoder counts, as in the FRA532 report, with covariance.
 
-* ``PositionOdometry``: wheel distance increments with the midpoint heading,
-  ``x += d cos(theta + dtheta/2)``; robust to time jitter.
-* ``VelocityOdometry``: wheel speeds integrated with Euler steps,
+``WheelOdometry(params, method=...)`` integrates (time, left count, right count)
+samples. Both methods step by the wheels' distance increments since the last sample
+(``v dt``), so sample-time jitter does not enter the pose; they differ in the heading:
+
+* ``method="position"`` (the default): the midpoint heading,
+  ``x += d cos(theta + dtheta/2)``.
+* ``method="velocity"``: Euler steps with the heading at the start of the step,
   ``x += v cos(theta) dt`` (the guide's section 2.0.6 and the report's type 2).
-* ``gyro`` option: the heading comes from an integrated z-gyro instead of the wheel
-  difference, so wheel slip does not turn the estimate.
+* ``use_gyro_heading(heading)``: the next update takes its heading from an integrated
+  z-gyro (``GyroIntegrator``) instead of the wheel difference, so wheel slip does not
+  turn the estimate.
 
 Covariances follow the seed's ekf.yaml conventions: a 6x6 row-major matrix over
 (x, y, z, roll, pitch, yaw) for pose and (vx, vy, vz, vroll, vpitch, vyaw) for twist,
@@ -27,6 +32,8 @@ UNUSED = 1e6
 
 @dataclass
 class Pose2D:
+    """x, y (m) and heading ``theta`` (rad, counter-clockwise) in the odometry frame."""
+
     x: float = 0.0
     y: float = 0.0
     theta: float = 0.0
@@ -34,6 +41,8 @@ class Pose2D:
 
 @dataclass
 class OdometryParams:
+    """The geometry (the spec's, by default) and the noise model."""
+
     wheel_radius: float = real("WHEEL_RADIUS")
     wheelbase: float = real("WHEELBASE")
     counts_per_rev: int = round(real("CPR"))
@@ -45,6 +54,9 @@ class OdometryParams:
 
 @dataclass
 class OdometryEstimate:
+    """One estimate: its time, the pose, linear (m/s) and angular (rad/s) speed over the
+    last interval, and 6x6 pose and twist covariances (the ekf.yaml layout)."""
+
     time: float
     pose: Pose2D
     linear: float
@@ -83,6 +95,8 @@ class WheelOdometry:
         self._gyro_heading = heading
 
     def update(self, time: float, count_left: int, count_right: int) -> OdometryEstimate:
+        """One sample (``time`` in s, the counts as the firmware reports them); returns
+        the estimate. The first sample only sets the starting counts."""
         if self._last is None:
             self._last = (time, count_left, count_right)
             return self.estimate(time)
@@ -120,6 +134,7 @@ class WheelOdometry:
         self._cov = f @ self._cov @ f.T + g @ q @ g.T
 
     def estimate(self, time: float) -> OdometryEstimate:
+        """The pose, speeds and covariances now, stamped ``time``."""
         c = self._cov
         pose_cov = _cov6(c[0, 0], c[1, 1], c[2, 2], c[0, 1], c[0, 2], c[1, 2])
         vx, vyaw = self.p.twist_variance
@@ -136,6 +151,7 @@ class GyroIntegrator:
         self._last: tuple[float, float] | None = None
 
     def add(self, time: float, rate: float) -> None:
+        """One sample: ``rate`` rad/s at ``time`` s."""
         if self._last is not None:
             t0, r0 = self._last
             self.heading += 0.5 * (rate + r0) * (time - t0)

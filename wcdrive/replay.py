@@ -32,6 +32,9 @@ class ReplayError(ValueError):
 
 @dataclass
 class ReplayReport:
+    """What ``replay`` found: ticks replayed, bytes compared and fed, the first mismatch
+    (None when the board and the port agree) and notes."""
+
     ticks: int = 0
     bytes_compared: int = 0
     bytes_fed: int = 0
@@ -40,6 +43,7 @@ class ReplayReport:
 
     @property
     def agrees(self) -> bool:
+        """True when no byte differed."""
         return self.mismatch is None
 
     def __str__(self) -> str:
@@ -69,6 +73,9 @@ def _lines(data: bytes) -> list[bytes]:
 
 
 def replay(recording: Recording) -> ReplayReport:
+    """Feeds ``recording`` to the port from its boot state, tick by tick (the module
+    docstring says how), and compares what it sends with what the board sent. Raises
+    ReplayError when the recording cannot be replayed."""
     report = ReplayReport()
     received = recording.received_bytes
     boot = received.rfind(b"BOOT:final_control\r\n")

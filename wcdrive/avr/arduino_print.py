@@ -18,6 +18,7 @@ def print_long(n: int) -> bytes:
 
 
 def print_unsigned(n: int) -> bytes:
+    """``Print::print(unsigned long)`` in base 10 (``n`` taken mod 2**32)."""
     return str(n & 0xFFFFFFFF).encode()
 
 

@@ -37,18 +37,22 @@ def bits(x: float) -> int:
 
 
 def from_bits(word: int) -> float:
+    """The binary32 value whose encoding is the low 32 bits of ``word``."""
     return _unpack(_U32.pack(word & 0xFFFFFFFF))[0]
 
 
 def add(a: float, b: float) -> float:
+    """``a + b`` in binary32 (one rounding)."""
     return f32(a + b)
 
 
 def sub(a: float, b: float) -> float:
+    """``a - b`` in binary32 (one rounding)."""
     return f32(a - b)
 
 
 def mul(a: float, b: float) -> float:
+    """``a * b`` in binary32 (one rounding)."""
     return f32(a * b)
 
 
@@ -106,6 +110,7 @@ def _div_subnormal(a: float, b: float) -> float:
 
 
 def neg(a: float) -> float:
+    """``-a``: exact, a flip of the sign bit."""
     return -a
 
 

@@ -26,6 +26,7 @@ class Timer0:
     fract: int = 0
 
     def overflow(self) -> None:
+        """One ``TIMER0_OVF_vect``: ``millis`` up by 1, and 1 more when ``fract`` reaches 125."""
         m = self.millis + MILLIS_INC
         f = self.fract + FRACT_INC
         if f >= FRACT_MAX:

@@ -52,6 +52,9 @@ def split_fields(buf: bytes, max_fields: int) -> list[bytes] | None:
 
 
 def parse_number(field: bytes, start: int, allow_sign: bool) -> float:
+    """``parseNumber``: all of ``field[start:]`` through avr-libc's ``strtod``. It must
+    start with a digit or a point (or a sign, with ``allow_sign``); else
+    ``ParseError("number")``."""
     c = field[start] if start < len(field) else 0
     digit_or_point = 0x30 <= c <= 0x39 or c == 0x2E
     if not digit_or_point and not (allow_sign and c in (0x2B, 0x2D)):
@@ -63,6 +66,8 @@ def parse_number(field: bytes, start: int, allow_sign: bool) -> float:
 
 
 def parse_bounded(field: bytes, start: int, allow_sign: bool, limit: float) -> float:
+    """``parseBounded``: ``parse_number``, then ``ParseError("range")`` unless
+    ``-limit <= value <= limit`` (which inf and NaN are not)."""
     value = parse_number(field, start, allow_sign)
     if not (value >= -limit and value <= limit):
         raise ParseError("range")
@@ -115,6 +120,8 @@ def parse_cmd_vel(buf: bytes, max_wheel: float) -> tuple[int, float, float]:
 
 
 def shape_stick(us: int) -> int:
+    """``shapeStick``: a stick's offset from neutral (µs), 0 inside the dead band, else
+    clamped to ±PPM_SPAN."""
     if -C.PPM_DEADBAND <= us <= C.PPM_DEADBAND:
         return 0
     return max(-C.PPM_SPAN, min(C.PPM_SPAN, us))
@@ -172,6 +179,7 @@ def parse(buf: bytes, max_wheel: float = C.MAX_WHEEL_SPEED) -> tuple[int, float,
 
 
 def hex_value(c: int) -> int:
+    """``hexValue``: the value of a hex digit (either case), or -1."""
     if 0x30 <= c <= 0x39:
         return c - 0x30
     if 0x41 <= c <= 0x46:
@@ -207,10 +215,12 @@ def unframe(buf: bytes) -> tuple[str | None, int, bytes]:
 
 
 def find_param(name: bytes) -> int:
+    """``findParam``: the parameter's index in ``PARAMS``, or -1."""
     return BY_NAME.get(name, -1)
 
 
 def parse_get(body: bytes) -> tuple[str | None, int]:
+    """``parseGet`` of ``get:<name>``: (reason or None, parameter index)."""
     if not all_printable(body):
         return "syntax", 0
     i = find_param(body[4:])
@@ -218,6 +228,8 @@ def parse_get(body: bytes) -> tuple[str | None, int]:
 
 
 def parse_set(s: FirmwareState, body: bytes) -> tuple[str | None, int]:
+    """``parseSet`` of ``set:<name>=<value>``: sets the parameter when the value is well
+    formed and in range; returns (reason or None, parameter index)."""
     if not all_printable(body):
         return "syntax", 0
     eq = body.find(b"=", 4)
@@ -247,6 +259,10 @@ def parse_set(s: FirmwareState, body: bytes) -> tuple[str | None, int]:
 
 
 def move_to(s: FirmwareState, body: bytes, out: bytearray) -> str | None:
+    """A motion command (``parseWheel``/``parseCmdVel``/``parsePpm`` and ``moveTo``):
+    the reason it is refused, or None. With the e-stop latched a stop or a PPM loss
+    frame is accepted and changes nothing; a PPM loss frame otherwise halts the chair
+    and writes ``EVT:PPM_LOST`` to ``out`` once."""
     result = parse(body, s.maxWheel)
     if isinstance(result, str):
         return result
@@ -270,6 +286,8 @@ def move_to(s: FirmwareState, body: bytes, out: bytearray) -> str | None:
 
 
 def latch_estop(s: FirmwareState, out: bytearray) -> None:
+    """``latchEstop``: halts at the emergency rate, disarms the watchdog and latches the
+    e-stop; ``EVT:ESTOP`` goes to ``out`` when it was not latched already."""
     emergency_halt(s)
     s.cmdSinceTick = 0
     s.watchdogArmed = 0
@@ -308,6 +326,8 @@ def dispatch(s: FirmwareState, body: bytes, out: bytearray) -> tuple[str | None,
 
 
 def fields_expected(s: FirmwareState) -> int:
+    """``fieldsExpected``: the fields the buffered command takes (2 for WHEEL and
+    CMDVEL, 8 for PPM), or 0 when no command starts that way."""
     buf = s.cmdBuf
     if buf[:1] in (b"r", b"x"):
         return 2
@@ -317,6 +337,8 @@ def fields_expected(s: FirmwareState) -> int:
 
 
 def finish_command(s: FirmwareState, out: bytearray) -> None:
+    """``finishCommand``: the buffered command, unframed when it starts with ``$``,
+    dispatched and answered (to ``out``); then the buffer is emptied."""
     body = bytes(s.cmdBuf)
     seq, data, param = -1, DATA_NONE, 0
     reason: str | None = None

@@ -31,6 +31,7 @@ def compute_pid(setpoint: float, measurement: float, integral: float, prev_meas:
 
 
 def ramp_toward(current: float, target: float, max_change: float) -> float:
+    """``rampToward``: ``current`` moved toward ``target`` by at most ``max_change``."""
     diff = f32(target - current)
     if abs(diff) <= max_change:
         return target

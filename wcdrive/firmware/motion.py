@@ -21,6 +21,8 @@ PIVOT_NONE, PIVOT_STOPPING, PIVOT_ROTATING = 0, 1, 2
 
 
 def needs_pivot(travel: float, prev_travel: float) -> bool:
+    """``needsPivot``: the travel (m/s) goes from above PIVOT_THRESHOLD to below
+    -PIVOT_THRESHOLD, or back."""
     return (prev_travel > PIVOT_THRESHOLD and travel < -PIVOT_THRESHOLD) or (
         prev_travel < -PIVOT_THRESHOLD and travel > PIVOT_THRESHOLD
     )
@@ -36,6 +38,9 @@ def emergency_halt(s: FirmwareState) -> None:
 
 
 def accept_command(s: FirmwareState, new_mode: int, right: float, left: float) -> None:
+    """``acceptCommand``: a valid command's wheel targets, through the pivot: a stop
+    applies at once (ending a pivot), a reversal starts one with the command pending,
+    and during a pivot a command replaces the pending one."""
     s.mode = new_mode
     s.cmdSinceTick = 1
     s.emergencyStop = 0
@@ -60,6 +65,9 @@ def accept_command(s: FirmwareState, new_mode: int, right: float, left: float) -
 
 
 def pivot_step(s: FirmwareState) -> None:
+    """The pivot step of ``controlTick``, after the motor outputs: STOPPING becomes
+    ROTATING once both setpoints are zero and both wheels slow; ROTATING applies the
+    pending targets after PIVOT_TICKS ticks."""
     slow = abs(s.filtVelL) < PIVOT_START_SPEED and abs(s.filtVelR) < PIVOT_START_SPEED
     if s.pivotPhase == PIVOT_STOPPING and s.setpointL == 0.0 and s.setpointR == 0.0 and slow:
         s.pivotPhase = PIVOT_ROTATING

@@ -1,8 +1,10 @@
 """Lines the firmware sends: formatted whole, as ``LineBuffer`` does, then written.
 
 The firmware writes a line only when the TX ring has room for all of it; with its
-256-byte ring and the per-tick limits that can never fail (docs/protocol), so the
-port appends every line. ``txDropped`` staying 0 is checked against the firmware.
+512-byte ring (``-DSERIAL_TX_BUFFER_SIZE=512``, firmware/final_control/Makefile) and
+the per-tick limits that can never fail ("Output budget" in protocol/PROTOCOL.md), so
+the port appends every line. That ``txDropped`` stays 0 is checked in the firmware
+after every event of the differential runs (``wcdrive.hil.lockstep``).
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ CRLF = b"\r\n"
 
 
 def feedback_line(s: FirmwareState) -> bytes:
+    """``ENC:<l>,<r>,VEL:<l>,<r>,MODE:<mode>``, the line every ``controlTick`` sends."""
     return b"".join((
         b"ENC:", print_long(s.encTickL), b",", print_long(s.encTickR),
         b",VEL:", print_float(s.rawVelL, 2), b",", print_float(s.rawVelR, 2),
@@ -24,6 +27,7 @@ def feedback_line(s: FirmwareState) -> bytes:
 
 
 def send_event(what: str) -> bytes:
+    """``sendEvent``: ``EVT:<what>``."""
     return b"EVT:" + what.encode() + CRLF
 
 

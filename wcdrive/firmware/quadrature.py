@@ -29,6 +29,7 @@ class QuadratureDecoder:
     illegal: int = 0
 
     def edge(self, state: int) -> None:
+        """The ISR for one pin change; ``state`` is the AB state the pins now show."""
         step = QUAD_TABLE[(self.last << 2) | state]
         if step == ILLEGAL:
             self.illegal += 1

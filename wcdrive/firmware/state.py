@@ -36,6 +36,10 @@ INPUT_FIELDS = ("freeRam",)
 
 @dataclass(slots=True)
 class FirmwareState:
+    """The sketch's globals with their initial values (``parked`` 1, ``dirL``/``dirR``
+    HIGH, the runtime parameters at the spec's defaults); ``cmdBuf`` holds the command
+    being received."""
+
     mode: int = MODE_CMDVEL
     targetL: float = 0.0
     targetR: float = 0.0
@@ -100,7 +104,9 @@ class FirmwareState:
     cmdDiscarding: int = 0
 
     def copy(self) -> FirmwareState:
+        """A deep copy."""
         return copy.deepcopy(self)
 
     def as_dict(self) -> dict[str, object]:
+        """Every field by name."""
         return {f.name: getattr(self, f.name) for f in fields(self)}

@@ -96,6 +96,11 @@ class WheelView:
 
 
 class Plant:
+    """The chair of the module docstring: ``set_drive`` is its input, ``step`` and
+    ``advance`` move it, ``left``/``right`` (``WheelView``) and the properties read it.
+    ``x``, ``y`` and ``heading`` place the axle midpoint at the start;
+    ``use_kernel=False`` takes the Python reference path."""
+
     def __init__(self, params: ChairParams | None = None, *, x: float = 0.0, y: float = 0.0,
                  heading: float = 0.0, use_kernel: bool = True) -> None:
         self.p = params or ChairParams()
@@ -156,6 +161,7 @@ class Plant:
 
     @property
     def uses_kernel(self) -> bool:
+        """Whether steps run in the C kernel (False: the Python reference path)."""
         return self._kernel is not None
 
     # ---- inputs ------------------------------------------------------------------
@@ -168,6 +174,7 @@ class Plant:
     # ---- state -------------------------------------------------------------------
     @property
     def time(self) -> float:
+        """Simulated seconds stepped so far."""
         return self.s.time
 
     @property
@@ -178,6 +185,7 @@ class Plant:
 
     @property
     def yaw_rate(self) -> float:
+        """rad/s, counter-clockwise positive, ground truth."""
         return self.body.angular_velocity
 
     @property
@@ -192,6 +200,7 @@ class Plant:
 
     @property
     def caster_scrub_time(self) -> float:
+        """s during which a caster patch slid sideways faster than 1 mm/s."""
         return self.s.scrub_time
 
     @property
@@ -217,6 +226,7 @@ class Plant:
 
     # ---- dynamics ----------------------------------------------------------------
     def step(self, dt: float = 0.001) -> None:
+        """One physics step of ``dt`` s."""
         self.advance(1, dt)
 
     def advance(self, n: int, dt: float = 0.001, *, record: bool = False

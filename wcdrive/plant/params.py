@@ -17,6 +17,9 @@ G = 9.81
 
 @dataclass(frozen=True)
 class ChairParams:
+    """Every physical parameter of the chair (frozen: vary one with
+    ``dataclasses.replace``, as a scenario's ``[chair]`` table does)."""
+
     # --- seed (guide 1.4.2) ---
     wheelbase: float = real("WHEELBASE")            # m between the drive wheels
     wheel_radius: float = real("WHEEL_RADIUS")      # m (6 in)
@@ -66,6 +69,7 @@ class ChairParams:
 
     @property
     def mass(self) -> float:
+        """kg: chair and occupant."""
         return self.chair_mass + self.occupant_mass
 
     @property
@@ -80,14 +84,17 @@ class ChairParams:
 
     @property
     def drive_wheel_load(self) -> float:
+        """N: the static normal force on each drive wheel."""
         return self.mass * G * (1.0 - self.caster_load_share) / 2.0
 
     @property
     def caster_load(self) -> float:
+        """N: the static normal force on each caster."""
         return self.mass * G * self.caster_load_share / 2.0
 
     @property
     def wheel_total_inertia(self) -> float:
+        """kg m^2 at the wheel: wheel and tyre, plus the rotor through gear_ratio**2."""
         return self.wheel_inertia + self.rotor_inertia * self.gear_ratio**2
 
     @property
@@ -105,5 +112,6 @@ class ChairParams:
         return (-b + math.sqrt(b * b - 4 * a * c)) / (2 * a)
 
     def wheel_friction(self, side: str) -> float:
+        """The friction coefficient of the ``"left"`` or ``"right"`` drive tyre."""
         override = self.friction_left if side == "left" else self.friction_right
         return self.friction if override is None else override

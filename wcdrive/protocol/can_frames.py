@@ -227,6 +227,8 @@ class TelemetryAssembler:
     _status: dict[int, bytes] | None = None
 
     def feed(self, can_id: int, data: bytes) -> bytes:
+        """One chair-to-host frame; returns the line it completes (a REPLY frame is a
+        line of its own), else ``b""``. Other frames are ignored."""
         if can_id == FEEDBACK_ENC:
             self._enc = struct.unpack("<ii", data[:8])
             return b""

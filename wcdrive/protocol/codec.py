@@ -2,7 +2,7 @@
 
 Host to board:  ``encode_cmdvel(v, w)`` -> ``b"x:0.500,t:0.100,"`` (the seed host's
 format), ``encode_wheel(right, left)`` -> ``b"rp5.000,lp3.000,"``, ``encode_ppm``.
-Protocol v2:    ``frame(command, seq)`` -> ``b"$17:x:0.500,t:0.100,*5C\\n"``,
+Protocol v2:    ``frame(command, seq)`` -> ``b"$17:x:0.500,t:0.100,*34\\n"``,
 ``encode_get(name)``, ``encode_set(name, value)``, ``HELLO``, ``ESTOP``, ``RESET``.
 Board to host:  ``LineDecoder.feed(data)`` returns the complete lines' messages:
 ``Feedback``, ``ExtendedTelemetry``, ``Error``, ``Event``, ``Boot``, ``Hello``,
@@ -64,6 +64,7 @@ def _param_name(name: str) -> str:
 
 
 def encode_get(name: str) -> bytes:
+    """``get:<name>`` (ValueError for an unknown parameter)."""
     return f"get:{_param_name(name)}".encode()
 
 
@@ -95,6 +96,7 @@ def encode_wheel(right: float, left: float) -> bytes:
 
 
 def encode_ppm(channels: list[int] | tuple[int, ...]) -> bytes:
+    """``ppm:c1,...,c8,``: eight pulse widths in µs, integers 0..9999."""
     if len(channels) != 8:
         raise ValueError("a PPM frame has 8 channels")
     for c in channels:
@@ -116,21 +118,29 @@ class Feedback:
 
 @dataclass(frozen=True)
 class Error:
+    """``ERR:<reason>``: a command the board rejected (protocol/PROTOCOL.md)."""
+
     reason: str
 
 
 @dataclass(frozen=True)
 class Event:
+    """``EVT:<name>``: ``WATCHDOG``, ``PPM_LOST`` or ``ESTOP``."""
+
     name: str
 
 
 @dataclass(frozen=True)
 class Boot:
+    """``BOOT:<text>``: the board has reset; ``text`` is the firmware's name."""
+
     text: str
 
 
 @dataclass(frozen=True)
 class Unknown:
+    """A line that matches none of the board's formats (or an overlong one), as received."""
+
     line: bytes
 
 
@@ -154,48 +164,62 @@ class ExtendedTelemetry:
 
     @property
     def watchdog_armed(self) -> bool:
+        """Flag bit 0: the watchdog is armed."""
         return bool(self.flags & 1)
 
     @property
     def emergency_ramp(self) -> bool:
+        """Flag bit 1: the setpoints ramp at the emergency rate (watchdog, PPM loss, e-stop)."""
         return bool(self.flags & 2)
 
     @property
     def estop_latched(self) -> bool:
+        """Flag bit 2: the e-stop is latched."""
         return bool(self.flags & 4)
 
     @property
     def ppm_lost(self) -> bool:
+        """Flag bit 3: a PPM frame said the receiver lost the transmitter."""
         return bool(self.flags & 8)
 
     @property
     def parked(self) -> bool:
+        """Flag bit 4: parked (at rest, integrators reset, both PWM outputs 0)."""
         return bool(self.flags & 16)
 
     @property
     def pivot_phase(self) -> int:
+        """Flag bits 5-6: the pivot phase (0 none, 1 stopping, 2 rotating)."""
         return (self.flags >> 5) & 3
 
 
 @dataclass(frozen=True)
 class Hello:
+    """``HELLO:<version>,<firmware>``: the answer to ``hello`` (protocol v2)."""
+
     version: int
     firmware: str
 
 
 @dataclass(frozen=True)
 class Param:
+    """``PAR:<name>,<value>``: the value in force, the answer to ``get:`` and ``set:``."""
+
     name: str
     value: float
 
 
 @dataclass(frozen=True)
 class Ack:
+    """``ACK:<seq>``: the framed line with this sequence number was carried out."""
+
     seq: int
 
 
 @dataclass(frozen=True)
 class Nak:
+    """``NAK:<seq>,<reason>``: the framed line with this sequence number was refused."""
+
     seq: int
     reason: str
 
@@ -261,6 +285,8 @@ class LineDecoder:
         self._buf = bytearray()
 
     def feed(self, data: bytes) -> list[Message]:
+        """Appends ``data``; returns the messages of the lines it completed (each ends
+        at ``\\n``; trailing ``\\r`` are dropped)."""
         self._buf += data
         out: list[Message] = []
         while True:

@@ -10,6 +10,9 @@ from wcdrive.sim.runner import SimResult
 
 
 def table(result: SimResult) -> str:
+    """What ``wcdrive sim`` prints for a run: ground truth against the three odometries,
+    tracking error, caster work, the board's line counts and (simavr backend) the
+    differences between the port and the firmware."""
     m = result.metrics()
     rows = [
         ("", "x (m)", "y (m)", "heading (deg)", "pos. error (m)", "heading error (deg)"),
@@ -40,6 +43,8 @@ def table(result: SimResult) -> str:
 
 
 def to_json(results: list[SimResult]) -> str:
+    """The metrics of ``results`` as a JSON list (NaN and inf as null)."""
+
     def clean(v):
         if isinstance(v, float):
             return None if math.isnan(v) or math.isinf(v) else round(v, 6)
@@ -49,6 +54,8 @@ def to_json(results: list[SimResult]) -> str:
 
 
 def plots(result: SimResult, out: Path) -> list[Path]:
+    """Writes trajectory.png, wheels.png and pwm.png into ``out`` (created); returns
+    their paths."""
     import matplotlib
 
     matplotlib.use("Agg")

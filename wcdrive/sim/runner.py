@@ -34,6 +34,10 @@ from wcdrive.sim.scenario import Scenario
 
 @dataclass
 class SimResult:
+    """One run of a scenario: arrays with a row per control tick (columns as noted),
+    the plant's caster totals, the board's line counts and, with the simavr backend,
+    the comparison of the firmware with the port."""
+
     scenario: str
     backend: str
     duration: float
@@ -59,9 +63,13 @@ class SimResult:
 
     @property
     def real_time_factor(self) -> float:
+        """Simulated seconds per wall second."""
         return self.duration / self.wall_time if self.wall_time > 0 else math.inf
 
     def metrics(self) -> dict[str, float | int | str | None]:
+        """The run's figures by name: the final pose of the ground truth and of each
+        odometry with its errors, the tracking error, the caster totals, the
+        port-vs-firmware differences and the line counts."""
         tx, ty, tth = self.truth[-1]
         out: dict[str, float | int | str | None] = {
             "scenario": self.scenario, "backend": self.backend,
@@ -156,6 +164,10 @@ def _signed(pwm: int, direction: int) -> int:
 
 def run(scenario: Scenario, *, backend: str = "port", seed: int = 0, dt: float = 0.001,
         progress: Callable[[float], None] | None = None, elf=None) -> SimResult:
+    """Runs ``scenario`` in closed loop: ``backend`` "port" (the Python port) or "simavr"
+    (the ELF ``elf``, by default the bundled firmware, built if needed), the plant
+    stepping every ``dt`` s. ``seed`` seeds the gyro; ``progress`` is called now and
+    then with the fraction done."""
     if backend not in ("port", "simavr"):
         raise ValueError("backend must be 'port' or 'simavr'")
     if not 1e-5 <= dt <= 0.01:

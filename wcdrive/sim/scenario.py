@@ -34,11 +34,15 @@ class ScenarioError(ValueError):
 
 @dataclass(frozen=True)
 class Segment:
+    """One ``[[segment]]``: its kind (cmdvel, wheel, ppm, stop, silence), the values
+    and the duration in s."""
+
     kind: str
     values: tuple[float, ...]
     duration: float
 
     def command(self) -> bytes | None:
+        """The command the host repeats during the segment (None: it sends nothing)."""
         if self.kind == "cmdvel":
             return encode_cmdvel(*self.values)
         if self.kind == "wheel":
@@ -52,6 +56,8 @@ class Segment:
 
 @dataclass(frozen=True)
 class Scenario:
+    """A loaded scenario file (the module docstring), ``segments`` already repeated."""
+
     name: str
     description: str
     segments: tuple[Segment, ...]
@@ -62,9 +68,11 @@ class Scenario:
 
     @property
     def duration(self) -> float:
+        """Seconds simulated: every segment, then ``settle_s``."""
         return sum(s.duration for s in self.segments) + self.settle_s
 
     def params(self) -> ChairParams:
+        """``ChairParams`` with the scenario's ``[chair]`` overrides."""
         return dataclasses.replace(ChairParams(), **self.chair)  # type: ignore[arg-type]
 
     def host_commands(self) -> list[tuple[float, bytes]]:
@@ -84,10 +92,13 @@ class Scenario:
 
 
 def bundled() -> list[Path]:
+    """The bundled scenario files, sorted by name."""
     return sorted(BUNDLED.glob("*.toml"))
 
 
 def find(name_or_path: str) -> Path:
+    """The file of a ``.toml`` path or of a bundled scenario's name (ScenarioError when
+    there is none)."""
     path = Path(name_or_path)
     if path.suffix == ".toml" and path.exists():
         return path
@@ -99,6 +110,8 @@ def find(name_or_path: str) -> Path:
 
 
 def load(name_or_path: str) -> Scenario:
+    """Reads and checks a scenario, by bundled name or path; a ScenarioError names
+    what is wrong."""
     path = find(name_or_path)
     try:
         data = tomllib.loads(path.read_text())
