@@ -12,8 +12,8 @@
 // Everything a command changes takes effect at the next control tick.
 //
 // The controller state is kept in plain globals with stable names so that the
-// simavr harness (hil/) can read them from SRAM by symbol. The Python port in
-// wcdrive/firmware/ mirrors every function here, bit for bit.
+// simavr harness (wcdrive/boards/simavr/) can read them from SRAM by symbol. The
+// Python port in wcdrive/firmware/ mirrors every function here, bit for bit.
 
 #include <Arduino.h>
 #include <math.h>

@@ -8,7 +8,7 @@
  * at which the firmware wrote it; entries to chosen functions (by flash byte
  * address) are logged with the cycle and the argument registers r22..r25.
  *
- * Compiled on first use by hil/build.py into libwcsim.so (gcc, -lsimavr -lelf).
+ * Compiled on first use by wcdrive/boards/simavr/build.py into libwcsim.so (gcc, -lsimavr -lelf).
  */
 #include <stdarg.h>
 #include <stdint.h>
