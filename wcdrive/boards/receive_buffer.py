@@ -8,12 +8,15 @@ import time
 
 
 class ReceiveBuffer:
+    """A byte queue: ``put`` by one thread, ``read`` with a timeout by another."""
+
     def __init__(self) -> None:
         self._data = threading.Condition()
         self._buf = bytearray()
         self._closed = False
 
     def put(self, data: bytes) -> None:
+        """Appends ``data`` and wakes the readers."""
         with self._data:
             self._buf += data
             self._data.notify_all()
@@ -37,6 +40,7 @@ class ReceiveBuffer:
             return len(self._buf)
 
     def clear(self) -> None:
+        """Drops every byte not yet read."""
         with self._data:
             self._buf.clear()
 

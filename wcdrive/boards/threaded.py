@@ -15,6 +15,8 @@ from wcdrive.boards.receive_buffer import ReceiveBuffer
 
 
 class ThreadedBoard:
+    """A board stepped by a background thread, with serial-like ``read``/``write``."""
+
     def __init__(self, name: str) -> None:
         self._lock = threading.Lock()
         self._rx = ReceiveBuffer()
@@ -36,10 +38,12 @@ class ThreadedBoard:
 
     # ---- lifecycle ---------------------------------------------------------------
     def start(self):
+        """Starts the board's thread; returns the board."""
         self._thread.start()
         return self
 
     def close(self) -> None:
+        """Stops the thread, wakes a blocked ``read`` and releases the board."""
         self._stop.set()
         if self._thread.is_alive() and threading.current_thread() is not self._thread:
             self._thread.join(timeout=5)
@@ -48,6 +52,7 @@ class ThreadedBoard:
 
     @property
     def closed(self) -> bool:
+        """True once ``close`` was called."""
         return self._stop.is_set()
 
     def __enter__(self):
@@ -58,6 +63,7 @@ class ThreadedBoard:
 
     # ---- I/O -----------------------------------------------------------------------
     def write(self, data: bytes) -> int:
+        """Puts ``data`` on the board's RX wire; returns its length."""
         with self._lock:
             self._send(bytes(data))
         return len(data)
@@ -68,9 +74,11 @@ class ThreadedBoard:
 
     @property
     def in_waiting(self) -> int:
+        """Bytes the board sent that were not read yet."""
         return len(self._rx)
 
     def reset_input(self) -> None:
+        """Drops what the board sent and was not read yet."""
         self._rx.clear()
 
     def _run(self) -> None:

@@ -35,6 +35,7 @@ from wcdrive.protocol.codec import LineDecoder
 
 
 def open_bus(interface: str, channel: str) -> can.BusABC:
+    """python-can's bus, or ``WcdriveConnectionError`` saying how to bring it up."""
     try:
         return can.Bus(interface=interface, channel=channel)
     except (can.CanError, OSError, ValueError, ImportError) as exc:
@@ -60,6 +61,7 @@ class CanLink:
 
     @property
     def closed(self) -> bool:
+        """True once ``close`` was called."""
         return self._stop.is_set()
 
     def reset_input(self) -> None:
@@ -81,7 +83,7 @@ class CanLink:
         return len(data)
 
     def flush(self) -> None:
-        pass
+        """Nothing to wait for: ``write`` puts the frames on the bus."""
 
     def read(self, size: int = 1, timeout: float | None = 0.1) -> bytes:
         """Up to ``size`` bytes of the board's lines; waits up to ``timeout`` s for the first."""
@@ -89,6 +91,7 @@ class CanLink:
 
     @property
     def in_waiting(self) -> int:
+        """Bytes of the board's lines received and not yet read."""
         return len(self._rx)
 
     def _receive(self) -> None:
@@ -101,6 +104,7 @@ class CanLink:
                 self._rx.put(text)
 
     def close(self) -> None:
+        """Stops the receiver, wakes a blocked ``read`` and shuts the bus down."""
         self._stop.set()
         self._thread.join(timeout=2)
         self._rx.close()
@@ -127,6 +131,7 @@ class CanGateway:
                          threading.Thread(target=self._to_bus, name="can-gw-out", daemon=True)]
 
     def start(self) -> CanGateway:
+        """Starts both directions; returns the gateway."""
         for t in self._threads:
             t.start()
         return self

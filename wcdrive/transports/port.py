@@ -21,15 +21,27 @@ class Port(Protocol):
       them (``None``: until ``size`` bytes came); fewer (maybe none) on a timeout.
     - ``write(data)`` queues all of ``data`` and returns its length.
     - ``in_waiting``: bytes that a ``read`` returns without waiting.
-    - ``flush()`` waits until written data has left; ``close()`` releases the port,
-      and a ``read`` blocked in another thread returns or raises.
+    - ``flush()`` waits until written data has left; ``close()`` releases the port
+      (twice is fine), and a ``read`` blocked in another thread returns promptly with
+      what it has (the ``wc*://`` ports) or raises (pyserial's posix port). On a
+      closed port ``read``, ``write`` and ``flush`` raise ``serial.SerialException``
+      (``PortNotOpenError``).
     """
 
     timeout: float | None
 
     @property
-    def in_waiting(self) -> int: ...
-    def read(self, size: int = 1) -> bytes: ...
-    def write(self, data: bytes) -> int | None: ...
-    def flush(self) -> None: ...
-    def close(self) -> None: ...
+    def in_waiting(self) -> int:
+        """Bytes that ``read`` returns without waiting."""
+
+    def read(self, size: int = 1) -> bytes:
+        """Up to ``size`` bytes, waiting at most ``timeout`` s for them."""
+
+    def write(self, data: bytes) -> int | None:
+        """Queues all of ``data``; returns its length."""
+
+    def flush(self) -> None:
+        """Waits until the written data has left."""
+
+    def close(self) -> None:
+        """Releases the port; wakes a ``read`` blocked in another thread."""

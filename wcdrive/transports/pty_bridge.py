@@ -19,12 +19,21 @@ from typing import Protocol
 
 
 class SerialLike(Protocol):
-    def write(self, data: bytes) -> int: ...
-    def read(self, size: int = 1, timeout: float | None = None) -> bytes: ...
-    def close(self) -> None: ...
+    """What the bridge serves: a ``ThreadedBoard`` (``SimulatedBoard``, ``MegaBoard``)."""
+
+    def write(self, data: bytes) -> int:
+        """Takes bytes written to the device."""
+
+    def read(self, size: int = 1, timeout: float | None = None) -> bytes:
+        """Up to ``size`` bytes for the device; waits up to ``timeout`` s."""
+
+    def close(self) -> None:
+        """Stops the board."""
 
 
 class PtyBridge:
+    """A pseudo-terminal whose other end is ``board``; the bridge owns the board."""
+
     def __init__(self, board: SerialLike, link: str | Path | None = None) -> None:
         self.board = board
         self._master, self._slave = os.openpty()
@@ -32,6 +41,7 @@ class PtyBridge:
         attrs = termios.tcgetattr(self._slave)
         attrs[3] &= ~termios.ECHO
         termios.tcsetattr(self._slave, termios.TCSANOW, attrs)
+        os.set_blocking(self._master, False)
         self.device = os.ttyname(self._slave)
         self.link = Path(link) if link else None
         if self.link:
@@ -44,14 +54,17 @@ class PtyBridge:
 
     @property
     def path(self) -> str:
+        """What to open: the ``link`` if one was given, else the pty's device."""
         return str(self.link) if self.link else self.device
 
     def start(self) -> PtyBridge:
+        """Starts copying in both directions; returns the bridge."""
         for t in self._threads:
             t.start()
         return self
 
     def close(self) -> None:
+        """Stops copying, closes the pty (and the link) and then the board."""
         self._stop.set()
         for t in self._threads:
             t.join(timeout=2)
@@ -82,13 +95,23 @@ class PtyBridge:
                     self.board.write(data)
 
     def _from_board(self) -> None:
+        # The master is non-blocking: when nobody reads the device its buffer fills, and
+        # a blocking write would hang here (and ``close``) for good. The board's bytes
+        # wait in ``pending`` (and the board's buffer) until there is room.
+        pending = b""
         while not self._stop.is_set():
-            data = self.board.read(4096, timeout=0.05)
-            if data:
-                try:
-                    os.write(self._master, data)
-                except OSError:
-                    pass
+            if not pending:
+                pending = self.board.read(4096, timeout=0.05)
+                continue
+            _, writable, _ = select.select([], [self._master], [], 0.05)
+            if not writable:
+                continue
+            try:
+                pending = pending[os.write(self._master, pending):]
+            except BlockingIOError:
+                continue
+            except OSError:
+                pending = b""
 
 
 def serve(bridge: PtyBridge) -> None:

@@ -24,19 +24,24 @@ FORMAT = "wcdrive-recording/1"
 
 @dataclass
 class Recording:
+    """What the host wrote (``sent``) and read (``received``): (time, bytes) chunks."""
+
     sent: list[tuple[float, bytes]] = field(default_factory=list)
     received: list[tuple[float, bytes]] = field(default_factory=list)
     meta: dict[str, object] = field(default_factory=dict)
 
     @property
     def sent_bytes(self) -> bytes:
+        """Every byte the host wrote, in order."""
         return b"".join(data for _, data in self.sent)
 
     @property
     def received_bytes(self) -> bytes:
+        """Every byte the host read, in order."""
         return b"".join(data for _, data in self.received)
 
     def save(self, path: str | Path) -> Path:
+        """Writes the JSON file; returns its path."""
         path = Path(path)
         path.write_text(json.dumps({
             "format": FORMAT, "meta": self.meta,
@@ -47,6 +52,7 @@ class Recording:
 
     @classmethod
     def load(cls, path: str | Path) -> Recording:
+        """Reads a file written by ``save``."""
         data = json.loads(Path(path).read_text())
         if data.get("format") != FORMAT:
             raise ValueError(f"{path} is not a {FORMAT} file")
@@ -65,6 +71,7 @@ class RecordingPort:
 
     @property
     def timeout(self) -> float | None:
+        """The wrapped port's ``timeout``."""
         return self.port.timeout
 
     @timeout.setter
@@ -72,12 +79,14 @@ class RecordingPort:
         self.port.timeout = value
 
     def write(self, data: bytes) -> int | None:
+        """Writes through; logs ``data`` once the write succeeded."""
         n = self.port.write(data)
         with self._lock:
             self.recording.sent.append((time.monotonic(), bytes(data)))
         return n
 
     def read(self, size: int = 1) -> bytes:
+        """Reads through; logs what came."""
         data = self.port.read(size)
         if data:
             with self._lock:
@@ -86,10 +95,18 @@ class RecordingPort:
 
     @property
     def in_waiting(self) -> int:
+        """The wrapped port's."""
         return self.port.in_waiting
 
+    @property
+    def is_open(self) -> bool:
+        """The wrapped port's (pyserial's attribute; True for a port without one)."""
+        return bool(getattr(self.port, "is_open", True))
+
     def flush(self) -> None:
+        """Flushes the wrapped port."""
         self.port.flush()
 
     def close(self) -> None:
+        """Closes the wrapped port (the recording stays)."""
         self.port.close()

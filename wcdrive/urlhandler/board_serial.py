@@ -16,15 +16,28 @@ from serial.serialutil import PortNotOpenError, SerialBase, SerialException, to_
 class BoardLike(Protocol):
     """What a handler opens: a ``ThreadedBoard`` or a ``CanLink``."""
 
-    def start(self) -> Any: ...
-    def close(self) -> None: ...
+    def start(self) -> Any:
+        """Starts the board (or link) and returns it."""
+
+    def close(self) -> None:
+        """Stops it; wakes a ``read`` blocked in another thread."""
+
     @property
-    def closed(self) -> bool: ...
+    def closed(self) -> bool:
+        """True once ``close`` was called."""
+
     @property
-    def in_waiting(self) -> int: ...
-    def read(self, size: int = 1, timeout: float | None = None) -> bytes: ...
-    def write(self, data: bytes) -> int: ...
-    def reset_input(self) -> None: ...
+    def in_waiting(self) -> int:
+        """Bytes received and not yet read."""
+
+    def read(self, size: int = 1, timeout: float | None = None) -> bytes:
+        """Up to ``size`` bytes; waits up to ``timeout`` s for the first."""
+
+    def write(self, data: bytes) -> int:
+        """Sends ``data``; returns its length."""
+
+    def reset_input(self) -> None:
+        """Drops what was received and not yet read."""
 
 
 class BoardSerial(SerialBase):
@@ -41,6 +54,7 @@ class BoardSerial(SerialBase):
         raise NotImplementedError
 
     def open(self) -> None:
+        """Opens the board named by the URL (``port``); a new board each time."""
         if self.is_open:
             raise SerialException("Port is already open.")
         if self._port is None:
@@ -49,62 +63,79 @@ class BoardSerial(SerialBase):
         self.is_open = True
 
     def close(self) -> None:
-        if self.board is not None:
-            self.board.close()
-            self.board = None
+        """Closes the board; safe to call twice, and wakes a ``read`` blocked in another
+        thread."""
+        board, self.board = self.board, None
         self.is_open = False
+        if board is not None:
+            board.close()
 
     def _reconfigure_port(self) -> None:
         pass
 
+    def _board(self) -> BoardLike:
+        """The open board, or ``PortNotOpenError``. Callers keep the object they got:
+        another thread may close the port meanwhile."""
+        board = self.board
+        if not self.is_open or board is None:
+            raise PortNotOpenError()
+        return board
+
     @property
     def in_waiting(self) -> int:
-        if not self.is_open or self.board is None:
-            raise PortNotOpenError()
-        return self.board.in_waiting
+        """Bytes received and not yet read."""
+        return self._board().in_waiting
 
     def read(self, size: int = 1) -> bytes:
-        if not self.is_open or self.board is None:
-            raise PortNotOpenError()
+        """Up to ``size`` bytes within ``timeout`` (``None``: until ``size`` came). A read
+        blocked when another thread closes the port returns what it has; the next
+        call raises ``PortNotOpenError``."""
+        board = self._board()
         data = bytearray()
         deadline = None if self._timeout is None else time.monotonic() + self._timeout
         while len(data) < size:
             left = None if deadline is None else max(0.0, deadline - time.monotonic())
-            chunk = self.board.read(size - len(data), timeout=left)
+            chunk = board.read(size - len(data), timeout=left)
             data += chunk
-            if not chunk and (deadline is None or time.monotonic() >= deadline):
-                if deadline is not None or self.board.closed:
-                    break
+            if not chunk and (board.closed or (deadline is not None and time.monotonic() >= deadline)):
+                break
         return bytes(data)
 
     def write(self, data: Any) -> int:
-        if not self.is_open or self.board is None:
-            raise PortNotOpenError()
-        return self.board.write(to_bytes(data))
+        """Hands all of ``data`` to the board; returns its length."""
+        return self._board().write(to_bytes(data))
+
+    def flush(self) -> None:
+        """Nothing to wait for: ``write`` hands the bytes to the board (or the bus) at
+        once. Raises ``PortNotOpenError`` on a closed port, as pyserial's ports do."""
+        self._board()
 
     def reset_input_buffer(self) -> None:
-        if not self.is_open or self.board is None:
-            raise PortNotOpenError()
-        self.board.reset_input()
+        """Drops what was received and not yet read."""
+        self._board().reset_input()
 
     def reset_output_buffer(self) -> None:
-        if not self.is_open:
-            raise PortNotOpenError()
+        """Nothing to drop: written bytes are with the board already."""
+        self._board()
 
     @property
     def cts(self) -> bool:
+        """Always set, as on a USB CDC port."""
         return True
 
     @property
     def dsr(self) -> bool:
+        """Always set, as on a USB CDC port."""
         return True
 
     @property
     def ri(self) -> bool:
+        """Never set."""
         return False
 
     @property
     def cd(self) -> bool:
+        """Always set, as on a USB CDC port."""
         return True
 
     def _update_rts_state(self) -> None:

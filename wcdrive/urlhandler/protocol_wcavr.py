@@ -15,6 +15,8 @@ from wcdrive.urlhandler.board_serial import BoardSerial
 
 
 class Serial(BoardSerial):
+    """pyserial's ``serial_for_url("wcavr://...")``: a ``MegaBoard`` per open."""
+
     def _open_board(self, url: str):
         from wcdrive.boards.simavr.mega_board import MegaBoard
 

@@ -16,6 +16,8 @@ from wcdrive.urlhandler.board_serial import BoardSerial
 
 
 class Serial(BoardSerial):
+    """pyserial's ``serial_for_url("wcsim://...")``: a ``SimulatedBoard`` per open."""
+
     def _open_board(self, url: str) -> SimulatedBoard:
         speed, seed = self._parse(url)
         return SimulatedBoard(speed=speed, seed=seed)
