@@ -30,6 +30,7 @@ FIRST_OVERFLOW_CYCLE = 21_250
 
 
 class PortLoop:
+    """The port driving the plant, run in 16 MHz cycles (module docstring)."""
     def __init__(self, plant: Plant, gyro: Gyro | None = None, dt: float = 0.001,
                  firmware: Firmware | None = None) -> None:
         self.plant = plant
@@ -53,10 +54,12 @@ class PortLoop:
         self._wire_free = start + len(data) * UART_BYTE_CYCLES
 
     def take_output(self) -> list[tuple[int, bytes]]:
+        """What the firmware sent since the last take, as (cycle, bytes)."""
         out, self.output = self.output, []
         return out
 
     def run_until(self, end_cycle: int, on_tick: Callable[[float], None] | None = None) -> None:
+        """Runs to ``end_cycle``; ``on_tick(time)`` after every control tick."""
         fw, plant = self.fw, self.plant
         while self._overflow <= end_cycle:
             overflow = self._overflow

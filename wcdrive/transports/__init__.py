@@ -1,1 +1,2 @@
-"""Ways to reach a board: the in-process simulated chair (``SimulatedBoard``) so far."""
+"""Ways to reach a board: the ``Port`` interface, the pty bridge, the CAN link and the
+recording port. The pyserial URL handlers are in ``wcdrive.urlhandler``."""

@@ -1,6 +1,6 @@
 """A virtual Arduino Mega 2560: the compiled firmware in simavr, in lock step with Python.
 
-``VirtualMega`` wraps the C harness (``hil/csrc/wcsim.c``) through ctypes. Time is
+``VirtualMega`` wraps the C harness (``csrc/wcsim.c``, built by ``build``) through ctypes. Time is
 simulated cycles at 16 MHz and advances only in ``run_until``/``run_for``; stimulus
 is queued at exact cycles, so one trace always gives the same bytes.
 
@@ -186,6 +186,7 @@ class VirtualMega:
 
     # ---- lifecycle -----------------------------------------------------------------
     def close(self) -> None:
+        """Frees the simulator; ``cycle`` stays readable. Safe to call twice."""
         if self._s:
             self._closed_cycle = self.cycle
             if self._vcd:
@@ -219,6 +220,7 @@ class VirtualMega:
         return self.cycle / F_CPU
 
     def run_until(self, cycle: int) -> None:
+        """Runs the firmware to ``cycle``, logging every hooked function entry on the way."""
         while self.run_to_break(cycle):
             pass
 
@@ -241,6 +243,7 @@ class VirtualMega:
         self._c.wcsim_set_break_mask(self._s, mask)
 
     def run_for(self, seconds: float) -> None:
+        """Runs the firmware for ``seconds`` of simulated time."""
         self.run_until(self.cycle + round(seconds * F_CPU))
 
     def _start_millis_at(self, millis: int) -> None:
@@ -256,6 +259,7 @@ class VirtualMega:
 
     # ---- stimulus ----------------------------------------------------------------
     def set_pin(self, pin: tuple[str, int], level: int, at: int | None = None) -> None:
+        """Drives an input pin (port letter, bit) to ``level`` at cycle ``at`` (default: now)."""
         port, bit = pin
         cycle = self.cycle if at is None else int(at)
         self._c.wcsim_schedule(self._s, cycle, 0, ord(port), bit, 1 if level else 0)
@@ -336,19 +340,23 @@ class VirtualMega:
         return out
 
     def take_tx_text(self) -> str:
+        """The UART bytes sent since the last take, as text."""
         return bytes(b for _, b in self.take_tx()).decode("latin-1")
 
     def take_hits(self) -> list[Hit]:
+        """The hooked function entries since the last take."""
         out, self.hit_log = self.hit_log, []
         return out
 
     def read_bytes(self, address: int, size: int) -> bytes:
+        """``size`` bytes of data space (SRAM and I/O registers) from ``address``."""
         buf = (ctypes.c_uint8 * size)()
         if self._c.wcsim_read(self._s, address, buf, size) != 0:
             raise ValueError(f"address {address:#x}+{size} is outside the data space")
         return bytes(buf)
 
     def address_of(self, name: str) -> tuple[int, int]:
+        """Data-space address and size of a firmware global, from the ELF's symbols."""
         try:
             return self.variables[name]
         except KeyError:
@@ -367,6 +375,7 @@ class VirtualMega:
         return out
 
     def read_raw(self, name: str) -> bytes:
+        """The bytes of a firmware global by name."""
         address, size = self.address_of(name)
         return self.read_bytes(address, size)
 
@@ -379,10 +388,12 @@ class VirtualMega:
         return struct.unpack("<" + fmt, self.read_raw(name)[:struct.calcsize(fmt)])[0]
 
     def write(self, name: str, value: float | int, fmt: str | None = None) -> None:
+        """Writes a firmware global by name, encoded by its C type (or ``fmt``)."""
         data = struct.pack("<" + (fmt or _FORMAT_OF[name]), value)
         self.write_raw(name, data)
 
     def write_raw(self, name: str, data: bytes) -> None:
+        """Writes bytes into a firmware global by name (at most its size)."""
         address, size = self.address_of(name)
         if len(data) > size:
             raise ValueError(f"{len(data)} bytes do not fit in {name} ({size} bytes)")
@@ -390,6 +401,7 @@ class VirtualMega:
         self._c.wcsim_write(self._s, address, buf, len(data))
 
     def pin_output(self, pin: tuple[str, int]) -> int:
+        """The level the firmware drives on an output pin (its PORTx bit)."""
         port, bit = pin
         return (self.read_bytes(_PORT_REG[port], 1)[0] >> bit) & 1
 
@@ -403,12 +415,15 @@ class VirtualMega:
         return 255 if self.pin_output(pin) else 0
 
     def direction(self, side: str) -> int:
+        """The DIR pin of a motor (1 forward)."""
         return self.pin_output(DIR_PINS[side])
 
     def relay(self) -> int:
+        """The relay pin that powers the motor driver."""
         return self.pin_output(RELAY_PIN)
 
     def stack_pointer(self) -> int:
+        """The AVR's stack pointer now."""
         return int(self._c.wcsim_sp(self._s))
 
     def free_ram(self) -> int:
