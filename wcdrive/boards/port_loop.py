@@ -31,6 +31,7 @@ FIRST_OVERFLOW_CYCLE = 21_250
 
 class PortLoop:
     """The port driving the plant, run in 16 MHz cycles (module docstring)."""
+
     def __init__(self, plant: Plant, gyro: Gyro | None = None, dt: float = 0.001,
                  firmware: Firmware | None = None) -> None:
         self.plant = plant

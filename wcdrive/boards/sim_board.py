@@ -26,6 +26,7 @@ STEP_S = 0.002
 class SimulatedBoard(ThreadedBoard):
     """The port and the plant (``PortLoop``) as a live board, paced to the wall clock
     times ``speed``; what ``wcsim://`` opens."""
+
     def __init__(self, params: ChairParams | None = None, *, speed: float = 1.0, seed: int = 0) -> None:
         if not 0.01 <= speed <= 1000.0:
             raise ValueError("speed must be within 0.01 .. 1000")
