@@ -3,9 +3,9 @@
 The host end of ``protocol/CAN.md``: protocol lines written to the port become command
 frames, and the chair's frames come back as the board's lines, so anything that
 speaks the serial protocol talks to a chair behind a ``wcdrive can-gateway``.
-``interface`` and ``channel`` are python-can's (``wccan://socketcan/can0``;
-``wccan://udp_multicast/239.74.163.2`` between processes; ``wccan://virtual/chair``
-inside one process).
+``interface`` and ``channel`` are python-can's: ``wccan://socketcan/can0`` on a real
+bus; ``wccan://virtual/chair`` reaches a gateway in the same process only (python-can's
+virtual bus is per process).
 """
 
 from __future__ import annotations
