@@ -1,11 +1,13 @@
 """The serial session with one board: the reader thread, the hello handshake, reconnects,
-and sequenced requests that are resent until acknowledged.
+and sequenced requests, acknowledged, sent again only when the board did not get them.
 
 ``Session`` speaks the protocol (``protocol/PROTOCOL.md``) over any ``Port``: it turns
 the bytes the board sends into messages, hands each tick's feedback to a callback
 (``wcdrive.telemetry.TelemetryHub.deliver``), and offers ``send`` (a line as it is),
 ``motion_line`` (framed with a checksum on a v2 board) and ``request`` (a sequenced
-line, resent until its ACK). The public API on top of it is ``wcdrive.Wheelchair``.
+line, sent again only when the board did not get it: a lost answer never makes the
+board act twice; see ``Session.request``). The public API on top of it is
+``wcdrive.Wheelchair``.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from wcdrive.errors import (
 )
 from wcdrive.protocol.codec import (
     HELLO,
+    SEQ_MAX,
     Ack,
     Boot,
     Error,
@@ -45,10 +48,34 @@ FeedbackHandler = Callable[[float, Feedback, ExtendedTelemetry | None], None]
 
 
 class _Request:
-    def __init__(self) -> None:
-        self.done = threading.Event()
+    """A sequenced request in flight; the fields are guarded by the session's lock."""
+
+    def __init__(self, seq: int) -> None:
+        self.seq = seq
+        self.answered = False
         self.data: object | None = None
         self.reason: str | None = None
+        self.order = 0          # the session's send counter when it last went out (0: not yet)
+        self.sent_at = 0.0      # host time of that send
+        self.ticks = 0          # TLM lines since then that do not report it
+        #: The first TLM line that reports it (its ``seq``, or a later request's): the
+        #: board has parsed the line, so its answer, if none came, was lost.
+        self.seen: ExtendedTelemetry | None = None
+
+
+#: ``_after_lost_answer``: the board did not act on the line; it may go out again.
+_SEND_AGAIN = object()
+#: How many recent sequence numbers remember their send order.
+_ORDER_MEMORY = 256
+
+
+def _same_value(value: float, text: bytes) -> bool:
+    """Whether ``value`` (as the board prints a parameter: 4 decimals) is ``text``."""
+    try:
+        wanted = float(text)
+    except ValueError:
+        return False
+    return abs(value - wanted) <= 0.5e-4 + 1e-6 * abs(wanted)
 
 
 class Session:
@@ -66,6 +93,7 @@ class Session:
         self.reconnect_timeout = reconnect_timeout
         self._decoder = LineDecoder()
         self._lock = threading.Lock()
+        self._changed = threading.Condition(self._lock)   # a request was answered or seen
         self._write_lock = threading.Lock()
         self.errors: list[str] = []
         self.events: list[str] = []
@@ -74,8 +102,12 @@ class Session:
         self.firmware = ""
         #: The latest TLM line (v2 boards).
         self.status: ExtendedTelemetry | None = None
-        #: Set when the board announced an e-stop (``EVT:ESTOP``) or the host sent one.
+        #: Set when the board announced an e-stop (``EVT:ESTOP``); cleared by a reset
+        #: and when the link is reopened onto a board that has reset.
         self.estop_announced = False
+        #: The host holds the e-stop latched (``Wheelchair.estop`` until ``reset_estop``):
+        #: a board that reset meanwhile (a reconnect) gets ``estop`` right after hello.
+        self.estop_held = False
         self._hello = threading.Event()
         self._handshake_done = threading.Event()
         self._hello_sent_at = -1e9
@@ -84,6 +116,9 @@ class Session:
         self._requests: dict[int, _Request] = {}
         self._last_data: object | None = None
         self._seq = 0
+        self._sends = 0
+        self._sent_order: dict[int, int] = {}       # seq -> self._sends when it last went out
+        self._telemetry_seen = False
         self._link_up = threading.Event()
         self._link_up.set()
         self.closed = threading.Event()
@@ -98,40 +133,117 @@ class Session:
     def send(self, data: bytes) -> None:
         """Writes ``data`` as it is; raises ``WcdriveConnectionError`` when the link is
         closed, lost or the write fails."""
+        with self._write_lock:
+            self._write(data)
+
+    def _write(self, data: bytes) -> None:
         if self.closed.is_set():
             raise WcdriveConnectionError("the link is closed: connect() again")
         if not self._link_up.is_set():
             raise WcdriveConnectionError("the link is lost (unplugged?); reconnecting: the "
                                          "board's watchdog has stopped the chair")
         try:
-            with self._write_lock:
-                self.port.write(data)
+            self.port.write(data)
         except (serial.SerialException, OSError) as exc:
             raise WcdriveConnectionError(
                 f"writing to the board failed ({exc}); is it still plugged in?") from exc
 
     def request(self, command: bytes) -> object | None:
-        """A sequenced line, resent until its ACK; returns the data line answered with it.
-        Raises WcdriveCommandError on a NAK, WcdriveTimeoutError without an answer."""
-        last_error = None
-        for _ in range(self.REQUEST_TRIES):
+        """A sequenced line; returns the data line answered with it (``PAR:``), or None.
+        Raises WcdriveCommandError on a NAK (WcdriveEstopError for "estop"),
+        WcdriveTimeoutError when the board never answers.
+
+        The board acts on every framed line it parses, a repeated one too, so the line
+        goes out again (with the same sequence number) only when the board shows that
+        it did not get it: for ``REQUEST_TIMEOUT`` s and two TLM lines, no TLM reported
+        its number (a board without TLM lines: ``REQUEST_TIMEOUT`` s without an
+        answer). When a TLM reports it but its answer was lost (a corrupted byte on the
+        way back, or the board's limit of 3 answers a tick), the outcome is read from the
+        board instead of acting twice: the e-stop flag of that TLM for ``estop`` and
+        ``reset``, a ``get:`` for a parameter (a ``set:`` goes out again only when the
+        value in force is not the one asked for)."""
+        with self._lock:
+            self._seq = self._seq % SEQ_MAX + 1     # 1 .. SEQ_MAX: a board that reset reports 0
+            request = self._requests[self._seq] = _Request(self._seq)
+        try:
+            return self._exchange(command, request)
+        finally:
             with self._lock:
-                self._seq = (self._seq + 1) % 65536
-                seq = self._seq
-                request = self._requests[seq] = _Request()
-            try:
-                self.send(frame(command, seq))
-                if request.done.wait(self.REQUEST_TIMEOUT):
-                    if request.reason is not None:
-                        cls = WcdriveEstopError if request.reason == "estop" else WcdriveCommandError
-                        raise cls(f"the board refused {command.decode()!r}: {request.reason}",
-                                  request.reason)
-                    return request.data
-                last_error = f"no answer to {command.decode()!r} in {self.REQUEST_TIMEOUT} s"
-            finally:
-                with self._lock:
-                    self._requests.pop(seq, None)
-        raise WcdriveTimeoutError(f"{last_error}, {self.REQUEST_TRIES} tries: is the link up?")
+                self._requests.pop(request.seq, None)
+
+    def _exchange(self, command: bytes, request: _Request) -> object | None:
+        deadline = time.monotonic() + self.REQUEST_TIMEOUT * (self.REQUEST_TRIES + 1)
+        for _ in range(self.REQUEST_TRIES):
+            self._send_request(command, request)
+            outcome = self._await(request, deadline)
+            if outcome == "answered":
+                if request.reason is not None:
+                    cls = WcdriveEstopError if request.reason == "estop" else WcdriveCommandError
+                    raise cls(f"the board refused {command.decode()!r}: {request.reason}",
+                              request.reason)
+                if command.startswith((b"get:", b"set:")):
+                    name = command[4:].partition(b"=")[0]
+                    data = request.data
+                    if not isinstance(data, Param) or data.name.encode() != name:
+                        return self.request(b"get:" + name)        # its PAR: line was lost
+                return request.data
+            if outcome == "seen":
+                result = self._after_lost_answer(command, request)
+                if result is not _SEND_AGAIN:
+                    return result
+            elif outcome == "timeout":
+                break
+        raise WcdriveTimeoutError(f"no answer to {command.decode()!r}: is the link up?")
+
+    def _send_request(self, command: bytes, request: _Request) -> None:
+        data = frame(command, request.seq)
+        with self._write_lock:                  # the send order is the order on the wire
+            with self._lock:
+                self._sends += 1
+                request.order, request.sent_at = self._sends, time.monotonic()
+                request.ticks, request.seen = 0, None
+                self._sent_order.pop(request.seq, None)
+                self._sent_order[request.seq] = request.order
+                if len(self._sent_order) > _ORDER_MEMORY:
+                    del self._sent_order[next(iter(self._sent_order))]
+            self._write(data)
+
+    def _await(self, request: _Request, deadline: float) -> str:
+        """"answered", "seen" (the board has it, its answer was lost), "lost" (it
+        did not get it) or "timeout"."""
+        with self._changed:
+            while True:
+                if request.answered:
+                    return "answered"
+                if request.seen is not None:
+                    return "seen"
+                now = time.monotonic()
+                waited = now - request.sent_at >= self.REQUEST_TIMEOUT
+                if waited and (request.ticks >= 2 or not self._telemetry_seen):
+                    return "lost"
+                if now >= deadline:
+                    return "timeout"
+                wake = deadline if waited else min(deadline, request.sent_at + self.REQUEST_TIMEOUT)
+                self._changed.wait(wake - now)
+
+    def _after_lost_answer(self, command: bytes, request: _Request) -> object | None:
+        """The board parsed the line but its answer never came: what it did, read from
+        the board, or ``_SEND_AGAIN`` when it did not act on it."""
+        seen = request.seen
+        assert seen is not None
+        if command == b"estop":
+            return None if seen.estop_latched else _SEND_AGAIN
+        if command == b"reset":
+            if seen.estop_latched:              # reset answers NAK only when not parked
+                raise WcdriveCommandError("the board refused 'reset': busy", "busy")
+            return None
+        if not command.startswith((b"get:", b"set:")):
+            return _SEND_AGAIN
+        name, _, text = command[4:].partition(b"=")
+        current = self.request(b"get:" + name)
+        if command.startswith(b"get:") or (isinstance(current, Param) and _same_value(current.value, text)):
+            return current
+        return _SEND_AGAIN
 
     # ---- handshake -------------------------------------------------------------------
     def _maybe_hello(self, now: float) -> None:
@@ -184,10 +296,13 @@ class Session:
     def _handle(self, now: float, msg: object) -> None:
         if isinstance(msg, ExtendedTelemetry):
             self.status = msg
+            self._last_data = None                  # a data line is followed by its ACK at once
+            self._note_telemetry(msg)
             self._flush_feedback(msg)
             return
         self._flush_feedback(None)                  # a feedback line without its TLM
         if isinstance(msg, Feedback):
+            self._last_data = None
             if self.protocol_version >= 2:
                 self._pending_feedback = (now, msg)  # its TLM line follows at once
             else:
@@ -198,18 +313,21 @@ class Session:
         elif isinstance(msg, Hello):
             self.protocol_version = msg.version
             self.firmware = msg.firmware
+            if self.estop_held and msg.version >= 2:
+                self._relatch_estop()
             self._hello.set()
             self._handshake_done.set()
             self._last_data = msg
         elif isinstance(msg, Param):
             self._last_data = msg
         elif isinstance(msg, Ack | Nak):
-            with self._lock:
+            with self._changed:
                 request = self._requests.get(msg.seq)
-            if request is not None:
-                request.data = self._last_data
-                request.reason = msg.reason if isinstance(msg, Nak) else None
-                request.done.set()
+                if request is not None and not request.answered:
+                    request.answered = True
+                    request.data = self._last_data
+                    request.reason = msg.reason if isinstance(msg, Nak) else None
+                    self._changed.notify_all()
             self._last_data = None
         elif isinstance(msg, Error):
             self.errors.append(msg.reason)
@@ -221,6 +339,29 @@ class Session:
             self.events.append(msg.name)
             if msg.name == "ESTOP":
                 self.estop_announced = True
+
+    def _note_telemetry(self, msg: ExtendedTelemetry) -> None:
+        """A TLM line reports the last sequence number the board parsed: the pending
+        requests sent up to it have reached the board; the others count a tick."""
+        with self._changed:
+            self._telemetry_seen = True
+            reported = self._sent_order.get(msg.seq, 0)
+            for request in self._requests.values():
+                if request.order == 0 or request.answered or request.seen is not None:
+                    continue
+                if msg.seq == request.seq or reported > request.order:
+                    request.seen = msg
+                else:
+                    request.ticks += 1
+            self._changed.notify_all()
+
+    def _relatch_estop(self) -> None:
+        """The board reset while the host held the e-stop: latch it there again."""
+        try:
+            with self._write_lock:
+                self.port.write(frame(b"estop"))
+        except (serial.SerialException, OSError):
+            self.errors.append("e-stop not re-sent")
 
     def _reconnect(self) -> bool:
         """The device vanished: reopen it until ``reconnect_timeout``; the board resets
@@ -243,6 +384,10 @@ class Session:
             self.port = port
             self._decoder = LineDecoder()
             self._pending_feedback = None
+            self._last_data = None
+            self.status = None                  # the old board's; the new one reports anew
+            self.estop_announced = False        # re-latched after hello when estop_held
+            self._telemetry_seen = False
             self.protocol_version = 1
             self._hello.clear()
             self._handshake_done.clear()

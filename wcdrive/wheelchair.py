@@ -7,12 +7,15 @@ reconnect, acknowledged requests) and telemetry with odometry in
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from collections.abc import Callable, Iterator
 
 import numpy as np
 
+from wcdrive.avr.avrlibc import strtod
+from wcdrive.avr.f32 import f32
 from wcdrive.errors import (
     WcdriveCommandError,
     WcdriveEstopError,
@@ -22,6 +25,9 @@ from wcdrive.errors import (
 from wcdrive.odometry import OdometryEstimate
 from wcdrive.protocol.codec import (
     ESTOP,
+    MAX_ANGULAR,
+    MAX_LINEAR,
+    MAX_WHEEL,
     RESET,
     ExtendedTelemetry,
     Param,
@@ -38,6 +44,17 @@ from wcdrive.transports.recording import Recording
 __all__ = ["Telemetry", "Wheelchair"]
 
 
+def _as_board_reads(value: float, limit: float) -> float:
+    """``value`` (already checked against ``limit``) at the 3 decimals the codec writes,
+    stepped 0.001 toward zero when the board would read that text just past its
+    binary32 limit: avr-libc's ``strtod`` is not correctly rounded, and reads "9.400"
+    as 9.4000006, above the firmware's 9.3999996, so ``x:0.000,t:9.400,`` is refused."""
+    text = f"{abs(value):.3f}"
+    while strtod(text.encode())[0] > f32(limit):
+        text = f"{float(text) - 0.001:.3f}"
+    return math.copysign(float(text), value)
+
+
 class Wheelchair:
     """A chair behind a serial-like ``port`` (a ``wcdrive.transports.port.Port``).
     ``reopen``: how to open the same device again after it vanished (device paths),
@@ -49,7 +66,6 @@ class Wheelchair:
                  ) -> None:
         self._on_close = on_close
         self._hub = TelemetryHub(odometry_method)
-        self._estop_latched = False
         self._session = Session(port, self._hub.deliver, reopen=reopen,
                                 reconnect_timeout=reconnect_timeout)
 
@@ -90,12 +106,18 @@ class Wheelchair:
 
     # ---- commands ----------------------------------------------------------------
     def set_velocity(self, linear: float, angular: float) -> None:
-        """Drive at ``linear`` m/s and ``angular`` rad/s (ValueError when out of range)."""
-        self._move(encode_cmdvel(linear, angular))
+        """Drive at ``linear`` m/s and ``angular`` rad/s (ValueError when out of range;
+        the board takes them to 3 decimals, and the limits themselves 0.001 short)."""
+        encode_cmdvel(linear, angular)          # ValueError when out of range
+        self._move(encode_cmdvel(_as_board_reads(linear, MAX_LINEAR),
+                                 _as_board_reads(angular, MAX_ANGULAR)))
 
     def set_wheels(self, left: float, right: float) -> None:
-        """Wheel speeds in rad/s, forward positive."""
-        self._move(encode_wheel(right, left))
+        """Wheel speeds in rad/s, forward positive (ValueError outside the WHEEL range;
+        the board refuses speeds beyond its ``max_wheel`` parameter: ``ERR:range`` in
+        ``errors``, and the command before stays in force)."""
+        encode_wheel(right, left)               # ValueError when out of range
+        self._move(encode_wheel(_as_board_reads(right, MAX_WHEEL), _as_board_reads(left, MAX_WHEEL)))
 
     def stop(self) -> None:
         """Targets to zero at the normal ramp (also while the e-stop is latched)."""
@@ -104,12 +126,13 @@ class Wheelchair:
     def estop(self) -> None:
         """Latch the e-stop: the board stops at its emergency rate and refuses motion
         until ``reset_estop()``. Acknowledged and retried; raises when the board never
-        confirms (after sending a plain stop as well)."""
+        confirms (after sending a plain stop as well). The host keeps it latched until
+        ``reset_estop()``: a board that resets meanwhile (a reconnect) is latched again."""
         if self.protocol_version < 2:
             self.stop()
             raise WcdriveProtocolError("this board speaks protocol v1, which has no latched "
                                        "e-stop: a stop was sent instead; flash the v2 firmware")
-        self._estop_latched = True
+        self._session.estop_held = True
         try:
             self._session.request(ESTOP.rstrip(b"\n"))
         except WcdriveTimeoutError:
@@ -125,7 +148,7 @@ class Wheelchair:
         while True:
             try:
                 self._session.request(RESET.rstrip(b"\n"))
-                self._estop_latched = False
+                self._session.estop_held = False
                 self._session.estop_announced = False
                 self._session.status = None          # the last TLM predates the reset
                 return
@@ -140,7 +163,7 @@ class Wheelchair:
         status = self._session.status
         if status is not None and status.estop_latched:
             return True
-        return self._estop_latched or self._session.estop_announced
+        return self._session.estop_held or self._session.estop_announced
 
     def get_param(self, name: str) -> float:
         """A runtime parameter (protocol/PROTOCOL.md, "Parameters")."""
