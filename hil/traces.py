@@ -7,9 +7,10 @@ command kind, malformed and newline-less commands, awkward decimal strings,
 reversals that start pivots and commands that interrupt them, silences past the
 watchdog, PPM loss, long saturations, illegal encoder transitions, encoder speeds up
 to 40,000 edges/s and boots with ``millis()`` just below its 2**32 wrap; and protocol
-v2: framed lines with sequence numbers and good, bad or missing checksums, hello
-(which turns the TLM lines on), get/set of every parameter in and out of range,
-estop and reset.
+v3: frames with sequence numbers and good, bad or missing CRCs (one or more flipped
+bits, lower-case hex, no sequence number, the ``$`` flipped to ``,``), hello (which
+turns the TLM lines on and from then on refuses unframed lines, but for stops and
+estop), get/set of every parameter in and out of range, estop and reset.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ import numpy as np
 
 from wcdrive.firmware.params import PARAMS
 from wcdrive.plant.encoders import EdgeTrain, edges_from_trajectory, state_for_count
-from wcdrive.protocol.codec import SEQ_MAX, checksum, frame
+from wcdrive.protocol.codec import SEQ_MAX, crc16, frame
 
 T = TypeVar("T")
 
@@ -249,35 +250,44 @@ def protocol_v2_command(draw: Draw) -> bytes:
 
 
 def framed(draw: Draw, body: bytes) -> bytes:
-    """``body`` as a framed v2 line, sometimes damaged (wrong or missing checksum,
-    lower-case hex, a bad sequence number, a flipped byte, overlong)."""
-    seq = draw.integer(0, SEQ_MAX) if draw.boolean(0.8) else None
-    line = frame(body.rstrip(b"\r\n"), seq)
-    damage = draw.integer(0, 11)
+    """``body`` as a v3 frame, sometimes damaged: bit flips (the ``$`` too), a missing or
+    lower-case CRC, a missing or bad sequence number, an overlong frame."""
+    body = body.rstrip(b"\r\n")
+    line = frame(body, draw.integer(0, SEQ_MAX))
+    damage = draw.integer(0, 13)
     if damage == 0:
-        i = draw.integer(1, len(line) - 2)
-        line = line[:i] + bytes([line[i] ^ (1 << draw.integer(0, 6))]) + line[i + 1:]
+        for _ in range(draw.integer(1, 3)):
+            i = draw.integer(0, len(line) - 2)
+            line = line[:i] + bytes([line[i] ^ (1 << draw.integer(0, 6))]) + line[i + 1:]
     elif damage == 1:
-        line = line[:-4] + b"\n"                           # no checksum
+        line = line[:-6] + b"\n"                           # no CRC
     elif damage == 2:
-        line = line[:-3] + line[-3:-1].lower() + b"\n"    # lower-case hex: accepted
+        line = line[:-5] + line[-5:-1].lower() + b"\n"    # lower-case hex: refused
     elif damage == 3:
-        inner = draw.choice([b"123456:", b"70000:", b"12", b"7:"]) + body.rstrip(b"\r\n")
-        line = b"$" + inner + b"*%02X\n" % checksum(inner)
+        inner = draw.choice([b"123456:", b"70000:", b"12", b"", b":"]) + body
+        line = b"$" + inner + b"*%04X\n" % crc16(inner)
     elif damage == 4:
-        inner = b"1:" + body.rstrip(b"\r\n") + b"," + b"9" * draw.integer(40, 70)
-        line = b"$" + inner + b"*%02X\n" % checksum(inner)
+        inner = b"1:" + body + b"," + b"9" * draw.integer(40, 70)
+        line = b"$" + inner + b"*%04X\n" % crc16(inner)
+    elif damage == 5:
+        line = b"," + line[1:]                             # the $ -> , flip
     return line
 
 
-def command(draw: Draw, travel_sign: list[int]) -> bytes:
+def command(draw: Draw, travel_sign: list[int], said_hello: list[bool] | None = None) -> bytes:
     """One command of any kind; ``travel_sign`` tracks the direction so reversals
-    (and so pivots) come often. A quarter are protocol v2: framed lines and the
-    hello/estop/reset/get/set commands."""
+    (and so pivots) come often. A quarter are v3 frames, and after a ``hello``
+    (``said_hello``, which this updates) nine in ten: the board then refuses unframed
+    lines but stops and estop."""
     body = _command(draw, travel_sign)
-    if draw.boolean(0.25):
-        return framed(draw, body)
-    return body
+    hello = said_hello is not None and said_hello[0]
+    if draw.boolean(0.9 if hello else 0.25):
+        line = framed(draw, body)
+    else:
+        line = body
+    if said_hello is not None and b"hello" in line:
+        said_hello[0] = True
+    return line
 
 
 def _command(draw: Draw, travel_sign: list[int]) -> bytes:
@@ -356,8 +366,9 @@ def generate_trace(draw: Draw, duration: float) -> Trace:
     serial: list[tuple[float, bytes]] = []
     t = FIRST_COMMAND_S + draw.real(0.0, 0.1)
     travel_sign = [1]
+    said_hello = [False]
     while t < duration - 0.05:
-        data = command(draw, travel_sign) + terminator(draw)
+        data = command(draw, travel_sign, said_hello) + terminator(draw)
         serial.append((t, data))
         gap = draw.integer(0, 9)
         if gap == 0:

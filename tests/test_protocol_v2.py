@@ -13,6 +13,7 @@ import pytest
 
 from tests.boards import boot, send_and_run
 from wcdrive.boards.simavr.virtual_mega import VirtualMega
+from wcdrive.firmware import constants as C
 from wcdrive.firmware.final_control import FREE_RAM, Firmware
 from wcdrive.plant.encoders import edges_from_trajectory
 from wcdrive.protocol.codec import ExtendedTelemetry, frame, parse_line
@@ -76,7 +77,8 @@ def test_gains_and_ramp_parameters_change_the_loop(mega) -> None:
 def test_tlm_lines_follow_feedback_after_hello_and_carry_the_tick_inputs(mega) -> None:
     boot(mega, 0.1)
     out = send_and_run(mega, b"hello\n" + frame(b"rp1.0,lp1.0,", 41), 0.3)
-    assert b"HELLO:2,final_control\r\n" in out and b"ACK:41\r\n" in out
+    assert b"HELLO:3,final_control,%s,%s\r\n" % (C.FIRMWARE_VERSION.encode(), C.BUILD_ID.encode()) in out
+    assert b"ACK:41\r\n" in out
     lines = out.split(b"\r\n")
     tlm = [parse_line(line) for line in lines if line.startswith(b"TLM:")]
     assert len(tlm) >= 5 and all(isinstance(t, ExtendedTelemetry) for t in tlm)

@@ -21,6 +21,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <util/atomic.h>
+#include <util/crc16.h>
 
 #include "wc_config.h"
 
@@ -129,12 +130,13 @@ uint8_t stillTicks = 0;
 volatile bool parked = true;                       // motors held at zero with integrators reset
 
 bool estopLatched = false;                  // e-stop: motion refused until "reset"
-bool tlmEnabled = false;                    // TLM lines after each ENC line (after "hello")
+bool tlmEnabled = false;                    // after "hello": TLM lines, and v3 frames only
+bool unframedLine = false;                  // the line being parsed is not a v3 frame
 uint16_t lastSeq = 0;                       // sequence number of the last framed line
 uint32_t rxCount = 0;                       // bytes received (through processByte)
 
 uint32_t rejectedCount = 0;                 // every rejected command
-uint32_t crcRejected = 0;                   // framed lines with a bad or missing checksum
+uint32_t crcRejected = 0;                   // framed lines with a bad or missing CRC
 uint32_t errSuppressed = 0;                 // replies not sent (rate limit)
 uint32_t txDropped = 0;                     // lines not sent for lack of TX room
 uint8_t errLinesThisTick = 0;
@@ -372,7 +374,7 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
 // ---------------------------------------------------------------------------
 enum ParseResult : uint8_t {
   PARSE_OK, ERR_SYNTAX, ERR_NUMBER, ERR_RANGE, ERR_FIELDS, ERR_OVERLONG, ERR_CHECKSUM, ERR_ESTOP,
-  ERR_BUSY, ERR_PARAM
+  ERR_BUSY, ERR_PARAM, ERR_UNFRAMED
 };
 // What a command answers besides ACK/ERR.
 enum DataReply : uint8_t { DATA_NONE, DATA_HELLO, DATA_PARAM };
@@ -397,9 +399,10 @@ static const char R_CHECKSUM[] PROGMEM = "checksum";
 static const char R_ESTOP[] PROGMEM = "estop";
 static const char R_BUSY[] PROGMEM = "busy";
 static const char R_PARAM[] PROGMEM = "param";
+static const char R_UNFRAMED[] PROGMEM = "unframed";
 static const char* const REASONS[] = {
   R_SYNTAX, R_SYNTAX, R_NUMBER, R_RANGE, R_FIELDS, R_OVERLONG, R_CHECKSUM, R_ESTOP, R_BUSY,
-  R_PARAM,
+  R_PARAM, R_UNFRAMED,
 };
 
 // Runtime parameters: name, variable, range. watchdog_ms (the last) is an integer.
@@ -442,7 +445,8 @@ static void answer(ParseResult r, int32_t seq, uint8_t data) {
   if (r == PARSE_OK && data == DATA_HELLO) {
     line.print(F("HELLO:"));
     line.print(WC_PROTOCOL_VERSION);
-    line.println(F(",final_control"));
+    line.print(F(",final_control," WC_FIRMWARE_VERSION ","));
+    line.println(F(WC_BUILD_ID));
     line.send();
   } else if (r == PARSE_OK && data == DATA_PARAM) {
     line.print(F("PAR:"));
@@ -520,9 +524,16 @@ static int32_t parseDigits(const char* s, uint8_t maxDigits) {
   return n == 0 ? -1 : v;
 }
 
+// After hello, a line that is not a v3 frame may only make the chair safer: a zero
+// velocity in any form (or estop, or a PPM frame that reports signal loss).
+static bool refusedUnframed(float right, float left) {
+  return unframedLine && (right != 0.0f || left != 0.0f);
+}
+
 // A motion command: the wheel targets, unless the e-stop is latched (then a stop
 // is accepted and changes nothing, and anything else is refused).
 static ParseResult moveTo(uint8_t newMode, float right, float left) {
+  if (refusedUnframed(right, left)) return ERR_UNFRAMED;
   if (estopLatched) return right == 0.0f && left == 0.0f ? PARSE_OK : ERR_ESTOP;
   acceptCommand(newMode, right, left);
   return PARSE_OK;
@@ -599,6 +610,7 @@ static ParseResult parsePpm() {
   float turn = (float)shapeStick(ch[WC_PPM_TURN_CHANNEL] - WC_PPM_NEUTRAL) * perUs;
   float right = constrain(fwd - turn, -cap, cap);
   float left = constrain(fwd + turn, -cap, cap);
+  if (refusedUnframed(right, left)) return ERR_UNFRAMED;
   if (estopLatched) return right == 0.0f && left == 0.0f ? PARSE_OK : ERR_ESTOP;
   ppmLost = false;
   acceptCommand(WC_MODE_PPM, right, left);
@@ -682,39 +694,39 @@ static bool allPrintable() {
   return true;
 }
 
+// An upper-case hex digit's value, or -1.
 static int8_t hexValue(char c) {
   if (c >= '0' && c <= '9') return c - '0';
   if (c >= 'A' && c <= 'F') return c - 'A' + 10;
-  if (c >= 'a' && c <= 'f') return c - 'a' + 10;
   return -1;
 }
 
-// A framed line: $[<seq>:]<command>*<hh>, hh the XOR of the bytes between $ and *.
-// Checks the checksum, takes the sequence number and leaves the bare command in
-// cmdBuf.
+// A v3 frame: $<seq>:<command>*<CCCC>, CCCC the CRC-16/XMODEM of the bytes between
+// $ and * in upper-case hex. Checks the CRC, takes the sequence number (mandatory)
+// and leaves the bare command in cmdBuf.
 static ParseResult unframe(int32_t& seq) {
-  if (cmdLen < 4 || cmdBuf[cmdLen - 3] != '*') return ERR_CHECKSUM;
-  int8_t hi = hexValue(cmdBuf[cmdLen - 2]);
-  int8_t lo = hexValue(cmdBuf[cmdLen - 1]);
-  if (hi < 0 || lo < 0) return ERR_CHECKSUM;
-  uint8_t sum = 0;
-  for (uint8_t i = 1; i < cmdLen - 3; i++) sum ^= (uint8_t)cmdBuf[i];
-  if (sum != (uint8_t)((hi << 4) | lo)) return ERR_CHECKSUM;
-  uint8_t start = 1;
-  if (cmdBuf[1] >= '0' && cmdBuf[1] <= '9') {
-    int32_t v = 0;
-    uint8_t p = 1;
-    while (cmdBuf[p] >= '0' && cmdBuf[p] <= '9') {
-      if (p == 6) return ERR_SYNTAX;          // more than 5 digits
-      v = v * 10 + (cmdBuf[p] - '0');
-      p++;
-    }
-    if (cmdBuf[p] != ':' || v > (int32_t)WC_SEQ_MAX) return ERR_SYNTAX;
-    seq = v;
-    lastSeq = (uint16_t)v;
-    start = p + 1;
+  if (cmdLen < 6 || cmdBuf[cmdLen - 5] != '*') return ERR_CHECKSUM;
+  uint16_t sent = 0;
+  for (uint8_t i = cmdLen - 4; i < cmdLen; i++) {
+    int8_t h = hexValue(cmdBuf[i]);
+    if (h < 0) return ERR_CHECKSUM;
+    sent = (sent << 4) | (uint8_t)h;
   }
-  cmdLen = cmdLen - 3 - start;
+  uint16_t crc = 0;
+  for (uint8_t i = 1; i < cmdLen - 5; i++) crc = _crc_xmodem_update(crc, (uint8_t)cmdBuf[i]);
+  if (crc != sent) return ERR_CHECKSUM;
+  int32_t v = 0;
+  uint8_t p = 1;
+  while (cmdBuf[p] >= '0' && cmdBuf[p] <= '9') {
+    if (p == 6) return ERR_SYNTAX;            // more than 5 digits
+    v = v * 10 + (cmdBuf[p] - '0');
+    p++;
+  }
+  if (p == 1 || cmdBuf[p] != ':' || v > (int32_t)WC_SEQ_MAX) return ERR_SYNTAX;
+  seq = v;
+  lastSeq = (uint16_t)v;
+  uint8_t start = p + 1;
+  cmdLen = cmdLen - 5 - start;
   memmove(cmdBuf, cmdBuf + start, cmdLen);
   cmdBuf[cmdLen] = '\0';
   return PARSE_OK;
@@ -722,18 +734,20 @@ static ParseResult unframe(int32_t& seq) {
 
 static ParseResult dispatch(uint8_t& data) {
   if (!allPrintable()) return ERR_SYNTAX;
+  if (strcmp_P(cmdBuf, PSTR("estop")) == 0) return latchEstop();
+  if (cmdBuf[0] == 'x') return parseCmdVel();        // unframed: zero only (moveTo)
+  if (cmdBuf[0] == 'r' && cmdBuf[1] != 'e') return parseWheel();
+  if (cmdLen >= 4 && cmdBuf[0] == 'p' && cmdBuf[1] == 'p' && cmdBuf[2] == 'm') return parsePpm();
+  if (unframedLine) return ERR_UNFRAMED;              // after hello, nothing else unframed
   if (strcmp_P(cmdBuf, PSTR("hello")) == 0) {
-    tlmEnabled = true;
+    tlmEnabled = true;      // TLM lines from now on, and v3 frames only until reset
     data = DATA_HELLO;
     return PARSE_OK;
   }
-  if (strcmp_P(cmdBuf, PSTR("estop")) == 0) return latchEstop();
   if (strcmp_P(cmdBuf, PSTR("reset")) == 0) return resetEstop();
   if (strncmp_P(cmdBuf, PSTR("get:"), 4) == 0) return parseGet(data);
   if (strncmp_P(cmdBuf, PSTR("set:"), 4) == 0) return parseSet(data);
   if (cmdBuf[0] == 'r') return parseWheel();
-  if (cmdBuf[0] == 'x') return parseCmdVel();
-  if (cmdLen >= 4 && cmdBuf[0] == 'p' && cmdBuf[1] == 'p' && cmdBuf[2] == 'm') return parsePpm();
   return ERR_SYNTAX;
 }
 
@@ -742,9 +756,12 @@ static void finishCommand() {
   int32_t seq = -1;
   uint8_t data = DATA_NONE;
   ParseResult r = PARSE_OK;
+  unframedLine = false;
   if (cmdBuf[0] == '$') {
     r = unframe(seq);
     if (r == ERR_CHECKSUM) crcRejected++;
+  } else if (tlmEnabled) {
+    unframedLine = true;    // after hello: only what makes the chair safer
   }
   if (r == PARSE_OK) r = dispatch(data);
   if (r != PARSE_OK) rejectedCount++;
@@ -783,7 +800,7 @@ extern "C" __attribute__((noinline)) void processByte(uint8_t c) {
   cmdCommas++;
   uint8_t expected = fieldsExpected();
   if (expected == 0) {
-    reject(ERR_SYNTAX);
+    reject(tlmEnabled ? ERR_UNFRAMED : ERR_SYNTAX);
     cmdLen = 0;
     cmdCommas = 0;
   } else if (cmdCommas >= expected) {

@@ -9,8 +9,9 @@
 #define WC_BAUD 115200UL
 #define WC_CMD_MAX_LEN 63          // longest command (bytes before its terminator)
 #define WC_ERR_LINES_PER_TICK 3    // commands answered per 50 ms window (ERR, ACK/NAK, data); the rest are counted
-#define WC_PROTOCOL_VERSION 2      // sent in the HELLO reply
-#define WC_SEQ_MAX 65535UL         // largest sequence number of a framed line
+#define WC_PROTOCOL_VERSION 3      // sent in the HELLO reply
+#define WC_FIRMWARE_VERSION "3.0.0" // final_control's version, sent in the HELLO reply
+#define WC_SEQ_MAX 65535UL         // largest sequence number of a v3 frame
 
 // ---- Timing ----------------------------------------------------------------
 #define WC_CONTROL_PERIOD_MS 50UL  // control tick and feedback period

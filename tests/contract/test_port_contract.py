@@ -49,7 +49,7 @@ def test_open_use_close(backend: Backend) -> None:
     wait_alive(backend, port)
     assert port.write(HELLO) == len(HELLO)
     port.flush()
-    read_until(port, lambda data: b"HELLO:2,final_control\r\n" in data)
+    read_until(port, lambda data: b"HELLO:3,final_control," in data)
 
     call_within(5.0, port.close)
     assert not port.is_open

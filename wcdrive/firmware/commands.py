@@ -2,14 +2,17 @@
 
 A command ends at a line end (``\\n`` or ``\\r``) or at the comma of its last field
 (WHEEL and CMDVEL: the 2nd, PPM: the 8th), so the seed host's newline-less
-``x:0.500,t:0.100,`` takes effect at the next tick. A framed line
-``$[<seq>:]<command>*<hh>`` (protocol v2) ends at its line end only. Malformed
-commands are counted and answered with ``ERR:<reason>`` (``NAK:<seq>,<reason>`` when
-framed with a sequence number); they never change the targets or the mode.
+``x:0.500,t:0.100,`` takes effect at the next tick. A v3 frame
+``$<seq>:<command>*<CCCC>`` (CRC-16/XMODEM) ends at its line end only. Malformed
+commands are counted and answered with ``ERR:<reason>`` (``NAK:<seq>,<reason>`` for a
+frame); they never change the targets or the mode. After ``hello`` a line that is not
+a frame may only make the chair safer (``estop``, a zero velocity in any form, a PPM
+loss frame); anything else is ``ERR:unframed``.
 """
 
 from __future__ import annotations
 
+import binascii
 import functools
 import re
 
@@ -20,7 +23,6 @@ from wcdrive.firmware.motion import accept_command, emergency_halt
 from wcdrive.firmware.output import DATA_HELLO, DATA_NONE, DATA_PARAM, answer, reject, send_event
 from wcdrive.firmware.params import BY_NAME, PARAMS
 from wcdrive.firmware.state import FirmwareState
-from wcdrive.protocol.codec import checksum
 
 NEWLINE, RETURN, COMMA, DOLLAR = 0x0A, 0x0D, 0x2C, 0x24
 DISCARD_NONE, DISCARD_TO_COMMA, DISCARD_TO_EOL = 0, 1, 2
@@ -179,39 +181,39 @@ def parse(buf: bytes, max_wheel: float = C.MAX_WHEEL_SPEED) -> tuple[int, float,
 
 
 def hex_value(c: int) -> int:
-    """``hexValue``: the value of a hex digit (either case), or -1."""
+    """``hexValue``: the value of an upper-case hex digit, or -1."""
     if 0x30 <= c <= 0x39:
         return c - 0x30
     if 0x41 <= c <= 0x46:
         return c - 0x41 + 10
-    if 0x61 <= c <= 0x66:
-        return c - 0x61 + 10
     return -1
 
 
 @functools.lru_cache(maxsize=1024)
 def unframe(buf: bytes) -> tuple[str | None, int, bytes]:
-    """``$[<seq>:]<command>*<hh>`` -> (reason or None, seq or -1, command). A sequence
-    number is returned (and taken as the last one) only once the checksum is right and
-    the number well formed. Pure, so cached like ``parse``."""
+    """``$<seq>:<command>*<CCCC>`` -> (reason or None, seq or -1, command). The CRC is
+    avr-libc's ``_crc_xmodem_update`` over the bytes between ``$`` and ``*``, which is
+    ``binascii.crc_hqx(..., 0)``. A sequence number is returned (and taken as the last
+    one) only once the CRC is right and the number well formed. Pure, so cached."""
     n = len(buf)
-    if n < 4 or buf[n - 3] != 0x2A:
+    if n < 6 or buf[n - 5] != 0x2A:
         return "checksum", -1, buf
-    hi, lo = hex_value(buf[n - 2]), hex_value(buf[n - 1])
-    if hi < 0 or lo < 0 or checksum(buf[1:n - 3]) != (hi << 4) | lo:
+    sent = 0
+    for c in buf[n - 4:]:
+        h = hex_value(c)
+        if h < 0:
+            return "checksum", -1, buf
+        sent = (sent << 4) | h
+    if binascii.crc_hqx(buf[1:n - 5], 0) != sent:
         return "checksum", -1, buf
-    start, seq = 1, -1
-    if 0x30 <= buf[1] <= 0x39:
-        p = 1
-        while 0x30 <= buf[p] <= 0x39:
-            if p == 6:
-                return "syntax", -1, buf
-            p += 1
-        value = int(buf[1:p])
-        if buf[p] != 0x3A or value > C.SEQ_MAX:
+    p = 1
+    while 0x30 <= buf[p] <= 0x39:
+        if p == 6:
             return "syntax", -1, buf
-        seq, start = value, p + 1
-    return None, seq, buf[start:n - 3]
+        p += 1
+    if p == 1 or buf[p] != 0x3A or int(buf[1:p]) > C.SEQ_MAX:
+        return "syntax", -1, buf
+    return None, int(buf[1:p]), buf[p + 1:n - 5]
 
 
 def find_param(name: bytes) -> int:
@@ -260,12 +262,15 @@ def parse_set(s: FirmwareState, body: bytes) -> tuple[str | None, int]:
 
 def move_to(s: FirmwareState, body: bytes, out: bytearray) -> str | None:
     """A motion command (``parseWheel``/``parseCmdVel``/``parsePpm`` and ``moveTo``):
-    the reason it is refused, or None. With the e-stop latched a stop or a PPM loss
+    the reason it is refused, or None. An unframed line after hello (``unframedLine``)
+    may only stop (``refusedUnframed``). With the e-stop latched a stop or a PPM loss
     frame is accepted and changes nothing; a PPM loss frame otherwise halts the chair
     and writes ``EVT:PPM_LOST`` to ``out`` once."""
     result = parse(body, s.maxWheel)
     if isinstance(result, str):
         return result
+    if result is not None and refused_unframed(s, result[1], result[2]):
+        return "unframed"
     if s.estopLatched:                       # a stop (or a PPM loss) changes nothing
         if result is None or (result[1] == 0.0 and result[2] == 0.0):
             return None
@@ -283,6 +288,11 @@ def move_to(s: FirmwareState, body: bytes, out: bytearray) -> str | None:
         s.ppmLost = 0
     accept_command(s, mode, right, left)
     return None
+
+
+def refused_unframed(s: FirmwareState, right: float, left: float) -> bool:
+    """``refusedUnframed``: after hello, an unframed line may only set zero targets."""
+    return bool(s.unframedLine) and (right != 0.0 or left != 0.0)
 
 
 def latch_estop(s: FirmwareState, out: bytearray) -> None:
@@ -307,7 +317,18 @@ def reset_estop(s: FirmwareState) -> str | None:
 def dispatch(s: FirmwareState, body: bytes, out: bytearray) -> tuple[str | None, int, int]:
     """``dispatch``: (reason or None, data reply, parameter index). The firmware checks
     that the command is printable first; here each branch does (``parse`` for motion,
-    cached), which gives the same answer: a keyword with a bad byte matches nothing."""
+    cached), which gives the same answer: a keyword with a bad byte matches nothing.
+    An unframed line after hello reaches only ``estop`` and the motion commands."""
+    if s.unframedLine:
+        if not all_printable(body):
+            return "syntax", DATA_NONE, 0
+        if body == b"estop":
+            latch_estop(s, out)
+            return None, DATA_NONE, 0
+        if (body[:1] == b"x" or (body[:1] == b"r" and body[1:2] != b"e")
+                or (len(body) >= 4 and body[:3] == b"ppm")):
+            return move_to(s, body, out), DATA_NONE, 0
+        return "unframed", DATA_NONE, 0
     if body == b"hello":
         s.tlmEnabled = 1
         return None, DATA_HELLO, 0
@@ -342,12 +363,15 @@ def finish_command(s: FirmwareState, out: bytearray) -> None:
     body = bytes(s.cmdBuf)
     seq, data, param = -1, DATA_NONE, 0
     reason: str | None = None
+    s.unframedLine = 0
     if body[:1] == b"$":
         reason, seq, body = unframe(body)
         if seq >= 0:
             s.lastSeq = seq
         if reason == "checksum":
             s.crcRejected = (s.crcRejected + 1) & 0xFFFFFFFF
+    elif s.tlmEnabled:
+        s.unframedLine = 1                  # after hello: only what makes the chair safer
     if reason is None:
         reason, data, param = dispatch(s, body, out)
     if reason is not None:
@@ -391,7 +415,7 @@ def process_byte(s: FirmwareState, c: int, out: bytearray) -> None:
     s.cmdCommas += 1
     expected = fields_expected(s)
     if expected == 0:
-        reject(s, "syntax", out)
+        reject(s, "unframed" if s.tlmEnabled else "syntax", out)
         _reset(s)
     elif s.cmdCommas >= expected:
         finish_command(s, out)

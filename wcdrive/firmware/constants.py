@@ -5,13 +5,16 @@
 from __future__ import annotations
 
 from wcdrive.avr.f32 import f32
-from wcdrive.protocol.spec import integer, real
+from wcdrive.protocol.spec import build_id, integer, real, text
 
 # Serial link
 BAUD = integer("BAUD")
 CMD_MAX_LEN = integer("CMD_MAX_LEN")
 ERR_LINES_PER_TICK = integer("ERR_LINES_PER_TICK")
 PROTOCOL_VERSION = integer("PROTOCOL_VERSION")
+FIRMWARE_VERSION = text("FIRMWARE_VERSION")
+#: ``WC_BUILD_ID``, which the Makefile computes from the sources (the same hash).
+BUILD_ID = build_id()
 SEQ_MAX = integer("SEQ_MAX")
 
 # Timing

@@ -10,7 +10,7 @@ after every event of the differential runs (``wcdrive.hil.lockstep``).
 from __future__ import annotations
 
 from wcdrive.avr.arduino_print import print_float, print_long, print_unsigned
-from wcdrive.firmware.constants import ERR_LINES_PER_TICK, MODE_NAMES, PROTOCOL_VERSION
+from wcdrive.firmware.constants import ERR_LINES_PER_TICK, FIRMWARE_VERSION, MODE_NAMES, PROTOCOL_VERSION
 from wcdrive.firmware.params import PARAMS
 from wcdrive.firmware.state import FirmwareState
 
@@ -55,7 +55,8 @@ def answer(s: FirmwareState, reason: str | None, seq: int, data: int, param: int
         return
     s.errLinesThisTick += 1
     if reason is None and data == DATA_HELLO:
-        out += b"HELLO:%d,final_control\r\n" % PROTOCOL_VERSION
+        out += b"HELLO:%d,final_control,%s,%s\r\n" % (PROTOCOL_VERSION, FIRMWARE_VERSION.encode(),
+                                                        s.buildId.encode())
     elif reason is None and data == DATA_PARAM:
         p = PARAMS[param]
         value = getattr(s, p.field)

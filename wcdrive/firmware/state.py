@@ -26,7 +26,7 @@ INT_FIELDS = (
     "lastControlTime", "tickCount", "pivotPhase", "pivotTicksLeft", "cmdSinceTick", "watchdogArmed",
     "lastCmdTime", "emergencyStop", "ppmLost", "stillTicks", "parked", "rejectedCount",
     "errSuppressed", "errLinesThisTick", "cmdLen", "cmdCommas", "cmdDiscarding",
-    "illTickL", "illTickR", "watchdogMs", "estopLatched", "tlmEnabled", "lastSeq",
+    "illTickL", "illTickR", "watchdogMs", "estopLatched", "tlmEnabled", "unframedLine", "lastSeq",
     "rxCount", "crcRejected",
 )
 
@@ -92,6 +92,7 @@ class FirmwareState:
     parked: int = 1
     estopLatched: int = 0
     tlmEnabled: int = 0
+    unframedLine: int = 0
     lastSeq: int = 0
     rxCount: int = 0
     rejectedCount: int = 0
@@ -102,6 +103,9 @@ class FirmwareState:
     cmdLen: int = 0
     cmdCommas: int = 0
     cmdDiscarding: int = 0
+    #: ``WC_BUILD_ID`` (in flash, not a global): the build the port stands for, which the
+    #: HELLO line names; a replay takes the board's.
+    buildId: str = C.BUILD_ID
 
     def copy(self) -> FirmwareState:
         """A deep copy."""

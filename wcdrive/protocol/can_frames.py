@@ -33,7 +33,7 @@ from wcdrive.protocol.codec import (
     Message,
     Nak,
     Param,
-    checksum,
+    crc16,
     frame,
 )
 
@@ -58,12 +58,12 @@ CONTROL_OPS = {1: b"hello", 2: b"estop", 3: b"reset"}
 PARAM_NAMES = tuple(PARAM_RANGES)
 MODES = ("WHEEL", "CMDVEL", "PPM")
 REASONS = ("", "syntax", "number", "range", "fields", "overlong", "checksum", "estop", "busy",
-           "param")
+           "param", "unframed")
 EVENTS = ("", "WATCHDOG", "PPM_LOST", "ESTOP")
 KIND_ACK, KIND_NAK, KIND_ERR, KIND_EVT, KIND_PAR, KIND_HELLO, KIND_BOOT = range(1, 8)
 FIRMWARE = "final_control"
 
-_FRAMED = re.compile(rb"\$(?:(\d{1,5}):)?(.*)\*([0-9A-Fa-f]{2})")
+_FRAMED = re.compile(rb"\$(\d{1,5}):(.*)\*([0-9A-F]{4})")
 _CMDVEL = re.compile(rb"x:([-+]?[\d.]+),t:([-+]?[\d.]+),?")
 _WHEEL = re.compile(rb"r([pn])([\d.]+),l([pn])([\d.]+),?")
 
@@ -89,10 +89,10 @@ def command_to_frames(line: bytes) -> list[tuple[int, bytes]]:
     seq = None
     m = _FRAMED.fullmatch(body)
     if m:
-        inner = body[1:-3]
-        if checksum(inner) != int(m[3], 16):
-            raise CanCodecError(f"bad checksum in {line!r}")
-        seq = int(m[1]) if m[1] is not None else None
+        inner = body[1:-5]
+        if crc16(inner) != int(m[3], 16):
+            raise CanCodecError(f"bad CRC in {line!r}")
+        seq = int(m[1])
         body = m[2]
     has_seq, seq_value = _seq_bytes(seq)
     tail = struct.pack("<BBH", 0, has_seq, seq_value)
@@ -142,8 +142,8 @@ def board_text(value: float) -> bytes:
 
 
 def frame_to_command(can_id: int, data: bytes) -> bytes:
-    """A host-to-chair frame as the protocol line for the board (framed v2, with the
-    host's sequence number when it gave one)."""
+    """A host-to-chair frame as the protocol line for the board: a v3 frame with the
+    host's sequence number, or 0 when the frame carries none."""
     seq: int | None
     if can_id in (CMD_VEL, CMD_WHEELS):
         a, b, _, has_seq, seq_value = struct.unpack("<hhBBH", data[:8])
@@ -173,7 +173,7 @@ def frame_to_command(can_id: int, data: bytes) -> bytes:
         seq = seq_value if op_flags & 0x80 else None
     else:
         raise CanCodecError(f"frame 0x{can_id:03X} is not a command")
-    return frame(body, seq)
+    return frame(body, 0 if seq is None else seq)
 
 
 def _clamp16(x: float) -> int:
@@ -206,12 +206,23 @@ def message_to_frames(msg: Message) -> list[tuple[int, bytes]]:
     elif isinstance(msg, Param):
         reply = (KIND_PAR, PARAM_NAMES.index(msg.name), 0, msg.value)
     elif isinstance(msg, Hello):
-        reply = (KIND_HELLO, msg.version, 0, 0.0)
+        return [(REPLY, struct.pack("<BBHI", KIND_HELLO, msg.version, _pack_version(msg.firmware_version),
+                                    int(msg.build_id or "0", 16)))]
     elif isinstance(msg, Boot):
         reply = (KIND_BOOT, 0, 0, 0.0)
     if reply is None:
         return []
     return [(REPLY, struct.pack("<BBHf", *reply))]
+
+
+def _pack_version(text: str) -> int:
+    """A firmware version ``major.minor.patch`` in 16 bits (6, 5, 5); 0 for none."""
+    if not text:
+        return 0
+    major, minor, patch = (int(part) for part in text.split("."))
+    if not (major < 64 and minor < 32 and patch < 32):
+        raise CanCodecError(f"firmware version {text!r} does not fit 16 bits")
+    return major << 10 | minor << 5 | patch
 
 
 def _index(names: tuple[str, ...], name: str) -> int:
@@ -282,7 +293,11 @@ def _reply_line(data: bytes) -> bytes:
         text = str(round(value)) if name == "watchdog_ms" else f"{value:.4f}"
         return f"PAR:{name},{text}\r\n".encode()
     if kind == KIND_HELLO:
-        return f"HELLO:{code},{FIRMWARE}\r\n".encode()
+        build = struct.unpack("<I", data[4:8])[0]
+        if seq == 0 and build == 0:
+            return f"HELLO:{code},{FIRMWARE}\r\n".encode()
+        version = f"{seq >> 10}.{seq >> 5 & 31}.{seq & 31}"
+        return f"HELLO:{code},{FIRMWARE},{version},{build:08x}\r\n".encode()
     if kind == KIND_BOOT:
         return f"BOOT:{FIRMWARE}\r\n".encode()
     return b""

@@ -2,7 +2,7 @@
 
 Host to board:  ``encode_cmdvel(v, w)`` -> ``b"x:0.500,t:0.100,"`` (the seed host's
 format), ``encode_wheel(right, left)`` -> ``b"rp5.000,lp3.000,"``, ``encode_ppm``.
-Protocol v2:    ``frame(command, seq)`` -> ``b"$17:x:0.500,t:0.100,*34\\n"``,
+Protocol v3:    ``frame(command, seq)`` -> ``b"$17:x:0.500,t:0.100,*DBDA\\n"`` (CRC-16),
 ``encode_get(name)``, ``encode_set(name, value)``, ``HELLO``, ``ESTOP``, ``RESET``.
 Board to host:  ``LineDecoder.feed(data)`` returns the complete lines' messages:
 ``Feedback``, ``ExtendedTelemetry``, ``Error``, ``Event``, ``Boot``, ``Hello``,
@@ -11,6 +11,7 @@ Board to host:  ``LineDecoder.feed(data)`` returns the complete lines' messages:
 
 from __future__ import annotations
 
+import binascii
 import math
 import re
 from dataclasses import dataclass
@@ -33,21 +34,21 @@ def _finite(name: str, value: float, limit: float) -> float:
     return value
 
 
-def checksum(data: bytes) -> int:
-    """XOR of the bytes: the ``*hh`` of a framed line covers those between ``$`` and ``*``."""
-    value = 0
-    for b in data:
-        value ^= b
-    return value
+def crc16(data: bytes) -> int:
+    """CRC-16/XMODEM (poly 0x1021, init 0, no reflection, no final XOR) of ``data``: the
+    ``*CCCC`` of a v3 frame covers the bytes between ``$`` and ``*``. It is Python's
+    ``binascii.crc_hqx(data, 0)`` and avr-libc's ``_crc_xmodem_update`` on the board."""
+    return binascii.crc_hqx(data, 0)
 
 
-def frame(command: bytes, seq: int | None = None) -> bytes:
-    """A protocol v2 framed line: ``$[<seq>:]<command>*<hh>\\n``. The command may keep
-    its trailing comma; the board acts on it at the line end only."""
-    if seq is not None and not 0 <= seq <= SEQ_MAX:
+def frame(command: bytes, seq: int) -> bytes:
+    """A protocol v3 frame: ``$<seq>:<command>*<CCCC>\\n`` (``seq`` 0..65535, CCCC the
+    CRC-16/XMODEM in upper-case hex). The command may keep its trailing comma; the board
+    acts on it at the line end only."""
+    if not 0 <= seq <= SEQ_MAX:
         raise ValueError(f"sequence number {seq} is outside 0..{SEQ_MAX}")
-    inner = (b"%d:" % seq if seq is not None else b"") + command
-    return b"$" + inner + b"*%02X\n" % checksum(inner)
+    inner = b"%d:" % seq + command
+    return b"$" + inner + b"*%04X\n" % crc16(inner)
 
 
 HELLO = b"hello\n"
@@ -195,10 +196,13 @@ class ExtendedTelemetry:
 
 @dataclass(frozen=True)
 class Hello:
-    """``HELLO:<version>,<firmware>``: the answer to ``hello`` (protocol v2)."""
+    """``HELLO:<version>,<firmware>[,<firmware version>,<build id>]``: the answer to
+    ``hello`` (v2 boards name the firmware only; v3 add its version and build id)."""
 
     version: int
     firmware: str
+    firmware_version: str = ""
+    build_id: str = ""
 
 
 @dataclass(frozen=True)
@@ -242,7 +246,7 @@ def _float(text: bytes) -> float:
 
 
 _TLM = re.compile(rb"TLM:(\d+(?:,\d+){12})")
-_HELLO = re.compile(rb"HELLO:(\d+),([\w.-]+)")
+_HELLO = re.compile(rb"HELLO:(\d+),([\w.-]+)(?:,([\w.-]+),([0-9a-f]+))?")
 _PARAM = re.compile(rb"PAR:(\w+),(\d+(?:\.\d+)?)")
 _ACK = re.compile(rb"ACK:(\d+)")
 _NAK = re.compile(rb"NAK:(\d+),(\w+)")
@@ -267,7 +271,7 @@ def parse_line(line: bytes) -> Message:
         return Param(m[1].decode(), float(m[2]))
     m = _HELLO.fullmatch(line)
     if m:
-        return Hello(int(m[1]), m[2].decode())
+        return Hello(int(m[1]), m[2].decode(), (m[3] or b"").decode(), (m[4] or b"").decode())
     if line.startswith(b"ERR:"):
         return Error(line[4:].decode("ascii", "replace"))
     if line.startswith(b"EVT:"):

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import functools
+import hashlib
 import sys
 import tomllib
 from dataclasses import dataclass
@@ -19,7 +20,7 @@ from typing import Any
 
 from wcdrive.resources import firmware_dir, protocol_dir
 
-__all__ = ["PARAMETERS", "Parameter", "constants", "header", "load", "value"]
+__all__ = ["PARAMETERS", "Parameter", "build_id", "constants", "header", "load", "value"]
 
 
 def spec_path() -> Path:
@@ -42,21 +43,31 @@ def _sections(spec: dict[str, Any]) -> list[dict[str, Any]]:
     return [s for s in spec.values() if isinstance(s, dict)]
 
 
-def constants(spec: dict[str, Any] | None = None) -> dict[str, int | float]:
+def constants(spec: dict[str, Any] | None = None) -> dict[str, int | float | str]:
     """Every constant by name (without the WC_ prefix): ints for ``int``/``ulong``,
-    Python floats for ``float`` (the port rounds them to binary32 itself)."""
+    Python floats for ``float`` (the port rounds them to binary32 itself), str for ``str``."""
     spec = spec or load()
-    out: dict[str, int | float] = {}
+    out: dict[str, int | float | str] = {}
     for section in _sections(spec):
         for name, entry in section.items():
             if isinstance(entry, dict):
-                out[name] = float(entry["value"]) if entry["type"] == "float" else int(entry["value"])
+                kind = entry["type"]
+                out[name] = (float(entry["value"]) if kind == "float" else str(entry["value"])
+                             if kind == "str" else int(entry["value"]))
     return out
 
 
-def value(name: str) -> int | float:
+def value(name: str) -> int | float | str:
     """One constant of the spec by name."""
     return constants()[name]
+
+
+def text(name: str) -> str:
+    """A string constant of the spec by name."""
+    v = value(name)
+    if not isinstance(v, str):
+        raise TypeError(f"{name} is not a string in spec.toml")
+    return v
 
 
 def integer(name: str) -> int:
@@ -68,8 +79,11 @@ def integer(name: str) -> int:
 
 
 def real(name: str) -> float:
-    """A constant of the spec by name, as a float."""
-    return float(value(name))
+    """A numeric constant of the spec by name, as a float."""
+    v = value(name)
+    if isinstance(v, str):
+        raise TypeError(f"{name} is a string in spec.toml")
+    return float(v)
 
 
 @dataclass(frozen=True)
@@ -97,12 +111,26 @@ def parameters(spec: dict[str, Any] | None = None) -> tuple[Parameter, ...]:
 PARAMETERS: tuple[Parameter, ...] = parameters()
 
 
+def build_id(sketch_dir: Path | None = None) -> str:
+    """The firmware's build id, as its Makefile computes it: the first 8 hex digits of
+    the SHA-256 of the sketch (``<sketch>.ino``) followed by its headers (``*.h``,
+    sorted by name). ``HELLO:`` carries it, so a host can tell which sources a board
+    runs."""
+    folder = sketch_dir or firmware_dir()
+    data = (folder / f"{folder.name}.ino").read_bytes()
+    for header_file in sorted(folder.glob("*.h"), key=lambda p: p.name):
+        data += header_file.read_bytes()
+    return hashlib.sha256(data).hexdigest()[:8]
+
+
 def _literal(entry: dict[str, Any]) -> str:
     value, kind = entry["value"], entry["type"]
     if kind == "float":
         return f"{float(value)!r}f"
     if kind == "ulong":
         return f"{int(value)}UL"
+    if kind == "str":
+        return '"' + str(value) + '"'
     return str(int(value))
 
 
