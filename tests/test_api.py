@@ -14,6 +14,7 @@ import pytest
 
 import wcdrive
 from wcdrive.boards.sim_board import SimulatedBoard
+from wcdrive.protocol import spec
 from wcdrive.transports.can_link import CanGateway
 from wcdrive.transports.pty_bridge import PtyBridge
 
@@ -115,8 +116,10 @@ def test_errors_say_what_to_do(tmp_path) -> None:
         wcdrive.connect("ftp://chair")
 
 
-def test_handshake_finds_a_v2_board_and_telemetry_carries_tlm(chair) -> None:
-    assert chair.protocol_version == 2 and chair.firmware == "final_control"
+def test_handshake_finds_a_v3_board_and_telemetry_carries_tlm(chair) -> None:
+    assert chair.protocol_version == 3 and chair.firmware == "final_control"
+    assert chair.firmware_version == spec.text("FIRMWARE_VERSION") and chair.build_id == spec.build_id()
+    assert chair.link_ok
     t = next(t for t in chair.telemetry(timeout=5) if t.extended is not None)
     assert t.extended.free_ram > 0 and t.extended.crc_rejected == 0
     later = chair.wait_for_telemetry()

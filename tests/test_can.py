@@ -200,7 +200,7 @@ def test_can_gateway_command_serves_a_host() -> None:
     gateway.start()
     try:
         with wcdrive.connect(f"can://virtual/{channel}") as chair:
-            assert chair.protocol_version == 2
+            assert chair.protocol_version == 3
             assert chair.set_param("max_accel", 2.5) == 2.5
     finally:
         gateway.join()

@@ -7,8 +7,9 @@ if "wcdrive.urlhandler" not in _serial.protocol_handler_packages:
 
 __version__ = "0.1.0"
 
-from wcdrive.api import Telemetry, Wheelchair, connect
+from wcdrive.api import LinkEvent, LinkLost, LinkRestored, Telemetry, Wheelchair, connect
 from wcdrive.errors import (
+    WcdriveBusyError,
     WcdriveCommandError,
     WcdriveConnectionError,
     WcdriveError,
@@ -17,7 +18,9 @@ from wcdrive.errors import (
     WcdriveProtocolError,
     WcdriveTimeoutError,
 )
+from wcdrive.wheelchair import stop_all
 
-__all__ = ["Telemetry", "WcdriveCommandError", "WcdriveConnectionError", "WcdriveError",
-           "WcdriveEstopError", "WcdrivePermissionError", "WcdriveProtocolError",
-           "WcdriveTimeoutError", "Wheelchair", "connect"]
+__all__ = ["LinkEvent", "LinkLost", "LinkRestored", "Telemetry", "WcdriveBusyError",
+           "WcdriveCommandError", "WcdriveConnectionError", "WcdriveError", "WcdriveEstopError",
+           "WcdrivePermissionError", "WcdriveProtocolError", "WcdriveTimeoutError", "Wheelchair",
+           "connect", "stop_all"]

@@ -15,32 +15,58 @@ URLs map onto pyserial (the query goes to the handler, which alone parses it):
   simavr driving the pymunk chair, as fast as it can unless ``realtime=1``;
 - ``can://<interface>/<channel>`` -> ``wccan://``: a chair behind a ``wcdrive can-gateway``;
 - any ``scheme://`` pyserial opens (``wcsim://``, ``socket://``, ``rfc2217://``);
-- a device path such as ``/dev/ttyACM0``: reopened after an unplug.
+- a device path such as ``/dev/ttyACM0``: opened exclusively (a second program gets
+  ``WcdriveBusyError``), reopened after an unplug.
 
 On connect the board resets (a real Mega does when its port opens); the API waits
-for it to boot, then says hello. A protocol-v2 board answers, and from then on
-motion commands go out as checksummed lines (a corrupted byte is rejected, never
-driven), ``estop()``/``reset_estop()`` and ``get_param()``/``set_param()`` work with
-acknowledged, retried requests, and telemetry carries the ``TLM:`` fields.
+for it to boot, then says hello (a v3 frame, tried 3 times with growing waits). A
+protocol-v3 board answers ``HELLO:3,final_control,<version>,<build id>``; from then on
+every line the host writes is a frame with a CRC-16 and a sequence number (a corrupted
+byte is rejected, never driven; the board refuses unframed lines but stops),
+``estop()``/``reset_estop()`` and ``get_param()``/``set_param()`` are acknowledged,
+retried requests, and telemetry carries the ``TLM:`` fields. A board that never
+answers hello raises ``WcdriveProtocolError``, as does one that answers with another
+version.
+
+``legacy=True`` drives a board that never answers hello (the seed's firmware) with
+protocol v1 instead: bare ``x:0.500,t:0.100,`` lines. Lost then: the CRC (a corrupted
+byte can change a speed), every answer (a refused command goes unnoticed), the latched
+e-stop (``estop()`` sends a stop and raises), the parameters, the ``TLM:`` telemetry
+(``status``, the watchdog and e-stop flags) and the firmware's identity. The liveness
+check still works on the feedback lines.
 
 The firmware stops the chair when no valid command arrives for 500 ms: hold a
 velocity by sending it again at 2 Hz or faster (as a ROS ``cmd_vel`` stream does).
-A device path that disappears (unplugged) is reopened until ``reconnect_timeout``;
-meanwhile commands raise ``WcdriveConnectionError``.
+The host watches the board in turn: no line for ``link_timeout`` s (default 0.15 s,
+three feedback periods) and ``chair.link_ok`` turns False, ``chair.on_link``
+callbacks get a ``LinkLost``, and motion calls raise ``WcdriveConnectionError``; lines
+flowing again restore it (``LinkRestored``). A device path that disappears (unplugged)
+is reopened until ``reconnect_timeout``, and the new board is greeted again.
+
+Every failure of ``connect`` is a ``WcdriveError`` that names the URL or device:
+``WcdriveConnectionError`` (bad URL, no such device), ``WcdriveBusyError`` (another
+program has the device), ``WcdrivePermissionError``, ``WcdriveProtocolError`` (no
+hello, unknown version), ``WcdriveTimeoutError`` (no feedback: no firmware, wrong baud
+rate).
 """
 
 from __future__ import annotations
 
+import errno
 from typing import Any
 
 import serial
 
-from wcdrive.errors import WcdriveConnectionError, WcdrivePermissionError, WcdriveTimeoutError
+from wcdrive.errors import (
+    WcdriveBusyError,
+    WcdriveConnectionError,
+    WcdrivePermissionError,
+)
 from wcdrive.transports.port import Port
 from wcdrive.transports.recording import RecordingPort
-from wcdrive.wheelchair import Telemetry, Wheelchair
+from wcdrive.wheelchair import LINK_TIMEOUT, LinkEvent, LinkLost, LinkRestored, Telemetry, Wheelchair
 
-__all__ = ["SCHEMES", "Telemetry", "Wheelchair", "connect"]
+__all__ = ["SCHEMES", "LinkEvent", "LinkLost", "LinkRestored", "Telemetry", "Wheelchair", "connect"]
 
 #: wcdrive's short URL schemes and the pyserial scheme each one is.
 SCHEMES = {"sim": "wcsim", "simavr": "wcavr", "can": "wccan"}
@@ -48,48 +74,92 @@ SCHEMES = {"sim": "wcsim", "simavr": "wcavr", "can": "wccan"}
 READ_TIMEOUT = 0.1
 
 
+def _errno(exc: BaseException) -> int | None:
+    """The OS error number behind a pyserial exception (its own, or its cause's)."""
+    seen: BaseException | None = exc
+    while seen is not None:
+        number = getattr(seen, "errno", None)
+        if isinstance(number, int):
+            return number
+        seen = seen.__cause__ or seen.__context__
+    return None
+
+
 def _open_device(path: str) -> serial.Serial:
     try:
-        return serial.Serial(path, 115200, timeout=READ_TIMEOUT)
-    except serial.SerialException as exc:
-        if isinstance(exc.__context__, PermissionError) or "Permission denied" in str(exc):
+        return serial.Serial(path, 115200, timeout=READ_TIMEOUT, exclusive=True)
+    except (serial.SerialException, OSError) as exc:
+        number, text = _errno(exc), str(exc)
+        if number in (errno.EACCES, errno.EPERM) or "Permission denied" in text:
             raise WcdrivePermissionError(
                 f"permission denied on {path}: add yourself to the dialout group "
                 "(sudo usermod -aG dialout $USER, then log in again)") from exc
+        if number == errno.ENOENT or "No such file" in text:
+            raise WcdriveConnectionError(
+                f"cannot open {path}: no such device; is the board plugged in? "
+                "(ls /dev/ttyACM* /dev/ttyUSB*)") from exc
+        if number in (errno.EBUSY, errno.EAGAIN) or "exclusively lock" in text:
+            raise WcdriveBusyError(
+                f"cannot open {path}: it is busy, another program has it open (a terminal, "
+                "another wcdrive, ModemManager?): close that first (fuser -v " + path + ")") from exc
         raise WcdriveConnectionError(f"cannot open {path}: {exc}") from exc
 
 
 def _open_url(url: str) -> Port:
     scheme, sep, rest = url.partition("://")
-    if sep:
-        url = f"{SCHEMES.get(scheme, scheme)}://{rest}"
+    target = f"{SCHEMES.get(scheme, scheme)}://{rest}" if sep else url
     try:
-        port: Port = serial.serial_for_url(url, timeout=READ_TIMEOUT)
-    except (serial.SerialException, ValueError, OSError) as exc:
-        raise WcdriveConnectionError(f"cannot open {url}: {exc}") from exc
+        port: Port = serial.serial_for_url(target, timeout=READ_TIMEOUT)
+    except Exception as exc:                    # whatever the handler raises: name the URL
+        shown = url if target == url else f"{url} ({target})"
+        raise WcdriveConnectionError(f"cannot open {shown}: {exc}") from exc
     return port
 
 
+def _default_link_timeout(port: Port) -> float:
+    """``LINK_TIMEOUT``, stretched for a simulated board slower than the wall clock
+    (``sim://?speed=0.1`` sends a line every 0.5 s)."""
+    speed = getattr(getattr(port, "board", None), "speed", None)
+    if isinstance(speed, int | float) and 0 < speed < 1:
+        return LINK_TIMEOUT / speed
+    return LINK_TIMEOUT
+
+
 def connect(url: str = "sim://", *, boot_timeout: float = 10.0, record: bool = False,
-            **options: Any) -> Wheelchair:
-    """Opens ``url``, waits for the board's boot and feedback, says hello. ``record``:
-    keep every byte both ways (``chair.recording``) for ``wcdrive.replay``.
-    ``options`` go to ``Wheelchair`` (``odometry_method``, ``reconnect_timeout``)."""
+            legacy: bool = False, link_timeout: float | None = None, **options: Any) -> Wheelchair:
+    """Opens ``url``, waits for the board's boot and feedback, says hello (module
+    docstring). ``record``: keep every byte both ways (``chair.recording``) for
+    ``wcdrive.replay``. ``legacy``: drive a board that never answers hello with
+    protocol v1 instead of raising ``WcdriveProtocolError``. ``link_timeout``: seconds
+    without a line before the link counts as lost (default 0.15 s, longer for a
+    simulated board slower than real time). ``options`` go to ``Wheelchair``
+    (``odometry_method``, ``reconnect_timeout``, ``stop_on_signals``)."""
     def wrap(port: Port) -> Port:
         return RecordingPort(port) if record else port
 
     if "://" in url:
-        chair = Wheelchair(wrap(_open_url(url)), **options)
+        port = _open_url(url)
     elif url.startswith("/"):
-        chair = Wheelchair(wrap(_open_device(url)), reopen=lambda: _open_device(url), **options)
+        port = _open_device(url)
     else:
         raise WcdriveConnectionError(
             f"unsupported URL {url!r}: use sim://, simavr://[elf], can://<interface>/<channel>, "
             "another pyserial URL, or a device path")
+    first = wrap(port)
+    options.setdefault("name", url)
+    if url.startswith("/"):
+        def reopen() -> Port:
+            again = _open_device(url)
+            return RecordingPort(again, first.recording) if isinstance(first, RecordingPort) else again
+
+        options.setdefault("reopen", reopen)
+    chair = Wheelchair(first, legacy=legacy,
+                       link_timeout=_default_link_timeout(port) if link_timeout is None else link_timeout,
+                       **options)
     try:
         chair.wait_for_telemetry(boot_timeout)   # the Mega resets on open: wait for it
         chair.wait_for_handshake(boot_timeout)
-    except WcdriveTimeoutError:
+    except BaseException:
         chair.close()
         raise
     return chair

@@ -12,7 +12,8 @@ a board) or ``sim://``. ``run`` drives a scenario (``wcdrive sim --list``) the w
 host would, in real time, recording every byte both ways from the board's reset;
 ``record`` is ``run`` with the recording required. ``replay`` then feeds that recording
 to the Python port (``wcdrive.replay``) and proves the board and the port agree. Exit
-status: 0 agree, 1 mismatch, 2 error.
+status: 0 agree, 1 mismatch, 2 error, 130 interrupted (Ctrl-C: ``run`` stops the chair
+and still writes the recording made so far, marked ``"interrupted": true`` in its meta).
 With the wheels on the ground the chair moves: run scenarios with it on blocks.
 """
 
@@ -21,7 +22,9 @@ from __future__ import annotations
 import argparse
 import shlex
 import subprocess
+import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -56,29 +59,61 @@ def _flash(args: argparse.Namespace) -> int:
     return subprocess.call(cmd)
 
 
-def run_scenario(name: str, url: str, *, speed: float = 1.0) -> Recording:
-    """Drives scenario ``name`` on the board at ``url`` and returns the recording."""
+class Interrupted(KeyboardInterrupt):
+    """Ctrl-C during ``run_scenario``: the chair was stopped and closed; ``recording``
+    holds the session up to then."""
+
+    def __init__(self, recording: Recording) -> None:
+        super().__init__("interrupted")
+        self.recording = recording
+
+
+def run_scenario(name: str, url: str, *, speed: float = 1.0,
+                 announce: Callable[[str], None] | None = None) -> Recording:
+    """Drives scenario ``name`` on the board at ``url`` and returns the recording;
+    ``announce`` gets a line once the chair is connected. Ctrl-C stops the chair and
+    raises ``Interrupted`` with the recording so far."""
 
     sc = scenario.load(name)
     period = 1.0 / (sc.host_rate_hz * speed)
-    with wcdrive.connect(url, record=True) as chair:
-        recording = chair.recording
-        recording.meta.update({"scenario": sc.name, "url": url, "protocol": chair.protocol_version,
-                               "firmware": chair.firmware})
-        for segment in sc.segments:
-            command = segment.command()
-            end = time.monotonic() + segment.duration / speed
-            while time.monotonic() < end:
-                if command is not None:
-                    chair.send_command(command)
-                time.sleep(period)
-        chair.stop()
-        time.sleep(sc.settle_s / speed)
+    recording: Recording | None = None
+    try:
+        with wcdrive.connect(url, record=True) as chair:
+            recording = chair.recording
+            recording.meta.update({"scenario": sc.name, "url": url, "protocol": chair.protocol_version,
+                                   "firmware": chair.firmware, "firmware_version": chair.firmware_version,
+                                   "build_id": chair.build_id})
+            if announce is not None:
+                announce(f"driving {sc.name} on {url} (firmware {chair.firmware} "
+                         f"{chair.firmware_version}, build {chair.build_id}; Ctrl-C stops the chair)")
+            for segment in sc.segments:
+                command = segment.command()
+                end = time.monotonic() + segment.duration / speed
+                while time.monotonic() < end:
+                    if command is not None:
+                        chair.send_command(command)
+                    time.sleep(period)
+            chair.stop()
+            time.sleep(sc.settle_s / speed)
+    except KeyboardInterrupt as exc:            # leaving the with block stopped the chair
+        if recording is None:
+            raise
+        recording.meta["interrupted"] = True
+        raise Interrupted(recording) from exc
     return recording
 
 
 def _run(args: argparse.Namespace) -> int:
-    recording = run_scenario(args.scenario, args.port, speed=args.speed)
+    def announce(text: str) -> None:
+        print(f"wcdrive bench {args.bench_command}: {text}", file=sys.stderr, flush=True)
+
+    try:
+        recording = run_scenario(args.scenario, args.port, speed=args.speed, announce=announce)
+    except Interrupted as exc:
+        print(f"wcdrive bench {args.bench_command}: interrupted, the chair was stopped", file=sys.stderr)
+        if args.record:
+            print(f"partial recording: {exc.recording.save(args.record)}", file=sys.stderr)
+        return 130
     print(f"recorded {len(recording.sent_bytes)} bytes sent, {len(recording.received_bytes)} received")
     if args.record:
         print(f"recording: {recording.save(args.record)}")

@@ -8,6 +8,10 @@
     wcdrive pty [--avr [--realtime]] [--speed S] [--link PATH]   a simulated chair on a pty
     wcdrive can-gateway --chair URL_OR_PATH --interface I --channel C
                                                          a chair's serial port on a CAN bus
+
+Ctrl-C (SIGINT) ends every command cleanly: what it drives is stopped, ports are
+closed, and the exit status is 130 with no traceback (``bench run`` keeps the
+recording made so far).
 """
 
 from __future__ import annotations
@@ -21,11 +25,15 @@ import serial
 
 from wcdrive import __version__, bench
 from wcdrive.boards.sim_board import SimulatedBoard
+from wcdrive.errors import WcdriveError
 from wcdrive.hil import verify
 from wcdrive.protocol.spec import integer
 from wcdrive.sim import report, runner, scenario
 from wcdrive.transports.can_link import CanGateway, open_bus
-from wcdrive.transports.pty_bridge import PtyBridge, serve
+from wcdrive.transports.pty_bridge import PtyBridge
+
+#: The exit status of a command ended by Ctrl-C (128 + SIGINT), as shells report it.
+INTERRUPTED = 130
 
 
 class _Progress:
@@ -80,6 +88,18 @@ def _sim(args: argparse.Namespace) -> int:
     return 1 if failed else 0
 
 
+def _serve(bridge: PtyBridge) -> int:
+    """Prints the device path, then serves until Ctrl-C; closes the bridge."""
+    print(bridge.path, flush=True)
+    try:
+        while True:
+            time.sleep(1)
+    except KeyboardInterrupt:
+        return INTERRUPTED
+    finally:
+        bridge.close()
+
+
 def _pty(args: argparse.Namespace) -> int:
     if args.avr:
         from wcdrive.boards.simavr.mega_board import MegaBoard
@@ -87,11 +107,11 @@ def _pty(args: argparse.Namespace) -> int:
         board = MegaBoard(args.elf, realtime=args.realtime, plant=not args.no_plant)
         bridge = PtyBridge(board, link=args.link).start()
         board.start()
-        serve(bridge)
+        status = _serve(bridge)
         print(f"stopped at {board.mega.time:.3f} s simulated", file=sys.stderr)
-        return 0
-    serve(PtyBridge(SimulatedBoard(speed=args.speed, seed=args.seed).start(), link=args.link).start())
-    return 0
+        return status
+    return _serve(PtyBridge(SimulatedBoard(speed=args.speed, seed=args.seed).start(),
+                            link=args.link).start())
 
 
 def _can_gateway(args: argparse.Namespace) -> int:
@@ -103,7 +123,7 @@ def _can_gateway(args: argparse.Namespace) -> int:
         while end is None or time.monotonic() < end:
             time.sleep(0.1)
     except KeyboardInterrupt:
-        pass
+        return INTERRUPTED
     finally:
         gateway.close()
         port.close()
@@ -160,7 +180,15 @@ def parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """The ``wcdrive`` command; returns the exit status."""
+    """The ``wcdrive`` command; returns the exit status (130 after Ctrl-C, 2 when the
+    chair cannot be reached: the error says why)."""
     args = parser().parse_args(argv)
-    status: int = args.func(args)
+    try:
+        status: int = args.func(args)
+    except KeyboardInterrupt:
+        print(f"wcdrive {args.command}: interrupted", file=sys.stderr)
+        return INTERRUPTED
+    except WcdriveError as exc:
+        print(f"wcdrive {args.command}: {exc}", file=sys.stderr)
+        return 2
     return status

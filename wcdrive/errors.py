@@ -15,12 +15,17 @@ class WcdrivePermissionError(WcdriveConnectionError, PermissionError):
     """The serial device exists but this user may not open it."""
 
 
+class WcdriveBusyError(WcdriveConnectionError):
+    """The serial device is open in another program (wcdrive opens it exclusively)."""
+
+
 class WcdriveTimeoutError(WcdriveError, TimeoutError):
     """The board did not answer in time."""
 
 
 class WcdriveProtocolError(WcdriveError):
-    """The board does not speak what was asked (e.g. a protocol-v1 board and estop())."""
+    """The board does not speak this host's protocol (no answer to hello, an unknown
+    version), or not what was asked (a legacy v1 board and estop())."""
 
 
 class WcdriveCommandError(WcdriveError):

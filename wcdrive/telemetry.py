@@ -2,8 +2,10 @@
 the odometry computed from it.
 
 ``TelemetryHub.deliver`` is called by the session's reader thread for every feedback
-line (with the ``TLM:`` line of the same tick on a v2 board); iterators, callbacks,
-the history arrays and the odometry all read from here.
+line (with the ``TLM:`` line of the same tick after hello); iterators, callbacks,
+the history arrays and the odometry all read from here. ``TelemetryHub.deliver_link``
+gets the link's state changes (``LinkLost``, ``LinkRestored``) for the subscribers
+that asked for them.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ import numpy as np
 from wcdrive.odometry import OdometryEstimate, WheelOdometry
 from wcdrive.protocol.codec import ExtendedTelemetry, Feedback
 
-__all__ = ["Telemetry", "TelemetryHub"]
+__all__ = ["LinkEvent", "LinkLost", "LinkRestored", "Telemetry", "TelemetryHub"]
 
 
 @dataclass(frozen=True)
@@ -32,7 +34,34 @@ class Telemetry:
     vel_left: float          # rad/s, forward positive (the firmware un-mirrors the left wheel)
     vel_right: float
     mode: str
-    extended: ExtendedTelemetry | None = None   # the TLM line of the same tick (v2)
+    extended: ExtendedTelemetry | None = None   # the TLM line of the same tick (after hello)
+
+
+@dataclass(frozen=True)
+class LinkLost:
+    """The board went silent: no line from it for ``silent_for`` s (more than the
+    chair's ``link_timeout``), or its device vanished. Motion calls raise
+    ``WcdriveConnectionError`` until ``LinkRestored``; the board's own watchdog stops
+    the chair ``watchdog_ms`` after the last command it received."""
+
+    time: float              # host monotonic time the loss was noticed (s)
+    port: str                # the URL or device path
+    silent_for: float        # seconds since the last line from the board
+    reason: str              # "silent" (no lines) or "vanished" (the device went away)
+
+
+@dataclass(frozen=True)
+class LinkRestored:
+    """Lines flow from the board again after a ``LinkLost`` (a reopened device too:
+    the session then says hello again)."""
+
+    time: float              # host monotonic time of the first line (s)
+    port: str
+    down_for: float          # seconds since the ``LinkLost``
+
+
+#: What ``Wheelchair.on_link`` callbacks and ``telemetry(link_events=True)`` get.
+LinkEvent = LinkLost | LinkRestored
 
 
 class TelemetryHub:
@@ -42,8 +71,10 @@ class TelemetryHub:
         self._lock = threading.Lock()
         self._odometry = WheelOdometry(method=odometry_method)
         self._history: list[tuple[float, int, int, float, float]] = []
-        self._subscribers: list[queue.Queue[Telemetry]] = []
+        self._subscribers: list[queue.Queue[Telemetry | LinkEvent]] = []
+        self._link_subscribers: list[queue.Queue[Telemetry | LinkEvent]] = []
         self._callbacks: list[Callable[[Telemetry], None]] = []
+        self._link_callbacks: list[Callable[[LinkEvent], None]] = []
 
     def deliver(self, now: float, msg: Feedback, extended: ExtendedTelemetry | None) -> None:
         """One tick arrived at host time ``now``."""
@@ -58,11 +89,35 @@ class TelemetryHub:
         for cb in callbacks:
             cb(t)
 
+    def deliver_link(self, event: LinkEvent) -> None:
+        """The link was lost or restored: to the ``on_link`` callbacks and the iterators
+        that asked for link events."""
+        with self._lock:
+            subscribers, callbacks = list(self._link_subscribers), list(self._link_callbacks)
+        for q in subscribers:
+            q.put(event)
+        for cb in callbacks:
+            cb(event)
+
     def stream(self, closed: threading.Event, timeout: float | None = None) -> Iterator[Telemetry]:
         """Telemetry as it arrives, until ``closed`` is set or ``timeout`` s pass without any."""
-        q: queue.Queue[Telemetry] = queue.Queue()
+        for item in self._stream(closed, timeout, link_events=False):
+            assert isinstance(item, Telemetry)
+            yield item
+
+    def stream_with_link(self, closed: threading.Event, timeout: float | None = None
+                         ) -> Iterator[Telemetry | LinkEvent]:
+        """``stream``, with the ``LinkLost``/``LinkRestored`` events in their place
+        among the ticks."""
+        return self._stream(closed, timeout, link_events=True)
+
+    def _stream(self, closed: threading.Event, timeout: float | None, link_events: bool
+                ) -> Iterator[Telemetry | LinkEvent]:
+        q: queue.Queue[Telemetry | LinkEvent] = queue.Queue()
         with self._lock:
             self._subscribers.append(q)
+            if link_events:
+                self._link_subscribers.append(q)
         try:
             while not closed.is_set():
                 try:
@@ -72,11 +127,18 @@ class TelemetryHub:
         finally:
             with self._lock:
                 self._subscribers.remove(q)
+                if link_events:
+                    self._link_subscribers.remove(q)
 
     def on_telemetry(self, callback: Callable[[Telemetry], None]) -> None:
         """Calls ``callback`` from the reader thread with every tick."""
         with self._lock:
             self._callbacks.append(callback)
+
+    def on_link(self, callback: Callable[[LinkEvent], None]) -> None:
+        """Calls ``callback`` with every ``LinkLost``/``LinkRestored``."""
+        with self._lock:
+            self._link_callbacks.append(callback)
 
     def arrays(self) -> dict[str, np.ndarray]:
         """Everything received so far as numpy arrays."""
