@@ -39,7 +39,7 @@ def bench_port_tick(periods: int, vary: bool = False, v2: bool = False) -> dict[
         from wcdrive.protocol.codec import frame
 
         fw.feed(b"hello\n")
-        command = frame(command)
+        command = frame(command, 7)
     samples = []
     now = 0
     for k in range(periods):

@@ -175,19 +175,23 @@ def test_a_write_larger_than_the_rx_ring(backend: Backend) -> None:
 
     The burst is whole lines that have a CAN form (CMDVEL, then a framed WHEEL), as
     the wccan backend requires of every write (CanLink.write turns each line into
-    frames); to the other backends it is an ordinary byte burst."""
+    frames); to the other backends it is an ordinary byte burst. Over CAN the gateway
+    makes each unsequenced CMDVEL a v3 frame with sequence number 0, which the board
+    acknowledges: with at most 3 answers a tick, ACK:4242 is among those left out, so
+    there the check is the mode that follows (a known cost of unsequenced CAN commands)."""
     port = backend.open(timeout=0.1)
     wait_alive(backend, port)
     burst = (encode_cmdvel(0.1, 0.0) + b"\n") * 100 + frame(encode_wheel(1.0, 1.0), 4242)
     assert len(burst) > 1500
     written, _ = call_within(5.0, lambda: port.write(burst))
     assert written == len(burst)
-    data = read_until(port, n_feedback(3, after=b"ACK:4242\r\n"), seconds=30)
+    marker = b"ACK:4242\r\n" if backend.byte_stream_writes else b"MODE:WHEEL\r\n"
+    data = read_until(port, n_feedback(3, after=marker), seconds=30)
     lines = split_lines(data)[0][1:]
     assert_well_formed(lines)
     assert not [line for line in lines if line.startswith((b"ERR:", b"NAK:"))]
-    after_ack = feedback(lines[lines.index(b"ACK:4242\r\n"):])
-    assert [m[3] for m in after_ack] == [b"WHEEL"] * len(after_ack)
+    after = feedback(lines[next(i for i, line in enumerate(lines) if marker in line):])
+    assert [m[3] for m in after] == [b"WHEEL"] * len(after)
 
 
 def test_lines_split_and_joined_across_writes(backend: Backend) -> None:
@@ -267,8 +271,10 @@ def test_recording_port_logs_exactly_what_went_through() -> None:
     port = RecordingPort(serial.serial_for_url(f"wcsim://?speed={SPEED}", timeout=0.05))
     written: list[bytes] = []
     got: list[bytes] = []
+    # After hello the board takes unframed stops only (strict framing): 60 of them
+    # answer nothing, so the 3-answers-a-tick budget leaves the last frame's ACK in.
     items = [HELLO, *(frame(encode_wheel(0.3, 0.3), seq) for seq in range(1, 6)),
-             (encode_cmdvel(0.1, 0.0) + b"\n") * 60, frame(encode_wheel(0.4, 0.4), 99)]
+             (encode_cmdvel(0.0, 0.0) + b"\n") * 60, frame(encode_wheel(0.4, 0.4), 99)]
 
     def writer() -> None:
         for item in items:
