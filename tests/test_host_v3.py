@@ -338,6 +338,41 @@ def test_an_estop_during_a_dead_link_is_latched_once_the_link_is_back(rig) -> No
         assert not state.estopLatched and not chair.estop_latched
 
 
+def _reset_board(board: SimulatedBoard) -> None:
+    """The board resets with its port still open (a brown-out): a fresh firmware, out of
+    ``setup()`` at the present ``millis()``, which sends its ``BOOT:`` line."""
+    from wcdrive.firmware.final_control import Firmware
+
+    with board._lock:
+        loop = board.loop
+        loop.fw = Firmware(boot_millis=loop.timer.millis)
+        loop.output.append((loop.cycle, Firmware.boot_output()))
+
+
+def test_a_board_that_resets_mid_session_is_handshaken_again(rig) -> None:
+    """A ``BOOT:`` line after the handshake: the host says hello again (TLM back on,
+    strict framing back on), reports ``BOARD_RESET``, and re-latches an e-stop it
+    holds, so a reset never releases it."""
+    tamper, path = rig
+    with wcdrive.connect(path) as chair:
+        chair.estop()
+        _reset_board(tamper.board)
+        state = tamper.board.loop.fw.state
+        assert not state.estopLatched and not state.tlmEnabled      # the fresh board
+        _wait(lambda: "BOARD_RESET" in chair.events, "the host to notice the reset", timeout=2.0)
+        _wait(lambda: state.tlmEnabled and state.estopLatched, "hello and the e-stop again",
+              timeout=3.0)
+        assert chair.protocol_version == 3 and chair.estop_latched
+        chair.reset_estop(timeout=10)
+        _reset_board(tamper.board)
+        state = tamper.board.loop.fw.state
+        _wait(lambda: chair.events.count("BOARD_RESET") == 2 and state.tlmEnabled,
+              "the second handshake", timeout=3.0)
+        assert not state.estopLatched and not chair.estop_latched
+        chair.set_velocity(0.3, 0.0)
+        _wait(lambda: state.targetL > 0, "the new board to drive", timeout=2.0)
+
+
 # ---- errors name the URL or device -----------------------------------------------------------
 def test_bad_urls_are_named() -> None:
     for url, pattern in [("ftp://chair", "cannot open ftp://chair"),

@@ -501,6 +501,13 @@ class Session:
                 self._on_feedback(now, msg, None)
             self._hello_step(now, first=True)
         elif isinstance(msg, Boot):
+            if self._handshake_done.is_set() and self.protocol_version == PROTOCOL_VERSION:
+                # A reset while the port stayed open (a brown-out, its watchdog, a
+                # reset button): the board boots unpowered and lax; say hello again,
+                # which also re-latches an e-stop the host holds.
+                with self._hello_lock:
+                    self._forget_board()
+                self.events.append("BOARD_RESET")
             self._hello_step(now, first=True)
         elif isinstance(msg, Hello):
             self._hello_answered(msg)
@@ -676,22 +683,27 @@ class Session:
                     pass
                 return False
             self._decoder = LineDecoder()
-            self._pending_feedback = None
-            self._last_data = None
             self._last_line_at = None
-            self.status = None                  # the old board's; the new one reports anew
-            self.estop_announced = False        # re-latched after hello when estop_held
-            self._telemetry_seen = False
-            self._relatch_check = False
-            self.protocol_version = 0
-            self.handshake_error = None
-            self._handshake_done.clear()
-            self._hello_tries = 0
-            self._hello_seq = -1
+            self._forget_board()
             self._link_up.set()
             self.events.append("RECONNECTED")
             return True
         return False
+
+    def _forget_board(self) -> None:
+        """The board has reset (a reopened device, or a ``BOOT:`` line mid-session): what
+        the host knew of it is gone, and the handshake starts over."""
+        self._pending_feedback = None
+        self._last_data = None
+        self.status = None                  # the old board's; the new one reports anew
+        self.estop_announced = False        # re-latched after hello when estop_held
+        self._telemetry_seen = False
+        self._relatch_check = False
+        self.protocol_version = 0
+        self.handshake_error = None
+        self._handshake_done.clear()
+        self._hello_tries = 0
+        self._hello_seq = -1
 
     # ---- lifecycle -------------------------------------------------------------------
     def stop_line(self) -> bytes:

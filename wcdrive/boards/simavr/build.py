@@ -10,6 +10,7 @@ cache. Both raise ``BuildError`` with the command that installs what is missing.
 
 from __future__ import annotations
 
+import fcntl
 import hashlib
 import shutil
 import subprocess
@@ -39,7 +40,8 @@ def build_dir(sketch_dir: Path) -> Path:
 
 def firmware_elf(sketch_dir: Path | None = None) -> Path:
     """Builds a sketch folder (default: the final_control firmware) with the firmware's
-    Makefile, into the cache; a no-op when up to date. Returns the ELF's path."""
+    Makefile, into the cache; a no-op when up to date; concurrent callers (processes
+    too) wait for one another. Returns the ELF's path."""
     if shutil.which("avr-gcc") is None:
         raise BuildError(f"avr-gcc is missing: apt-get install {DEBIAN_PACKAGES}")
     sketch_dir = sketch_dir or firmware_dir()
@@ -48,7 +50,16 @@ def firmware_elf(sketch_dir: Path | None = None) -> Path:
     makefile = firmware_dir() / "Makefile"
     cmd = ["make", "-s", "-C", str(sketch_dir), "-f", str(makefile), f"SKETCH={sketch}",
            f"BUILD={build}", f"{build}/{sketch}.elf", f"{build}/{sketch}.hex"]
-    result = subprocess.run(cmd, capture_output=True, text=True)
+    # One build at a time per folder: test workers and threads that start together
+    # must not run make over each other's half-written objects.
+    with open(build / ".lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        result = subprocess.run(cmd, capture_output=True, text=True)
+        if result.returncode != 0:              # a damaged cache (a build cut short): once more, clean
+            for item in build.iterdir():
+                if item.name != ".lock":
+                    shutil.rmtree(item) if item.is_dir() else item.unlink()
+            result = subprocess.run(cmd, capture_output=True, text=True)
     if result.returncode != 0:
         raise BuildError(f"building {sketch} failed:\n{' '.join(cmd)}\n{result.stdout}\n{result.stderr}")
     return build / f"{sketch}.elf"
