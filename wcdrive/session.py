@@ -20,6 +20,7 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable
+from typing import TypeVar
 
 import serial
 
@@ -46,13 +47,14 @@ from wcdrive.protocol.codec import (
     encode_cmdvel,
     frame,
 )
+from wcdrive.protocol.spec import integer
 from wcdrive.telemetry import LinkEvent, LinkLost, LinkRestored
 from wcdrive.transports.port import Port
 
 __all__ = ["PROTOCOL_VERSION", "FeedbackHandler", "Session"]
 
-#: The protocol this host speaks (``connect(url, legacy=True)`` also speaks v1).
-PROTOCOL_VERSION = 3
+#: The protocol this host speaks, the spec's (``connect(url, legacy=True)`` also speaks v1).
+PROTOCOL_VERSION = integer("PROTOCOL_VERSION")
 
 #: Called from the reader thread with (host time, feedback, the TLM of the same tick).
 FeedbackHandler = Callable[[float, Feedback, ExtendedTelemetry | None], None]
@@ -74,6 +76,8 @@ class _Request:
         self.seen: ExtendedTelemetry | None = None
 
 
+_V = TypeVar("_V")
+
 #: ``_after_lost_answer``: the board did not act on the line; it may go out again.
 _SEND_AGAIN = object()
 #: ``_exchange``: a ``get:`` whose answer was lost: ask again, under a new number (the
@@ -83,6 +87,14 @@ _ASK_AGAIN = object()
 _ORDER_MEMORY = 256
 #: The stop every way out of a session sends.
 _STOP = encode_cmdvel(0.0, 0.0)
+
+
+def _remember(recent: dict[int, _V], seq: int, value: _V) -> None:
+    """Notes ``seq`` as the newest of ``recent``, which keeps the last ``_ORDER_MEMORY``."""
+    recent.pop(seq, None)
+    recent[seq] = value
+    if len(recent) > _ORDER_MEMORY:
+        del recent[next(iter(recent))]
 
 
 def _same_value(value: float, text: bytes) -> bool:
@@ -202,20 +214,20 @@ class Session:
         """Notes that the frame ``seq`` goes out now; returns its send order. Under
         ``_lock``, inside ``_write_lock`` (the send order is the order on the wire)."""
         self._sends += 1
-        self._sent_order.pop(seq, None)
-        self._sent_order[seq] = self._sends
-        if len(self._sent_order) > _ORDER_MEMORY:
-            del self._sent_order[next(iter(self._sent_order))]
+        _remember(self._sent_order, seq, self._sends)
         return self._sends
 
-    def send_frame(self, command: bytes) -> int:
+    def send_frame(self, command: bytes, *, motion: bool = False) -> int:
         """Sends ``command`` without waiting, as a frame with a fresh sequence number
         registered in the send order (a TLM line that reports it proves that the frames
-        before it arrived); returns the number. Its answer is ignored."""
+        before it arrived); returns the number. Its answer is ignored, but for the
+        reason of a ``NAK:`` to a ``motion`` frame, which goes to ``errors``."""
         with self._write_lock:
             with self._lock:
                 seq = self._next_seq()
                 self._register(seq)
+                if motion:
+                    _remember(self._motion_seqs, seq, None)
             self._write(frame(command, seq))
         return seq
 
@@ -228,15 +240,7 @@ class Session:
         if self.protocol_version == 1:
             self.send(command)
             return None
-        with self._write_lock:
-            with self._lock:
-                seq = self._next_seq()
-                self._register(seq)
-                self._motion_seqs[seq] = None
-                if len(self._motion_seqs) > _ORDER_MEMORY:
-                    del self._motion_seqs[next(iter(self._motion_seqs))]
-            self._write(frame(command, seq))
-        return seq
+        return self.send_frame(command, motion=True)
 
     def send(self, data: bytes) -> None:
         """Writes ``data`` as it is; raises ``WcdriveConnectionError`` when the link is
