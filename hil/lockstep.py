@@ -192,9 +192,12 @@ def compare(recording: Recording) -> Report:
         else:
             ticks += 1
             latched = {name: int(ev.after[name])
-                       for name in ("encTickL", "encTickR", "illTickL", "illTickR")}
+                       for name in ("encTickL", "encTickR", "illTickL", "illTickR", "stormTickL",
+                                    "stormTickR")}
             exit_cycle = events[i + 1].cycle if i + 1 < len(events) else recording.end_cycle
             for side, suffix in (("left", "L"), ("right", "R")):
+                if latched["stormTick" + suffix]:
+                    continue        # masked by the storm guard: its count stopped early
                 for what, k in (("encTick", 0), ("illTick", 1)):
                     value = latched[what + suffix]
                     if not _count_possible(decoded[side][k], value, ev.cycle, exit_cycle):
@@ -203,7 +206,8 @@ def compare(recording: Recording) -> Report:
             # freeRam is measured by loop() just before the call: the state at entry.
             before = events[i - 1].after if i > 0 else recording.initial
             tx += fw.tick(ev.arg, latched["encTickL"], latched["encTickR"], latched["illTickL"],
-                          latched["illTickR"], free_ram=int(before["freeRam"]))
+                          latched["illTickR"], free_ram=int(before["freeRam"]),
+                          storm_l=latched["stormTickL"], storm_r=latched["stormTickR"])
         diffs = _differences(fw.state, ev.after)
         fields_compared += len(FLOAT_FIELDS) + len(INT_FIELDS) + 4
         for name, port_value, fw_value in diffs:

@@ -24,3 +24,37 @@ def send_and_run(mega: VirtualMega, data: bytes, seconds: float) -> bytes:
 
 def ms(cycles: int) -> float:
     return cycles * 1000.0 / F_CPU
+
+
+class ChairOnPins:
+    """A ``VirtualMega`` with the pymunk chair on its pins (``PlantOnPins``), stepped a
+    millisecond at a time: the board's encoders see the wheels its motors turn, as on
+    the real chair (a board driven with idle encoders latches a stall fault)."""
+
+    def __init__(self, mega: VirtualMega, dt: float = 0.001, **chair: float) -> None:
+        import dataclasses
+
+        from wcdrive.boards.simavr.plant_on_pins import PlantOnPins
+        from wcdrive.plant import ChairParams, Plant
+
+        self.mega = mega
+        self.plant = Plant(dataclasses.replace(ChairParams(), **chair))  # type: ignore[arg-type]
+        self.pins = PlantOnPins(mega, self.plant)
+        self.dt = dt
+
+    def run_for(self, seconds: float) -> None:
+        """Runs the board and the chair for ``seconds``."""
+        end = self.mega.time + seconds
+        while self.mega.time < end - 1e-9:
+            t0 = self.mega.time
+            self.pins.step(t0, min(t0 + self.dt, end))
+
+    def send_and_run(self, data: bytes, seconds: float) -> bytes:
+        """Sends ``data``, runs for ``seconds``; returns what the board sent."""
+        self.mega.send(data)
+        self.run_for(seconds)
+        return bytes(b for _, b in self.mega.take_tx())
+
+    def speeds(self) -> tuple[float, float]:
+        """The wheels' true speeds (rad/s, forward positive)."""
+        return self.plant.left.speed, self.plant.right.speed

@@ -4,11 +4,12 @@ case, the watchdog, stops and PPM loss (issue: firmware)."""
 from __future__ import annotations
 
 import itertools
+import math
 import re
 
 import pytest
 
-from tests.boards import FEEDBACK, boot, ms, send_and_run
+from tests.boards import FEEDBACK, ChairOnPins, boot, ms, send_and_run
 from wcdrive.avr.f32 import f32
 from wcdrive.boards.simavr.virtual_mega import F_CPU, VirtualMega
 from wcdrive.firmware.final_control import Firmware
@@ -23,7 +24,7 @@ def test_boots_and_sends_feedback_every_50ms(mega: VirtualMega) -> None:
     mega.run_for(2.0)
     tx = mega.take_tx()
     text = bytes(b for _, b in tx)
-    assert text.startswith(b"BOOT:final_control\r\n")
+    assert text.startswith(b"BOOT:final_control,POWER_ON\r\n")
     starts = [cycle for k, (cycle, b) in enumerate(tx)
               if b == ord("E") and bytes(x for _, x in tx[k:k + 4]) == b"ENC:"]
     assert len(starts) >= 38
@@ -146,60 +147,72 @@ def test_malformed_commands_change_nothing_in_motion(elf, command: bytes, reason
     assert results[0] == results[1]
 
 
-def _pwm_zero_time(mega: VirtualMega, until: float) -> float | None:
-    """Steps 1 ms at a time; the first time from which both PWM outputs stay 0."""
+def _pwm_zero_time(rig: ChairOnPins, until: float) -> tuple[float | None, float]:
+    """Steps 1 ms at a time; the first time from which both PWM outputs stay 0, and the
+    fastest true wheel speed (rad/s) at that moment."""
+    mega = rig.mega
     zero_since = None
+    fastest_at_zero = math.inf
     while mega.time < until:
-        mega.run_for(0.001)
+        rig.run_for(0.001)
         if mega.pwm("left") == 0 and mega.pwm("right") == 0:
             if zero_since is None:
                 zero_since = mega.time
+                fastest_at_zero = max(abs(v) for v in rig.speeds())
         else:
             zero_since = None
-    return zero_since
+    return zero_since, fastest_at_zero
 
 
 @pytest.mark.parametrize("speed", [0.5, 3.0, 10.0, 17.59])
-def test_watchdog_stops_the_motors_after_the_last_command(mega: VirtualMega, speed: float) -> None:
-    boot(mega)
+def test_watchdog_brakes_the_chair_then_unpowers_the_motors(mega: VirtualMega, speed: float) -> None:
+    """After the last command the watchdog ramps the setpoints down and the PID keeps
+    braking the wheels until they turn slower than BRAKE_DONE_SPEED; then the motors are
+    unpowered (parked). The chair on the pins is the ground truth."""
+    rig = ChairOnPins(mega)
+    rig.run_for(0.06)
     command = f"rp{speed},lp{speed},".encode()
-    settle = speed / 5.0 + 0.3
+    settle = speed / 5.0 + 0.5
     t = mega.time
     while mega.time - t < settle:        # a host repeating its command until the ramp is done
-        send_and_run(mega, command, 0.1)
+        rig.send_and_run(command, 0.1)
     last = mega.send(command)[-1] / F_CPU
-    setpoint = mega.read("setpointR")
-    assert setpoint == pytest.approx(speed, abs=1e-4)
-    deadline = last + 0.5 + setpoint / 15.0 + 0.15
-    zero_at = _pwm_zero_time(mega, deadline + 0.5)
+    assert mega.read("setpointR") == pytest.approx(speed, abs=1e-4)
+    # The plant brakes at most ~7.4 rad/s^2 (the driver's 13 A limit): budget 6 rad/s^2.
+    deadline = last + 0.5 + speed / 6.0 + 0.3
+    zero_at, speed_at_zero = _pwm_zero_time(rig, deadline + 0.5)
     assert zero_at is not None and zero_at <= deadline, (zero_at, deadline)
+    assert speed_at_zero < 0.5, "unpowered while the wheels still turned fast"
     out = bytes(b for _, b in mega.take_tx())
-    assert b"EVT:WATCHDOG\r\n" in out
+    assert b"EVT:WATCHDOG\r\n" in out and b"EVT:FAULT" not in out
     assert mega.read("integralL") == 0.0 and mega.read("integralR") == 0.0
     assert mega.read("parked") == 1
 
 
 def test_stop_command_leaves_the_motors_unpowered(mega: VirtualMega) -> None:
-    boot(mega)
-    for _ in range(10):                  # wheels held still: the integrators wind up
-        send_and_run(mega, b"rp2.0,lp2.0,", 0.1)
+    rig = ChairOnPins(mega)
+    rig.run_for(0.06)
+    for _ in range(10):
+        rig.send_and_run(b"rp2.0,lp2.0,", 0.1)
     assert mega.pwm("left") > 0
-    send_and_run(mega, b"rp0,lp0,", 0.0)
-    zero_at = _pwm_zero_time(mega, mega.time + 1.0)
+    rig.send_and_run(b"rp0,lp0,", 0.0)
+    zero_at, _ = _pwm_zero_time(rig, mega.time + 1.5)
     assert zero_at is not None
     assert mega.read("parked") == 1 and mega.read("integralR") == 0.0
+    assert max(abs(v) for v in rig.speeds()) < 0.05
 
 
 def test_ppm_loss_stops_and_is_reported(mega: VirtualMega) -> None:
-    boot(mega)
+    rig = ChairOnPins(mega)
+    rig.run_for(0.06)
     frame = b"ppm:1500,1800,1500,1500,1500,1500,1500,1500,"
     for _ in range(8):
-        send_and_run(mega, frame, 0.05)
+        rig.send_and_run(frame, 0.05)
     assert mega.read("targetR") == f32(3.0)
-    out = send_and_run(mega, b"ppm:1500,0,1500,1500,1500,1500,1500,1500,", 0.05)
+    out = rig.send_and_run(b"ppm:1500,0,1500,1500,1500,1500,1500,1500,", 0.05)
     assert b"EVT:PPM_LOST\r\n" in out
     assert mega.read("targetR") == 0.0 and mega.read("emergencyStop") == 1
-    assert _pwm_zero_time(mega, mega.time + 1.0) is not None
+    assert _pwm_zero_time(rig, mega.time + 1.0)[0] is not None
     assert mega.read("mode") == 2
 
 

@@ -10,9 +10,10 @@ import numpy as np
 import pytest
 import serial
 
-from tests.boards import FEEDBACK, boot, send_and_run
+from tests.boards import FEEDBACK, ChairOnPins, boot, send_and_run
 from wcdrive.boards.simavr.mega_board import MegaBoard
 from wcdrive.boards.simavr.virtual_mega import F_CPU, VirtualMega
+from wcdrive.firmware import constants as C
 from wcdrive.plant.encoders import EdgeTrain, edges_from_trajectory, state_for_count
 from wcdrive.transports.pty_bridge import PtyBridge
 
@@ -53,12 +54,29 @@ def test_illegal_transitions_are_counted_not_stepped(mega: VirtualMega) -> None:
     assert mega.read("encoderValueL") == 0
 
 
-def test_sixty_thousand_edges_per_second_on_one_wheel(mega: VirtualMega) -> None:
-    train = edges_from_trajectory(np.array([0.0, 0.01, 0.51]), np.array([0.5, 0.5, 30000.5]))
-    assert np.min(np.diff(train.times)) == pytest.approx(1 / 60000, rel=1e-6)
+def test_fifty_thousand_edges_per_second_are_all_counted(mega: VirtualMega) -> None:
+    """Below the storm guard's threshold (STORM_EDGES per 1.024 ms, twice the top
+    speed) every edge counts: 50,000 edges/s for half a second."""
+    train = edges_from_trajectory(np.array([0.0, 0.01, 0.51]), np.array([0.5, 0.5, 25000.5]))
+    assert np.min(np.diff(train.times)) == pytest.approx(1 / 50000, rel=1e-6)
     mega.encoder_edges("left", train)
     mega.run_for(0.6)
-    assert mega.read("encoderValueL") == 30000 and mega.read("illegalL") == 0
+    assert mega.read("encoderValueL") == 25000 and mega.read("illegalL") == 0
+    assert mega.read("stormL") == 0
+
+
+def test_sixty_thousand_edges_per_second_trip_the_storm_guard(mega: VirtualMega) -> None:
+    """60,000 edges/s is more than twice the wheel's top speed (28,000 edges/s): the
+    ISR masks the encoder within one 1.024 ms window, after STORM_EDGES edges at most,
+    and the tick latches an implausible-encoder fault."""
+    train = edges_from_trajectory(np.array([0.0, 0.1, 0.6]), np.array([0.5, 0.5, 30000.5]))
+    mega.encoder_edges("left", train)
+    mega.run_for(0.7)
+    assert mega.read("stormL") == 1 and mega.read("stormR") == 0
+    counted = mega.read("encoderValueL")
+    assert 0 < counted <= 2 * C.STORM_EDGES
+    assert mega.read("faultFlags") == 0x10               # ENC_IMPLAUSIBLE_L
+    assert b"EVT:FAULT,ENC_IMPLAUSIBLE_L\r\n" in bytes(b for _, b in mega.take_tx())
 
 
 def test_quadrature_states_follow_the_seed_table() -> None:
@@ -83,9 +101,9 @@ def test_commands_give_expected_pwm_and_dir(mega: VirtualMega) -> None:
 
 
 def test_full_duty_reads_255(mega: VirtualMega) -> None:
-    boot(mega)
-    for _ in range(30):
-        send_and_run(mega, b"rp17.0,lp17.0,", 0.1)
+    rig = ChairOnPins(mega, battery_voltage=20.0)    # a weak battery: the PID saturates
+    for _ in range(40):
+        rig.send_and_run(b"rp17.59,lp17.59,", 0.1)
     assert mega.pwm("left") == 255 and mega.pwm("right") == 255   # analogWrite(255) is digitalWrite
 
 

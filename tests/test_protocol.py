@@ -66,7 +66,7 @@ def test_vector_on_the_port(v: dict) -> None:
 @pytest.mark.parametrize("v", VECTORS, ids=lambda v: v["name"])
 def test_vector_on_the_firmware(elf, v: dict) -> None:
     with VirtualMega(elf) as mega:
-        boot(mega, 0.055)                     # just past the first tick
+        boot(mega, 0.058)                     # just past the first tick and its lines
         mega.send(v["input"].encode("latin-1"))
         mega.run_for(0.04)                    # the bytes are in, the next tick not yet
         text = bytes(b for _, b in mega.take_tx())

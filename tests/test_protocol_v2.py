@@ -11,7 +11,7 @@ import re
 import numpy as np
 import pytest
 
-from tests.boards import boot, send_and_run
+from tests.boards import ChairOnPins, boot, send_and_run
 from wcdrive.boards.simavr.virtual_mega import VirtualMega
 from wcdrive.firmware import constants as C
 from wcdrive.firmware.final_control import FREE_RAM, Firmware
@@ -29,24 +29,27 @@ def _drive(mega: VirtualMega, command: bytes, seconds: float) -> bytes:
 
 
 def test_estop_in_motion_ramps_down_refuses_motion_and_resets_once_parked(mega) -> None:
-    boot(mega, 0.1)
-    _drive(mega, b"rp6.0,lp6.0,\n", 1.5)
+    rig = ChairOnPins(mega)
+    rig.run_for(0.1)
+    for _ in range(15):
+        rig.send_and_run(b"rp6.0,lp6.0,\n", 0.1)
     assert mega.read("setpointR") == pytest.approx(6.0)
-    out = send_and_run(mega, b"estop\n", 0.06)
+    out = rig.send_and_run(b"estop\n", 0.06)
     assert b"EVT:ESTOP\r\n" in out and mega.read("estopLatched") == 1
     # Setpoints fall at estop_decel (15 rad/s^2): 6 rad/s -> 0 in 0.4 s, 0.75 per tick.
     before = mega.read("setpointR")
-    mega.run_for(0.05)
+    rig.run_for(0.05)
     assert before - mega.read("setpointR") == pytest.approx(0.75, abs=0.06)
-    assert b"ERR:estop" in send_and_run(mega, b"rp6.0,lp6.0,\n", 0.01)
-    assert b"NAK:3,estop" in send_and_run(mega, frame(b"x:0.5,t:0.0,", 3), 0.01)
-    assert b"ERR:busy" in send_and_run(mega, b"reset\n", 0.01)     # still ramping down
-    mega.run_for(0.6)
+    assert b"ERR:estop" in rig.send_and_run(b"rp6.0,lp6.0,\n", 0.01)
+    assert b"NAK:3,estop" in rig.send_and_run(frame(b"x:0.5,t:0.0,", 3), 0.01)
+    assert b"ERR:busy" in rig.send_and_run(b"reset\n", 0.01)     # still braking
+    rig.run_for(1.2)                              # the chair brakes to rest, then parks
     assert mega.read("parked") == 1 and mega.pwm("left") == 0 and mega.pwm("right") == 0
-    assert b"ERR:" not in send_and_run(mega, b"reset\n", 0.06)
+    assert max(abs(v) for v in rig.speeds()) < 0.3
+    assert b"ERR:" not in rig.send_and_run(b"reset\n", 0.06)
     assert mega.read("estopLatched") == 0
     assert mega.read("setpointR") == 0.0          # a reset alone does not move the chair
-    send_and_run(mega, b"rp2.0,lp2.0,\n", 0.2)
+    rig.send_and_run(b"rp2.0,lp2.0,\n", 0.2)
     assert mega.read("targetR") == 2.0 and mega.read("setpointR") > 0.0
 
 

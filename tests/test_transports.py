@@ -157,7 +157,7 @@ def test_plain_pyserial_finds_wcsim_in_a_fresh_interpreter() -> None:
             "print(p.readline().decode().strip()); print('wcdrive' in sys.modules); p.close()")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
                          cwd="/", check=True).stdout.split()
-    assert out == ["BOOT:final_control", "True"]
+    assert out == ["BOOT:final_control,POWER_ON", "True"]
 
 
 @pytest.mark.simavr
@@ -165,7 +165,7 @@ def test_wcavr_url_opens_the_firmware_in_simavr_driving_the_chair(elf) -> None:
     """``serial_for_url("wcavr://<elf>")``: the compiled firmware behind a pyserial port."""
     port = serial.serial_for_url(f"wcavr://{elf}", timeout=0.5)
     try:
-        assert port.readline() == b"BOOT:final_control\r\n"
+        assert port.readline() == b"BOOT:final_control,POWER_ON\r\n"
         got = b""
         deadline = time.monotonic() + 20
         while b"MODE:WHEEL" not in got and time.monotonic() < deadline:

@@ -14,6 +14,7 @@ from wcdrive.errors import (
     WcdriveConnectionError,
     WcdriveError,
     WcdriveEstopError,
+    WcdriveFaultError,
     WcdrivePermissionError,
     WcdriveProtocolError,
     WcdriveTimeoutError,
@@ -22,5 +23,5 @@ from wcdrive.wheelchair import stop_all
 
 __all__ = ["LinkEvent", "LinkLost", "LinkRestored", "Telemetry", "WcdriveBusyError",
            "WcdriveCommandError", "WcdriveConnectionError", "WcdriveError", "WcdriveEstopError",
-           "WcdrivePermissionError", "WcdriveProtocolError", "WcdriveTimeoutError", "Wheelchair",
+           "WcdriveFaultError", "WcdrivePermissionError", "WcdriveProtocolError", "WcdriveTimeoutError", "Wheelchair",
            "connect", "stop_all"]

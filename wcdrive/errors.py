@@ -38,3 +38,12 @@ class WcdriveCommandError(WcdriveError):
 
 class WcdriveEstopError(WcdriveCommandError):
     """Motion refused: the e-stop is latched. Call ``reset_estop()`` once it is safe."""
+
+
+class WcdriveFaultError(WcdriveEstopError):
+    """The board has latched a fault (an encoder or the motor driver, ``EVT:FAULT``) and
+    refuses motion until ``reset_estop()``; ``faults`` names them."""
+
+    def __init__(self, message: str, faults: tuple[str, ...]) -> None:
+        super().__init__(message, "fault")
+        self.faults = faults

@@ -78,7 +78,7 @@ def replay(recording: Recording) -> ReplayReport:
     ReplayError when the recording cannot be replayed."""
     report = ReplayReport()
     received = recording.received_bytes
-    boot = received.rfind(b"BOOT:final_control\r\n")
+    boot = received.rfind(b"BOOT:final_control")
     if boot < 0:
         raise ReplayError("no BOOT line: the recording must start at the board's reset "
                           "(open the port so that the Mega resets, as connect() does)")

@@ -175,6 +175,10 @@ class Session:
         #: The host holds the e-stop latched (``Wheelchair.estop`` until ``reset_estop``):
         #: a board that reset meanwhile (a reconnect) gets ``estop`` right after hello.
         self.estop_held = False
+        #: Faults the board announced (``EVT:FAULT,<name>``) since the last reset.
+        self.faults_announced: list[str] = []
+        #: The cause of the board's last reset as its ``BOOT:`` line gave it ("" before one).
+        self.reset_cause = ""
         self._handshake_done = threading.Event()
         self._hello_tries = 0                   # hellos sent since the port was opened
         self._hello_sent_at = 0.0
@@ -505,13 +509,14 @@ class Session:
                 self._on_feedback(now, msg, None)
             self._hello_step(now, first=True)
         elif isinstance(msg, Boot):
+            self.reset_cause = msg.cause
             if self._handshake_done.is_set() and self.protocol_version == PROTOCOL_VERSION:
                 # A reset while the port stayed open (a brown-out, its watchdog, a
                 # reset button): the board boots unpowered and lax; say hello again,
                 # which also re-latches an e-stop the host holds.
                 with self._hello_lock:
                     self._forget_board()
-                self.events.append("BOARD_RESET")
+                self.events.append("BOARD_RESET")   # the cause: reset_cause
             self._hello_step(now, first=True)
         elif isinstance(msg, Hello):
             self._hello_answered(msg)
@@ -542,6 +547,8 @@ class Session:
             self.events.append(msg.name)
             if msg.name == "ESTOP":
                 self.estop_announced = True
+            elif msg.fault is not None:
+                self.faults_announced.append(msg.fault)
 
     def _note_telemetry(self, msg: ExtendedTelemetry) -> None:
         """A TLM line reports the last sequence number the board parsed: the pending
@@ -701,6 +708,7 @@ class Session:
         self._last_data = None
         self.status = None                  # the old board's; the new one reports anew
         self.estop_announced = False        # re-latched after hello when estop_held
+        self.faults_announced = []          # a board that reset has no fault latched
         self._telemetry_seen = False
         self._relatch_check = False
         self.protocol_version = 0

@@ -39,6 +39,7 @@ from wcdrive.errors import (
     WcdriveConnectionError,
     WcdriveError,
     WcdriveEstopError,
+    WcdriveFaultError,
     WcdriveProtocolError,
     WcdriveTimeoutError,
 )
@@ -333,8 +334,9 @@ class Wheelchair:
             raise
 
     def reset_estop(self, timeout: float = 5.0) -> None:
-        """Release the e-stop once the chair has parked (the board refuses earlier: this
-        waits and retries until ``timeout``). The chair stays at rest until a command."""
+        """Release the e-stop, and any latched fault, once the chair has parked (the
+        board refuses earlier: this waits and retries until ``timeout``). The chair
+        stays at rest until a command."""
         if self.protocol_version == 1:
             raise WcdriveProtocolError(f"{self.url} speaks protocol v1 (legacy): there is no "
                                        "e-stop to reset")
@@ -345,12 +347,31 @@ class Wheelchair:
                 self._session.request(RESET.rstrip(b"\n"))
                 self._session.estop_held = False
                 self._session.estop_announced = False
+                self._session.faults_announced = []
                 self._session.status = None          # the last TLM predates the reset
                 return
             except WcdriveCommandError as exc:
                 if exc.reason != "busy" or time.monotonic() > deadline:
                     raise
             time.sleep(0.05)
+
+    @property
+    def faults(self) -> tuple[str, ...]:
+        """The faults the board has latched (``ENC_STALL_L``, ``DRIVER_DEAD``, ...;
+        PROTOCOL.md "Faults"), as its TLM line or its ``EVT:FAULT`` lines report them;
+        empty when none. Motion raises ``WcdriveFaultError`` until ``reset_estop()``."""
+        status = self._session.status
+        names = list(status.fault_names) if status is not None else []
+        for name in self._session.faults_announced:
+            if name not in names:
+                names.append(name)
+        return tuple(names)
+
+    @property
+    def reset_cause(self) -> str:
+        """Why the board last reset, from its ``BOOT:`` line (``POWER_ON``, ``EXTERNAL``,
+        ``BROWN_OUT``, ``WATCHDOG``, ...), or "" when no BOOT line was seen."""
+        return self._session.reset_cause
 
     @property
     def estop_latched(self) -> bool:
@@ -393,6 +414,11 @@ class Wheelchair:
 
     def _move(self, command: bytes) -> None:
         self._require_link(repr(command.decode(errors="replace")))
+        faults = self.faults
+        if faults:
+            raise WcdriveFaultError(f"{self.url} latched a fault ({', '.join(faults)}) and "
+                                    "refuses motion: find the cause, then reset_estop() once "
+                                    "the chair has parked", faults)
         if self.estop_latched:
             raise WcdriveEstopError(f"the e-stop of {self.url} is latched: call reset_estop() "
                                     "once it is safe", "estop")

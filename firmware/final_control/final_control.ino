@@ -22,6 +22,7 @@
 #include <string.h>
 #include <util/atomic.h>
 #include <util/crc16.h>
+#include <avr/wdt.h>
 
 #include "wc_config.h"
 
@@ -49,6 +50,20 @@ static const int8_t QUAD_TABLE[16] = {
   QUAD_ILLEGAL, +1, -1, 0,
 };
 
+// Storm guard: the encoder ISRs count their edges in windows of one Timer0 period
+// (1.024 ms; TIMER0_COMPA clears the counts). WC_STORM_EDGES edges in one window, more
+// than twice the wheel's top speed (a loose connector, EMI), mask that encoder's
+// interrupts and set its storm flag, which the control tick latches as an
+// implausible-encoder fault. So no edge rate holds loop() for more than WC_STORM_EDGES
+// interrupts per encoder; "reset" unmasks.
+volatile uint8_t stormL = 0, stormR = 0;
+volatile uint8_t stormEdgesL = 0, stormEdgesR = 0;
+
+ISR(TIMER0_COMPA_vect) {
+  stormEdgesL = 0;
+  stormEdgesR = 0;
+}
+
 // Left encoder: A on PE4 (pin 2), B on PE5 (pin 3).
 static inline uint8_t readEncoderL() {
   uint8_t pins = PINE;
@@ -69,6 +84,10 @@ ISR(INT4_vect) {
     encoderValueL += step;
   }
   lastEncodedL = now;
+  if (++stormEdgesL >= WC_STORM_EDGES) {
+    EIMSK &= (uint8_t)~(_BV(INT4) | _BV(INT5));
+    stormL = 1;
+  }
 }
 ISR(INT5_vect, ISR_ALIASOF(INT4_vect));
 
@@ -81,6 +100,31 @@ ISR(INT3_vect) {
     encoderValueR += step;
   }
   lastEncodedR = now;
+  if (++stormEdgesR >= WC_STORM_EDGES) {
+    EIMSK &= (uint8_t)~(_BV(INT2) | _BV(INT3));
+    stormR = 1;
+  }
+}
+
+// "reset" after an implausible-encoder fault: the pins read afresh, the interrupts on
+// again.
+static void unmaskEncoders() {
+  ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
+    if (stormL) {
+      lastEncodedL = readEncoderL();
+      stormEdgesL = 0;
+      stormL = 0;
+      EIFR = _BV(INTF4) | _BV(INTF5);
+      EIMSK |= _BV(INT4) | _BV(INT5);
+    }
+    if (stormR) {
+      lastEncodedR = readEncoderR();
+      stormEdgesR = 0;
+      stormR = 0;
+      EIFR = _BV(INTF2) | _BV(INTF3);
+      EIMSK |= _BV(INT2) | _BV(INT3);
+    }
+  }
 }
 ISR(INT2_vect, ISR_ALIASOF(INT3_vect));
 
@@ -100,6 +144,7 @@ uint8_t dirL = HIGH, dirR = HIGH;
 int32_t encTickL = 0, encTickR = 0;         // counts latched at the last tick
 int32_t prevEncL = 0, prevEncR = 0;
 uint32_t illTickL = 0, illTickR = 0;        // illegal-transition counts latched at the last tick
+uint8_t stormTickL = 0, stormTickR = 0;     // the ISRs' storm flags latched at the last tick
 uint32_t lastControlTime = 0;               // millis() of the last tick
 uint32_t tickCount = 0;
 uint16_t freeRam = 0;                       // bytes between the heap and the stack, before a tick
@@ -130,6 +175,18 @@ uint8_t stillTicks = 0;
 volatile bool parked = true;                       // motors held at zero with integrators reset
 
 bool estopLatched = false;                  // e-stop: motion refused until "reset"
+
+// Faults (EVT:FAULT,<name>; docs/safety.md): latched until "reset", motion refused, motors off.
+#define FAULT_STALL_L 0x01
+#define FAULT_STALL_R 0x02
+#define FAULT_REVERSED_L 0x04
+#define FAULT_REVERSED_R 0x08
+#define FAULT_IMPLAUSIBLE_L 0x10
+#define FAULT_IMPLAUSIBLE_R 0x20
+#define FAULT_DRIVER 0x40
+uint8_t faultFlags = 0;
+uint8_t stallTicksL = 0, stallTicksR = 0;   // ticks driven without a count
+uint8_t reverseTicksL = 0, reverseTicksR = 0;   // ticks measured against the setpoint
 bool tlmEnabled = false;                    // after "hello": TLM lines, and v3 frames only
 bool unframedLine = false;                  // the line being parsed is not a v3 frame
 uint16_t lastSeq = 0;                       // sequence number of the last framed line
@@ -175,6 +232,28 @@ static void sendEvent(const __FlashStringHelper* what) {
   line.send();
 }
 
+static const char F_STALL_L[] PROGMEM = "ENC_STALL_L";
+static const char F_STALL_R[] PROGMEM = "ENC_STALL_R";
+static const char F_REVERSED_L[] PROGMEM = "ENC_REVERSED_L";
+static const char F_REVERSED_R[] PROGMEM = "ENC_REVERSED_R";
+static const char F_IMPLAUSIBLE_L[] PROGMEM = "ENC_IMPLAUSIBLE_L";
+static const char F_IMPLAUSIBLE_R[] PROGMEM = "ENC_IMPLAUSIBLE_R";
+static const char F_DRIVER[] PROGMEM = "DRIVER_DEAD";
+static const char* const FAULT_NAMES[7] = {
+  F_STALL_L, F_STALL_R, F_REVERSED_L, F_REVERSED_R, F_IMPLAUSIBLE_L, F_IMPLAUSIBLE_R, F_DRIVER,
+};
+
+// One EVT:FAULT,<name> line per fault bit set.
+static void sendFaultEvents(uint8_t faults) {
+  for (uint8_t i = 0; i < 7; i++) {
+    if (faults & (1 << i)) {
+      line.print(F("EVT:FAULT,"));
+      line.println((const __FlashStringHelper*)FAULT_NAMES[i]);
+      line.send();
+    }
+  }
+}
+
 // ---------------------------------------------------------------------------
 // Control law
 // ---------------------------------------------------------------------------
@@ -212,13 +291,47 @@ static void setMotor(uint8_t pwmPin, uint8_t dirPin, float output, uint8_t& pwm,
   analogWrite(pwmPin, pwm);
 }
 
-// Targets to zero; the ramp brings the setpoints down at the emergency rate.
+// Targets to zero; the ramp brings the setpoints down at the emergency rate and the
+// PID brakes the wheels along it. Its integrators start from zero: what they held to
+// keep the chair rolling would push against the brake.
 static void emergencyHalt() {
+  if (!emergencyStop) integralL = integralR = 0.0f;
   targetL = targetR = 0.0f;
   pivotPhase = PIVOT_NONE;
   pivotTicksLeft = 0;
   lastTravel = 0.0f;
   emergencyStop = true;
+}
+
+// What one wheel's encoder showed over the interval that just ended, driven at
+// appliedPwm (the last tick's duty) toward setpoint: WHEEL_OK; WHEEL_SUSPECT (no count
+// although driven, or measured against the setpoint: the PID must not push harder on
+// it this tick); or a fault: stalled or cut, reversed, implausible (storm or illegal
+// transitions).
+#define WHEEL_OK 0
+#define WHEEL_SUSPECT 1
+#define WHEEL_STALLED 2
+#define WHEEL_REVERSED 3
+#define WHEEL_IMPLAUSIBLE 4
+static uint8_t checkWheel(int32_t delta, uint32_t illegal, uint8_t storm, uint8_t appliedPwm,
+                          float setpoint, float measured, uint8_t& stallTicks, uint8_t& reverseTicks) {
+  if (storm || illegal >= WC_FAULT_ILLEGAL_PER_TICK) return WHEEL_IMPLAUSIBLE;
+  bool stalled = appliedPwm >= WC_FAULT_STALL_PWM && delta == 0;
+  stallTicks = stalled ? stallTicks + 1 : 0;
+  if (stallTicks >= WC_FAULT_STALL_TICKS) return WHEEL_STALLED;
+  bool against = fabs(setpoint) >= WC_FAULT_REVERSE_SPEED && fabs(measured) >= WC_FAULT_REVERSE_SPEED &&
+                 (setpoint > 0.0f) != (measured > 0.0f);
+  reverseTicks = against ? reverseTicks + 1 : 0;
+  if (reverseTicks >= WC_FAULT_REVERSE_TICKS) return WHEEL_REVERSED;
+  return (stalled || against) ? WHEEL_SUSPECT : WHEEL_OK;
+}
+
+// The fault bits of one wheel's check (its stall, reversed and implausible bits).
+static uint8_t wheelFaults(uint8_t check, uint8_t stall, uint8_t reversed, uint8_t implausible) {
+  if (check == WHEEL_STALLED) return stall;
+  if (check == WHEEL_REVERSED) return reversed;
+  if (check == WHEEL_IMPLAUSIBLE) return implausible;
+  return 0;
 }
 
 // A valid command: new wheel targets, through the pivot state machine.
@@ -248,10 +361,11 @@ static void acceptCommand(uint8_t newMode, float right, float left) {
 }
 
 // TLM:<millis>,<rx bytes>,<seq>,<pwmL>,<pwmR>,<dirL>,<dirR>,<illegalL>,<illegalR>,
-//     <flags>,<rejected>,<crc rejected>,<free RAM>   (protocol/PROTOCOL.md)
+//     <flags>,<rejected>,<crc rejected>,<free RAM>,<faults>   (protocol/PROTOCOL.md)
 static void sendTelemetry(uint32_t now) {
   uint8_t flags = (watchdogArmed ? 1 : 0) | (emergencyStop ? 2 : 0) | (estopLatched ? 4 : 0) |
-                  (ppmLost ? 8 : 0) | (parked ? 16 : 0) | (uint8_t)(pivotPhase << 5);
+                  (ppmLost ? 8 : 0) | (parked ? 16 : 0) | (uint8_t)(pivotPhase << 5) |
+                  (faultFlags != 0 ? 128 : 0);
   line.print(F("TLM:"));
   line.print(now);
   line.print(',');
@@ -277,7 +391,9 @@ static void sendTelemetry(uint32_t now) {
   line.print(',');
   line.print(crcRejected);
   line.print(',');
-  line.println(freeRam);
+  line.print(freeRam);
+  line.print(',');
+  line.println(faultFlags);
   line.send();
 }
 
@@ -286,11 +402,16 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
   lastControlTime = now;
   tickCount++;
 
+  uint32_t illDeltaL, illDeltaR;
   ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
     encTickL = encoderValueL;
     encTickR = encoderValueR;
+    illDeltaL = illegalL - illTickL;
+    illDeltaR = illegalR - illTickR;
     illTickL = illegalL;
     illTickR = illegalR;
+    stormTickL = stormL;
+    stormTickR = stormR;
   }
   int32_t deltaL = (int32_t)((uint32_t)encTickL - (uint32_t)prevEncL);
   int32_t deltaR = (int32_t)((uint32_t)encTickR - (uint32_t)prevEncR);
@@ -302,6 +423,28 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
   rawVelR = ((float)deltaR / WC_CPR) * (WC_TWO_PI / dt);
   filtVelL = WC_ALPHA * rawVelL + (1.0f - WC_ALPHA) * filtVelL;
   filtVelR = WC_ALPHA * rawVelR + (1.0f - WC_ALPHA) * filtVelR;
+
+  // Faults: checked until one latches. A new one stops the chair (motors off below).
+  uint8_t checkL = WHEEL_OK, checkR = WHEEL_OK;
+  if (faultFlags == 0) {
+    checkL = checkWheel(deltaL, illDeltaL, stormTickL, pwmL, setpointL, filtVelL, stallTicksL, reverseTicksL);
+    checkR = checkWheel(deltaR, illDeltaR, stormTickR, pwmR, setpointR, filtVelR, stallTicksR, reverseTicksR);
+    uint8_t faults;
+    if (checkL == WHEEL_STALLED && checkR == WHEEL_STALLED) {
+      faults = FAULT_DRIVER;   // both wheels driven, neither turns: the driver or its supply
+    } else {
+      faults = wheelFaults(checkL, FAULT_STALL_L, FAULT_REVERSED_L, FAULT_IMPLAUSIBLE_L) |
+               wheelFaults(checkR, FAULT_STALL_R, FAULT_REVERSED_R, FAULT_IMPLAUSIBLE_R);
+    }
+    if (faults != 0) {
+      faultFlags = faults;
+      emergencyHalt();
+      cmdSinceTick = false;
+      watchdogArmed = false;
+      stallTicksL = stallTicksR = reverseTicksL = reverseTicksR = 0;
+      sendFaultEvents(faults);
+    }
+  }
 
   if (cmdSinceTick) {
     cmdSinceTick = false;
@@ -325,9 +468,12 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
     stillTicks++;
   }
   bool atRest = targetL == 0.0f && targetR == 0.0f && setpointL == 0.0f && setpointR == 0.0f;
-  // Park: at rest and still for a few ticks; after an emergency ramp (watchdog, PPM
-  // loss, e-stop) at once, so the motors are not driven on by the integrators.
-  if (atRest && (stillTicks >= WC_STILL_TICKS || emergencyStop)) {
+  // Park: at rest and still for a few ticks. An emergency ramp (watchdog, PPM loss,
+  // e-stop) keeps braking under closed loop until both wheels are slower than
+  // WC_BRAKE_DONE_SPEED, then parks at once. A fault parks at once: its encoders are
+  // not to be trusted, the driver brakes the motors.
+  bool braked = fabs(filtVelL) < WC_BRAKE_DONE_SPEED && fabs(filtVelR) < WC_BRAKE_DONE_SPEED;
+  if (faultFlags != 0 || (atRest && (stillTicks >= WC_STILL_TICKS || (emergencyStop && braked)))) {
     parked = true;
     integralL = integralR = 0.0f;
     prevMeasL = filtVelL;
@@ -335,8 +481,13 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
     outputL = outputR = 0.0f;
   } else {
     parked = false;
-    outputL = computePID(setpointL, filtVelL, integralL, prevMeasL, kpL, kiL, kdL, dt);
-    outputR = computePID(setpointR, filtVelR, integralR, prevMeasR, kpR, kiR, kdR, dt);
+    // A suspect wheel keeps its output: no count is no reason to push harder.
+    if (checkL != WHEEL_SUSPECT) {
+      outputL = computePID(setpointL, filtVelL, integralL, prevMeasL, kpL, kiL, kdL, dt);
+    }
+    if (checkR != WHEEL_SUSPECT) {
+      outputR = computePID(setpointR, filtVelR, integralR, prevMeasR, kpR, kiR, kdR, dt);
+    }
   }
   setMotor(WC_PIN_PWM_L, WC_PIN_DIR_L, outputL, pwmL, dirL);
   setMotor(WC_PIN_PWM_R, WC_PIN_DIR_R, outputR, pwmR, dirR);
@@ -374,7 +525,7 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
 // ---------------------------------------------------------------------------
 enum ParseResult : uint8_t {
   PARSE_OK, ERR_SYNTAX, ERR_NUMBER, ERR_RANGE, ERR_FIELDS, ERR_OVERLONG, ERR_CHECKSUM, ERR_ESTOP,
-  ERR_BUSY, ERR_PARAM, ERR_UNFRAMED
+  ERR_BUSY, ERR_PARAM, ERR_UNFRAMED, ERR_FAULT
 };
 // What a command answers besides ACK/ERR.
 enum DataReply : uint8_t { DATA_NONE, DATA_HELLO, DATA_PARAM };
@@ -400,9 +551,10 @@ static const char R_ESTOP[] PROGMEM = "estop";
 static const char R_BUSY[] PROGMEM = "busy";
 static const char R_PARAM[] PROGMEM = "param";
 static const char R_UNFRAMED[] PROGMEM = "unframed";
+static const char R_FAULT[] PROGMEM = "fault";
 static const char* const REASONS[] = {
   R_SYNTAX, R_SYNTAX, R_NUMBER, R_RANGE, R_FIELDS, R_OVERLONG, R_CHECKSUM, R_ESTOP, R_BUSY,
-  R_PARAM, R_UNFRAMED,
+  R_PARAM, R_UNFRAMED, R_FAULT,
 };
 
 // Runtime parameters: name, variable, range. watchdog_ms (the last) is an integer.
@@ -535,6 +687,7 @@ static bool refusedUnframed(float right, float left) {
 static ParseResult moveTo(uint8_t newMode, float right, float left) {
   if (refusedUnframed(right, left)) return ERR_UNFRAMED;
   if (estopLatched) return right == 0.0f && left == 0.0f ? PARSE_OK : ERR_ESTOP;
+  if (faultFlags != 0) return right == 0.0f && left == 0.0f ? PARSE_OK : ERR_FAULT;
   acceptCommand(newMode, right, left);
   return PARSE_OK;
 }
@@ -596,7 +749,7 @@ static ParseResult parsePpm() {
     if (v < WC_PPM_VALID_MIN || v > WC_PPM_VALID_MAX) lost = true;
   }
   if (lost) {
-    if (estopLatched) return PARSE_OK;   // stopped already
+    if (estopLatched || faultFlags != 0) return PARSE_OK;   // stopped already
     mode = WC_MODE_PPM;
     cmdSinceTick = true;
     emergencyHalt();
@@ -612,6 +765,7 @@ static ParseResult parsePpm() {
   float left = constrain(fwd + turn, -cap, cap);
   if (refusedUnframed(right, left)) return ERR_UNFRAMED;
   if (estopLatched) return right == 0.0f && left == 0.0f ? PARSE_OK : ERR_ESTOP;
+  if (faultFlags != 0) return right == 0.0f && left == 0.0f ? PARSE_OK : ERR_FAULT;
   ppmLost = false;
   acceptCommand(WC_MODE_PPM, right, left);
   return PARSE_OK;
@@ -627,10 +781,13 @@ static ParseResult latchEstop() {
   return PARSE_OK;
 }
 
-// reset: release the e-stop once the chair is parked (at rest, motors off).
+// reset: release the e-stop and any fault once the chair is parked (at rest, motors
+// off); encoders masked by the storm guard come back.
 static ParseResult resetEstop() {
-  if (estopLatched && !parked) return ERR_BUSY;
+  if ((estopLatched || faultFlags != 0) && !parked) return ERR_BUSY;
   estopLatched = false;
+  faultFlags = 0;
+  unmaskEncoders();
   return PARSE_OK;
 }
 
@@ -809,6 +966,28 @@ extern "C" __attribute__((noinline)) void processByte(uint8_t c) {
 }
 
 // ---------------------------------------------------------------------------
+// Reset cause: MCUSR, read and cleared before anything else runs (.init3), and the
+// hardware watchdog off until setup() arms it (after a watchdog reset it stays on at
+// its shortest period, which would reset the board again in the middle of setup()).
+uint8_t resetCause __attribute__((section(".noinit")));
+extern "C" void captureResetCause() __attribute__((naked, used, section(".init3")));
+extern "C" void captureResetCause() {
+  resetCause = MCUSR;
+  MCUSR = 0;
+  wdt_disable();
+}
+
+// The BOOT line's cause word, the first of MCUSR's flags that is set.
+static const __FlashStringHelper* resetCauseName(uint8_t mcusr) {
+  if (mcusr & _BV(WDRF)) return F("WATCHDOG");
+  if (mcusr & _BV(BORF)) return F("BROWN_OUT");
+  if (mcusr & _BV(EXTRF)) return F("EXTERNAL");
+  if (mcusr & _BV(PORF)) return F("POWER_ON");
+  if (mcusr & _BV(JTRF)) return F("JTAG");
+  return F("NONE");
+}
+
+// ---------------------------------------------------------------------------
 void setup() {
   pinMode(WC_PIN_RELAY, OUTPUT);
   digitalWrite(WC_PIN_RELAY, LOW);
@@ -832,10 +1011,17 @@ void setup() {
   EICRB = (EICRB & 0xF0) | _BV(ISC40) | _BV(ISC50);
   EIFR = _BV(INTF2) | _BV(INTF3) | _BV(INTF4) | _BV(INTF5);
   EIMSK |= _BV(INT2) | _BV(INT3) | _BV(INT4) | _BV(INT5);
+  // The storm guard's window: Timer0 (millis(), 1.024 ms per period) matching OCR0A once
+  // a period. OC0A (pin 13) stays disconnected: no PWM is written there.
+  OCR0A = WC_STORM_COMPARE;
+  TIFR0 = _BV(OCF0A);
+  TIMSK0 |= _BV(OCIE0A);
 
   digitalWrite(WC_PIN_RELAY, HIGH);
-  line.println(F("BOOT:final_control"));
+  line.print(F("BOOT:final_control,"));
+  line.println(resetCauseName(resetCause));
   line.send();
+  wdt_enable(WC_HW_WATCHDOG);   // a loop() pass that hangs resets the board
   lastControlTime = millis();
 }
 
@@ -848,6 +1034,7 @@ static uint16_t measureFreeRam() {
 }
 
 void loop() {
+  wdt_reset();
   // Bounded: at most one RX buffer's worth per pass.
   for (uint8_t n = 0; n < 64 && Serial.available() > 0; n++) {
     processByte((uint8_t)Serial.read());

@@ -71,6 +71,17 @@
 #define WC_PIN_DIR_R 11            // PB5
 #define WC_PIN_RELAY 7             // PH4, powers the SmartDriveDuo
 
+// ---- Fault detection (EVT:FAULT; docs/safety.md) ---------------------------
+#define WC_FAULT_STALL_PWM 51      // duty (20 %) at or above which a wheel must show encoder counts
+#define WC_FAULT_STALL_TICKS 2     // ticks driven at FAULT_STALL_PWM without a count: stalled or cut encoder
+#define WC_FAULT_REVERSE_SPEED 1.0f // rad/s: setpoint and measured speed both beyond it, opposite signs
+#define WC_FAULT_REVERSE_TICKS 3   // ticks of measured speed against the setpoint: reversed encoder
+#define WC_FAULT_ILLEGAL_PER_TICK 4 // illegal transitions in one tick: implausible encoder
+#define WC_STORM_EDGES 58          // edges of one encoder in one Timer0 period (1.024 ms) that mask it: > 2x top speed
+#define WC_STORM_COMPARE 128       // OCR0A: the Timer0 count at which each storm window starts
+#define WC_HW_WATCHDOG 3           // AVR watchdog period (avr/wdt.h WDTO_120MS): a loop() pass that hangs longer resets the board
+#define WC_BRAKE_DONE_SPEED 0.3f   // rad/s: an emergency stop keeps braking until both wheels are slower
+
 // ---- Modes (printed as MODE:WHEEL / CMDVEL / PPM) --------------------------
 #define WC_MODE_WHEEL 0
 #define WC_MODE_CMDVEL 1
@@ -87,6 +98,6 @@
 #define WC_DECEL_MIN 5.0f          // estop_decel in [DECEL_MIN, DECEL_MAX] rad/s^2
 #define WC_DECEL_MAX 50.0f
 #define WC_WATCHDOG_MIN_MS 100     // watchdog_ms in [WATCHDOG_MIN_MS, WATCHDOG_MAX_MS]
-#define WC_WATCHDOG_MAX_MS 2000
+#define WC_WATCHDOG_MAX_MS 1000    // docs/safety.md: the stopping distance grows with it
 
 #endif

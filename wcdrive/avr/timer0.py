@@ -9,6 +9,9 @@ time, tracks real milliseconds.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import overload
+
+import numpy as np
 
 F_CPU = 16_000_000
 OVERFLOW_CYCLES = 64 * 256
@@ -49,3 +52,32 @@ def overflows_until(target_elapsed: int, start_fract: int = 0) -> int:
     while millis_after(n, 0, start_fract) < target_elapsed:
         n += 1
     return n
+
+
+#: The cycle at which Timer0 starts counting after reset (``init()`` in wiring.c sets its
+#: prescaler): its first overflow completes 16,384 cycles later, at cycle 21,250, as
+#: measured on the ELF in simavr.
+TIMER0_START_CYCLE = 21_250 - OVERFLOW_CYCLES
+
+
+_WINDOW_START = TIMER0_START_CYCLE + 128 * 64
+
+
+@overload
+def storm_window(cycle: int) -> int: ...
+@overload
+def storm_window(cycle: np.ndarray) -> np.ndarray: ...
+def storm_window(cycle: int | np.ndarray) -> int | np.ndarray:
+    """The Timer0 period an instant (cycles since reset; an int or an array) falls in,
+    for the encoders' storm guard: windows start when Timer0's count passes
+    ``STORM_COMPARE`` (128, the TIMER0_COMPA interrupt that clears the ISRs' edge
+    counts), one per 16,384 cycles."""
+    if isinstance(cycle, np.ndarray):
+        return (cycle.astype(np.int64) - _WINDOW_START) // OVERFLOW_CYCLES
+    return (cycle - _WINDOW_START) // OVERFLOW_CYCLES
+
+
+def micros_at(cycle: int) -> int:
+    """What ``micros()`` returns at ``cycle`` (cycles since reset): Timer0's total count
+    (overflows * 256 + TCNT0, one count per 64 cycles) times 4 us, modulo 2**32."""
+    return (max(0, cycle - TIMER0_START_CYCLE) // 64 * 4) & 0xFFFFFFFF

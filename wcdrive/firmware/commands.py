@@ -271,10 +271,10 @@ def move_to(s: FirmwareState, body: bytes, out: bytearray) -> str | None:
         return result
     if result is not None and refused_unframed(s, result[1], result[2]):
         return "unframed"
-    if s.estopLatched:                       # a stop (or a PPM loss) changes nothing
+    if s.estopLatched or s.faultFlags:       # a stop (or a PPM loss) changes nothing
         if result is None or (result[1] == 0.0 and result[2] == 0.0):
             return None
-        return "estop"
+        return "estop" if s.estopLatched else "fault"
     if result is None:                       # PPM: signal lost
         s.mode = C.MODE_PPM
         s.cmdSinceTick = 1
@@ -307,10 +307,13 @@ def latch_estop(s: FirmwareState, out: bytearray) -> None:
 
 
 def reset_estop(s: FirmwareState) -> str | None:
-    """``resetEstop``: releases the latch once the chair has parked."""
-    if s.estopLatched and not s.parked:
+    """``resetEstop``: releases the e-stop and any fault once the chair has parked, and
+    (``unmaskEncoders``) clears the ISRs' storm flags: a masked encoder counts again."""
+    if (s.estopLatched or s.faultFlags) and not s.parked:
         return "busy"
     s.estopLatched = 0
+    s.faultFlags = 0
+    s.stormL = s.stormR = 0
     return None
 
 

@@ -1,12 +1,13 @@
-"""The control tick of final_control.ino: velocity, filter, watchdog, ramp, parking,
-PID with back-calculation anti-windup, motor outputs, pivot and feedback."""
+"""The control tick of final_control.ino: velocity, filter, fault checks, watchdog,
+ramp, parking and braking, PID with back-calculation anti-windup, motor outputs, pivot
+and feedback."""
 
 from __future__ import annotations
 
 from wcdrive.avr.f32 import div, f32, from_int
 from wcdrive.firmware import constants as C
 from wcdrive.firmware.motion import emergency_halt, pivot_step
-from wcdrive.firmware.output import feedback_line, send_event, send_telemetry
+from wcdrive.firmware.output import feedback_line, send_event, send_fault_events, send_telemetry
 from wcdrive.firmware.state import FirmwareState
 
 _OUT_MAX = C.PID_OUT_MAX
@@ -44,20 +45,76 @@ def set_motor(output: float) -> tuple[int, int]:
     return int(f32(abs(output) * C.PWM_SCALE)) & 0xFF, direction
 
 
+WHEEL_OK, WHEEL_SUSPECT, WHEEL_STALLED, WHEEL_REVERSED, WHEEL_IMPLAUSIBLE = range(5)
+FAULT_STALL_L, FAULT_STALL_R, FAULT_REVERSED_L, FAULT_REVERSED_R = 0x01, 0x02, 0x04, 0x08
+FAULT_IMPLAUSIBLE_L, FAULT_IMPLAUSIBLE_R, FAULT_DRIVER = 0x10, 0x20, 0x40
+
+
+def check_wheel(delta: int, illegal: int, storm: int, applied_pwm: int, setpoint: float,
+                measured: float, stall_ticks: int, reverse_ticks: int) -> tuple[int, int, int]:
+    """``checkWheel``: ``(verdict, stall ticks, reverse ticks)`` for one wheel over the
+    interval that ended: WHEEL_OK, WHEEL_SUSPECT (hold the output), or a fault."""
+    if storm or illegal >= C.FAULT_ILLEGAL_PER_TICK:
+        return WHEEL_IMPLAUSIBLE, stall_ticks, reverse_ticks
+    stalled = applied_pwm >= C.FAULT_STALL_PWM and delta == 0
+    stall_ticks = (stall_ticks + 1) & 0xFF if stalled else 0
+    if stall_ticks >= C.FAULT_STALL_TICKS:
+        return WHEEL_STALLED, stall_ticks, reverse_ticks
+    against = (abs(setpoint) >= C.FAULT_REVERSE_SPEED and abs(measured) >= C.FAULT_REVERSE_SPEED
+               and (setpoint > 0.0) != (measured > 0.0))
+    reverse_ticks = (reverse_ticks + 1) & 0xFF if against else 0
+    if reverse_ticks >= C.FAULT_REVERSE_TICKS:
+        return WHEEL_REVERSED, stall_ticks, reverse_ticks
+    return (WHEEL_SUSPECT if stalled or against else WHEEL_OK), stall_ticks, reverse_ticks
+
+
+def wheel_faults(check: int, stall: int, reversed_: int, implausible: int) -> int:
+    """``wheelFaults``: the fault bits of one wheel's verdict."""
+    return {WHEEL_STALLED: stall, WHEEL_REVERSED: reversed_, WHEEL_IMPLAUSIBLE: implausible}.get(check, 0)
+
+
+def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_r: int,
+                  out: bytearray) -> tuple[int, int]:
+    """The tick's fault checks (until one latches); a new fault halts the chair and
+    sends its events. Returns both wheels' verdicts."""
+    if s.faultFlags:
+        return WHEEL_OK, WHEEL_OK
+    check_l, s.stallTicksL, s.reverseTicksL = check_wheel(
+        delta_l, ill_l, s.stormTickL, s.pwmL, s.setpointL, s.filtVelL, s.stallTicksL, s.reverseTicksL)
+    check_r, s.stallTicksR, s.reverseTicksR = check_wheel(
+        delta_r, ill_r, s.stormTickR, s.pwmR, s.setpointR, s.filtVelR, s.stallTicksR, s.reverseTicksR)
+    if check_l == WHEEL_STALLED and check_r == WHEEL_STALLED:
+        faults = FAULT_DRIVER
+    else:
+        faults = (wheel_faults(check_l, FAULT_STALL_L, FAULT_REVERSED_L, FAULT_IMPLAUSIBLE_L)
+                  | wheel_faults(check_r, FAULT_STALL_R, FAULT_REVERSED_R, FAULT_IMPLAUSIBLE_R))
+    if faults:
+        s.faultFlags = faults
+        emergency_halt(s)
+        s.cmdSinceTick = 0
+        s.watchdogArmed = 0
+        s.stallTicksL = s.stallTicksR = s.reverseTicksL = s.reverseTicksR = 0
+        out += send_fault_events(faults)
+    return check_l, check_r
+
+
 def _i32(x: int) -> int:
     return (x + 2**31) % 2**32 - 2**31
 
 
 def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: bytearray,
-                 illegal_l: int = 0, illegal_r: int = 0) -> None:
-    """``controlTick(now)`` with the encoder and illegal-transition counts it latches
-    atomically."""
+                 illegal_l: int = 0, illegal_r: int = 0, storm_l: int = 0, storm_r: int = 0) -> None:
+    """``controlTick(now)`` with what it latches atomically from the encoder ISRs: the
+    counts, the illegal-transition counts and the storm flags."""
     dt = div(from_int((now - s.lastControlTime) & 0xFFFFFFFF), 1000.0)
     s.lastControlTime = now & 0xFFFFFFFF
     s.tickCount = (s.tickCount + 1) & 0xFFFFFFFF
 
     s.encTickL, s.encTickR = _i32(count_l), _i32(count_r)
+    ill_l = (illegal_l - s.illTickL) & 0xFFFFFFFF
+    ill_r = (illegal_r - s.illTickR) & 0xFFFFFFFF
     s.illTickL, s.illTickR = illegal_l & 0xFFFFFFFF, illegal_r & 0xFFFFFFFF
+    s.stormTickL, s.stormTickR = int(bool(storm_l)), int(bool(storm_r))
     delta_l = _i32(s.encTickL - s.prevEncL)
     delta_r = _i32(s.encTickR - s.prevEncR)
     s.prevEncL, s.prevEncR = s.encTickL, s.encTickR
@@ -67,6 +124,8 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
     s.rawVelR = f32(div(from_int(delta_r), C.CPR) * per_second)
     s.filtVelL = f32(f32(C.ALPHA * s.rawVelL) + f32(C.ONE_MINUS_ALPHA * s.filtVelL))
     s.filtVelR = f32(f32(C.ALPHA * s.rawVelR) + f32(C.ONE_MINUS_ALPHA * s.filtVelR))
+
+    check_l, check_r = _check_faults(s, delta_l, delta_r, ill_l, ill_r, out)
 
     if s.cmdSinceTick:
         s.cmdSinceTick = 0
@@ -87,7 +146,8 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
     elif s.stillTicks < 255:
         s.stillTicks += 1
     at_rest = s.targetL == 0.0 and s.targetR == 0.0 and s.setpointL == 0.0 and s.setpointR == 0.0
-    if at_rest and (s.stillTicks >= C.STILL_TICKS or s.emergencyStop):
+    braked = abs(s.filtVelL) < C.BRAKE_DONE_SPEED and abs(s.filtVelR) < C.BRAKE_DONE_SPEED
+    if s.faultFlags or (at_rest and (s.stillTicks >= C.STILL_TICKS or (s.emergencyStop and braked))):
         s.parked = 1
         s.integralL = s.integralR = 0.0
         s.prevMeasL = s.filtVelL
@@ -95,12 +155,15 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
         s.outputL = s.outputR = 0.0
     else:
         s.parked = 0
-        s.outputL, s.integralL = compute_pid(s.setpointL, s.filtVelL, s.integralL, s.prevMeasL,
-                                             s.kpL, s.kiL, s.kdL, dt)
-        s.prevMeasL = s.filtVelL
-        s.outputR, s.integralR = compute_pid(s.setpointR, s.filtVelR, s.integralR, s.prevMeasR,
-                                             s.kpR, s.kiR, s.kdR, dt)
-        s.prevMeasR = s.filtVelR
+        # A suspect wheel keeps its output: no count is no reason to push harder.
+        if check_l != WHEEL_SUSPECT:
+            s.outputL, s.integralL = compute_pid(s.setpointL, s.filtVelL, s.integralL, s.prevMeasL,
+                                                 s.kpL, s.kiL, s.kdL, dt)
+            s.prevMeasL = s.filtVelL
+        if check_r != WHEEL_SUSPECT:
+            s.outputR, s.integralR = compute_pid(s.setpointR, s.filtVelR, s.integralR, s.prevMeasR,
+                                                 s.kpR, s.kiR, s.kdR, dt)
+            s.prevMeasR = s.filtVelR
     s.pwmL, s.dirL = set_motor(s.outputL)
     s.pwmR, s.dirR = set_motor(s.outputR)
 

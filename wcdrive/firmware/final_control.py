@@ -23,11 +23,17 @@ from wcdrive.firmware.constants import CONTROL_PERIOD_MS
 from wcdrive.firmware.control import control_tick
 from wcdrive.firmware.state import FirmwareState
 
-BOOT_LINE = b"BOOT:final_control\r\n"
+#: ``BOOT:final_control,<cause>``: what setup() sends, the cause from MCUSR.
+BOOT_LINE = b"BOOT:final_control,POWER_ON\r\n"
+
+
+def boot_line(cause: str = "POWER_ON") -> bytes:
+    """The BOOT line after a reset of the given cause (``resetCauseName``)."""
+    return b"BOOT:final_control," + cause.encode() + b"\r\n"
 #: What ``measureFreeRam()`` reports on the Mega build (bytes between the heap and the
 #: stack in loop()); the simulated board reports it too. tests/test_protocol_v2.py checks
 #: it against the ELF running in simavr, so a firmware change that moves it fails there.
-FREE_RAM = 6984
+FREE_RAM = 6956
 
 
 class Firmware:
@@ -64,13 +70,14 @@ class Firmware:
         return ((now - self.state.lastControlTime) & 0xFFFFFFFF) >= CONTROL_PERIOD_MS
 
     def tick(self, now: int, count_l: int, count_r: int, illegal_l: int = 0, illegal_r: int = 0,
-             free_ram: int | None = None) -> bytes:
-        """``controlTick(now)``. The latched counts are inputs, and so is ``free_ram``
-        (what loop() measured before the tick; None: ``self.free_ram``, which starts at
-        the figure of the Mega build, ``FREE_RAM``)."""
+             free_ram: int | None = None, storm_l: int = 0, storm_r: int = 0) -> bytes:
+        """``controlTick(now)``. What it latches from the encoder ISRs (counts, illegal
+        transitions, storm flags) are inputs, and so is ``free_ram`` (what loop()
+        measured before the tick; None: ``self.free_ram``, which starts at the figure of
+        the Mega build, ``FREE_RAM``)."""
         self.state.freeRam = self.free_ram if free_ram is None else free_ram
         out = bytearray()
-        control_tick(self.state, now, count_l, count_r, out, illegal_l, illegal_r)
+        control_tick(self.state, now, count_l, count_r, out, illegal_l, illegal_r, storm_l, storm_r)
         return bytes(out)
 
 

@@ -29,7 +29,11 @@ def needs_pivot(travel: float, prev_travel: float) -> bool:
 
 
 def emergency_halt(s: FirmwareState) -> None:
-    """Targets to zero; the ramp brings the setpoints down at the emergency rate."""
+    """Targets to zero; the ramp brings the setpoints down at the emergency rate and the
+    PID brakes along it, its integrators started from zero (what they held to keep the
+    chair rolling would push against the brake)."""
+    if not s.emergencyStop:
+        s.integralL = s.integralR = 0.0
     s.targetL = s.targetR = 0.0
     s.pivotPhase = PIVOT_NONE
     s.pivotTicksLeft = 0

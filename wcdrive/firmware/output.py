@@ -13,6 +13,7 @@ from wcdrive.avr.arduino_print import print_float, print_long, print_unsigned
 from wcdrive.firmware.constants import ERR_LINES_PER_TICK, FIRMWARE_VERSION, MODE_NAMES, PROTOCOL_VERSION
 from wcdrive.firmware.params import PARAMS
 from wcdrive.firmware.state import FirmwareState
+from wcdrive.protocol.codec import FAULT_NAMES
 
 CRLF = b"\r\n"
 
@@ -31,15 +32,21 @@ def send_event(what: str) -> bytes:
     return b"EVT:" + what.encode() + CRLF
 
 
+def send_fault_events(faults: int) -> bytes:
+    """``sendFaultEvents``: one ``EVT:FAULT,<name>`` line per fault bit set."""
+    return b"".join(b"EVT:FAULT," + name.encode() + CRLF
+                    for i, name in enumerate(FAULT_NAMES) if faults & (1 << i))
+
+
 def send_telemetry(s: FirmwareState, now: int) -> bytes:
     """``TLM:`` (protocol v2), sent after each feedback line once a host said hello."""
     flags = ((1 if s.watchdogArmed else 0) | (2 if s.emergencyStop else 0)
              | (4 if s.estopLatched else 0) | (8 if s.ppmLost else 0) | (16 if s.parked else 0)
-             | ((s.pivotPhase << 5) & 0xFF))
+             | ((s.pivotPhase << 5) & 0xFF) | (128 if s.faultFlags else 0))
     # Every field is unsigned and in range, so %d prints what Print::print prints.
-    return b"TLM:%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d\r\n" % (
+    return b"TLM:%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d\r\n" % (
         now, s.rxCount, s.lastSeq, s.pwmL, s.pwmR, s.dirL, s.dirR, s.illTickL, s.illTickR,
-        flags, s.rejectedCount, s.crcRejected, s.freeRam)
+        flags, s.rejectedCount, s.crcRejected, s.freeRam, s.faultFlags)
 
 
 DATA_NONE, DATA_HELLO, DATA_PARAM = 0, 1, 2

@@ -27,7 +27,8 @@ INT_FIELDS = (
     "lastCmdTime", "emergencyStop", "ppmLost", "stillTicks", "parked", "rejectedCount",
     "errSuppressed", "errLinesThisTick", "cmdLen", "cmdCommas", "cmdDiscarding",
     "illTickL", "illTickR", "watchdogMs", "estopLatched", "tlmEnabled", "unframedLine", "lastSeq",
-    "rxCount", "crcRejected",
+    "rxCount", "crcRejected", "stormTickL", "stormTickR", "faultFlags", "stallTicksL",
+    "stallTicksR", "reverseTicksL", "reverseTicksR",
 )
 
 #: Globals the tick takes as inputs rather than computes (loop() measures them).
@@ -65,6 +66,13 @@ class FirmwareState:
     prevEncR: int = 0
     illTickL: int = 0
     illTickR: int = 0
+    stormTickL: int = 0
+    stormTickR: int = 0
+    #: The encoder ISRs' storm flags (``stormL``/``stormR``): set by the ISR model
+    #: (``wcdrive.firmware.quadrature``) when it masks an encoder, cleared by ``reset``.
+    #: ISR-owned, so not compared event by event; the tick's latched copies are.
+    stormL: int = 0
+    stormR: int = 0
     lastControlTime: int = 0
     tickCount: int = 0
     freeRam: int = 0
@@ -91,6 +99,11 @@ class FirmwareState:
     stillTicks: int = 0
     parked: int = 1
     estopLatched: int = 0
+    faultFlags: int = 0
+    stallTicksL: int = 0
+    stallTicksR: int = 0
+    reverseTicksL: int = 0
+    reverseTicksR: int = 0
     tlmEnabled: int = 0
     unframedLine: int = 0
     lastSeq: int = 0

@@ -58,8 +58,12 @@ CONTROL_OPS = {1: b"hello", 2: b"estop", 3: b"reset"}
 PARAM_NAMES = tuple(PARAM_RANGES)
 MODES = ("WHEEL", "CMDVEL", "PPM")
 REASONS = ("", "syntax", "number", "range", "fields", "overlong", "checksum", "estop", "busy",
-           "param", "unframed")
-EVENTS = ("", "WATCHDOG", "PPM_LOST", "ESTOP")
+           "param", "unframed", "fault")
+EVENTS = ("", "WATCHDOG", "PPM_LOST", "ESTOP", "FAULT,ENC_STALL_L", "FAULT,ENC_STALL_R",
+          "FAULT,ENC_REVERSED_L", "FAULT,ENC_REVERSED_R", "FAULT,ENC_IMPLAUSIBLE_L",
+          "FAULT,ENC_IMPLAUSIBLE_R", "FAULT,DRIVER_DEAD")
+#: BOOT reply codes: the reset cause (0: the line named none).
+BOOT_CAUSES = ("", "POWER_ON", "EXTERNAL", "BROWN_OUT", "WATCHDOG", "JTAG", "NONE")
 KIND_ACK, KIND_NAK, KIND_ERR, KIND_EVT, KIND_PAR, KIND_HELLO, KIND_BOOT = range(1, 8)
 FIRMWARE = "final_control"
 
@@ -209,7 +213,7 @@ def message_to_frames(msg: Message) -> list[tuple[int, bytes]]:
         return [(REPLY, struct.pack("<BBHI", KIND_HELLO, msg.version, _pack_version(msg.firmware_version),
                                     int(msg.build_id or "0", 16)))]
     elif isinstance(msg, Boot):
-        reply = (KIND_BOOT, 0, 0, 0.0)
+        reply = (KIND_BOOT, _index(BOOT_CAUSES, msg.cause), 0, 0.0)
     if reply is None:
         return []
     return [(REPLY, struct.pack("<BBHf", *reply))]
@@ -299,5 +303,6 @@ def _reply_line(data: bytes) -> bytes:
         version = f"{seq >> 10}.{seq >> 5 & 31}.{seq & 31}"
         return f"HELLO:{code},{FIRMWARE},{version},{build:08x}\r\n".encode()
     if kind == KIND_BOOT:
-        return f"BOOT:{FIRMWARE}\r\n".encode()
+        cause = BOOT_CAUSES[code] if code < len(BOOT_CAUSES) else ""
+        return f"BOOT:{FIRMWARE},{cause}\r\n".encode() if cause else f"BOOT:{FIRMWARE}\r\n".encode()
     return b""

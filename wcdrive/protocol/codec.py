@@ -126,16 +126,29 @@ class Error:
 
 @dataclass(frozen=True)
 class Event:
-    """``EVT:<name>``: ``WATCHDOG``, ``PPM_LOST`` or ``ESTOP``."""
+    """``EVT:<name>``: ``WATCHDOG``, ``PPM_LOST``, ``ESTOP`` or ``FAULT,<fault>`` (a latched
+    fault: ``ENC_STALL_L``, ``ENC_REVERSED_R``, ``DRIVER_DEAD``, ...; PROTOCOL.md)."""
 
     name: str
+
+    @property
+    def fault(self) -> str | None:
+        """The fault's name for ``EVT:FAULT,<fault>``, else None."""
+        return self.name[6:] if self.name.startswith("FAULT,") else None
 
 
 @dataclass(frozen=True)
 class Boot:
-    """``BOOT:<text>``: the board has reset; ``text`` is the firmware's name."""
+    """``BOOT:<text>``: the board has reset; ``text`` is the firmware's name and, since
+    firmware 3.1, the reset cause after a comma (``final_control,WATCHDOG``)."""
 
     text: str
+
+    @property
+    def cause(self) -> str:
+        """The reset cause (``POWER_ON``, ``EXTERNAL``, ``BROWN_OUT``, ``WATCHDOG``,
+        ``JTAG``, ``NONE``), or "" when the line names none."""
+        return self.text.partition(",")[2]
 
 
 @dataclass(frozen=True)
@@ -143,6 +156,17 @@ class Unknown:
     """A line that matches none of the board's formats (or an overlong one), as received."""
 
     line: bytes
+
+
+#: The fault bits of ``TLM``'s last field and of ``EVT:FAULT,<name>``, bit 0 first
+#: (protocol/PROTOCOL.md, "Faults").
+FAULT_NAMES = ("ENC_STALL_L", "ENC_STALL_R", "ENC_REVERSED_L", "ENC_REVERSED_R",
+               "ENC_IMPLAUSIBLE_L", "ENC_IMPLAUSIBLE_R", "DRIVER_DEAD")
+
+
+def fault_names(faults: int) -> tuple[str, ...]:
+    """The names of the fault bits set in ``faults``."""
+    return tuple(name for i, name in enumerate(FAULT_NAMES) if faults & (1 << i))
 
 
 @dataclass(frozen=True)
@@ -162,6 +186,17 @@ class ExtendedTelemetry:
     rejected: int
     crc_rejected: int
     free_ram: int
+    faults: int = 0
+
+    @property
+    def fault_latched(self) -> bool:
+        """Flag bit 7: a fault is latched (``faults`` says which; motion is refused)."""
+        return bool(self.flags & 128)
+
+    @property
+    def fault_names(self) -> tuple[str, ...]:
+        """The latched faults by name (``FAULT_NAMES``)."""
+        return fault_names(self.faults)
 
     @property
     def watchdog_armed(self) -> bool:
@@ -245,7 +280,7 @@ def _float(text: bytes) -> float:
     return -value if text.startswith(b"-") else value
 
 
-_TLM = re.compile(rb"TLM:(\d+(?:,\d+){12})")
+_TLM = re.compile(rb"TLM:(\d+(?:,\d+){12}(?:,\d+)?)")
 _HELLO = re.compile(rb"HELLO:(\d+),([\w.-]+)(?:,([\w.-]+),([0-9a-f]+))?")
 _PARAM = re.compile(rb"PAR:(\w+),(\d+(?:\.\d+)?)")
 _ACK = re.compile(rb"ACK:(\d+)")

@@ -63,7 +63,9 @@ VARIABLE_FORMATS = {
     "B": ("mode", "pwmL", "pwmR", "dirL", "dirR", "pivotPhase", "pivotTicksLeft", "cmdSinceTick",
           "watchdogArmed", "emergencyStop", "ppmLost", "stillTicks", "parked", "cmdLen",
           "cmdCommas", "cmdDiscarding", "errLinesThisTick", "lastEncodedL", "lastEncodedR",
-          "timer0_fract", "estopLatched", "tlmEnabled", "unframedLine"),
+          "timer0_fract", "estopLatched", "tlmEnabled", "unframedLine", "stormTickL", "stormTickR",
+          "faultFlags", "stallTicksL", "stallTicksR", "reverseTicksL", "reverseTicksR", "stormL",
+          "stormR", "resetCause"),
 }
 _FORMAT_OF = {name: fmt for fmt, names in VARIABLE_FORMATS.items() for name in names}
 
