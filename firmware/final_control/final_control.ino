@@ -304,19 +304,23 @@ static void emergencyHalt() {
 }
 
 // What one wheel's encoder showed over the interval that just ended, driven at
-// appliedPwm (the last tick's duty) toward setpoint: WHEEL_OK; WHEEL_SUSPECT (no count
-// although driven, or measured against the setpoint: the PID must not push harder on
-// it this tick); or a fault: stalled or cut, reversed, implausible (storm or illegal
-// transitions).
+// appliedPwm in direction appliedDir (the last tick's) with setpoint (the last tick's):
+// WHEEL_OK; WHEEL_SUSPECT (no count although driven toward a setpoint, or measured
+// against the setpoint: the PID must not push harder on it this tick); or a fault:
+// stalled or cut, reversed, implausible (storm or illegal transitions). Braking (a duty
+// against the setpoint, or toward a zero setpoint) ends with no count: not a stall.
 #define WHEEL_OK 0
 #define WHEEL_SUSPECT 1
 #define WHEEL_STALLED 2
 #define WHEEL_REVERSED 3
 #define WHEEL_IMPLAUSIBLE 4
 static uint8_t checkWheel(int32_t delta, uint32_t illegal, uint8_t storm, uint8_t appliedPwm,
-                          float setpoint, float measured, uint8_t& stallTicks, uint8_t& reverseTicks) {
+                          uint8_t appliedDir, float setpoint, float measured, uint8_t& stallTicks,
+                          uint8_t& reverseTicks) {
   if (storm || illegal >= WC_FAULT_ILLEGAL_PER_TICK) return WHEEL_IMPLAUSIBLE;
-  bool stalled = appliedPwm >= WC_FAULT_STALL_PWM && delta == 0;
+  bool driven = appliedPwm >= WC_FAULT_STALL_PWM && setpoint != 0.0f &&
+                (appliedDir == HIGH) == (setpoint > 0.0f);
+  bool stalled = driven && delta == 0;
   stallTicks = stalled ? stallTicks + 1 : 0;
   if (stallTicks >= WC_FAULT_STALL_TICKS) return WHEEL_STALLED;
   bool against = fabs(setpoint) >= WC_FAULT_REVERSE_SPEED && fabs(measured) >= WC_FAULT_REVERSE_SPEED &&
@@ -427,8 +431,10 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
   // Faults: checked until one latches. A new one stops the chair (motors off below).
   uint8_t checkL = WHEEL_OK, checkR = WHEEL_OK;
   if (faultFlags == 0) {
-    checkL = checkWheel(deltaL, illDeltaL, stormTickL, pwmL, setpointL, filtVelL, stallTicksL, reverseTicksL);
-    checkR = checkWheel(deltaR, illDeltaR, stormTickR, pwmR, setpointR, filtVelR, stallTicksR, reverseTicksR);
+    checkL = checkWheel(deltaL, illDeltaL, stormTickL, pwmL, dirL, setpointL, filtVelL, stallTicksL,
+                        reverseTicksL);
+    checkR = checkWheel(deltaR, illDeltaR, stormTickR, pwmR, dirR, setpointR, filtVelR, stallTicksR,
+                        reverseTicksR);
     uint8_t faults;
     if (checkL == WHEEL_STALLED && checkR == WHEEL_STALLED) {
       faults = FAULT_DRIVER;   // both wheels driven, neither turns: the driver or its supply

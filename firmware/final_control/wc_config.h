@@ -72,7 +72,7 @@
 #define WC_PIN_RELAY 7             // PH4, powers the SmartDriveDuo
 
 // ---- Fault detection (EVT:FAULT; docs/safety.md) ---------------------------
-#define WC_FAULT_STALL_PWM 51      // duty (20 %) at or above which a wheel must show encoder counts
+#define WC_FAULT_STALL_PWM 26      // duty (10 %) at or above which a wheel must show encoder counts
 #define WC_FAULT_STALL_TICKS 2     // ticks driven at FAULT_STALL_PWM without a count: stalled or cut encoder
 #define WC_FAULT_REVERSE_SPEED 1.0f // rad/s: setpoint and measured speed both beyond it, opposite signs
 #define WC_FAULT_REVERSE_TICKS 3   // ticks of measured speed against the setpoint: reversed encoder

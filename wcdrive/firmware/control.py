@@ -50,13 +50,17 @@ FAULT_STALL_L, FAULT_STALL_R, FAULT_REVERSED_L, FAULT_REVERSED_R = 0x01, 0x02, 0
 FAULT_IMPLAUSIBLE_L, FAULT_IMPLAUSIBLE_R, FAULT_DRIVER = 0x10, 0x20, 0x40
 
 
-def check_wheel(delta: int, illegal: int, storm: int, applied_pwm: int, setpoint: float,
-                measured: float, stall_ticks: int, reverse_ticks: int) -> tuple[int, int, int]:
+def check_wheel(delta: int, illegal: int, storm: int, applied_pwm: int, applied_dir: int,
+                setpoint: float, measured: float, stall_ticks: int, reverse_ticks: int
+                ) -> tuple[int, int, int]:
     """``checkWheel``: ``(verdict, stall ticks, reverse ticks)`` for one wheel over the
-    interval that ended: WHEEL_OK, WHEEL_SUSPECT (hold the output), or a fault."""
+    interval that ended: WHEEL_OK, WHEEL_SUSPECT (hold the output), or a fault. A stall
+    is a duty toward a non-zero setpoint without a count (braking ends with none)."""
     if storm or illegal >= C.FAULT_ILLEGAL_PER_TICK:
         return WHEEL_IMPLAUSIBLE, stall_ticks, reverse_ticks
-    stalled = applied_pwm >= C.FAULT_STALL_PWM and delta == 0
+    driven = (applied_pwm >= C.FAULT_STALL_PWM and setpoint != 0.0
+              and (applied_dir == C.HIGH) == (setpoint > 0.0))
+    stalled = driven and delta == 0
     stall_ticks = (stall_ticks + 1) & 0xFF if stalled else 0
     if stall_ticks >= C.FAULT_STALL_TICKS:
         return WHEEL_STALLED, stall_ticks, reverse_ticks
@@ -80,9 +84,11 @@ def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_
     if s.faultFlags:
         return WHEEL_OK, WHEEL_OK
     check_l, s.stallTicksL, s.reverseTicksL = check_wheel(
-        delta_l, ill_l, s.stormTickL, s.pwmL, s.setpointL, s.filtVelL, s.stallTicksL, s.reverseTicksL)
+        delta_l, ill_l, s.stormTickL, s.pwmL, s.dirL, s.setpointL, s.filtVelL, s.stallTicksL,
+        s.reverseTicksL)
     check_r, s.stallTicksR, s.reverseTicksR = check_wheel(
-        delta_r, ill_r, s.stormTickR, s.pwmR, s.setpointR, s.filtVelR, s.stallTicksR, s.reverseTicksR)
+        delta_r, ill_r, s.stormTickR, s.pwmR, s.dirR, s.setpointR, s.filtVelR, s.stallTicksR,
+        s.reverseTicksR)
     if check_l == WHEEL_STALLED and check_r == WHEEL_STALLED:
         faults = FAULT_DRIVER
     else:
