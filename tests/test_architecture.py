@@ -225,7 +225,8 @@ def test_every_function_of_the_sketch_has_its_port_twin() -> None:
     #: What the sketch reads from hardware is an argument of the port.
     inputs = {"readEncoderL": "QuadratureDecoder.edge(state)",
               "readEncoderR": "QuadratureDecoder.edge(state)",
-              "measureFreeRam": "Firmware.tick(free_ram=...)"}
+              "measureFreeRam": "Firmware.tick(free_ram=...)",
+              "captureResetCause": "reset_cause_name(mcusr)"}
 
     def snake(name: str) -> str:
         return re.sub(r"(?<=[a-z0-9])([A-Z])", r"_\1", name).lower().replace("p_i_d", "pid")

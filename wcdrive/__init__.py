@@ -23,5 +23,5 @@ from wcdrive.wheelchair import stop_all
 
 __all__ = ["LinkEvent", "LinkLost", "LinkRestored", "Telemetry", "WcdriveBusyError",
            "WcdriveCommandError", "WcdriveConnectionError", "WcdriveError", "WcdriveEstopError",
-           "WcdriveFaultError", "WcdrivePermissionError", "WcdriveProtocolError", "WcdriveTimeoutError", "Wheelchair",
-           "connect", "stop_all"]
+           "WcdriveFaultError", "WcdrivePermissionError", "WcdriveProtocolError", "WcdriveTimeoutError",
+           "Wheelchair", "connect", "stop_all"]

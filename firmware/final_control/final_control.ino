@@ -184,9 +184,17 @@ bool estopLatched = false;                  // e-stop: motion refused until "res
 #define FAULT_IMPLAUSIBLE_L 0x10
 #define FAULT_IMPLAUSIBLE_R 0x20
 #define FAULT_DRIVER 0x40
-uint8_t faultFlags = 0;
+#define FAULT_MOTOR_L 0x80
+#define FAULT_MOTOR_R 0x100
+uint16_t faultFlags = 0;
 uint8_t stallTicksL = 0, stallTicksR = 0;   // ticks driven without a count
 uint8_t reverseTicksL = 0, reverseTicksR = 0;   // ticks measured against the setpoint
+// Effort without progress: the duty and speed (toward the setpoint) when the setpoint
+// last changed or the wheel last gained speed; the lowest duty since.
+uint8_t effortPwmL = 0, effortPwmR = 0;
+uint8_t effortTicksL = 0, effortTicksR = 0;   // consecutive ticks of that effort
+float effortSpeedL = 0.0f, effortSpeedR = 0.0f;
+float effortSetpointL = 0.0f, effortSetpointR = 0.0f;
 bool tlmEnabled = false;                    // after "hello": TLM lines, and v3 frames only
 bool unframedLine = false;                  // the line being parsed is not a v3 frame
 uint16_t lastSeq = 0;                       // sequence number of the last framed line
@@ -239,14 +247,18 @@ static const char F_REVERSED_R[] PROGMEM = "ENC_REVERSED_R";
 static const char F_IMPLAUSIBLE_L[] PROGMEM = "ENC_IMPLAUSIBLE_L";
 static const char F_IMPLAUSIBLE_R[] PROGMEM = "ENC_IMPLAUSIBLE_R";
 static const char F_DRIVER[] PROGMEM = "DRIVER_DEAD";
-static const char* const FAULT_NAMES[7] = {
+static const char F_MOTOR_L[] PROGMEM = "MOTOR_L";
+static const char F_MOTOR_R[] PROGMEM = "MOTOR_R";
+#define FAULT_COUNT 9
+static const char* const FAULT_NAMES[FAULT_COUNT] = {
   F_STALL_L, F_STALL_R, F_REVERSED_L, F_REVERSED_R, F_IMPLAUSIBLE_L, F_IMPLAUSIBLE_R, F_DRIVER,
+  F_MOTOR_L, F_MOTOR_R,
 };
 
 // One EVT:FAULT,<name> line per fault bit set.
-static void sendFaultEvents(uint8_t faults) {
-  for (uint8_t i = 0; i < 7; i++) {
-    if (faults & (1 << i)) {
+static void sendFaultEvents(uint16_t faults) {
+  for (uint8_t i = 0; i < FAULT_COUNT; i++) {
+    if (faults & (1u << i)) {
       line.print(F("EVT:FAULT,"));
       line.println((const __FlashStringHelper*)FAULT_NAMES[i]);
       line.send();
@@ -314,9 +326,32 @@ static void emergencyHalt() {
 #define WHEEL_STALLED 2
 #define WHEEL_REVERSED 3
 #define WHEEL_IMPLAUSIBLE 4
+#define WHEEL_NO_EFFECT 5
+// Effort without progress: toward a steady setpoint the duty has stayed
+// WC_FAULT_EFFORT_PWM above its lowest for WC_FAULT_EFFORT_TICKS ticks in a row while the
+// wheel gained no speed (a dead motor, a broken motor wire: the wheel is only dragged
+// along). A new setpoint, a duty away from it, or any gain in speed starts over.
+static bool noEffect(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, float measured,
+                     uint8_t& effortPwm, float& effortSpeed, float& effortSetpoint,
+                     uint8_t& effortTicks) {
+  float progress = setpoint > 0.0f ? measured : -measured;
+  bool toward = setpoint != 0.0f && (appliedDir == HIGH) == (setpoint > 0.0f);
+  if (!toward || setpoint != effortSetpoint || progress > effortSpeed) {
+    effortSetpoint = setpoint;
+    effortSpeed = progress;
+    effortPwm = appliedPwm;
+    effortTicks = 0;
+    return false;
+  }
+  if (appliedPwm < effortPwm) effortPwm = appliedPwm;
+  effortTicks = appliedPwm >= effortPwm + WC_FAULT_EFFORT_PWM ? effortTicks + 1 : 0;
+  return effortTicks >= WC_FAULT_EFFORT_TICKS;
+}
+
 static uint8_t checkWheel(int32_t delta, uint32_t illegal, uint8_t storm, uint8_t appliedPwm,
                           uint8_t appliedDir, float setpoint, float measured, uint8_t& stallTicks,
-                          uint8_t& reverseTicks) {
+                          uint8_t& reverseTicks, uint8_t& effortPwm, float& effortSpeed,
+                          float& effortSetpoint, uint8_t& effortTicks) {
   if (storm || illegal >= WC_FAULT_ILLEGAL_PER_TICK) return WHEEL_IMPLAUSIBLE;
   bool driven = appliedPwm >= WC_FAULT_STALL_PWM && setpoint != 0.0f &&
                 (appliedDir == HIGH) == (setpoint > 0.0f);
@@ -327,14 +362,20 @@ static uint8_t checkWheel(int32_t delta, uint32_t illegal, uint8_t storm, uint8_
                  (setpoint > 0.0f) != (measured > 0.0f);
   reverseTicks = against ? reverseTicks + 1 : 0;
   if (reverseTicks >= WC_FAULT_REVERSE_TICKS) return WHEEL_REVERSED;
+  if (noEffect(appliedPwm, appliedDir, setpoint, measured, effortPwm, effortSpeed, effortSetpoint,
+               effortTicks)) {
+    return WHEEL_NO_EFFECT;
+  }
   return (stalled || against) ? WHEEL_SUSPECT : WHEEL_OK;
 }
 
-// The fault bits of one wheel's check (its stall, reversed and implausible bits).
-static uint8_t wheelFaults(uint8_t check, uint8_t stall, uint8_t reversed, uint8_t implausible) {
+// The fault bits of one wheel's check (its stall, reversed, implausible and motor bits).
+static uint16_t wheelFaults(uint8_t check, uint16_t stall, uint16_t reversed, uint16_t implausible,
+                            uint16_t motor) {
   if (check == WHEEL_STALLED) return stall;
   if (check == WHEEL_REVERSED) return reversed;
   if (check == WHEEL_IMPLAUSIBLE) return implausible;
+  if (check == WHEEL_NO_EFFECT) return motor;
   return 0;
 }
 
@@ -432,15 +473,15 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
   uint8_t checkL = WHEEL_OK, checkR = WHEEL_OK;
   if (faultFlags == 0) {
     checkL = checkWheel(deltaL, illDeltaL, stormTickL, pwmL, dirL, setpointL, filtVelL, stallTicksL,
-                        reverseTicksL);
+                        reverseTicksL, effortPwmL, effortSpeedL, effortSetpointL, effortTicksL);
     checkR = checkWheel(deltaR, illDeltaR, stormTickR, pwmR, dirR, setpointR, filtVelR, stallTicksR,
-                        reverseTicksR);
-    uint8_t faults;
+                        reverseTicksR, effortPwmR, effortSpeedR, effortSetpointR, effortTicksR);
+    uint16_t faults;
     if (checkL == WHEEL_STALLED && checkR == WHEEL_STALLED) {
       faults = FAULT_DRIVER;   // both wheels driven, neither turns: the driver or its supply
     } else {
-      faults = wheelFaults(checkL, FAULT_STALL_L, FAULT_REVERSED_L, FAULT_IMPLAUSIBLE_L) |
-               wheelFaults(checkR, FAULT_STALL_R, FAULT_REVERSED_R, FAULT_IMPLAUSIBLE_R);
+      faults = wheelFaults(checkL, FAULT_STALL_L, FAULT_REVERSED_L, FAULT_IMPLAUSIBLE_L, FAULT_MOTOR_L) |
+               wheelFaults(checkR, FAULT_STALL_R, FAULT_REVERSED_R, FAULT_IMPLAUSIBLE_R, FAULT_MOTOR_R);
     }
     if (faults != 0) {
       faultFlags = faults;

@@ -76,6 +76,8 @@
 #define WC_FAULT_STALL_TICKS 2     // ticks driven at FAULT_STALL_PWM without a count: stalled or cut encoder
 #define WC_FAULT_REVERSE_SPEED 1.0f // rad/s: setpoint and measured speed both beyond it, opposite signs
 #define WC_FAULT_REVERSE_TICKS 3   // ticks of measured speed against the setpoint: reversed encoder
+#define WC_FAULT_EFFORT_PWM 20     // duty rise (8 %) toward a steady setpoint without any gain in speed: the motor does not respond
+#define WC_FAULT_EFFORT_TICKS 4    // consecutive ticks of that effort without progress: the motor fault
 #define WC_FAULT_ILLEGAL_PER_TICK 4 // illegal transitions in one tick: implausible encoder
 #define WC_STORM_EDGES 58          // edges of one encoder in one Timer0 period (1.024 ms) that mask it: > 2x top speed
 #define WC_STORM_COMPARE 128       // OCR0A: the Timer0 count at which each storm window starts

@@ -313,8 +313,14 @@ def reset_estop(s: FirmwareState) -> str | None:
         return "busy"
     s.estopLatched = 0
     s.faultFlags = 0
-    s.stormL = s.stormR = 0
+    unmask_encoders(s)
     return None
+
+
+def unmask_encoders(s: FirmwareState) -> None:
+    """``unmaskEncoders``: the storm flags cleared; the ISR model (``QuadratureDecoder``,
+    driven by ``PortLoop``) sees them cleared and reads the pins afresh (``unmask``)."""
+    s.stormL = s.stormR = 0
 
 
 def dispatch(s: FirmwareState, body: bytes, out: bytearray) -> tuple[str | None, int, int]:

@@ -45,36 +45,59 @@ def set_motor(output: float) -> tuple[int, int]:
     return int(f32(abs(output) * C.PWM_SCALE)) & 0xFF, direction
 
 
-WHEEL_OK, WHEEL_SUSPECT, WHEEL_STALLED, WHEEL_REVERSED, WHEEL_IMPLAUSIBLE = range(5)
+WHEEL_OK, WHEEL_SUSPECT, WHEEL_STALLED, WHEEL_REVERSED, WHEEL_IMPLAUSIBLE, WHEEL_NO_EFFECT = range(6)
 FAULT_STALL_L, FAULT_STALL_R, FAULT_REVERSED_L, FAULT_REVERSED_R = 0x01, 0x02, 0x04, 0x08
 FAULT_IMPLAUSIBLE_L, FAULT_IMPLAUSIBLE_R, FAULT_DRIVER = 0x10, 0x20, 0x40
+FAULT_MOTOR_L, FAULT_MOTOR_R = 0x80, 0x100
+
+
+Effort = tuple[int, float, float, int]
+
+
+def no_effect(applied_pwm: int, applied_dir: int, setpoint: float, measured: float,
+              effort: Effort) -> tuple[bool, Effort]:
+    """``noEffect``: effort without progress. ``effort`` is (lowest duty, speed toward
+    the setpoint, setpoint, ticks) of the reference; returns (tripped, the new one)."""
+    effort_pwm, effort_speed, effort_setpoint, ticks = effort
+    progress = measured if setpoint > 0.0 else -measured
+    toward = setpoint != 0.0 and (applied_dir == C.HIGH) == (setpoint > 0.0)
+    if not toward or setpoint != effort_setpoint or progress > effort_speed:
+        return False, (applied_pwm, progress, setpoint, 0)
+    effort_pwm = min(effort_pwm, applied_pwm)
+    ticks = (ticks + 1) & 0xFF if applied_pwm >= effort_pwm + C.FAULT_EFFORT_PWM else 0
+    return ticks >= C.FAULT_EFFORT_TICKS, (effort_pwm, effort_speed, effort_setpoint, ticks)
 
 
 def check_wheel(delta: int, illegal: int, storm: int, applied_pwm: int, applied_dir: int,
-                setpoint: float, measured: float, stall_ticks: int, reverse_ticks: int
-                ) -> tuple[int, int, int]:
-    """``checkWheel``: ``(verdict, stall ticks, reverse ticks)`` for one wheel over the
-    interval that ended: WHEEL_OK, WHEEL_SUSPECT (hold the output), or a fault. A stall
-    is a duty toward a non-zero setpoint without a count (braking ends with none)."""
+                setpoint: float, measured: float, stall_ticks: int, reverse_ticks: int,
+                effort: Effort) -> tuple[int, int, int, Effort]:
+    """``checkWheel``: ``(verdict, stall ticks, reverse ticks, effort reference)`` for
+    one wheel over the interval that ended: WHEEL_OK, WHEEL_SUSPECT (hold the output),
+    or a fault. A stall is a duty toward a non-zero setpoint without a count (braking
+    ends with none)."""
     if storm or illegal >= C.FAULT_ILLEGAL_PER_TICK:
-        return WHEEL_IMPLAUSIBLE, stall_ticks, reverse_ticks
+        return WHEEL_IMPLAUSIBLE, stall_ticks, reverse_ticks, effort
     driven = (applied_pwm >= C.FAULT_STALL_PWM and setpoint != 0.0
               and (applied_dir == C.HIGH) == (setpoint > 0.0))
     stalled = driven and delta == 0
     stall_ticks = (stall_ticks + 1) & 0xFF if stalled else 0
     if stall_ticks >= C.FAULT_STALL_TICKS:
-        return WHEEL_STALLED, stall_ticks, reverse_ticks
+        return WHEEL_STALLED, stall_ticks, reverse_ticks, effort
     against = (abs(setpoint) >= C.FAULT_REVERSE_SPEED and abs(measured) >= C.FAULT_REVERSE_SPEED
                and (setpoint > 0.0) != (measured > 0.0))
     reverse_ticks = (reverse_ticks + 1) & 0xFF if against else 0
     if reverse_ticks >= C.FAULT_REVERSE_TICKS:
-        return WHEEL_REVERSED, stall_ticks, reverse_ticks
-    return (WHEEL_SUSPECT if stalled or against else WHEEL_OK), stall_ticks, reverse_ticks
+        return WHEEL_REVERSED, stall_ticks, reverse_ticks, effort
+    tripped, effort = no_effect(applied_pwm, applied_dir, setpoint, measured, effort)
+    if tripped:
+        return WHEEL_NO_EFFECT, stall_ticks, reverse_ticks, effort
+    return (WHEEL_SUSPECT if stalled or against else WHEEL_OK), stall_ticks, reverse_ticks, effort
 
 
-def wheel_faults(check: int, stall: int, reversed_: int, implausible: int) -> int:
+def wheel_faults(check: int, stall: int, reversed_: int, implausible: int, motor: int) -> int:
     """``wheelFaults``: the fault bits of one wheel's verdict."""
-    return {WHEEL_STALLED: stall, WHEEL_REVERSED: reversed_, WHEEL_IMPLAUSIBLE: implausible}.get(check, 0)
+    return {WHEEL_STALLED: stall, WHEEL_REVERSED: reversed_, WHEEL_IMPLAUSIBLE: implausible,
+            WHEEL_NO_EFFECT: motor}.get(check, 0)
 
 
 def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_r: int,
@@ -83,17 +106,20 @@ def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_
     sends its events. Returns both wheels' verdicts."""
     if s.faultFlags:
         return WHEEL_OK, WHEEL_OK
-    check_l, s.stallTicksL, s.reverseTicksL = check_wheel(
+    check_l, s.stallTicksL, s.reverseTicksL, effort_l = check_wheel(
         delta_l, ill_l, s.stormTickL, s.pwmL, s.dirL, s.setpointL, s.filtVelL, s.stallTicksL,
-        s.reverseTicksL)
-    check_r, s.stallTicksR, s.reverseTicksR = check_wheel(
+        s.reverseTicksL, (s.effortPwmL, s.effortSpeedL, s.effortSetpointL, s.effortTicksL))
+    s.effortPwmL, s.effortSpeedL, s.effortSetpointL, s.effortTicksL = effort_l
+    check_r, s.stallTicksR, s.reverseTicksR, effort_r = check_wheel(
         delta_r, ill_r, s.stormTickR, s.pwmR, s.dirR, s.setpointR, s.filtVelR, s.stallTicksR,
-        s.reverseTicksR)
+        s.reverseTicksR, (s.effortPwmR, s.effortSpeedR, s.effortSetpointR, s.effortTicksR))
+    s.effortPwmR, s.effortSpeedR, s.effortSetpointR, s.effortTicksR = effort_r
     if check_l == WHEEL_STALLED and check_r == WHEEL_STALLED:
         faults = FAULT_DRIVER
     else:
-        faults = (wheel_faults(check_l, FAULT_STALL_L, FAULT_REVERSED_L, FAULT_IMPLAUSIBLE_L)
-                  | wheel_faults(check_r, FAULT_STALL_R, FAULT_REVERSED_R, FAULT_IMPLAUSIBLE_R))
+        faults = (
+            wheel_faults(check_l, FAULT_STALL_L, FAULT_REVERSED_L, FAULT_IMPLAUSIBLE_L, FAULT_MOTOR_L)
+            | wheel_faults(check_r, FAULT_STALL_R, FAULT_REVERSED_R, FAULT_IMPLAUSIBLE_R, FAULT_MOTOR_R))
     if faults:
         s.faultFlags = faults
         emergency_halt(s)

@@ -27,8 +27,22 @@ from wcdrive.firmware.state import FirmwareState
 BOOT_LINE = b"BOOT:final_control,POWER_ON\r\n"
 
 
+#: MCUSR's flags (avr/io.h): JTRF, WDRF, BORF, EXTRF, PORF.
+JTRF, WDRF, BORF, EXTRF, PORF = 0x10, 0x08, 0x04, 0x02, 0x01
+
+
+def reset_cause_name(mcusr: int) -> str:
+    """``resetCauseName``: the BOOT line's cause word, the first of MCUSR's flags set
+    (``captureResetCause`` read MCUSR before anything else ran)."""
+    for flag, name in ((WDRF, "WATCHDOG"), (BORF, "BROWN_OUT"), (EXTRF, "EXTERNAL"),
+                       (PORF, "POWER_ON"), (JTRF, "JTAG")):
+        if mcusr & flag:
+            return name
+    return "NONE"
+
+
 def boot_line(cause: str = "POWER_ON") -> bytes:
-    """The BOOT line after a reset of the given cause (``resetCauseName``)."""
+    """The BOOT line after a reset of the given cause (``reset_cause_name``)."""
     return b"BOOT:final_control," + cause.encode() + b"\r\n"
 #: What ``measureFreeRam()`` reports on the Mega build (bytes between the heap and the
 #: stack in loop()); the simulated board reports it too. tests/test_protocol_v2.py checks

@@ -17,7 +17,8 @@ from wcdrive.firmware.constants import HIGH, MODE_CMDVEL
 FLOAT_FIELDS = (
     "targetL", "targetR", "setpointL", "setpointR", "rawVelL", "rawVelR", "filtVelL",
     "filtVelR", "integralL", "integralR", "prevMeasL", "prevMeasR", "outputL", "outputR",
-    "lastTravel", "pendingL", "pendingR",
+    "lastTravel", "pendingL", "pendingR", "effortSpeedL", "effortSpeedR", "effortSetpointL",
+    "effortSetpointR",
     "kpL", "kiL", "kdL", "kpR", "kiR", "kdR", "maxWheel", "maxAccel", "estopDecel",
 )
 #: Integer and flag globals compared exactly.
@@ -28,7 +29,8 @@ INT_FIELDS = (
     "errSuppressed", "errLinesThisTick", "cmdLen", "cmdCommas", "cmdDiscarding",
     "illTickL", "illTickR", "watchdogMs", "estopLatched", "tlmEnabled", "unframedLine", "lastSeq",
     "rxCount", "crcRejected", "stormTickL", "stormTickR", "faultFlags", "stallTicksL",
-    "stallTicksR", "reverseTicksL", "reverseTicksR",
+    "stallTicksR", "reverseTicksL", "reverseTicksR", "effortPwmL", "effortPwmR",
+    "effortTicksL", "effortTicksR",
 )
 
 #: Globals the tick takes as inputs rather than computes (loop() measures them).
@@ -104,6 +106,14 @@ class FirmwareState:
     stallTicksR: int = 0
     reverseTicksL: int = 0
     reverseTicksR: int = 0
+    effortPwmL: int = 0
+    effortPwmR: int = 0
+    effortTicksL: int = 0
+    effortTicksR: int = 0
+    effortSpeedL: float = 0.0
+    effortSpeedR: float = 0.0
+    effortSetpointL: float = 0.0
+    effortSetpointR: float = 0.0
     tlmEnabled: int = 0
     unframedLine: int = 0
     lastSeq: int = 0

@@ -61,7 +61,7 @@ REASONS = ("", "syntax", "number", "range", "fields", "overlong", "checksum", "e
            "param", "unframed", "fault")
 EVENTS = ("", "WATCHDOG", "PPM_LOST", "ESTOP", "FAULT,ENC_STALL_L", "FAULT,ENC_STALL_R",
           "FAULT,ENC_REVERSED_L", "FAULT,ENC_REVERSED_R", "FAULT,ENC_IMPLAUSIBLE_L",
-          "FAULT,ENC_IMPLAUSIBLE_R", "FAULT,DRIVER_DEAD")
+          "FAULT,ENC_IMPLAUSIBLE_R", "FAULT,DRIVER_DEAD", "FAULT,MOTOR_L", "FAULT,MOTOR_R")
 #: BOOT reply codes: the reset cause (0: the line named none).
 BOOT_CAUSES = ("", "POWER_ON", "EXTERNAL", "BROWN_OUT", "WATCHDOG", "JTAG", "NONE")
 KIND_ACK, KIND_NAK, KIND_ERR, KIND_EVT, KIND_PAR, KIND_HELLO, KIND_BOOT = range(1, 8)

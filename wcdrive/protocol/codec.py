@@ -161,7 +161,7 @@ class Unknown:
 #: The fault bits of ``TLM``'s last field and of ``EVT:FAULT,<name>``, bit 0 first
 #: (protocol/PROTOCOL.md, "Faults").
 FAULT_NAMES = ("ENC_STALL_L", "ENC_STALL_R", "ENC_REVERSED_L", "ENC_REVERSED_R",
-               "ENC_IMPLAUSIBLE_L", "ENC_IMPLAUSIBLE_R", "DRIVER_DEAD")
+               "ENC_IMPLAUSIBLE_L", "ENC_IMPLAUSIBLE_R", "DRIVER_DEAD", "MOTOR_L", "MOTOR_R")
 
 
 def fault_names(faults: int) -> tuple[str, ...]:

@@ -54,18 +54,19 @@ VARIABLE_FORMATS = {
     "f": ("targetL", "targetR", "setpointL", "setpointR", "rawVelL", "rawVelR", "filtVelL",
           "filtVelR", "integralL", "integralR", "prevMeasL", "prevMeasR", "outputL", "outputR",
           "lastTravel", "pendingL", "pendingR", "kpL", "kiL", "kdL", "kpR", "kiR", "kdR",
-          "maxWheel", "maxAccel", "estopDecel"),
+          "maxWheel", "maxAccel", "estopDecel", "effortSpeedL", "effortSpeedR", "effortSetpointL",
+          "effortSetpointR"),
     "i": ("encoderValueL", "encoderValueR", "encTickL", "encTickR", "prevEncL", "prevEncR"),
     "I": ("illegalL", "illegalR", "lastControlTime", "tickCount", "lastCmdTime", "rejectedCount",
           "errSuppressed", "txDropped", "timer0_millis", "timer0_overflow_count", "illTickL",
           "illTickR", "rxCount", "crcRejected"),
-    "H": ("freeRam", "watchdogMs", "lastSeq"),
+    "H": ("freeRam", "watchdogMs", "lastSeq", "faultFlags"),
     "B": ("mode", "pwmL", "pwmR", "dirL", "dirR", "pivotPhase", "pivotTicksLeft", "cmdSinceTick",
           "watchdogArmed", "emergencyStop", "ppmLost", "stillTicks", "parked", "cmdLen",
           "cmdCommas", "cmdDiscarding", "errLinesThisTick", "lastEncodedL", "lastEncodedR",
           "timer0_fract", "estopLatched", "tlmEnabled", "unframedLine", "stormTickL", "stormTickR",
-          "faultFlags", "stallTicksL", "stallTicksR", "reverseTicksL", "reverseTicksR", "stormL",
-          "stormR", "resetCause"),
+          "stallTicksL", "stallTicksR", "reverseTicksL", "reverseTicksR", "stormL", "stormR",
+          "resetCause", "effortPwmL", "effortPwmR", "effortTicksL", "effortTicksR"),
 }
 _FORMAT_OF = {name: fmt for fmt, names in VARIABLE_FORMATS.items() for name in names}
 
