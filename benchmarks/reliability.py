@@ -4,7 +4,7 @@ the chair. docs/benchmarks.md ("Reliability (protocol v3)") keeps the figures.
 
     python benchmarks/reliability.py [--quick] [--seed N] [--no-simavr]
         [--port-lines N] [--port-frames N] [--legacy-frames N]
-        [--firmware-lines N] [--firmware-frames N]
+        [--firmware-lines N] [--firmware-frames N] [--r3-trials N] [--r3-pace X]
 
 R1, random and mutated lines. Every line ends in ``\\n``, so each starts with an empty
 command buffer. Sources: random bytes (30 %), mutations of valid commands (55 %: bit
@@ -53,14 +53,34 @@ hello (what a seed host without hello risks), and of a v2 frame ``$seq:cmd*hh`` 
 the XOR checksum, in a model: the port before hello with the CRC check replaced by
 v2's (either-case hex XOR); v2 boards also took unframed lines after hello, as the
 port takes them before. Each of these trials starts on a fresh board at rest.
+
+R3, faults mid-motion (``firmware_r3``): the firmware in simavr with the chair on its
+pins (``MegaBoard``, paced to real time, or ``--r3-pace`` times it with the host's
+clock stretched alike), behind a ``FaultyLink`` (the USB cable), driven by a
+``Wheelchair`` with ``set_velocity`` at 20 Hz at 0.4-1.2 m/s for 0.6-1.0 s; then, at
+a random moment between two commands, one of: the link cut both ways while the port
+stays open (mid-line when a write is under way), the device unplugged (reads, writes
+and reopening raise; replugged, opening the port pulses DTR and resets the board, as
+on a real Mega), or a DTR reset (``MegaBoard.reset``). The host commands on until it
+notices (``LinkLost``, a refused motion call, or ``BOARD_RESET``), then waits until the
+chair has been still and unpowered for 0.1 s; the link comes back and the host must
+drive again (after a reset or a replug: once the board answered a new hello). Per
+trial: PWM 0 for good against ``stop_bound`` (the watchdog, the ramp at the emergency
+deceleration, two ticks; after a reset no watchdog, and PWM 0 from its first
+instruction), the standstill, the travel against issue 13's distance goal, when the
+host noticed and drove again, the reboot cause it saw, and the frames the board
+executed after a reset before a new hello; over the run, the frames executed twice
+(an ``ACK:`` of one sequence number twice).
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import random
 import re
 import sys
+import threading
 import time
 from collections import Counter
 from collections.abc import Iterator
@@ -76,6 +96,8 @@ from wcdrive.protocol.codec import crc16, frame
 from wcdrive.protocol.spec import integer, real
 
 if TYPE_CHECKING:
+    from wcdrive.boards.simavr.mega_board import MegaBoard
+    from wcdrive.boards.simavr.virtual_mega import VirtualMega
     from wcdrive.hil.lockstep import Recording
     from wcdrive.hil.traces import Trace
 
@@ -92,9 +114,9 @@ TICK_MS = 50
 HANG_S = 0.050                      # a line (port) or a byte (firmware) must be done within a tick
 
 QUICK = {"port_lines": 20_000, "port_frames": 20_000, "legacy_frames": 20_000,
-         "firmware_lines": 600, "firmware_frames": 400}
+         "firmware_lines": 600, "firmware_frames": 400, "r3_trials": 5}
 FULL = {"port_lines": 1_000_000, "port_frames": 1_000_000, "legacy_frames": 1_000_000,
-        "firmware_lines": 100_000, "firmware_frames": 10_000}
+        "firmware_lines": 100_000, "firmware_frames": 10_000, "r3_trials": 100}
 
 
 # ---- input -----------------------------------------------------------------------
@@ -490,23 +512,44 @@ class Results:
     r2_port: R2Result | None = None
     r2_firmware: R2Result | None = None
     legacy: Legacy | None = None
+    r3: R3Result | None = None
     wall: dict[str, float] = field(default_factory=dict)
 
 
 # ---- R1 on the port ----------------------------------------------------------------
 class _PortBoard:
-    """A port ``Firmware`` with its clock; ``strict`` says hello first."""
+    """A port ``Firmware`` with its clock and the chair (``wcdrive.plant``) on its
+    motors: at each tick the plant has run the 50 ms since the last under the duty that
+    tick set, and the encoders count its wheels. R1 tests the parser: the random
+    command stream whips the chair about (a new motion every 50 ms) until the encoder
+    fault checks (issue 13) take a wheel for reversed or stalled, which latches a fault
+    that refuses motion until a ``reset`` once parked; so a latched fault is cleared
+    after its tick (``faults`` counts them). ``strict`` says hello first."""
 
     def __init__(self, strict: bool) -> None:
+        from wcdrive.plant import ChairParams, Plant
+
         self.fw = Firmware()
         self.now = 0
+        self.faults = 0
+        self.plant = Plant(ChairParams())
+        self._scale = self.plant.p.counts_per_rev / (2.0 * math.pi)
         if strict:
             self.fw.feed(HELLO_FRAME)
             self.tick()
 
     def tick(self) -> None:
+        s = self.fw.state
+        self.plant.set_drive(s.pwmL, s.dirL, s.pwmR, s.dirR)
+        recorded = self.plant.advance(TICK_MS, 0.001, record=True)
+        assert recorded is not None
+        left, right = recorded[0][-1]
         self.now += TICK_MS
-        self.fw.tick(self.now, 0, 0)
+        # as wcdrive.boards.simavr.plant_on_pins counts them: the left encoder counts down forward
+        self.fw.tick(self.now, math.floor(-left * self._scale + 0.5), math.floor(right * self._scale + 0.5))
+        if getattr(s, "faultFlags", 0):
+            self.faults += 1
+            s.faultFlags = 0
 
 
 def _check_line(st: R1Slice, source: str, line: bytes, strict: bool, drove: bool,
@@ -591,7 +634,8 @@ def _wire(chunks: list[tuple[float, bytes]]) -> tuple[list[tuple[float, bytes]],
     from wcdrive.avr.uart import UART_BYTE_CYCLES
     from wcdrive.boards.simavr.virtual_mega import F_CPU
 
-    writes, cycles = [], []
+    writes: list[tuple[float, bytes]] = []
+    cycles: list[int] = []
     free = round(0.010 * F_CPU)
     for pause, data in chunks:
         start = free + round(pause * F_CPU)
@@ -795,14 +839,15 @@ def firmware_r2(n: int, rng: random.Random, elf: ElfPath, chunk: int = 500) -> R
     """R2 on the firmware: chunks of ``chunk`` corrupted frames after hello, at wire speed.
     Nothing may change the motion, the parameters or the e-stop, arm the watchdog or be
     ACKed (the hello's ACK aside), and every command must be refused."""
-    res = R2Result(lockstep=Lockstep())
+    totals = Lockstep()
+    res = R2Result(lockstep=totals)
     while n > 0:
         count = min(chunk, n)
         n -= count
         lines = [corrupt(rng, frame(cmdvel_command(rng), rng.randint(0, SEQ_MAX)))
                  for _ in range(count)]
         data = b"".join(line for _, line in lines)
-        rec, cycles = _lockstep_run([(0.0, HELLO_FRAME + data)], elf, res.lockstep)
+        rec, cycles = _lockstep_run([(0.0, HELLO_FRAME + data)], elf, totals)
         if rec is None:
             res.crashes += 1
             continue
@@ -812,7 +857,7 @@ def firmware_r2(n: int, rng: random.Random, elf: ElfPath, chunk: int = 500) -> R
         executed = [False] * count
         rejected0 = None
         fw_rest = params0 = None
-        for k, before, after in _byte_effects(rec, cycles, res.lockstep):
+        for k, before, after in _byte_effects(rec, cycles, totals):
             i = line_of[k]
             if i < 0:
                 continue
@@ -838,11 +883,11 @@ def firmware_r2(n: int, rng: random.Random, elf: ElfPath, chunk: int = 500) -> R
                 res.examples.append(f"{kind} {line!r}: executed")
         if acks:
             res.acked["any"] += acks
-            res.examples.append(f"{acks} ACK lines in run {res.lockstep.runs}")
-    res.worst_s = res.lockstep.max_latency_s
-    res.hangs = int(res.lockstep.max_latency_s > HANG_S) + int(res.lockstep.max_tick_gap_ms >= 2 * TICK_MS) \
-        + res.lockstep.lost_bytes
-    res.crashes += res.lockstep.extra_boots
+            res.examples.append(f"{acks} ACK lines in run {totals.runs}")
+    res.worst_s = totals.max_latency_s
+    res.hangs = int(totals.max_latency_s > HANG_S) + int(totals.max_tick_gap_ms >= 2 * TICK_MS) \
+        + totals.lost_bytes
+    res.crashes += totals.extra_boots
     return res
 
 
@@ -915,7 +960,7 @@ def legacy_rates(n: int, rng: random.Random) -> Legacy:
         res.v1[kind, _outcome(fw, intended)] += 1
         res.frames[kind] += 1
     saved = commands.unframe
-    commands.unframe = v2_unframe            # the model: v3's port, v2's frame check
+    commands.unframe = v2_unframe  # type: ignore[assignment]   # the model: v3's port, v2's frame check
     try:
         for _ in range(n):
             cmd = cmdvel_command(rng)
@@ -935,10 +980,564 @@ def legacy_rates(n: int, rng: random.Random) -> Legacy:
     return res
 
 
+# ---- R3: link cut, unplug and DTR reset mid-motion (the firmware in simavr, live) -----
+R3_KINDS = ("link cut", "unplug", "DTR reset")
+WHEEL_RADIUS = real("WHEEL_RADIUS")
+WATCHDOG_S = integer("WATCHDOG_MS") / 1000
+EMERGENCY_DECEL = real("EMERGENCY_DECEL")
+PERIOD_S = integer("CONTROL_PERIOD_MS") / 1000
+HOST_PERIOD_S = 0.05            # the host's motion commands: 20 Hz
+STANDSTILL_MPS = 0.01
+RECOVERY_TIMEOUT_S = 5.0
+_ACK = re.compile(rb"ACK:(\d+)\r\n")
+_BOOT = re.compile(rb"BOOT:[^,\r\n]*,([A-Z_]+)\r\n")
+
+Sample = tuple[int, int, int, float, float, float]      # cycle, PWM left, right, speed, x, y
+
+
+def stop_bound(speed: float, watchdog: bool = True) -> float:
+    """The longest it may take, from the moment the board last heard the host (or
+    reset), until PWM is 0 for good at ``speed`` m/s: the watchdog (not after a reset),
+    the ramp from the wheels' speed at the emergency deceleration, and two control
+    ticks (the one that sees it, the one that parks)."""
+    return (WATCHDOG_S if watchdog else 0.0) + speed / WHEEL_RADIUS / EMERGENCY_DECEL + 2 * PERIOD_S
+
+
+def travel_bound(speed: float, watchdog: bool = True) -> float:
+    """Issue 13's goal for the distance after the last byte: constant speed over the
+    watchdog time (not after a reset), the braking distance at the emergency
+    deceleration, plus 0.1 m."""
+    decel = EMERGENCY_DECEL * WHEEL_RADIUS
+    return (speed * WATCHDOG_S if watchdog else 0.0) + speed * speed / (2 * decel) + 0.1
+
+
+class FaultyLink:
+    """The USB cable between a host and a live ``MegaBoard``, a ``Port``, with faults.
+    ``cut()``: the bytes are lost both ways while the port stays open (the write under
+    way when it happens is cut after a random number of its bytes); ``restore()``.
+    ``unplug()``: the device vanishes (reads, writes and reopening raise
+    ``SerialException``, as pyserial's do) until ``replug()``. Opening the port again
+    (``reopen``) pulses DTR, which resets the board, as on a real Mega. Every byte the
+    board sends is kept in ``board_tx``, delivered or not; ``delivered``: those the
+    host got."""
+
+    def __init__(self, board: MegaBoard, rng: random.Random, timeout: float = 0.05) -> None:
+        from wcdrive.boards.receive_buffer import ReceiveBuffer
+
+        self.board = board
+        self.timeout: float | None = timeout
+        self.board_tx = bytearray()
+        self.delivered = bytearray()
+        self.state = "up"                       # up | cut | gone
+        self.is_open = True
+        self._rng = rng
+        self._cut_pending = False
+        self._rx = ReceiveBuffer()
+        self._lock = threading.Lock()
+        self._done = threading.Event()
+        self._pump = threading.Thread(target=self._pump_loop, name="r3-link", daemon=True)
+        self._pump.start()
+
+    def _pump_loop(self) -> None:
+        while not self._done.is_set():
+            data = self.board.read(4096, timeout=0.01)
+            if not data:
+                continue
+            with self._lock:
+                self.board_tx += data
+                if self.state == "up" and self.is_open:
+                    self.delivered += data
+                    self._rx.put(data)
+
+    def _check(self) -> None:
+        import serial
+
+        if self.state == "gone":
+            raise serial.SerialException("device reports readiness to read but returned no data "
+                                         "(device disconnected or multiple access on port?)")
+        if not self.is_open:
+            raise serial.PortNotOpenError()
+
+    # ---- the Port ------------------------------------------------------------------
+    @property
+    def in_waiting(self) -> int:
+        """Bytes delivered and not read yet."""
+        self._check()
+        return len(self._rx)
+
+    def read(self, size: int = 1) -> bytes:
+        """Up to ``size`` bytes, waiting at most ``timeout`` s for the first."""
+        self._check()
+        data = self._rx.read(size, self.timeout)
+        if not data:
+            self._check()                       # unplugged while waiting
+        return data
+
+    def write(self, data: bytes) -> int:
+        """Hands ``data`` to the board, unless the link is cut."""
+        self._check()
+        with self._lock:
+            state, cut_now = self.state, self._cut_pending
+            self._cut_pending = False
+        if state == "up":
+            self.board.write(data)
+        elif cut_now and len(data) > 1:         # cut in the middle of this line
+            self.board.write(data[:self._rng.randrange(1, len(data))])
+        return len(data)
+
+    def flush(self) -> None:
+        """Nothing to wait for."""
+        self._check()
+
+    def close(self) -> None:
+        """Closes the port (the board runs on)."""
+        self.is_open = False
+        self._rx.clear()
+
+    def reopen(self) -> FaultyLink:
+        """Opens the port again (``Session``'s reopen): raises while unplugged; else
+        pulses DTR, which resets the board."""
+        import serial
+
+        if self.state == "gone":
+            raise serial.SerialException("[Errno 2] could not open port: No such file or directory")
+        self._rx.clear()
+        self.is_open = True
+        self.board.reset("external")
+        return self
+
+    # ---- faults --------------------------------------------------------------------
+    def cut(self) -> None:
+        """Loses the bytes both ways from now on (the next write is cut after some bytes)."""
+        with self._lock:
+            self.state = "cut"
+            self._cut_pending = True
+
+    def restore(self) -> None:
+        """Ends a cut."""
+        with self._lock:
+            self.state = "up"
+            self._cut_pending = False
+
+    def unplug(self) -> None:
+        """The device vanishes."""
+        with self._lock:
+            self.state = "gone"
+            self._rx.clear()
+
+    def replug(self) -> None:
+        """The device is back; the host must open it again."""
+        with self._lock:
+            self.state = "up"
+
+    def shutdown(self) -> None:
+        """Stops the pump (the board is closed by its owner)."""
+        self._done.set()
+        self._pump.join(timeout=1.0)
+
+
+@dataclass
+class R3Trial:
+    """One fault mid-motion. Board times are simulated seconds from the fault, host
+    times wall seconds from the fault (``recovered_s``: from the end of the outage, or
+    from the reset); None: never (within the trial)."""
+
+    kind: str
+    speed: float                        # commanded, m/s
+    bound_s: float                      # stop_bound(speed), no watchdog for a reset
+    travel_bound_m: float               # travel_bound(speed), likewise
+    pwm_before: tuple[int, int] = (0, 0)
+    pwm_after: tuple[int, int] = (0, 0)  # right after the fault (a reset: its first instruction)
+    pwm_zero_s: float | None = None     # both PWM 0 for good (to the end of the outage)
+    standstill_s: float | None = None   # the chair's speed below 0.01 m/s for good
+    travel_m: float = 0.0
+    noticed_s: float | None = None      # the host: LinkLost, a refused motion call, or BOARD_RESET
+    noticed_by: str = ""
+    recovered_s: float | None = None    # the host drives again (after a reset or a replug: hello again)
+    rehandshake: bool = False           # hello answered again after the fault
+    boot_cause: str = ""                # as the host reported it (BOARD_RESET,<cause>), or its BOOT line
+    executed_before_hello: int = 0      # frames the board executed after its reset, before a new hello
+    link_losses_before: int = 0         # LinkLost while driving, before the fault (the board lagged)
+
+    def stopped_in_time(self) -> bool:
+        """PWM 0 for good within the bound (after a reset, also at its first instruction)."""
+        if self.kind == "DTR reset" and self.pwm_after != (0, 0):
+            return False
+        return self.pwm_zero_s is not None and self.pwm_zero_s <= self.bound_s
+
+
+@dataclass
+class R3Result:
+    """R3: the trials of each kind, the frames the board executed (ACKed) and those
+    executed twice, and how well the board kept to real time."""
+
+    trials: dict[str, list[R3Trial]] = field(default_factory=dict)
+    acked: int = 0
+    executed_twice: list[int] = field(default_factory=list)
+    board_lag_s: float = 0.0            # the most simulated time fell behind the (paced) wall clock
+    pace: float = 1.0                   # simulated seconds per wall second
+    examples: list[str] = field(default_factory=list)
+
+
+class _Probe:
+    """``MegaBoard.on_step``: a ``Sample`` at each step, since when the chair has been
+    still and unpowered, and how far simulated time fell behind the wall clock."""
+
+    def __init__(self, board: MegaBoard) -> None:
+        self.board = board
+        self.samples: list[Sample] = []
+        self.cycle = 0
+        self.quiet_since: int | None = None
+        self.wall0: float | None = None
+        self.lag = 0.0
+
+    def __call__(self, tx: list[tuple[int, int]]) -> None:
+        from wcdrive.avr.timer0 import F_CPU
+
+        mega, plant = self.board.mega, self.board.plant
+        assert plant is not None
+        forward, lateral = plant.axle_velocity()
+        x, y, _ = plant.pose
+        sample = (mega.cycle, mega.pwm("left"), mega.pwm("right"), math.hypot(forward, lateral), x, y)
+        self.samples.append(sample)
+        self.cycle = sample[0]
+        if sample[1] == 0 and sample[2] == 0 and sample[3] < STANDSTILL_MPS:
+            if self.quiet_since is None:
+                self.quiet_since = sample[0]
+        else:
+            self.quiet_since = None
+        now = time.monotonic() * self.board.speed
+        if self.wall0 is None:
+            self.wall0 = now - sample[0] / F_CPU
+        self.lag = max(self.lag, now - self.wall0 - sample[0] / F_CPU)
+
+    def quiet_for(self) -> float:
+        """Simulated seconds for which PWM has been 0 and the chair still."""
+        from wcdrive.avr.timer0 import F_CPU
+
+        since = self.quiet_since
+        return 0.0 if since is None else (self.cycle - since) / F_CPU
+
+
+def analyse_stop(samples: list[Sample], fault_cycle: int, end_cycle: int
+                 ) -> tuple[float | None, float | None, float]:
+    """From the probe's samples between the fault and the end of the outage: PWM 0 for
+    good and standstill for good, each in s after the fault (None: not by the end),
+    and the distance the chair travelled."""
+    from wcdrive.avr.timer0 import F_CPU
+
+    pwm_zero: float | None = 0.0
+    still: float | None = 0.0
+    travel = 0.0
+    previous: tuple[float, float] | None = None
+    seen = False
+    for cycle, left, right, speed, x, y in samples:
+        if not fault_cycle <= cycle <= end_cycle:
+            continue
+        seen = True
+        t = (cycle - fault_cycle) / F_CPU
+        if left or right:
+            pwm_zero = None
+        elif pwm_zero is None:
+            pwm_zero = t
+        if speed >= STANDSTILL_MPS:
+            still = None
+        elif still is None:
+            still = t
+        if previous is not None:
+            travel += math.hypot(x - previous[0], y - previous[1])
+        previous = (x, y)
+    if not seen:
+        return None, None, 0.0
+    return pwm_zero, still, travel
+
+
+def executed_before_hello(board_tx: bytes) -> int:
+    """Frames a board executed (``ACK:``) after its ``BOOT:`` line and before it answered
+    a new hello (the ACK of the hello itself aside): what it took while lax, with the
+    host unaware of the reset."""
+    boot = board_tx.find(b"BOOT:")
+    if boot < 0:
+        return 0
+    after = board_tx[boot:]
+    hello = after.find(b"HELLO:")
+    return len(_ACK.findall(after if hello < 0 else after[:hello]))
+
+
+class _Rig:
+    """The firmware in simavr with the chair on its pins, at real time (times ``pace``),
+    behind a ``FaultyLink``, driven by a ``Wheelchair`` as a program would, whose
+    link timeout is stretched by 1 / ``pace`` too."""
+
+    def __init__(self, elf: ElfPath, rng: random.Random, pace: float = 1.0) -> None:
+        from wcdrive.boards.simavr.mega_board import MegaBoard
+        from wcdrive.wheelchair import LINK_TIMEOUT, Wheelchair
+
+        self.pace = pace
+        self.board = MegaBoard(elf, realtime=True, speed=pace)
+        self.probe = _Probe(self.board)
+        self.board.on_step = self.probe
+        self.board.start()
+        self.link = FaultyLink(self.board, rng)
+        self.link_events: list[tuple[float, object]] = []
+        self.errors: list[str] = []
+        self.chair = Wheelchair(self.link, name="wcavr-r3", reopen=self.link.reopen,
+                                reconnect_timeout=30.0, stop_on_signals=False,
+                                link_timeout=LINK_TIMEOUT / pace)
+        self.chair.on_link(lambda event: self.link_events.append((time.monotonic(), event)))
+        self.chair.wait_for_handshake(10.0)
+
+    def close(self) -> None:
+        try:
+            self.chair.close()
+        finally:
+            self.link.shutdown()
+            self.board.close()
+
+
+def _r3_trial(rig: _Rig, kind: str, rng: random.Random) -> R3Trial:
+    """Drives at a random speed for 0.6-1.0 s, then the fault at a random moment
+    between two commands; the host keeps commanding until it notices, then waits until
+    the chair has stopped; then the link comes back (replugged: a DTR reset on open)
+    and the host must drive again."""
+    from wcdrive.errors import WcdriveError
+    from wcdrive.telemetry import LinkLost
+
+    chair, link, board = rig.chair, rig.link, rig.board
+    period, stretch = HOST_PERIOD_S / rig.pace, 1.0 / rig.pace      # in wall seconds
+    speed = rng.uniform(0.4, 1.2)
+    watchdog = kind != "DTR reset"
+    trial = R3Trial(kind, speed, stop_bound(speed, watchdog), travel_bound(speed, watchdog))
+    links_start = len(rig.link_events)
+    t_stop = time.monotonic() + rng.uniform(0.6, 1.0) * stretch
+    while True:
+        t_last = time.monotonic()
+        try:
+            chair.set_velocity(speed, 0.0)
+        except WcdriveError as exc:
+            rig.errors.append(f"{kind}: a motion call before the fault failed: {exc}")
+        if t_last + period >= t_stop:
+            break
+        time.sleep(max(0.0, t_last + period - time.monotonic()))
+    time.sleep(max(0.0, t_last + rng.uniform(0.0, period) - time.monotonic()))
+    events0, links0, errors0 = len(chair.events), len(rig.link_events), len(chair.errors)
+    hellos0, delivered0, tx0 = link.delivered.count(b"HELLO:"), len(link.delivered), len(link.board_tx)
+    trial.link_losses_before = sum(isinstance(e, LinkLost) for _, e in rig.link_events[links_start:links0])
+
+    def fault(mega: VirtualMega) -> tuple[int, tuple[int, int], tuple[int, int]]:
+        before = (mega.pwm("left"), mega.pwm("right"))
+        if kind == "link cut":
+            link.cut()
+        elif kind == "unplug":
+            link.unplug()
+        else:
+            mega.reset("external")
+        return mega.cycle, before, (mega.pwm("left"), mega.pwm("right"))
+
+    def ready() -> bool:
+        hello_again = link.delivered.count(b"HELLO:") > hellos0
+        trial.rehandshake = hello_again
+        return (chair.link_ok and chair.protocol_version == 3
+                and (kind == "link cut" or hello_again))
+
+    t_fault = time.monotonic()
+    fault_cycle, trial.pwm_before, trial.pwm_after = board.between_steps(fault)
+    # The host: a command every 50 ms until it notices (a refused call, LinkLost,
+    # BOARD_RESET), then none. The outage lasts until the chair has been still and
+    # unpowered for 0.1 s (at least 0.3 s, at most 2.5 s past the stop bound).
+    next_command = t_last + period
+    min_end, max_end = t_fault + 0.3 * stretch, t_fault + (stop_bound(speed) + 2.5) * stretch
+    while time.monotonic() < max_end:
+        now = time.monotonic()
+        if trial.noticed_s is None:
+            lost = [t for t, e in rig.link_events[links0:] if isinstance(e, LinkLost)]
+            resets = [e for e in chair.events[events0:] if e.startswith("BOARD_RESET")]
+            if lost:
+                trial.noticed_s, trial.noticed_by = (lost[0] - t_fault) * rig.pace, "LinkLost"
+            elif resets:
+                trial.noticed_s, trial.noticed_by = (now - t_fault) * rig.pace, "BOOT"
+                trial.boot_cause = resets[0].partition(",")[2]
+            elif now >= next_command:
+                next_command += period
+                try:
+                    chair.set_velocity(speed, 0.0)
+                except WcdriveError:
+                    trial.noticed_s, trial.noticed_by = (now - t_fault) * rig.pace, "refused"
+        elif now >= min_end and rig.probe.quiet_for() >= 0.1:
+            break
+        if kind == "DTR reset" and trial.recovered_s is None and ready():
+            trial.recovered_s = (now - t_fault) * rig.pace
+        time.sleep(0.005)
+    end_cycle = board.between_steps(lambda mega: mega.cycle)
+    if kind == "link cut":
+        link.restore()
+    elif kind == "unplug":
+        link.replug()
+    t_back = time.monotonic()
+    deadline = t_back + RECOVERY_TIMEOUT_S * stretch
+    while time.monotonic() < deadline:
+        if ready():
+            try:
+                chair.set_velocity(0.0, 0.0)
+            except WcdriveError:
+                pass
+            else:
+                if trial.recovered_s is None and kind != "DTR reset":
+                    trial.recovered_s = (time.monotonic() - t_back) * rig.pace
+                break
+        time.sleep(0.005)
+    else:
+        trial.recovered_s = None
+    got = bytes(link.delivered[delivered0:])
+    boots = _BOOT.findall(got)
+    if not trial.boot_cause and boots:          # a replug: its BOOT line came before hello
+        trial.boot_cause = boots[0].decode()
+    if kind == "DTR reset" and trial.noticed_s is None and boots:
+        whole = bytes(link.delivered)               # the line may have begun before the fault
+        at = whole.find(b"BOOT:", delivered0)
+        line = whole[whole.rfind(b"\n", 0, at) + 1:whole.find(b"\n", at) + 1]
+        rig.errors.append(f"{kind}: the host got {line!r} and did not see the reset")
+    elif kind != "link cut" and trial.noticed_s is not None and not trial.rehandshake:
+        rig.errors.append(f"{kind}: the host saw the reset and said hello, but got "
+                          f"{['ERR:' + e for e in chair.errors[errors0:]]} and no HELLO; "
+                          f"protocol_version {chair.protocol_version}")
+    trial.executed_before_hello = executed_before_hello(bytes(link.board_tx[tx0:]))
+    trial.pwm_zero_s, trial.standstill_s, trial.travel_m = analyse_stop(rig.probe.samples,
+                                                                        fault_cycle, end_cycle)
+    del rig.probe.samples[:-1]
+    return trial
+
+
+def firmware_r3(trials: int, rng: random.Random, elf: ElfPath, log: bool = False,
+                pace: float = 1.0) -> R3Result:
+    """R3: ``trials`` of each kind (link cut, unplug, DTR reset), mixed in a random
+    order, on one live board at real time behind a ``FaultyLink``, driven by a
+    ``Wheelchair``. Each time the chair must stop (PWM 0 within ``stop_bound``; after
+    a reset also at its first instruction), the host must notice and drive again
+    (after a reset or a replug: after a new hello), and no frame is executed twice.
+    ``pace`` < 1 runs the board slower than real time, and the host's clock with it
+    (its command period and link timeout), for a loaded machine: host times are
+    reported in the board's seconds."""
+    res = R3Result(trials={k: [] for k in R3_KINDS}, pace=pace)
+    order = [k for k in R3_KINDS for _ in range(trials)]
+    rng.shuffle(order)
+    acks: Counter[int] = Counter()
+
+    def finish(rig: _Rig) -> None:
+        rig.close()
+        acks.update(int(s) for s in _ACK.findall(bytes(rig.link.board_tx)))
+        res.acked += sum(acks.values())
+        res.executed_twice += sorted(s for s, n in acks.items() if n > 1)
+        res.board_lag_s = max(res.board_lag_s, rig.probe.lag)
+        res.examples.extend(rig.errors)
+        acks.clear()
+
+    rig = _Rig(elf, rng, pace)
+    try:
+        for i, kind in enumerate(order):
+            trial = _r3_trial(rig, kind, rng)
+            res.trials[kind].append(trial)
+            if log and (i + 1) % 30 == 0:
+                print(f"    R3 {i + 1}/{len(order)}", file=sys.stderr, flush=True)
+            if trial.recovered_s is None:           # a host that never came back: start again
+                res.examples.append(f"trial {i + 1} ({kind}): the host never drove again; "
+                                    "a new board and host for the next")
+                finish(rig)
+                rig = _Rig(elf, rng, pace)
+    finally:
+        finish(rig)
+    return res
+
+
+def r3_problems(r: R3Result) -> list[str]:
+    """What R3 found wrong, by kind (empty: every trial as required)."""
+    found = []
+    for kind, trials in r.trials.items():
+        bad = {
+            "trials not in motion at the fault": sum(t.pwm_before == (0, 0) for t in trials),
+            "stops late or never (PWM)": sum(not t.stopped_in_time() for t in trials),
+            "faults the host did not notice": sum(t.noticed_s is None for t in trials),
+            "hosts that never drove again": sum(t.recovered_s is None for t in trials),
+        }
+        if kind != "link cut":
+            bad["re-handshakes missing"] = sum(not t.rehandshake for t in trials)
+            bad["reboots without the cause EXTERNAL"] = sum(t.boot_cause != "EXTERNAL" for t in trials)
+        found += [f"R3 {kind}: {v} {k}" for k, v in bad.items() if v]
+    if r.executed_twice:
+        found.append(f"R3: sequence numbers executed twice: {r.executed_twice[:10]}")
+    return found + [f"  {e}" for e in r.examples[:10]]
+
+
+def _stats(values: list[float], unit: str, scale: float = 1.0, digits: int = 0) -> str:
+    if not values:
+        return "-"
+    values = sorted(v * scale for v in values)
+    median = values[len(values) // 2]
+    return f"{median:.{digits}f} / {values[-1]:.{digits}f} {unit}"
+
+
+def _r3_cell(r: R3Result | None) -> str:
+    if r is None:
+        return "not run"
+    parts = []
+    for kind, trials in r.trials.items():
+        n = len(trials)
+        parts.append(f"{kind}: {n - sum(not t.stopped_in_time() for t in trials)}/{n} stopped in time, "
+                     f"{sum(t.noticed_s is not None for t in trials)}/{n} noticed, "
+                     f"{sum(t.recovered_s is not None for t in trials)}/{n} driving again"
+                     + ("" if kind == "link cut" else
+                        f" ({sum(t.rehandshake for t in trials)}/{n} after a new hello)"))
+    return "; ".join(parts) + (f"; **{len(r.executed_twice)} of {_n(r.acked)} executed frames "
+                               "executed twice**")
+
+
+def r3_table(r: R3Result | None) -> list[str]:
+    """R3's figures by kind, as markdown lines."""
+    if r is None:
+        return []
+    paced = "at real time" if r.pace == 1.0 else f"at {r.pace:g}x real time (the host's clock alike)"
+    out = [f"R3 on the firmware in simavr with the chair on its pins, {paced}, driven by a "
+           "`Wheelchair` at 20 Hz at 0.4-1.2 m/s (median / max, in ms of the board's clock "
+           "from the fault; the host's times are wall times times the pace; driving again: "
+           "from the end of the outage, or from the reset):", "",
+           "| fault | trials | PWM 0 for good | standstill | travel (within issue 13's "
+           "bound) | host notices (by) | driving again | reboot cause the host saw | frames the "
+           "board executed after its reset before a new hello |",
+           "|---|---:|---|---|---|---|---|---|---:|"]
+    for kind, trials in r.trials.items():
+        by = Counter(t.noticed_by or "not noticed" for t in trials)
+        causes = Counter(t.boot_cause or "none" for t in trials)
+        zero = [t.pwm_zero_s for t in trials if t.pwm_zero_s is not None]
+        over = [t.pwm_zero_s - t.bound_s for t in trials if t.pwm_zero_s is not None]
+        late = sum(t.pwm_zero_s is None for t in trials)
+        within = sum(t.travel_m <= t.travel_bound_m for t in trials)
+        first = (f"; PWM 0 at the reset's first instruction {sum(t.pwm_after == (0, 0) for t in trials)}"
+                 f"/{len(trials)}" if kind == "DTR reset" else "")
+        out.append(
+            f"| {kind} | {len(trials)} | {_stats(zero, 'ms', 1e3)}"
+            + (f", not by the end {late}" if late else "")
+            + f" (bound {_stats([t.bound_s for t in trials], 'ms', 1e3)}; past it by "
+            f"{_stats(over, 'ms', 1e3)}){first} | "
+            f"{_stats([t.standstill_s for t in trials if t.standstill_s is not None], 'ms', 1e3)} | "
+            f"{_stats([t.travel_m for t in trials], 'm', 1.0, 3)} ({within}/{len(trials)}) | "
+            f"{_stats([t.noticed_s for t in trials if t.noticed_s is not None], 'ms', 1e3)} "
+            f"({', '.join(f'{k} {v}' for k, v in by.items())}) | "
+            f"{_stats([t.recovered_s for t in trials if t.recovered_s is not None], 'ms', 1e3)} | "
+            f"{', '.join(f'{k} {v}' for k, v in causes.items())} | "
+            f"{sum(t.executed_before_hello for t in trials)} in "
+            f"{sum(t.executed_before_hello > 0 for t in trials)} trials |")
+    losses = sum(t.link_losses_before for ts in r.trials.values() for t in ts)
+    out += ["", f"Frames the board executed (ACKed): {_n(r.acked)}; executed twice: "
+            f"{len(r.executed_twice)}. Link losses while driving, before a fault: {losses}; the "
+            f"board fell at most {r.board_lag_s * 1e3:.0f} ms behind the wall clock."]
+    return out
+
+
 # ---- the whole run -----------------------------------------------------------------
 def run(counts: dict[str, int], seed: int = 1, simavr: bool = True, elf: ElfPath = None,
-        log: bool = False) -> Results:
-    """Every test with these counts (keys of ``FULL``)."""
+        log: bool = False, r3_pace: float = 1.0) -> Results:
+    """Every test with these counts (keys of ``FULL``); R3's board runs at ``r3_pace``
+    times real time."""
     res = Results(seed, dict(counts))
 
     def timed(name: str, fn, *args):
@@ -967,6 +1566,9 @@ def run(counts: dict[str, int], seed: int = 1, simavr: bool = True, elf: ElfPath
                                 random.Random(seed * 1000 + 5), elf)
         res.r2_firmware = timed("R2 firmware", firmware_r2, counts["firmware_frames"],
                                 random.Random(seed * 1000 + 6), elf)
+        if counts.get("r3_trials", 0) > 0:
+            res.r3 = timed("R3 firmware", firmware_r3, counts["r3_trials"],
+                           random.Random(seed * 1000 + 7), elf, log, r3_pace)
     return res
 
 
@@ -1040,7 +1642,12 @@ def markdown(res: Results) -> str:
     out.append("| R2: 1- to 3-bit flips and bursts of 2 to 16 bits in valid motion frames, the `$` "
                f"included, after hello: 0 executed, 0 ACKed | {_r2_cell(res.r2_port)} | "
                f"{_r2_cell(res.r2_firmware)} |")
-    out += ["", *_r1_details(res), "", *_reply_table(res), "", *_comparison_table(res), ""]
+    out.append("| R3: the link cut, the board unplugged and a DTR reset, each mid-motion: the "
+               "chair stops within the watchdog bound (a reset: PWM 0 from its first "
+               "instruction), the host notices and re-handshakes, no frame executed twice | - | "
+               f"{_r3_cell(res.r3)} |")
+    out += ["", *_r1_details(res), "", *r3_table(res.r3), "", *_reply_table(res), "",
+            *_comparison_table(res), ""]
     total = sum(res.wall.values())
     out.append("Wall time: " + ", ".join(f"{k} {v:.1f} s" for k, v in res.wall.items())
                + f"; total {total:.1f} s.")
@@ -1167,6 +1774,8 @@ def problems(res: Results) -> list[str]:
                 found += [f"  {e}" for e in st.lockstep.examples]
     if res.r2_firmware and res.r2_firmware.lockstep and res.r2_firmware.lockstep.examples:
         found += [f"  {e}" for e in res.r2_firmware.lockstep.examples]
+    if res.r3 is not None:
+        found += r3_problems(res.r3)
     return found
 
 
@@ -1177,6 +1786,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-simavr", action="store_true", help="the port only")
     for key in FULL:
         parser.add_argument("--" + key.replace("_", "-"), type=int, default=None)
+    parser.add_argument("--r3-pace", type=float, default=1.0,
+                        help="R3's board (and host clock) at this times real time (a loaded machine: 0.5)")
     args = parser.parse_args(argv)
     counts = dict(QUICK if args.quick else FULL)
     for key in FULL:
@@ -1184,7 +1795,7 @@ def main(argv: list[str] | None = None) -> int:
         if value is not None:
             counts[key] = value
     t0 = time.perf_counter()
-    res = run(counts, args.seed, simavr=not args.no_simavr, log=True)
+    res = run(counts, args.seed, simavr=not args.no_simavr, log=True, r3_pace=args.r3_pace)
     print(markdown(res))
     found = problems(res)
     print()

@@ -10,6 +10,7 @@ import random
 import sys
 from pathlib import Path
 from types import ModuleType
+from typing import Any
 
 import pytest
 
@@ -113,3 +114,109 @@ def test_it_sees_a_frame_taken_with_a_bad_crc(rel: ModuleType, monkeypatch: pyte
     monkeypatch.setattr(commands, "unframe", lax)
     r2 = rel.port_r2(2000, random.Random(2))
     assert sum(r2.acked.values()) > 0 and sum(r2.executed.values()) > 0
+
+
+# ---- R3: link cut, unplug and DTR reset mid-motion ----------------------------------------
+#: Problems R3 finds today, reported, in files this benchmark does not own:
+#: - the firmware's active stop parks (PWM 0) some 100-200 ms after the watchdog, the
+#:   ramp at the emergency deceleration and two ticks (the plant lags the ramp, then
+#:   three still ticks);
+#: - after a DTR reset the host may miss the reboot: the reset cuts the line the board
+#:   was sending and ``BOOT:`` ends up in the middle of a line, which the host's
+#:   decoder does not see ("glued"); or the tail of the frame that was on the wire
+#:   when the reset came gives ``ERR:`` lines, each of which makes the session say
+#:   hello again at once, the board's three answers per tick are spent on the ERRs,
+#:   and the session gives up after three unanswered hellos ("unanswered"). Either
+#:   way the host never re-handshakes, and (glued) the lax board executes its frames.
+KNOWN_LATE_STOP = "stops late or never (PWM)"
+MISSED_REBOOT = ("faults the host did not notice", "hosts that never drove again", "re-handshakes missing")
+
+
+def missed_reboot_shown(r: Any) -> bool:
+    """Whether R3's examples show one of the two known ways the host misses a reboot."""
+    return any(("did not see the reset" in e and "b'BOOT:" not in e) or "and no HELLO" in e
+               for e in r.examples)
+
+
+def unknown_problems(rel: ModuleType, r: Any) -> list[str]:
+    """R3's problems, less the known ones (a missed reboot only where it is shown)."""
+    out = []
+    for line in rel.r3_problems(r):
+        if line.startswith("  "):
+            continue
+        kind, _, what = line.partition(": ")
+        what = what.split(" ", 1)[1] if what[:1].isdigit() else what
+        if what == KNOWN_LATE_STOP or (kind == "R3 DTR reset" and what in MISSED_REBOOT
+                                       and missed_reboot_shown(r)):
+            continue
+        out.append(line)
+    return out
+
+
+def test_r3_bounds_and_analysis(rel: ModuleType) -> None:
+    # watchdog 0.5 s, 1 m/s = 6.56 rad/s at 15 rad/s^2, two 50 ms ticks
+    assert rel.stop_bound(1.0) == pytest.approx(0.5 + 1.0 / 0.1524 / 15.0 + 0.1)
+    assert rel.stop_bound(1.0, watchdog=False) == pytest.approx(1.0 / 0.1524 / 15.0 + 0.1)
+    assert rel.travel_bound(1.0) == pytest.approx(0.5 + 1.0 / (2 * 15.0 * 0.1524) + 0.1)
+    f = 16_000_000
+    samples = [(0, 50, 50, 0.5, 0.0, 0.0), (f // 2, 20, 20, 0.2, 0.2, 0.0), (f, 0, 0, 0.005, 0.3, 0.0),
+               (f + f // 10, 3, 0, 0.02, 0.3, 0.1), (2 * f, 0, 0, 0.0, 0.3, 0.1)]
+    pwm_zero, still, travel = rel.analyse_stop(samples, 0, 2 * f)
+    assert (pwm_zero, still, travel) == (2.0, 2.0, pytest.approx(0.4))
+    assert rel.analyse_stop(samples, 0, f) == (1.0, 1.0, pytest.approx(0.3))
+    assert rel.analyse_stop(samples, 3 * f, 4 * f) == (None, None, 0.0)
+    assert rel.executed_before_hello(b"ACK:1\r\nENC:1,2BOOT:x,EXTERNAL\r\nACK:2\r\nACK:3\r\n") == 2
+    assert rel.executed_before_hello(b"BOOT:x,EXTERNAL\r\nHELLO:3,x\r\nACK:2\r\n") == 0
+
+
+def test_r3_reports_what_went_wrong(rel: ModuleType) -> None:
+    """The checks can fail: a late stop, a reset the host missed, a frame executed twice."""
+    late = rel.R3Trial("link cut", 1.0, rel.stop_bound(1.0), rel.travel_bound(1.0), pwm_before=(60, 60),
+                       pwm_zero_s=rel.stop_bound(1.0) + 0.2, noticed_s=0.15, recovered_s=0.01)
+    missed = rel.R3Trial("DTR reset", 1.0, rel.stop_bound(1.0, False), rel.travel_bound(1.0, False),
+                         pwm_before=(60, 60), pwm_after=(0, 0), pwm_zero_s=0.2, boot_cause="EXTERNAL",
+                         executed_before_hello=4)
+    good = rel.R3Trial("unplug", 1.0, rel.stop_bound(1.0), rel.travel_bound(1.0), pwm_before=(60, 60),
+                       pwm_zero_s=0.9, noticed_s=0.02, recovered_s=0.2, rehandshake=True,
+                       boot_cause="EXTERNAL")
+    r = rel.R3Result(trials={"link cut": [late], "unplug": [good], "DTR reset": [missed]}, acked=10,
+                     executed_twice=[7])
+    found = rel.r3_problems(r)
+    assert "R3 link cut: 1 stops late or never (PWM)" in found
+    assert "R3 DTR reset: 1 faults the host did not notice" in found
+    assert "R3 DTR reset: 1 re-handshakes missing" in found
+    assert not any(line.startswith("R3 unplug") for line in found)
+    assert "R3: sequence numbers executed twice: [7]" in found
+    assert "| DTR reset | 1 |" in "\n".join(rel.r3_table(r))
+    assert unknown_problems(rel, r) != []
+
+
+@pytest.mark.simavr
+def test_r3_faults_mid_motion_on_the_firmware(rel: ModuleType, elf: Path) -> None:
+    """Two of each fault on the live board, at half real time (the host's clock alike,
+    so that a loaded machine does not starve it): the chair stops, the host notices and
+    drives again, no frame is executed twice."""
+    r = rel.firmware_r3(2, random.Random(3), elf, pace=0.5)
+    print("\n".join(rel.r3_table(r)))
+    assert unknown_problems(rel, r) == [], rel.r3_problems(r)
+    assert r.acked > 50 and r.executed_twice == []
+    link_timeout = 3 * 0.050
+    for kind, trials in r.trials.items():
+        assert len(trials) == 2
+        for t in trials:
+            assert min(t.pwm_before) > 0, t                      # mid-motion
+            if kind == "DTR reset":
+                assert t.pwm_after == (0, 0), t                  # from its first instruction
+                if t.noticed_s is None or not t.rehandshake:     # a known missed reboot
+                    assert missed_reboot_shown(r), r.examples
+                    continue
+                assert t.noticed_by == "BOOT" and t.noticed_s < 0.1, t
+            else:
+                assert t.noticed_s is not None and t.noticed_s <= link_timeout + 0.05, t
+            assert t.pwm_zero_s is not None and t.standstill_s is not None, t   # it stops
+            assert t.travel_m <= t.travel_bound_m, t
+            assert t.recovered_s is not None, t
+            if kind != "link cut":
+                assert t.rehandshake and t.boot_cause == "EXTERNAL", t
+            if kind == "unplug":
+                assert t.executed_before_hello == 0, t       # the host says hello before it drives

@@ -5,20 +5,26 @@ background thread, with the pymunk chair wired to its pins.
 ``read``, ``close``): ``wcavr://`` opens it as a pyserial port, and
 ``wcdrive.transports.pty_bridge.PtyBridge`` puts it behind a pseudo-terminal that any
 program opens like /dev/ttyACM0 (``wcdrive pty --avr``). ``realtime=True`` paces simulated time
-to the wall clock; otherwise the board runs as fast as it can.
+to the wall clock (``speed`` simulated seconds per second); otherwise the board runs as
+fast as it can. ``reset()`` pulses the Mega's RESET line, as DTR does when a host opens
+a real Mega's port.
 """
 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import TypeVar
 
 from wcdrive.boards.simavr.plant_on_pins import PlantOnPins
-from wcdrive.boards.simavr.virtual_mega import VirtualMega
+from wcdrive.boards.simavr.virtual_mega import Reset, VirtualMega
 from wcdrive.boards.threaded import ThreadedBoard
 from wcdrive.plant import ChairParams, Gyro, Plant
 
 __all__ = ["MegaBoard"]
+
+_T = TypeVar("_T")
 
 #: Simulated time per step of the board's thread.
 STEP_S = 0.002
@@ -31,10 +37,14 @@ class MegaBoard(ThreadedBoard):
     (``write``, ``read``, ``close``) that ``PtyBridge`` expects."""
 
     def __init__(self, elf: str | Path | None = None, *, realtime: bool = False,
-                 plant: ChairParams | bool = True) -> None:
+                 plant: ChairParams | bool = True, speed: float = 1.0) -> None:
+        if not speed > 0:
+            raise ValueError(f"speed must be positive, got {speed}")
         super().__init__("virtual-mega")
         self.mega = VirtualMega(elf)
         self.realtime = realtime
+        #: With ``realtime``: simulated seconds per wall-clock second.
+        self.speed = speed
         self._wall0: float | None = None
         self.plant: Plant | None = None
         self._pins: PlantOnPins | None = None
@@ -42,6 +52,10 @@ class MegaBoard(ThreadedBoard):
             params = plant if isinstance(plant, ChairParams) else ChairParams()
             self.plant = Plant(params)
             self._pins = PlantOnPins(self.mega, self.plant, Gyro(params, 0))
+        #: Called by the board's thread after each step (``STEP_S`` of simulated time),
+        #: under the board's lock, with the UART bytes the firmware sent in that step as
+        #: ``(cycle, byte)``: a probe for measurements (PWM, the plant) at the step's end.
+        self.on_step: Callable[[list[tuple[int, int]]], None] | None = None
 
     def pose(self) -> tuple[float, float, float]:
         """Ground truth (x, y, heading) of the chair behind the pins."""
@@ -49,6 +63,21 @@ class MegaBoard(ThreadedBoard):
             raise RuntimeError("this board has no plant (plant=False)")
         with self._lock:
             return self.plant.pose
+
+    def between_steps(self, fn: Callable[[VirtualMega], _T]) -> _T:
+        """Calls ``fn(mega)`` between two steps of the board's thread (under its lock),
+        so that it sees, and may change, the Mega at one simulated instant; returns
+        what ``fn`` returns."""
+        with self._lock:
+            return fn(self.mega)
+
+    def reset(self, cause: str = "external") -> Reset:
+        """Resets the Mega now, between two steps of its thread: ``"external"`` is a DTR
+        pulse (or the reset button), also ``"brownout"`` and ``"power_on"``
+        (``VirtualMega.reset``). The chair behind the pins rolls on; what the board sent
+        before the reset stays readable."""
+        with self._lock:
+            return self.mega.reset(cause)
 
     def _send(self, data: bytes) -> None:
         self.mega.send(data)
@@ -62,13 +91,17 @@ class MegaBoard(ThreadedBoard):
             for _ in range(round(STEP_S / PLANT_DT)):
                 t0 = self.mega.time
                 self._pins.step(t0, t0 + PLANT_DT)
-        return bytes(b for _, b in self.mega.take_tx())
+        tx = self.mega.take_tx()
+        if self.on_step is not None:
+            self.on_step(tx)
+        return bytes(b for _, b in tx)
 
     def _pause(self) -> float:
-        """Real time: wait until the wall clock catches up; else run flat out."""
+        """Real time (times ``speed``): wait until the wall clock catches up; else run
+        flat out."""
         if not self.realtime or self._wall0 is None:
             return 0.0
-        return self.mega.time - (time.monotonic() - self._wall0)
+        return self.mega.time / self.speed - (time.monotonic() - self._wall0)
 
     def _shutdown(self) -> None:
         self.mega.close()

@@ -8,6 +8,12 @@ is queued at exact cycles, so one trace always gives the same bytes.
     mega.send(b"rp2.0,lp2.0,")            # bytes on the wire from now on
     mega.run_for(0.2)
     print(mega.take_tx_text(), mega.pwm("left"), mega.read("setpointL"))
+    mega.reset()                          # DTR: an external reset, the clock running on
+
+A reset (``reset``: external, brown-out, power-on; or the AVR's own watchdog) restarts
+the core but not the clock: ``cycle`` keeps counting from the first power-on, queued
+bytes and pin edges stay queued at their cycles, the pins driven from outside keep
+their levels, and ``resets`` logs each one with MCUSR as the chip shows it.
 """
 
 from __future__ import annotations
@@ -74,8 +80,24 @@ _FORMAT_OF = {name: fmt for fmt, names in VARIABLE_FORMATS.items() for name in n
 HOOKS = ("processByte", "controlTick", "main", "doneOp")
 
 
+#: Reset causes by the harness's code (wcsim.c, ``WCSIM_RESET_*``).
+RESET_CAUSES = ("power_on", "external", "brownout", "watchdog")
+#: MCUSR's flags (ATmega2560 datasheet, 11.5.1).
+PORF, EXTRF, BORF, WDRF, JTRF = 0x01, 0x02, 0x04, 0x08, 0x10
+
+
 class HarnessError(RuntimeError):
     """The virtual board could not be made or stopped unexpectedly."""
+
+
+@dataclass(frozen=True)
+class Reset:
+    """One reset of the AVR: the cycle it happened at, its cause (one of
+    ``RESET_CAUSES``) and MCUSR right after it (what the firmware finds at boot)."""
+
+    cycle: int
+    cause: str
+    mcusr: int
 
 
 @dataclass(frozen=True)
@@ -131,6 +153,10 @@ def _load_library() -> ctypes.CDLL:
         "wcsim_vcd_pwm": (None, [p, i32, i32]),
         "wcsim_vcd_open": (i32, [p, ctypes.c_char_p, ctypes.c_char_p]),
         "wcsim_vcd_close": (None, [p]),
+        "wcsim_reset": (i32, [p, i32]),
+        "wcsim_mcusr": (ctypes.c_uint8, [p]),
+        "wcsim_resets_count": (sz, [p]),
+        "wcsim_resets_take": (sz, [p, ctypes.POINTER(u64), u8p, u8p, sz]),
     }
     for name, (restype, argtypes) in sig.items():
         fn = getattr(lib, name)
@@ -173,6 +199,10 @@ class VirtualMega:
         self._pin_level: dict[tuple[str, int], int] = {}
         self.tx_log: list[tuple[int, int]] = []
         self.hit_log: list[Hit] = []
+        #: Every reset since power-on, the first power-on (cycle 0) included.
+        self.resets: list[Reset] = []
+        self._resets_taken = 0
+        self._collect_resets()
         # Both encoders rest at count 0, state 11, before the firmware boots.
         for side in ENCODER_PINS:
             for pin in ENCODER_PINS[side]:
@@ -212,15 +242,56 @@ class VirtualMega:
     # ---- time --------------------------------------------------------------------
     @property
     def cycle(self) -> int:
-        """Cycles since reset (after close(), where it stopped)."""
+        """Cycles since the first power-on, across resets (after close(), where it
+        stopped)."""
         if not self._s:
             return self._closed_cycle
         return int(self._c.wcsim_cycle(self._s))
 
     @property
     def time(self) -> float:
-        """Simulated seconds since reset."""
+        """Simulated seconds since the first power-on, across resets."""
         return self.cycle / F_CPU
+
+    @property
+    def boot_cycle(self) -> int:
+        """The cycle of the last reset (0: none since power-on)."""
+        self._collect_resets()
+        return self.resets[-1].cycle
+
+    # ---- resets --------------------------------------------------------------------
+    def reset(self, cause: str = "external") -> Reset:
+        """Resets the AVR now: ``"external"`` (the RESET pin, which DTR pulls on an
+        Arduino, or the reset button), ``"brownout"`` or ``"power_on"``. The core
+        restarts at its reset vector with every I/O register at its reset value (the
+        motor outputs are inputs, unpowered, from the first instruction); SRAM and the
+        EEPROM keep their contents (a power-on clears SRAM). MCUSR gets the cause's
+        flag (EXTRF, BORF) beside the flags the program has not cleared, or PORF alone
+        after a power-on; with WDRF still set the watchdog runs, as on the chip. The
+        clock does not restart: ``cycle`` runs on, the queued bytes and edges stay
+        queued (bytes that reach the USART before the firmware enables it are lost, as
+        on the chip), the pins driven from outside keep their levels. A core that had
+        stopped runs again. Returns the reset, also appended to ``resets``."""
+        if cause not in ("external", "brownout", "power_on"):
+            raise ValueError(f"unknown reset cause {cause!r}: external, brownout or power_on "
+                             "(the watchdog resets the board by itself)")
+        if self._c.wcsim_reset(self._s, RESET_CAUSES.index(cause)) != 0:
+            raise HarnessError(f"the harness refused a {cause} reset")
+        self._collect()
+        return self.resets[-1]
+
+    @property
+    def mcusr(self) -> int:
+        """MCUSR now: the reset flags (``PORF``, ``EXTRF``, ``BORF``, ``WDRF``) the
+        firmware has not cleared."""
+        return int(self._c.wcsim_mcusr(self._s))
+
+    def take_resets(self) -> list[Reset]:
+        """The resets since the last call (the first call: the power-on too)."""
+        self._collect_resets()
+        out = self.resets[self._resets_taken:]
+        self._resets_taken = len(self.resets)
+        return out
 
     def run_until(self, cycle: int) -> None:
         """Runs the firmware to ``cycle``, logging every hooked function entry on the way."""
@@ -320,7 +391,19 @@ class VirtualMega:
             raise HarnessError("out of memory queueing pin events")
 
     # ---- observation -------------------------------------------------------------
+    def _collect_resets(self) -> None:
+        if not self._s:
+            return
+        n = self._c.wcsim_resets_count(self._s)
+        if n:
+            cycles = (ctypes.c_uint64 * n)()
+            causes = (ctypes.c_uint8 * n)()
+            flags = (ctypes.c_uint8 * n)()
+            got = self._c.wcsim_resets_take(self._s, cycles, causes, flags, n)
+            self.resets.extend(Reset(cycles[i], RESET_CAUSES[causes[i]], flags[i]) for i in range(got))
+
     def _collect(self) -> None:
+        self._collect_resets()
         n = self._c.wcsim_tx_count(self._s)
         if n:
             cycles = (ctypes.c_uint64 * n)()
@@ -357,6 +440,13 @@ class VirtualMega:
         if self._c.wcsim_read(self._s, address, buf, size) != 0:
             raise ValueError(f"address {address:#x}+{size} is outside the data space")
         return bytes(buf)
+
+    def write_bytes(self, address: int, data: bytes) -> None:
+        """Writes ``data`` into data space (SRAM and I/O registers) at ``address``: for
+        tests that corrupt what a fault would (a stack, a register)."""
+        buf = (ctypes.c_uint8 * len(data))(*data)
+        if self._c.wcsim_write(self._s, address, buf, len(data)) != 0:
+            raise ValueError(f"address {address:#x}+{len(data)} is outside the data space")
 
     def address_of(self, name: str) -> tuple[int, int]:
         """Data-space address and size of a firmware global, from the ELF's symbols."""

@@ -8,6 +8,11 @@
  * at which the firmware wrote it; entries to chosen functions (by flash byte
  * address) are logged with the cycle and the argument registers r22..r25.
  *
+ * Resets (wcsim_reset: DTR/external, brown-out, power-on; and the AVR watchdog's own)
+ * restart the core without stopping the clock: the cycle count runs on, so queued
+ * stimulus and logs keep their meaning. MCUSR shows the cause as the hardware's does;
+ * the pins driven from outside keep their levels; every reset is logged.
+ *
  * Compiled on first use by wcdrive/boards/simavr/build.py into libwcsim.so (gcc, -lsimavr -lelf).
  */
 #include <stdarg.h>
@@ -23,6 +28,7 @@
 #include <simavr/sim_vcd_file.h>
 #include <simavr/avr_ioport.h>
 #include <simavr/avr_uart.h>
+#include <simavr/avr_watchdog.h>
 
 #define WCSIM_MAX_HOOKS 16
 
@@ -46,6 +52,23 @@ typedef struct {
     uint8_t r24;
 } wcsim_hit_t;
 
+/* Reset causes: what wcsim_reset takes (all but WATCHDOG) and the reset log reports. */
+enum {
+    WCSIM_RESET_POWER_ON = 0,
+    WCSIM_RESET_EXTERNAL = 1,   /* the RESET pin: DTR on an Arduino, the reset button */
+    WCSIM_RESET_BROWN_OUT = 2,
+    WCSIM_RESET_WATCHDOG = 3,   /* the AVR's WDT expired in reset mode */
+};
+
+typedef struct {
+    uint64_t cycle;
+    uint8_t cause;
+    uint8_t mcusr;   /* MCUSR right after the reset */
+} wcsim_reset_t;
+
+/* Ports 'A'..'L' by letter - 'A': the input levels driven from outside. */
+#define WCSIM_PORTS 12
+
 typedef struct {
     avr_t *avr;
     elf_firmware_t fw;
@@ -67,6 +90,12 @@ typedef struct {
     int vcd_on;
     avr_irq_t *pwm_irq;   /* two 8-bit signals for the VCD: left, right duty */
     int crashed;
+    /* resets */
+    void (*run_fn)(avr_t *);    /* simavr's run callback; the WDT swaps in its reset */
+    avr_watchdog_t *wdt;
+    uint8_t driven[WCSIM_PORTS], level[WCSIM_PORTS];
+    wcsim_reset_t *resets;
+    size_t n_resets, cap_resets;
 } wcsim_t;
 
 static void no_sleep(avr_t *avr, avr_cycle_count_t how_long) {
@@ -101,6 +130,77 @@ static void on_uart_tx(struct avr_irq_t *irq, uint32_t value, void *param) {
     s->n_tx++;
 }
 
+static uint8_t mcusr_get(wcsim_t *s) { return s->avr->data[s->avr->reset_flags.porf.reg]; }
+
+static void log_reset(wcsim_t *s, int cause) {
+    wcsim_reset_t *r = grow(s->resets, &s->cap_resets, s->n_resets + 1, sizeof(*r));
+    if (!r) return;
+    s->resets = r;
+    r = &s->resets[s->n_resets++];
+    r->cycle = s->avr->cycle;
+    r->cause = (uint8_t)cause;
+    r->mcusr = mcusr_get(s);
+}
+
+/* The watchdog module (for its WDE bit); simavr keeps it only in the core's struct. */
+static avr_watchdog_t *find_watchdog(avr_t *avr) {
+    for (avr_io_t *io = avr->io_port; io; io = io->next) {
+        if (io->kind && strcmp(io->kind, "watchdog") == 0) return (avr_watchdog_t *)io;
+    }
+    return NULL;
+}
+
+/* A write to an I/O register as the core makes it (through the module's handler). */
+static void io_write(avr_t *avr, avr_io_addr_t addr, uint8_t v) {
+    avr_io_addr_t io = AVR_DATA_TO_IO(addr);
+    if (avr->io[io].w.c)
+        avr->io[io].w.c(avr, addr, v, avr->io[io].w.param);
+    else
+        avr->data[addr] = v;
+}
+
+/* After avr_reset() (which zeroes every I/O register, MCUSR and PINx included):
+ *  - MCUSR as the hardware has it: a power-on leaves PORF alone; any other reset adds
+ *    its flag to those the program has not cleared (simavr 1.6 sets only WDRF, on a
+ *    watchdog reset, and clears the rest);
+ *  - WDRF set forces WDE on (the watchdog runs at its shortest period), as on the chip;
+ *  - the pins driven from outside show their levels again in PINx (their IRQs are
+ *    filtered on value, so each is marked to notify once more, then raised);
+ *  - a power-on also clears the register file and SRAM (defined: zero). */
+static void after_reset(wcsim_t *s, int cause, uint8_t mcusr_before) {
+    avr_t *avr = s->avr;
+    uint8_t porf = 1u << avr->reset_flags.porf.bit;
+    uint8_t extrf = 1u << avr->reset_flags.extrf.bit;
+    uint8_t borf = 1u << avr->reset_flags.borf.bit;
+    uint8_t wdrf = 1u << avr->reset_flags.wdrf.bit;
+    uint8_t m;
+    switch (cause) {
+    case WCSIM_RESET_POWER_ON: m = porf; break;
+    case WCSIM_RESET_EXTERNAL: m = mcusr_before | extrf; break;
+    case WCSIM_RESET_BROWN_OUT: m = mcusr_before | borf; break;
+    default: m = mcusr_before | wdrf; break;
+    }
+    avr->data[avr->reset_flags.porf.reg] = m;
+    if (cause == WCSIM_RESET_POWER_ON) {
+        memset(avr->data, 0, 32);
+        memset(avr->data + avr->ioend + 1, 0, avr->ramend - avr->ioend);
+    }
+    if ((m & wdrf) && s->wdt && !avr_regbit_get(avr, s->wdt->wde)) {
+        io_write(avr, s->wdt->wde.reg, (uint8_t)(1u << s->wdt->wde.bit));
+    }
+    for (int p = 0; p < WCSIM_PORTS; p++) {
+        for (int b = 0; b < 8; b++) {
+            avr_irq_t *irq = avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('A' + p), b);
+            if (!irq) break;
+            irq->flags |= IRQ_FLAG_INIT;
+            if (s->driven[p] & (1u << b)) avr_raise_irq(irq, (s->level[p] >> b) & 1u);
+        }
+    }
+    s->at_break = 0;
+    s->crashed = 0;
+    log_reset(s, cause);
+}
+
 wcsim_t *wcsim_new(const char *elf_path, char *err, int errlen) {
     wcsim_t *s = calloc(1, sizeof(*s));
     if (!s) return NULL;
@@ -131,6 +231,9 @@ wcsim_t *wcsim_new(const char *elf_path, char *err, int errlen) {
                             on_uart_tx, s);
     static const char *pwm_names[] = {"8>pwm_left", "8>pwm_right"};
     s->pwm_irq = avr_alloc_irq(&s->avr->irq_pool, 0, 2, pwm_names);
+    s->run_fn = s->avr->run;
+    s->wdt = find_watchdog(s->avr);
+    log_reset(s, WCSIM_RESET_POWER_ON);   /* avr_init() reset the core and set PORF */
     return s;
 }
 
@@ -140,6 +243,7 @@ void wcsim_free(wcsim_t *s) {
     free(s->events);
     free(s->tx);
     free(s->hits);
+    free(s->resets);
     /* simavr 1.6 has no avr_free(); the MCU struct is reclaimed at exit. */
     free(s);
 }
@@ -170,6 +274,11 @@ int wcsim_schedule(wcsim_t *s, uint64_t cycle, int kind, int port, int bit, int 
 
 static void apply_event(wcsim_t *s, const wcsim_event_t *e) {
     if (e->kind == 0) {
+        int p = e->port - 'A';
+        if (p >= 0 && p < WCSIM_PORTS && e->bit < 8) {
+            s->driven[p] |= (uint8_t)(1u << e->bit);
+            s->level[p] = (uint8_t)((s->level[p] & ~(1u << e->bit)) | ((e->value ? 1u : 0u) << e->bit));
+        }
         avr_irq_t *irq = avr_io_getirq(s->avr, AVR_IOCTL_IOPORT_GETIRQ(e->port), e->bit);
         if (irq) avr_raise_irq(irq, e->value);
     } else {
@@ -206,9 +315,51 @@ static void record_hit(wcsim_t *s, int h) {
 
 void wcsim_set_break_mask(wcsim_t *s, uint32_t mask) { s->break_mask = mask; }
 
+/* Resets the AVR now, the clock running on (see after_reset). cause: one of
+ * WCSIM_RESET_POWER_ON, _EXTERNAL, _BROWN_OUT. Returns 0, or -1 for another cause.
+ * It also revives a core that stopped (a real reset does). */
+int wcsim_reset(wcsim_t *s, int cause) {
+    if (cause != WCSIM_RESET_POWER_ON && cause != WCSIM_RESET_EXTERNAL && cause != WCSIM_RESET_BROWN_OUT)
+        return -1;
+    uint8_t before = mcusr_get(s);
+    if (s->avr->run != s->run_fn && s->wdt) {
+        /* A watchdog reset was due at this very instruction: take it back from simavr
+         * (which would set WDRF and restart the WDT whatever the cause) and let
+         * after_reset() set WDRF beside this cause's flag, unless it is a power-on. */
+        s->avr->run = s->run_fn;
+        s->wdt->reset_context.wdrf = 0;
+        before |= (uint8_t)(1u << s->avr->reset_flags.wdrf.bit);
+    }
+    avr_reset(s->avr);
+    after_reset(s, cause, before);
+    return 0;
+}
+
+uint8_t wcsim_mcusr(wcsim_t *s) { return mcusr_get(s); }
+
+size_t wcsim_resets_count(wcsim_t *s) { return s->n_resets; }
+
+/* Copies and removes up to max reset-log entries from the front of the log. */
+size_t wcsim_resets_take(wcsim_t *s, uint64_t *cycles, uint8_t *causes, uint8_t *mcusr, size_t max) {
+    size_t n = s->n_resets < max ? s->n_resets : max;
+    for (size_t i = 0; i < n; i++) {
+        cycles[i] = s->resets[i].cycle;
+        causes[i] = s->resets[i].cause;
+        mcusr[i] = s->resets[i].mcusr;
+    }
+    memmove(s->resets, s->resets + n, (s->n_resets - n) * sizeof(*s->resets));
+    s->n_resets -= n;
+    return n;
+}
+
 /* Runs until avr->cycle >= target. Returns 0; 1 when it stopped at a break
  * hook (logged, not yet executed; the next call runs on past it); -1 when the
- * core stopped (crash or sleep with interrupts off). */
+ * core stopped (crash or sleep with interrupts off).
+ *
+ * simavr 1.6's watchdog, when it expires in reset mode, swaps avr->run for a callback
+ * that calls avr_reset() on the next avr_run() (no instruction runs in that call) and
+ * sets WDRF and WDE (shortest period) from the watchdog's reset handler. The loop
+ * sees the swap, lets that reset happen, then completes it (after_reset). */
 int wcsim_run_until(wcsim_t *s, uint64_t target) {
     avr_t *avr = s->avr;
     while (avr->cycle < target) {
@@ -218,6 +369,13 @@ int wcsim_run_until(wcsim_t *s, uint64_t target) {
         }
         if (s->next_event == s->n_events) {   /* drained: reuse the queue from the start */
             s->next_event = s->n_events = 0;
+        }
+        if (avr->run != s->run_fn) {          /* a watchdog reset is due */
+            uint8_t before = mcusr_get(s);
+            avr_run(avr);
+            if (avr->run == s->run_fn) after_reset(s, WCSIM_RESET_WATCHDOG, before);
+            else { s->crashed = 1; return -1; }   /* not simavr 1.6's watchdog: unknown state */
+            continue;
         }
         for (int h = 0; h < s->n_hooks; h++) {
             if (avr->pc == s->hook_pc[h] && !s->at_break) {
