@@ -15,6 +15,13 @@ from the run are what the firmware's loop reads: the bytes, ``millis()`` at each
 tick, the encoder and illegal-transition counts the tick latched (themselves checked
 against the Python quadrature decoder run over the trace's edges) and the free RAM
 loop() measured before the tick.
+
+A run may reset the board (``VirtualMega.reset``, or its watchdog): at each reset the
+port starts again from ``setup()`` with the new boot's ``lastControlTime`` and the
+BOOT line of the reset's cause (MCUSR); the state the firmware shows right after its
+new ``setup()`` is compared with that, the encoder counts are checked from the count
+at the reset on, and the TX stream is compared boot by boot (what sat in the TX ring
+at the reset is lost on the chip, so each boot's bytes only need to start the port's).
 """
 
 from __future__ import annotations
@@ -26,7 +33,7 @@ import numpy as np
 
 from wcdrive.avr.f32 import bits
 from wcdrive.boards.simavr.virtual_mega import F_CPU, VirtualMega
-from wcdrive.firmware.final_control import Firmware
+from wcdrive.firmware.final_control import Firmware, boot_line, reset_cause_name
 from wcdrive.firmware.quadrature import ILLEGAL, QUAD_TABLE
 from wcdrive.firmware.state import FLOAT_FIELDS, INPUT_FIELDS, INT_FIELDS, FirmwareState
 from wcdrive.hil.traces import Trace
@@ -60,6 +67,11 @@ class Recording:
     events: list[Event]
     tx: bytes
     end_cycle: int
+    #: The resets after the power-on (``Recorder.reset``): (cycle, MCUSR after it, the
+    #: globals at the first event after it: the new boot's state after ``setup()``).
+    resets: list[tuple[int, int, dict[str, float | int]]] = field(default_factory=list)
+    #: The cycle of each byte of ``tx`` (empty: not kept; then no reset may occur).
+    tx_cycles: list[int] = field(default_factory=list)
 
 
 @dataclass
@@ -103,16 +115,34 @@ class Recorder:
         self.mega = mega
         self.events: list[Event] = []
         self.initial: dict[str, float | int] | None = None
+        self.resets: list[tuple[int, int, dict[str, float | int]]] = []
+        self._reset_pending: tuple[int, int] | None = None
+        self._boot_state: dict[str, float | int] = {}
         mega.break_on("processByte", "controlTick")
+
+    def reset(self, cause: str = "external") -> None:
+        """Resets the Mega (``VirtualMega.reset``) after closing the last event with the
+        state it left; the state at the next event is the new boot's."""
+        self._close_last()
+        done = self.mega.reset(cause)
+        self._reset_pending = (done.cycle, done.mcusr)
 
     def _snapshot(self) -> tuple[dict[str, float | int], tuple[int, int], tuple[int, int]]:
         m = self.mega
         return (m.snapshot(_WATCHED), (m.pwm("left"), m.pwm("right")),
                 (m.direction("left"), m.direction("right")))
 
+    def _end_reset(self) -> None:
+        """A reset is followed by an event (or the end): the state now is the new boot's."""
+        if self._reset_pending is not None:
+            self.resets.append((*self._reset_pending, self._boot_state))
+            self._reset_pending = None
+
     def _close_last(self) -> None:
         state, pwm, direction = self._snapshot()
-        if self.events:
+        if self._reset_pending is not None:
+            self._boot_state = state          # the last event before the reset stays as it was
+        elif self.events:
             last = self.events[-1]
             last.after, last.pwm, last.direction = state, pwm, direction
         elif self.initial is None:
@@ -124,6 +154,7 @@ class Recorder:
         while mega.run_to_break(cycle):
             hit = mega.hit_log[-1]
             self._close_last()
+            self._end_reset()
             kind = "byte" if hit.function == "processByte" else "tick"
             arg = (hit.arg >> 16) & 0xFF if kind == "byte" else hit.arg
             self.events.append(Event(kind, arg, hit.cycle))
@@ -133,7 +164,10 @@ class Recorder:
         """What was logged so far, as the ``Recording`` of ``trace``."""
         assert self.initial is not None, "run_until() first"
         tx = bytes(b for _, b in self.mega.tx_log)
-        return Recording(trace, self.initial, self.events, tx, self.mega.cycle)
+        self._end_reset()
+        resets = list(self.resets)
+        tx_cycles = [c for c, _ in self.mega.tx_log]
+        return Recording(trace, self.initial, self.events, tx, self.mega.cycle, resets, tx_cycles)
 
 
 def record(trace: Trace, elf: str | Path | None = None) -> Recording:
@@ -182,11 +216,16 @@ def compare(recording: Recording) -> Report:
     # The state right after setup() must be the port's boot state.
     for name, port_value, fw_value in _differences(fw.state, recording.initial):
         mismatches.append(Mismatch(-1, 0, name, port_value, fw_value))
-    tx = bytearray(fw.boot_output())
+    boots = [bytearray(fw.boot_output())]           # the port's TX, boot by boot
     decoded = {side: _decoded_counts(recording.trace, side) for side in ("left", "right")}
+    # What the decoder had counted when the firmware's counts started from 0 (at
+    # setup(), somewhere between a reset and the first event after it): the candidates.
+    offsets: dict[tuple[str, int], set[int]] = {(side, k): {0} for side in ("left", "right") for k in (0, 1)}
+    resets = list(recording.resets)
     ticks = 0
     events = recording.events
     for i, ev in enumerate(events):
+        tx = boots[-1]
         if ev.kind == "byte":
             tx += fw.feed(bytes([ev.arg]))
         else:
@@ -200,7 +239,8 @@ def compare(recording: Recording) -> Report:
                     continue        # masked by the storm guard: its count stopped early
                 for what, k in (("encTick", 0), ("illTick", 1)):
                     value = latched[what + suffix]
-                    if not _count_possible(decoded[side][k], value, ev.cycle, exit_cycle):
+                    if not any(_count_possible(decoded[side][k], value + offset, ev.cycle, exit_cycle)
+                               for offset in offsets[(side, k)]):
                         mismatches.append(Mismatch(i, ticks, f"{what} {side}",
                                                    "decoder disagrees", str(value)))
             # freeRam is measured by loop() just before the call: the state at entry.
@@ -218,16 +258,40 @@ def compare(recording: Recording) -> Report:
                                        str((ev.pwm, ev.direction))))
         if int(ev.after.get("txDropped", 0)) != 0:
             mismatches.append(Mismatch(i, ticks, "txDropped", "0", str(ev.after["txDropped"])))
-    fw_tx = recording.tx
-    sent = bytes(tx)
-    # The firmware may still hold the tail of its last lines in the TX ring.
-    if not (sent.startswith(fw_tx) and len(sent) - len(fw_tx) < 256):
-        where = next((k for k, (a, b) in enumerate(zip(sent, fw_tx, strict=False)) if a != b),
-                     min(len(sent), len(fw_tx)))
-        mismatches.append(Mismatch(len(events), ticks, f"TX byte {where}",
-                                   repr(sent[max(0, where - 20):where + 20]),
-                                   repr(fw_tx[max(0, where - 20):where + 20])))
-    return Report(len(events), ticks, fields_compared, mismatches, len(fw_tx))
+        next_cycle = events[i + 1].cycle if i + 1 < len(events) else recording.end_cycle
+        while resets and resets[0][0] <= next_cycle:
+            # The board reset before the next event: the port starts again from setup()
+            # and must match the new boot's state.
+            cycle, mcusr, booted = resets.pop(0)
+            fw = Firmware(FirmwareState(lastControlTime=int(booted["lastControlTime"])))
+            boots.append(bytearray(boot_line(reset_cause_name(mcusr))))
+            for side in ("left", "right"):
+                for k in (0, 1):
+                    counts, cycles = decoded[side][k]
+                    lo = int(np.searchsorted(cycles, cycle, "right"))
+                    hi = int(np.searchsorted(cycles, next_cycle, "right"))
+                    offsets[(side, k)] = {int(counts[lo - 1]) if lo > 0 else 0}
+                    offsets[(side, k)].update(int(c) for c in counts[lo:hi])
+            for name, port_value, fw_value in _differences(fw.state, booted):
+                mismatches.append(Mismatch(i, ticks, f"{name} (after the reset)", port_value, fw_value))
+    # The TX stream, boot by boot: the firmware may still hold the tail of a boot's last
+    # lines in its TX ring (lost at a reset, or not sent yet at the end).
+    cuts = [c for c, _, _ in recording.resets]
+    if cuts and len(recording.tx_cycles) != len(recording.tx):
+        mismatches.append(Mismatch(len(events), ticks, "TX", "a reset without TX cycles", ""))
+        cuts = []
+    starts = [0] + [int(np.searchsorted(np.asarray(recording.tx_cycles), c, "left")) for c in cuts]
+    ends = [*starts[1:], len(recording.tx)]
+    for k, (lo, hi) in enumerate(zip(starts, ends, strict=True)):
+        fw_tx = recording.tx[lo:hi]
+        sent = bytes(boots[k]) if k < len(boots) else b""
+        if not (sent.startswith(fw_tx) and len(sent) - len(fw_tx) < 256 + (256 if k < len(ends) - 1 else 0)):
+            where = next((j for j, (a, b) in enumerate(zip(sent, fw_tx, strict=False)) if a != b),
+                         min(len(sent), len(fw_tx)))
+            mismatches.append(Mismatch(len(events), ticks, f"TX byte {where} (boot {k})",
+                                       repr(sent[max(0, where - 20):where + 20]),
+                                       repr(fw_tx[max(0, where - 20):where + 20])))
+    return Report(len(events), ticks, fields_compared, mismatches, len(recording.tx))
 
 
 def _count_possible(decoded: tuple[np.ndarray, np.ndarray], count: int, start: int,

@@ -80,7 +80,9 @@ def test_no_windup_overshoot_after_saturation() -> None:
 def test_slip_turns_wheel_odometry_but_not_the_gyro() -> None:
     r = runner.run(scenario.load("slip_turn"))
     m = r.metrics()
-    assert abs(m["odom_wheel_heading_error_deg"]) > 10.0
+    # 16.5 deg when the watchdog's stop let the chair coast; 7.6 deg since it brakes
+    # (issue 13): the wet wheel slips less on the way to rest.
+    assert abs(m["odom_wheel_heading_error_deg"]) > 5.0
     assert abs(m["odom_gyro_heading_error_deg"]) < 1.0
     dry = runner.run(dataclasses.replace(scenario.load("slip_turn"), chair={}))
     assert abs(dry.metrics()["odom_wheel_heading_error_deg"]) < 2.0

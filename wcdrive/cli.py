@@ -60,7 +60,7 @@ def _sim(args: argparse.Namespace) -> int:
     if args.list:
         for path in scenario.bundled():
             sc = scenario.load(str(path))
-            print(f"{sc.name:20s} {sc.duration:7.1f} s  {sc.description}")
+            print(f"{sc.name:28s} {sc.duration:7.1f} s  {sc.description}")
         return 0
     names = [p.stem for p in scenario.bundled()] if args.all else (args.scenario or ["square"])
     results = []

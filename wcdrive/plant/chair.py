@@ -26,6 +26,12 @@ function pointers so a step costs well under a microsecond. ``tests/test_plant.p
 checks that both give the same trajectory. Without a C compiler the Python path runs.
 
 The body's position is the drive axle's midpoint, the odometry reference point.
+
+Faults (``set_wheel_locked``, ``set_motor_dead``; scheduled by ``wcdrive.plant.faults``):
+a locked wheel does not turn at all, its tyre slides on the floor within ``mu N``; a
+dead motor is an open circuit: no torque, no current, no back-EMF braking, the wheel
+rolls freely against its gear friction. ``start_motion_log`` records the chassis's
+motion after every step (``take_motion_log``), the ground truth of the fault metrics.
 """
 
 from __future__ import annotations
@@ -58,6 +64,7 @@ class ChairStruct(ctypes.Structure):
     _fields_ += [(n, _D * 2) for n in ("volts", "angle", "speed", "current", "slip", "force",
                                       "caster_heading")]
     _fields_ += [(n, _D) for n in ("scrub_energy", "scrub_time", "swivel_work", "side_impulse", "time")]
+    _fields_ += [(n, ctypes.c_int32 * 2) for n in ("locked", "dead")]
 
 
 #: rad/s: the swivel friction torque is regularised as ``T tanh(rate / scale)``.
@@ -74,7 +81,7 @@ def _load_kernel() -> ctypes.CDLL | None:
         try:
             lib = load(_KERNEL_SOURCE, "chairkernel", ("-lm",), ("-O2", "-ffp-contract=off"))
             lib.chair_advance.argtypes = [ctypes.POINTER(ChairStruct), ctypes.c_int32, _D,
-                                          ctypes.POINTER(_D), ctypes.POINTER(_D)]
+                                          ctypes.POINTER(_D), ctypes.POINTER(_D), ctypes.POINTER(_D)]
             lib.chair_advance.restype = None
             _kernel = lib
         except BuildError:
@@ -139,6 +146,7 @@ class Plant:
         s.caster_heading[1] = heading + p.caster_initial_offsets[1]
         self.left = WheelView(s, 0)
         self.right = WheelView(s, 1)
+        self._motion_log: list[np.ndarray] | None = None
         self._kernel = _load_kernel() if use_kernel else None
         if self._kernel is not None:
             self._bind_chipmunk()
@@ -170,6 +178,40 @@ class Plant:
         v = (self.p.battery_voltage or self.p.supply_voltage) / 255.0
         self.s.volts[0] = v * pwm_left * (1.0 if dir_left else -1.0)
         self.s.volts[1] = v * pwm_right * (1.0 if dir_right else -1.0)
+
+    def set_wheel_locked(self, side: str, locked: bool = True) -> None:
+        """Locks the ``"left"`` or ``"right"`` drive wheel (a jammed gearbox, a brake
+        on): it no longer turns and its tyre slides; ``False`` frees it again."""
+        self.s.locked[_side_index(side)] = 1 if locked else 0
+
+    def set_motor_dead(self, side: str, dead: bool = True) -> None:
+        """Makes a motor an open circuit (a dead driver channel, a cut wire): no torque
+        and no back-EMF braking, whatever the drive input; ``False`` restores it."""
+        self.s.dead[_side_index(side)] = 1 if dead else 0
+
+    def wheel_locked(self, side: str) -> bool:
+        """Whether that drive wheel is locked (``set_wheel_locked``)."""
+        return bool(self.s.locked[_side_index(side)])
+
+    def motor_dead(self, side: str) -> bool:
+        """Whether that motor is dead (``set_motor_dead``)."""
+        return bool(self.s.dead[_side_index(side)])
+
+    # ---- ground truth log ------------------------------------------------------------
+    def start_motion_log(self) -> None:
+        """From now on every step records ``(time, forward, lateral, yaw rate, volts
+        left, volts right)``: the axle midpoint's motion after the step (m/s, m/s,
+        rad/s) and the motor voltages over it, read back with ``take_motion_log``."""
+        self._motion_log = []
+
+    def take_motion_log(self) -> np.ndarray:
+        """The steps recorded since the last take, an ``n x 6`` array
+        (``start_motion_log``); empty when the log is off."""
+        if not self._motion_log:
+            return np.zeros((0, 6))
+        out = np.concatenate(self._motion_log)
+        self._motion_log = []
+        return out
 
     # ---- state -------------------------------------------------------------------
     @property
@@ -233,18 +275,32 @@ class Plant:
                 ) -> tuple[np.ndarray, np.ndarray] | None:
         """``n`` steps of ``dt``. With ``record``, returns the wheel angles after each
         step (an ``n x 2`` array, left and right) and the yaw rates (``n``)."""
+        if n <= 0:
+            return (np.empty((0, 2)), np.empty(0)) if record else None
         angles = np.empty((n if record else 0, 2))
         rates = np.empty(n if record else 0)
+        logging = self._motion_log is not None
+        motion = np.empty((n if logging else 0, 6))
+        t0 = self.s.time
         if self._kernel is not None:
             a_ptr = angles.ctypes.data_as(ctypes.POINTER(_D)) if record else None
             r_ptr = rates.ctypes.data_as(ctypes.POINTER(_D)) if record else None
-            self._kernel.chair_advance(ctypes.byref(self.s), n, dt, a_ptr, r_ptr)
+            m_ptr = motion.ctypes.data_as(ctypes.POINTER(_D)) if logging else None
+            self._kernel.chair_advance(ctypes.byref(self.s), n, dt, a_ptr, r_ptr, m_ptr)
         else:
             for k in range(n):
                 self._python_step(dt)
                 if record:
                     angles[k] = self.s.angle[0], self.s.angle[1]
                     rates[k] = self.body.angular_velocity
+                if logging:
+                    forward, lateral = self.axle_velocity()
+                    motion[k, 1:4] = forward, lateral, self.body.angular_velocity
+        if logging:
+            assert self._motion_log is not None
+            motion[:, 0] = t0 + dt * np.arange(1, n + 1)
+            motion[:, 4], motion[:, 5] = self.s.volts[0], self.s.volts[1]
+            self._motion_log.append(motion)
         return (angles, rates) if record else None
 
     def _wheel(self, i: int, ground: float, dt: float) -> float:
@@ -254,8 +310,29 @@ class Plant:
         r, k, j_dt, b = s.r, s.c_long, s.j / dt, s.b
         volts, speed = s.volts[i], s.speed[i]
         fmax = s.mu[i] * s.n_drive
-        k1v, tau = s.k1 * volts, 0.0
+        if s.locked[i]:
+            # The wheel stands still; the tyre slides (stiff below mu N); a stalled motor.
+            force = _clamp(-k * ground, -fmax, fmax)
+            s.speed[i] = 0.0
+            s.current[i] = _clamp(volts / s.res, -s.i_max_r / s.res, s.i_max_r / s.res)
+            s.slip[i] = -ground
+            s.force[i] = force
+            return force
         rr = s.crr * s.n_drive * math.tanh(ground / 0.01)
+        if s.dead[i]:
+            # Open circuit: no torque, no current, so no back-EMF term either.
+            w = (j_dt * speed + r * k * ground) / (j_dt + b + r * r * k)
+            force = k * (r * w - ground)
+            if abs(force) > fmax:
+                force = math.copysign(fmax, force)
+                w = (j_dt * speed - r * force) / (j_dt + b)
+            s.speed[i] = w
+            s.angle[i] += w * dt
+            s.current[i] = 0.0
+            s.slip[i] = r * w - ground
+            s.force[i] = force
+            return force - rr
+        k1v, tau = s.k1 * volts, 0.0
         w = (j_dt * speed + k1v + r * k * ground) / (j_dt + s.k2 + b + r * r * k)
         limited = abs(volts - s.ke_g * w) > s.i_max_r
         if limited:
@@ -332,6 +409,12 @@ class Plant:
         b.torque = torque_axle - xg * fy_b
         self.space.step(dt)
         s.time += dt
+
+
+def _side_index(side: str) -> int:
+    if side not in ("left", "right"):
+        raise ValueError(f"side must be 'left' or 'right', not {side!r}")
+    return 0 if side == "left" else 1
 
 
 def _clamp(v: float, lo: float, hi: float) -> float:

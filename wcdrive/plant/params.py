@@ -68,6 +68,25 @@ class ChairParams:
     gyro_bias_walk_dps_per_sqrt_s: float = 0.002
 
     @property
+    def max_braking(self) -> float:
+        """m/s^2: the hardest the motors can brake the chair on the flat: both at the
+        driver's current limit (torque ``Ke G eff I``, ``Ke`` from the rated voltage at
+        top speed) on the chair's mass and the wheels' and rotors' inertia, plus the
+        drive wheels' rolling resistance. 1.12 m/s^2 for these figures:
+        tests/test_fault_injection.py checks it against a full-reverse stop."""
+        ke = self.supply_voltage / (self.gear_ratio * self.top_wheel_speed)
+        force = 2.0 * self.current_limit * ke * self.gear_ratio * self.gear_efficiency / self.wheel_radius
+        inertia = 2.0 * (self.wheel_inertia + self.rotor_inertia * self.gear_ratio**2) / self.wheel_radius**2
+        return force / (self.mass + inertia) + self.rolling_resistance * G
+
+    @property
+    def current_limit_speed(self) -> float:
+        """m/s: below this speed the motors' own back-EMF, shorted by the driver at duty
+        0, no longer reaches the current limit, and the braking fades."""
+        ke = self.supply_voltage / (self.gear_ratio * self.top_wheel_speed)
+        return self.current_limit * self.armature_resistance / (ke * self.gear_ratio) * self.wheel_radius
+
+    @property
     def mass(self) -> float:
         """kg: chair and occupant."""
         return self.chair_mass + self.occupant_mass

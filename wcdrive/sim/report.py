@@ -39,6 +39,23 @@ def table(result: SimResult) -> str:
     if result.firmware_differences is not None:
         lines.append(f"  port vs firmware: {result.firmware_differences} differences over "
                      f"{result.firmware_events_compared} firmware events")
+    lines.append(f"  control ticks: at most {m['max_tick_gap_ms']:.1f} ms apart")
+    for fault in result.faults:
+        what = fault.kind + (f" {fault.side}" if fault.side else "")
+        what += f" at {fault.at:g} s" + (f" for {fault.duration:g} s" if fault.duration else "")
+        if fault.rate_hz:
+            what += f", {fault.rate_hz:g} edges/s"
+        lines.append(f"  fault: {what}")
+    if m["fault_at_s"] is not None:
+        def secs(key: str) -> str:
+            v = m[key]
+            return "never" if v is None else f"{v:.3f} s"
+        lines.append(f"  after the fault ({m['fault_at_s']:.3f} s): PWM 0 after "
+                     f"{secs('pwm_zero_after_fault_s')}, standstill after "
+                     f"{secs('standstill_after_fault_s')}, travel {m['travel_after_fault_m']:.3f} m, "
+                     f"peak {m['peak_speed_after_fault_mps']:.3f} m/s")
+    for t, line in result.boots[1:] + result.events:
+        lines.append(f"  {t:8.3f} s  {line}")
     return "\n".join(lines)
 
 
@@ -46,9 +63,13 @@ def to_json(results: list[SimResult]) -> str:
     """The metrics of ``results`` as a JSON list (NaN and inf as null)."""
 
     def clean(v):
+        if isinstance(v, (list, tuple)):
+            return [clean(x) for x in v]
+        if hasattr(v, "item"):
+            v = v.item()
         if isinstance(v, float):
             return None if math.isnan(v) or math.isinf(v) else round(v, 6)
-        return v.item() if hasattr(v, "item") else v
+        return v
 
     return json.dumps([{k: clean(v) for k, v in r.metrics().items()} for r in results], indent=2)
 

@@ -9,6 +9,13 @@ Time runs in 16 MHz cycles (``wcdrive.boards.port_loop``); the plant steps at a 
   their exact times and the host's bytes at wire speed. Every firmware event is
   recorded, and at the end the port replays them (``wcdrive.hil.lockstep``) so the report
   gives the differences in the firmware outputs between the two (expected: none).
+
+A scenario's ``[[fault]]`` entries act on both backends alike (``wcdrive.plant.faults``;
+the boards inject the encoder, plant and reset faults, and the host's bytes that fall
+in a ``link_cut`` never reach the board). The ground truth of the fault figures
+(``fault_metrics``) is the plant's motion after every physics step: the chair's speed is
+that of the faster of its two drive-wheel contact points (so a chair spinning on the
+spot is not "still"), and its travel the longer of their two paths.
 """
 
 from __future__ import annotations
@@ -20,6 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from wcdrive.avr.uart import UART_BYTE_CYCLES
 from wcdrive.boards.port_loop import F_CPU, PortLoop
 from wcdrive.boards.simavr.plant_on_pins import PlantOnPins
 from wcdrive.boards.simavr.virtual_mega import VirtualMega
@@ -28,8 +36,12 @@ from wcdrive.hil.traces import Trace
 from wcdrive.odometry import GyroIntegrator, OdometryParams, WheelOdometry
 from wcdrive.plant import Gyro, Plant
 from wcdrive.plant.encoders import EdgeTrain
+from wcdrive.plant.faults import Fault
 from wcdrive.protocol.codec import Feedback, LineDecoder
 from wcdrive.sim.scenario import Scenario
+
+#: m/s: the chair is at a standstill once its speed stays below this.
+STANDSTILL_SPEED = 0.01
 
 
 @dataclass
@@ -53,6 +65,7 @@ class SimResult:
     wheel_speed: np.ndarray     # (n, 2): true wheel speed
     pwm: np.ndarray             # (n, 2): signed duty (-255..255)
     caster: np.ndarray          # (n, 2): caster swivel angles relative to the chassis (rad)
+    counts: np.ndarray          # (n, 2): the encoder counts the tick latched (left, right)
     caster_scrub_energy: float
     caster_scrub_time: float
     caster_swivel_work: float
@@ -60,18 +73,76 @@ class SimResult:
     firmware_differences: int | None = None
     firmware_events_compared: int | None = None
     lines: dict[str, int] = field(default_factory=dict)
+    #: Per physics step: the time at its end (s), the chair's speed (m/s, module
+    #: docstring), the wheels' contact speeds (left, right; m/s) and the motor
+    #: voltages the driver applied over it (left, right; V, signed).
+    step_time: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    step_speed: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    step_contact_speed: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    step_volts: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    #: The cycle of every control tick.
+    tick_cycles: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    #: Every ``EVT:`` line and every ``BOOT:`` line the board sent, as (s, line).
+    events: list[tuple[float, str]] = field(default_factory=list)
+    boots: list[tuple[float, str]] = field(default_factory=list)
+    faults: tuple[Fault, ...] = ()
+    #: ``fault_metrics``: when the fault figures count from (None: no fault, no silence).
+    fault_at: float | None = None
+
+    def fault_metrics(self) -> dict[str, float | None]:
+        """The fault figures: ``max_tick_gap_ms`` (the longest interval between two
+        control ticks, or from the last tick to the end, by the simulated clock),
+        ``fault_at_s`` (the first fault's ``at``; for a ``link_cut`` or a ``silence``
+        segment, the time the last byte before it reached the board), and from then
+        on: ``pwm_zero_after_fault_s`` (until both duties are 0 to the end),
+        ``standstill_after_fault_s`` (until the chair's speed stays below
+        ``STANDSTILL_SPEED``), ``travel_after_fault_m`` and
+        ``peak_speed_after_fault_mps``; None where there is no fault or it never
+        happens."""
+        ticks = self.tick_cycles
+        end = round(self.duration * F_CPU)
+        if ticks.size:
+            gaps = np.diff(np.concatenate((ticks, [end])))
+            gap = float(gaps.max()) / F_CPU * 1000.0
+        else:
+            gap = self.duration * 1000.0
+        out: dict[str, float | None] = {"max_tick_gap_ms": gap, "fault_at_s": self.fault_at,
+                                        "pwm_zero_after_fault_s": None,
+                                        "standstill_after_fault_s": None,
+                                        "travel_after_fault_m": None,
+                                        "peak_speed_after_fault_mps": None}
+        if self.fault_at is None or self.step_time.size == 0:
+            return out
+        at = self.fault_at
+        t = self.step_time
+        dt = float(t[1] - t[0]) if t.size > 1 else float(t[0])
+        after = t > at + 1e-12
+        out["travel_after_fault_m"] = float(np.max(np.sum(self.step_contact_speed[after], axis=0)) * dt) \
+            if after.any() else 0.0
+        out["peak_speed_after_fault_mps"] = float(self.step_speed[after].max()) if after.any() else 0.0
+        powered = np.flatnonzero(np.any(self.step_volts != 0.0, axis=1))
+        if not powered.size or powered[-1] < t.size - 1:
+            # the step after the last powered one is the first unpowered for good
+            zero_from = t[powered[-1] + 1] - dt if powered.size else 0.0
+            out["pwm_zero_after_fault_s"] = max(0.0, float(zero_from) - at)
+        moving = np.flatnonzero(self.step_speed >= STANDSTILL_SPEED)
+        if not moving.size or moving[-1] < t.size - 1:
+            still_from = t[moving[-1]] if moving.size else 0.0
+            out["standstill_after_fault_s"] = max(0.0, float(still_from) - at)
+        return out
 
     @property
     def real_time_factor(self) -> float:
         """Simulated seconds per wall second."""
         return self.duration / self.wall_time if self.wall_time > 0 else math.inf
 
-    def metrics(self) -> dict[str, float | int | str | None]:
+    def metrics(self) -> dict[str, object]:
         """The run's figures by name: the final pose of the ground truth and of each
         odometry with its errors, the tracking error, the caster totals, the
-        port-vs-firmware differences and the line counts."""
+        port-vs-firmware differences, the line counts, the board's events and the fault
+        figures (``fault_metrics``)."""
         tx, ty, tth = self.truth[-1]
-        out: dict[str, float | int | str | None] = {
+        out: dict[str, object] = {
             "scenario": self.scenario, "backend": self.backend,
             "simulated_s": round(self.duration, 3), "ticks": self.ticks,
             "real_time_factor": round(self.real_time_factor, 1),
@@ -92,6 +163,9 @@ class SimResult:
         out["caster_side_impulse_ns"] = self.caster_side_impulse
         out["firmware_differences"] = self.firmware_differences
         out.update({f"lines_{k}": v for k, v in self.lines.items()})
+        out["events"] = [[t, line] for t, line in self.events]
+        out["boots"] = [[t, line] for t, line in self.boots]
+        out.update(self.fault_metrics())
         return out
 
 
@@ -138,108 +212,235 @@ class _Host:
 class _Log:
     def __init__(self) -> None:
         self.rows: list[tuple] = []
+        self.tick_cycles: list[int] = []
 
-    def add(self, t: float, plant: Plant, host: _Host, setpoint, measured, pwm) -> None:
+    def add(self, cycle: int, plant: Plant, host: _Host, setpoint, measured, pwm, counts) -> None:
         wheel, velocity, gyro = host.poses()
         heading = plant.pose[2]
         caster = tuple(_wrap(c - heading) for c in plant.caster_heading)
-        self.rows.append((t, plant.pose, wheel, velocity, gyro, setpoint, measured,
-                          (plant.left.speed, plant.right.speed), pwm, caster))
+        self.rows.append((cycle / F_CPU, plant.pose, wheel, velocity, gyro, setpoint, measured,
+                          (plant.left.speed, plant.right.speed), pwm, caster, counts))
+        self.tick_cycles.append(cycle)
 
     def arrays(self) -> dict[str, np.ndarray]:
+        names = ("tick_time", "truth", "odom_wheel", "odom_velocity", "odom_gyro", "setpoint",
+                 "measured", "wheel_speed", "pwm", "caster", "counts")
+        out: dict[str, np.ndarray]
         if not self.rows:
             z3, z2 = np.zeros((1, 3)), np.zeros((1, 2))
-            return {"tick_time": np.zeros(1), "truth": z3, "odom_wheel": z3, "odom_velocity": z3,
-                    "odom_gyro": z3, "setpoint": z2, "measured": z2, "wheel_speed": z2, "pwm": z2,
-                    "caster": z2}
-        cols = list(zip(*self.rows, strict=True))
-        names = ("tick_time", "truth", "odom_wheel", "odom_velocity", "odom_gyro", "setpoint",
-                 "measured", "wheel_speed", "pwm", "caster")
-        return {n: np.array(c, dtype=float) for n, c in zip(names, cols, strict=True)}
+            out = {n: z2 for n in names}
+            out.update(tick_time=np.zeros(1), truth=z3, odom_wheel=z3, odom_velocity=z3, odom_gyro=z3)
+        else:
+            cols = list(zip(*self.rows, strict=True))
+            out = {n: np.array(c, dtype=float) for n, c in zip(names, cols, strict=True)}
+        out["tick_cycles"] = np.array(self.tick_cycles, dtype=np.int64)
+        return out
+
+
+class _Lines:
+    """The board's TX stream cut into lines, each stamped with the cycle of its last
+    byte; keeps the ``EVT:`` and ``BOOT:`` lines."""
+
+    def __init__(self) -> None:
+        self._partial = bytearray()
+        self.events: list[tuple[float, str]] = []
+        self.boots: list[tuple[float, str]] = []
+
+    def feed(self, cycle: int, data: bytes) -> None:
+        self._partial += data
+        while True:
+            end = self._partial.find(b"\n")
+            if end < 0:
+                return
+            line = bytes(self._partial[:end]).rstrip(b"\r").decode("latin-1")
+            del self._partial[:end + 1]
+            if line.startswith("EVT:"):
+                self.events.append((round(cycle / F_CPU, 6), line))
+            elif line.startswith("BOOT:"):
+                self.boots.append((round(cycle / F_CPU, 6), line))
+
+    def feed_stamped(self, stamped: list[tuple[int, int]]) -> None:
+        """(cycle, byte) pairs, as the simulated Mega logs its TX."""
+        start = 0
+        for i, (cycle, byte) in enumerate(stamped):
+            if byte == 0x0A:
+                self.feed(cycle, bytes(b for _, b in stamped[start:i + 1]))
+                start = i + 1
+        if start < len(stamped):
+            self._partial += bytes(b for _, b in stamped[start:])
 
 
 def _signed(pwm: int, direction: int) -> int:
     return pwm if direction else -pwm
 
 
+@dataclass(frozen=True)
+class WireSchedule:
+    """The host's bytes on the wire: ``runs`` of bytes that reach the board, each
+    (start cycle, bytes), one byte every ``UART_BYTE_CYCLES``; ``received`` the cycle at
+    which each delivered byte has fully arrived, and ``sent`` the start cycle of every
+    byte the host sent (delivered or not)."""
+
+    runs: list[tuple[int, bytes]]
+    received: np.ndarray
+    received_start: np.ndarray
+
+
+def wire_schedule(commands: list[tuple[int, bytes]], faults: tuple[Fault, ...] = ()) -> WireSchedule:
+    """Lays the host's commands ((cycle, bytes), in order) on the wire as both boards do
+    (a command starts when it is sent or when the previous one has gone) and drops the
+    bytes whose transmission starts while a ``link_cut`` acts."""
+    cuts = [f.cycles(F_CPU) for f in faults if f.kind == "link_cut"]
+    runs: list[tuple[int, bytes]] = []
+    received: list[int] = []
+    starts: list[int] = []
+    free = 0
+    for cycle, data in commands:
+        start = max(cycle, free)
+        free = start + len(data) * UART_BYTE_CYCLES
+        run_start, run = 0, bytearray()
+        for i, byte in enumerate(data):
+            at = start + i * UART_BYTE_CYCLES
+            lost = any(lo <= at and (hi is None or at < hi) for lo, hi in cuts)
+            if lost:
+                if run:
+                    runs.append((run_start, bytes(run)))
+                    run = bytearray()
+                continue
+            if not run:
+                run_start = at
+            run.append(byte)
+            starts.append(at)
+            received.append(at + UART_BYTE_CYCLES)
+        if run:
+            runs.append((run_start, bytes(run)))
+    return WireSchedule(runs, np.array(received, dtype=np.int64), np.array(starts, dtype=np.int64))
+
+
+def fault_time(scenario: Scenario, wire: WireSchedule) -> float | None:
+    """When the fault figures count from (``SimResult.fault_metrics``): the earliest of
+    the faults' ``at`` and of the ``silence`` segments' starts; for a ``link_cut`` or a
+    silence, the time at which the last byte that started before it reached the board.
+    None when the scenario has neither."""
+    triggers: list[tuple[float, bool]] = [(f.at, f.kind == "link_cut") for f in scenario.faults]
+    t0 = 0.02
+    for seg in scenario.segments:
+        if seg.kind == "silence":
+            triggers.append((t0, True))
+            break
+        t0 += seg.duration
+    if not triggers:
+        return None
+    at, by_last_byte = min(triggers)
+    if not by_last_byte:
+        return at
+    before = np.flatnonzero(wire.received_start < round(at * F_CPU))
+    return float(wire.received[before[-1]]) / F_CPU if before.size else 0.0
+
+
 def run(scenario: Scenario, *, backend: str = "port", seed: int = 0, dt: float = 0.001,
         progress: Callable[[float], None] | None = None, elf=None) -> SimResult:
     """Runs ``scenario`` in closed loop: ``backend`` "port" (the Python port) or "simavr"
     (the ELF ``elf``, by default the bundled firmware, built if needed), the plant
-    stepping every ``dt`` s. ``seed`` seeds the gyro; ``progress`` is called now and
-    then with the fraction done."""
+    stepping every ``dt`` s, with the scenario's faults. ``seed`` seeds the gyro;
+    ``progress`` is called now and then with the fraction done."""
     if backend not in ("port", "simavr"):
         raise ValueError("backend must be 'port' or 'simavr'")
     if not 1e-5 <= dt <= 0.01:
         raise ValueError("dt must be within 10 us .. 10 ms")
     params = scenario.params()
     plant = Plant(params)
+    plant.start_motion_log()
     gyro = Gyro(params, seed)
     host = _Host(params, gyro)
     log = _Log()
+    lines = _Lines()
     step_cycles = round(dt * F_CPU)
     end_cycle = round(scenario.duration * F_CPU)
     commands = [(round(t * F_CPU), data) for t, data in scenario.host_commands()
                 if t < scenario.duration]
+    wire = wire_schedule(commands, scenario.faults)
     wall0 = time.perf_counter()
     if backend == "port":
-        extra = _run_port(plant, gyro, host, log, commands, step_cycles, end_cycle, dt, progress)
+        extra = _run_port(plant, gyro, host, log, lines, wire, scenario.faults, end_cycle, dt, progress)
     else:
-        extra = _run_simavr(plant, gyro, host, log, commands, step_cycles, end_cycle, dt, progress, elf)
+        extra = _run_simavr(plant, gyro, host, log, lines, wire, scenario.faults, step_cycles, end_cycle,
+                            dt, progress, elf)
     wall = time.perf_counter() - wall0
+    motion = plant.take_motion_log()
+    half = 0.5 * params.wheelbase
+    contact = np.stack((np.hypot(motion[:, 1] - motion[:, 3] * half, motion[:, 2]),
+                        np.hypot(motion[:, 1] + motion[:, 3] * half, motion[:, 2])), axis=1)
     return SimResult(scenario=scenario.name, backend=backend, duration=scenario.duration, wall_time=wall,
                      ticks=len(log.rows), caster_scrub_energy=plant.caster_scrub_energy,
                      caster_scrub_time=plant.caster_scrub_time, caster_swivel_work=plant.caster_swivel_work,
                      caster_side_impulse=plant.caster_side_impulse, lines=dict(host.lines),
+                     step_time=motion[:, 0], step_speed=contact.max(axis=1) if contact.size else np.zeros(0),
+                     step_contact_speed=contact, step_volts=motion[:, 4:6],
+                     events=lines.events, boots=lines.boots, faults=scenario.faults,
+                     fault_at=fault_time(scenario, wire),
                      **extra, **log.arrays())  # type: ignore[arg-type]
 
 
-def _run_port(plant, gyro, host, log, commands, step_cycles, end_cycle, dt, progress) -> dict:
-    loop = PortLoop(plant, gyro, dt)
-    for cycle, data in commands:
+def _run_port(plant, gyro, host, log, lines, wire, faults, end_cycle, dt, progress) -> dict:
+    loop = PortLoop(plant, gyro, dt, faults=faults)
+    for cycle, data in wire.runs:
         loop.send(data, at=cycle)
     last_progress = [0.0]
 
-    def on_tick(t: float) -> None:
+    def take() -> None:
         for cycle, out in loop.take_output():
             host.receive(cycle / F_CPU, out)
+            lines.feed(cycle, out)
+
+    def on_tick(t: float) -> None:
+        take()
         s = loop.fw.state
-        log.add(t, plant, host, (s.setpointL, s.setpointR), (s.filtVelL, s.filtVelR),
-                (_signed(s.pwmL, s.dirL), _signed(s.pwmR, s.dirR)))
+        assert loop.last_tick_cycle is not None
+        log.add(loop.last_tick_cycle, plant, host, (s.setpointL, s.setpointR), (s.filtVelL, s.filtVelR),
+                (_signed(s.pwmL, s.dirL), _signed(s.pwmR, s.dirR)), (s.encTickL, s.encTickR))
         if progress and t - last_progress[0] > 1.0:
             progress(t * F_CPU / end_cycle)
             last_progress[0] = t
 
     loop.run_until(end_cycle, on_tick)
-    for cycle, out in loop.take_output():
-        host.receive(cycle / F_CPU, out)
+    take()
     return {}
 
 
-def _run_simavr(plant, gyro, host, log, commands, step_cycles, end_cycle, dt, progress, elf) -> dict:
+def _run_simavr(plant, gyro, host, log, lines, wire, faults, step_cycles, end_cycle, dt, progress,
+                elf) -> dict:
     mega = VirtualMega(elf)
-    for cycle, data in commands:
-        mega.send(data, at=cycle)
     recorder = Recorder(mega)
-    pins = PlantOnPins(mega, plant, gyro)
+    pins = PlantOnPins(mega, plant, gyro, faults=faults)
     trains: dict[str, list[EdgeTrain]] = {"left": [], "right": []}
     tx_seen = 0
     n_events_logged = 0
+    runs = wire.runs
+    next_run = 0
     steps = end_cycle // step_cycles
     for k in range(steps):
         t0, t1 = k * dt, (k + 1) * dt
-        for side, train in pins.step(t0, t1, recorder.run_until).items():
+        # The host's bytes are queued a step ahead, so that the harness's queue stays
+        # short (an encoder storm queues millions of edges).
+        while next_run < len(runs) and runs[next_run][0] < (k + 1) * step_cycles:
+            mega.send(runs[next_run][1], at=runs[next_run][0])
+            next_run += 1
+        for side, train in pins.step(t0, t1, recorder.run_until, recorder.reset).items():
             if train.times.size:
                 trains[side].append(train)
         if len(mega.tx_log) > tx_seen:
-            host.receive(t1, bytes(b for _, b in mega.tx_log[tx_seen:]))
+            fresh = mega.tx_log[tx_seen:]
+            host.receive(t1, bytes(b for _, b in fresh))
+            lines.feed_stamped(fresh)
             tx_seen = len(mega.tx_log)
         for ev in recorder.events[n_events_logged:]:
             if ev.kind == "tick" and ev.after:
                 a = ev.after
-                log.add(ev.cycle / F_CPU, plant, host, (a["setpointL"], a["setpointR"]),
+                log.add(ev.cycle, plant, host, (a["setpointL"], a["setpointR"]),
                         (a["filtVelL"], a["filtVelR"]),
-                        (_signed(int(a["pwmL"]), int(a["dirL"])), _signed(int(a["pwmR"]), int(a["dirR"]))))
+                        (_signed(int(a["pwmL"]), int(a["dirL"])), _signed(int(a["pwmR"]), int(a["dirR"]))),
+                        (int(a["encTickL"]), int(a["encTickR"])))
         n_events_logged = len(recorder.events)
         if progress and k % 1000 == 0:
             progress(k / steps)
@@ -248,7 +449,7 @@ def _run_simavr(plant, gyro, host, log, commands, step_cycles, end_cycle, dt, pr
         if parts:
             encoders[side] = EdgeTrain(np.concatenate([p.times for p in parts]),
                                        np.concatenate([p.states for p in parts]), 0, 0)
-    trace = Trace(duration=end_cycle / F_CPU, serial=[(c / F_CPU, d) for c, d in commands],
+    trace = Trace(duration=end_cycle / F_CPU, serial=[(c / F_CPU, d) for c, d in runs],
                   encoders=encoders)
     report = compare(recorder.recording(trace))
     mega.close()

@@ -6,9 +6,23 @@
     repeat = 4               # the segment list, this many times (default 1)
     settle_s = 1.5           # after the last segment: a stop, then this long (default)
     [chair]                  # optional ChairParams overrides, e.g. friction_left = 0.1
+    [params]                 # optional runtime parameters the host sets first,
+    watchdog_ms = 1000       #    set:<name>=<value> (protocol v2), e.g. kp_l, estop_decel
     [[segment]]
     cmdvel = [0.3, 0.0]      # or wheel = [right, left], ppm = [8 channels],
     duration = 3.33          #    stop = true, silence = true (the host sends nothing)
+    [[fault]]                # optional, any number (wcdrive.plant.faults)
+    at = 2.0                 # s from the start
+    kind = "encoder_cut"     # encoder_cut | encoder_reversed | encoder_noise |
+                             #   wheel_locked | motor_dead | reset | link_cut
+    side = "left"            # left | right | both (encoder, wheel and motor kinds)
+    duration = 3.0           # optional: to the end of the scenario
+    rate_hz = 200000         # encoder_noise: edges per second on channel A
+
+Faults act the same way on both backends of ``wcdrive.sim.runner``: the encoder kinds on
+the encoder's wire, ``wheel_locked`` and ``motor_dead`` on the plant, ``reset`` on the
+board, and ``link_cut`` on the host's bytes, which stop reaching the board from ``at``
+(mid-line if that is where it falls).
 
 Bundled scenarios live in ``wcdrive/sim/scenarios``; ``wcdrive sim --list`` shows them and
 any path to a file of your own works the same.
@@ -21,11 +35,13 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from wcdrive.plant.faults import FAULT_KINDS, SIDED_KINDS, Fault
 from wcdrive.plant.params import ChairParams
-from wcdrive.protocol.codec import encode_cmdvel, encode_ppm, encode_wheel
+from wcdrive.protocol.codec import encode_cmdvel, encode_ppm, encode_set, encode_wheel
 
 BUNDLED = Path(__file__).resolve().parent / "scenarios"
 _KINDS = ("cmdvel", "wheel", "ppm", "stop", "silence")
+_FAULT_KEYS = ("at", "kind", "side", "duration", "rate_hz")
 
 
 class ScenarioError(ValueError):
@@ -65,6 +81,8 @@ class Scenario:
     settle_s: float = 1.5
     chair: dict[str, float] = field(default_factory=dict)
     source: Path | None = None
+    faults: tuple[Fault, ...] = ()
+    board_params: dict[str, float] = field(default_factory=dict)
 
     @property
     def duration(self) -> float:
@@ -76,9 +94,10 @@ class Scenario:
         return dataclasses.replace(ChairParams(), **self.chair)  # type: ignore[arg-type]
 
     def host_commands(self) -> list[tuple[float, bytes]]:
-        """(time, bytes) the host sends: each segment's command at ``host_rate_hz``,
-        then a stop."""
-        out: list[tuple[float, bytes]] = []
+        """(time, bytes) the host sends: the ``[params]`` settings at 5 ms, then each
+        segment's command at ``host_rate_hz`` from 20 ms, then a stop."""
+        out: list[tuple[float, bytes]] = [(0.005, encode_set(name, value) + b"\n")
+                                          for name, value in self.board_params.items()]
         period = 1.0 / self.host_rate_hz
         t0 = 0.02
         for seg in self.segments:
@@ -150,8 +169,56 @@ def load(name_or_path: str) -> Scenario:
     rate = float(data.get("host_rate_hz", 10.0))
     if not 0.5 <= rate <= 100.0:
         raise ScenarioError(f"{path}: host_rate_hz must be within 0.5..100")
-    return Scenario(
+    scenario = Scenario(
         name=str(data.get("name", path.stem)), description=str(data.get("description", "")),
         segments=tuple(segments) * repeat, host_rate_hz=rate,
         settle_s=float(data.get("settle_s", 1.5)), chair=chair, source=path,
     )
+    board_params = dict(data.get("params", {}))
+    for name, value in board_params.items():
+        try:
+            encode_set(name, value)
+        except (ValueError, TypeError) as exc:
+            raise ScenarioError(f"{path}: [params] {name}: {exc}") from exc
+    raw_faults = data.get("fault", [])
+    if not isinstance(raw_faults, list):
+        raise ScenarioError(f"{path}: faults are [[fault]] tables")
+    faults = tuple(parse_fault(raw, f"{path}: fault {i + 1}", scenario.duration)
+                   for i, raw in enumerate(raw_faults))
+    return dataclasses.replace(scenario, faults=faults,
+                               board_params={k: float(v) for k, v in board_params.items()})
+
+
+def parse_fault(raw: object, where: str, duration: float | None = None) -> Fault:
+    """One ``[[fault]]`` table as a ``Fault``; ``where`` starts every ScenarioError's
+    message, and ``duration`` (the scenario's, s) bounds ``at``."""
+    if not isinstance(raw, dict):
+        raise ScenarioError(f"{where}: a fault is a table ([[fault]])")
+    unknown = set(raw) - set(_FAULT_KEYS)
+    if unknown:
+        raise ScenarioError(f"{where}: unknown keys {', '.join(sorted(unknown))} "
+                            f"(a fault takes {', '.join(_FAULT_KEYS)})")
+    kind = raw.get("kind")
+    if kind not in FAULT_KINDS:
+        raise ScenarioError(f"{where}: kind must be one of {', '.join(FAULT_KINDS)}, not {kind!r}")
+    at = raw.get("at")
+    if isinstance(at, bool) or not isinstance(at, (int, float)):
+        raise ScenarioError(f"{where}: at (s from the start) is missing or not a number")
+    if kind in SIDED_KINDS and "side" not in raw:
+        raise ScenarioError(f"{where}: {kind} needs side = \"left\", \"right\" or \"both\"")
+    values: dict[str, object] = {}
+    for key in ("duration", "rate_hz"):
+        if key in raw:
+            value = raw[key]
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise ScenarioError(f"{where}: {key} must be a number, not {value!r}")
+            values[key] = float(value)
+    try:
+        fault = Fault(kind=kind, at=float(at), side=raw.get("side"),
+                      duration=values.get("duration"), rate_hz=values.get("rate_hz"))  # type: ignore[arg-type]
+    except ValueError as exc:
+        raise ScenarioError(f"{where}: {exc}") from exc
+    if duration is not None and fault.at >= duration:
+        raise ScenarioError(f"{where}: at = {fault.at} s is not within the scenario "
+                            f"({duration:.3f} s)")
+    return fault

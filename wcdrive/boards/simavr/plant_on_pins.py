@@ -4,12 +4,19 @@ board (``MegaBoard``) and ``wcdrive sim --backend simavr`` take.
 Per physics step: the plant advances, the wheels' motion over the step becomes
 encoder edges queued on the encoder pins, the firmware runs through the step, and its
 PWM and DIR pins drive the plant over the next one.
+
+Faults (``wcdrive.plant.faults``, given as ``faults=``): the encoder kinds act on the
+wires (``EncoderWire``: a cut queues no more edges, a reversal swaps the two bits of
+every state queued, noise merges its chatter into the train, which can be millions of
+edges, queued a step at a time); wheel and motor faults act on the plant from the step
+at which they start; a ``reset`` resets the Mega (``VirtualMega.reset``) at its cycle,
+within the step.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -18,6 +25,7 @@ from wcdrive.boards.port_loop import advance
 from wcdrive.boards.simavr.virtual_mega import VirtualMega
 from wcdrive.plant import Gyro, Plant
 from wcdrive.plant.encoders import EdgeTrain, edges_from_trajectory
+from wcdrive.plant.faults import PLANT_KINDS, EncoderWire, Fault, apply_plant_faults
 
 __all__ = ["PlantOnPins"]
 
@@ -25,31 +33,52 @@ SIDES = ("left", "right")
 
 
 class PlantOnPins:
-    """``plant`` behind ``mega``'s pins; ``gyro`` (optional) samples the plant's yaw rate."""
+    """``plant`` behind ``mega``'s pins; ``gyro`` (optional) samples the plant's yaw rate;
+    ``faults`` are injected as the module docstring says."""
 
-    def __init__(self, mega: VirtualMega, plant: Plant, gyro: Gyro | None = None) -> None:
+    def __init__(self, mega: VirtualMega, plant: Plant, gyro: Gyro | None = None,
+                 faults: Sequence[Fault] = ()) -> None:
         self.mega = mega
         self.plant = plant
         self.gyro = gyro
+        self.faults = tuple(faults)
         self._scale = plant.p.counts_per_rev / (2.0 * math.pi)
         self._position = {"left": 0.5, "right": 0.5}     # counts; floor() is the count
+        wires = {side: EncoderWire(self.faults, side, F_CPU) for side in SIDES}
+        self._wires = {side: w for side, w in wires.items() if w.faulty}
+        self._plant_faults = any(f.kind in PLANT_KINDS for f in self.faults)
+        self._resets = sorted(f.cycles(F_CPU)[0] for f in self.faults if f.kind == "reset")
 
-    def step(self, t0: float, t1: float, run_until: Callable[[int], None] | None = None
-             ) -> dict[str, EdgeTrain]:
+    def step(self, t0: float, t1: float, run_until: Callable[[int], None] | None = None,
+             reset: Callable[[], object] | None = None) -> dict[str, EdgeTrain]:
         """One physics step over [t0, t1] s of simulated time (the Mega is at ``t0``):
         returns the edges queued on each encoder. ``run_until`` runs the Mega to a cycle
-        (default ``mega.run_until``; the lock-step recorder passes its own)."""
+        and ``reset`` resets it (default ``mega.run_until``, ``mega.reset``; the
+        lock-step recorder passes its own)."""
+        c0, c1 = round(t0 * F_CPU), round(t1 * F_CPU)
+        if self._plant_faults:
+            apply_plant_faults(self.plant, self.faults, c0, F_CPU)
         angles = advance(self.plant, self.gyro, 1, t1 - t0)
         assert angles is not None
         new = {"left": -angles[0, 0] * self._scale + 0.5, "right": angles[0, 1] * self._scale + 0.5}
         trains = {}
         for side in SIDES:
             train = edges_from_trajectory(np.array([t0, t1]), np.array([self._position[side], new[side]]))
+            wire = self._wires.get(side)
+            if wire is not None:
+                ticks = np.clip(np.round(train.times * F_CPU).astype(np.int64), c0 + 1, c1)
+                ticks, states = wire.transform(c0, c1, ticks, train.states)
+                train = EdgeTrain(ticks / F_CPU, states, train.start_count, train.end_count)
             if train.times.size:
                 self.mega.encoder_edges(side, train)
             trains[side] = train
             self._position[side] = new[side]
-        (run_until or self.mega.run_until)(round(t1 * F_CPU))
+        run = run_until or self.mega.run_until
+        while self._resets and self._resets[0] <= c1:
+            cycle = self._resets.pop(0)
+            run(cycle)
+            (reset or self.mega.reset)()
+        run(c1)
         self.plant.set_drive(self.mega.pwm("left"), self.mega.direction("left"),
                              self.mega.pwm("right"), self.mega.direction("right"))
         return trains

@@ -32,6 +32,8 @@ typedef struct {
     double angle[2], speed[2], current[2], slip[2], force[2];
     double caster_heading[2];
     double scrub_energy, scrub_time, swivel_work, side_impulse, time;
+    /* faults (Plant.set_wheel_locked, Plant.set_motor_dead) */
+    int32_t locked[2], dead[2];
 } chair_t;
 
 static double clampd(double v, double lo, double hi) { return v > hi ? hi : (v < lo ? lo : v); }
@@ -40,8 +42,33 @@ static double wheel(chair_t *c, int i, double ground, double dt) {
     double r = c->r, k = c->c_long, j_dt = c->j / dt, b = c->b;
     double volts = c->volts[i], speed = c->speed[i];
     double fmax = c->mu[i] * c->n_drive;
-    double k1v = c->k1 * volts, tau = 0.0;
+    if (c->locked[i]) {
+        /* the wheel stands still; the tyre slides (stiff below mu N); a stalled motor */
+        double force = clampd(-k * ground, -fmax, fmax);
+        double imax = c->i_max_r / c->res;
+        c->speed[i] = 0.0;
+        c->current[i] = clampd(volts / c->res, -imax, imax);
+        c->slip[i] = -ground;
+        c->force[i] = force;
+        return force;
+    }
     double rr = c->crr * c->n_drive * tanh(ground / 0.01);
+    if (c->dead[i]) {
+        /* open circuit: no torque, no current, so no back-EMF term either */
+        double w = (j_dt * speed + r * k * ground) / (j_dt + b + r * r * k);
+        double force = k * (r * w - ground);
+        if (fabs(force) > fmax) {
+            force = copysign(fmax, force);
+            w = (j_dt * speed - r * force) / (j_dt + b);
+        }
+        c->speed[i] = w;
+        c->angle[i] += w * dt;
+        c->current[i] = 0.0;
+        c->slip[i] = r * w - ground;
+        c->force[i] = force;
+        return force - rr;
+    }
+    double k1v = c->k1 * volts, tau = 0.0;
     double w = (j_dt * speed + k1v + r * k * ground) / (j_dt + c->k2 + b + r * r * k);
     int limited = fabs(volts - c->ke_g * w) > c->i_max_r;
     if (limited) {
@@ -128,14 +155,27 @@ static void step(chair_t *c, double dt) {
 }
 
 /* n steps; after each, the wheel angles (left, right) and the yaw rate are stored
- * in the output arrays when they are not NULL. */
-void chair_advance(chair_t *c, int32_t n, double dt, double *angles, double *yaw_rates) {
+ * in the output arrays when they are not NULL, and in motion (6 doubles a step) the
+ * axle midpoint's forward and lateral speed and the yaw rate, in slots 1 to 3 (Python
+ * fills slot 0 with the time and 4, 5 with the voltages: Plant.start_motion_log). */
+void chair_advance(chair_t *c, int32_t n, double dt, double *angles, double *yaw_rates,
+                   double *motion) {
     for (int32_t k = 0; k < n; k++) {
         step(c, dt);
         if (angles) {
             angles[2 * k] = c->angle[0];
             angles[2 * k + 1] = c->angle[1];
         }
-        if (yaw_rates) yaw_rates[k] = ((get_f_fn)c->get_angular_velocity)(c->body);
+        double w = ((get_f_fn)c->get_angular_velocity)(c->body);
+        if (yaw_rates) yaw_rates[k] = w;
+        if (motion) {
+            vec_t v = ((get_vec_fn)c->get_velocity)(c->body);
+            double th = ((get_f_fn)c->get_angle)(c->body);
+            double cs = cos(th), sn = sin(th), xg = c->cog_x;
+            double ax = v.x + w * xg * sn, ay = v.y - w * xg * cs;
+            motion[6 * k + 1] = ax * cs + ay * sn;
+            motion[6 * k + 2] = -ax * sn + ay * cs;
+            motion[6 * k + 3] = w;
+        }
     }
 }
