@@ -329,8 +329,9 @@ static void emergencyHalt() {
 #define WHEEL_NO_EFFECT 5
 // Effort without progress: toward a steady setpoint the duty has stayed
 // WC_FAULT_EFFORT_PWM above its lowest for WC_FAULT_EFFORT_TICKS ticks in a row while the
-// wheel gained no speed (a dead motor, a broken motor wire: the wheel is only dragged
-// along). A new setpoint, a duty away from it, or any gain in speed starts over.
+// wheel gained no speed and turns slower than WC_FAULT_EFFORT_SHORTFALL of its setpoint
+// (a dead motor, a broken motor wire: the wheel is only dragged along). A new setpoint, a
+// duty away from it, or any gain in speed starts over.
 static bool noEffect(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, float measured,
                      uint8_t& effortPwm, float& effortSpeed, float& effortSetpoint,
                      uint8_t& effortTicks) {
@@ -344,7 +345,8 @@ static bool noEffect(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, flo
     return false;
   }
   if (appliedPwm < effortPwm) effortPwm = appliedPwm;
-  effortTicks = appliedPwm >= effortPwm + WC_FAULT_EFFORT_PWM ? effortTicks + 1 : 0;
+  bool shortfall = fabs(measured) < WC_FAULT_EFFORT_SHORTFALL * fabs(setpoint);
+  effortTicks = shortfall && appliedPwm >= effortPwm + WC_FAULT_EFFORT_PWM ? effortTicks + 1 : 0;
   return effortTicks >= WC_FAULT_EFFORT_TICKS;
 }
 
@@ -625,7 +627,8 @@ static float* const PARAM_VARS[PARAM_COUNT - 1] = {
   &kpL, &kiL, &kdL, &kpR, &kiR, &kdR, &maxWheel, &maxAccel, &estopDecel,
 };
 static const float PARAM_MIN[PARAM_COUNT - 1] = {
-  0.0f, WC_GAIN_I_MIN, 0.0f, 0.0f, WC_GAIN_I_MIN, 0.0f, WC_MAX_WHEEL_MIN, WC_ACCEL_MIN, WC_DECEL_MIN,
+  WC_GAIN_P_MIN, WC_GAIN_I_MIN, 0.0f, WC_GAIN_P_MIN, WC_GAIN_I_MIN, 0.0f, WC_MAX_WHEEL_MIN, WC_ACCEL_MIN,
+  WC_DECEL_MIN,
 };
 static const float PARAM_MAX[PARAM_COUNT - 1] = {
   WC_GAIN_P_MAX, WC_GAIN_I_MAX, WC_GAIN_D_MAX, WC_GAIN_P_MAX, WC_GAIN_I_MAX, WC_GAIN_D_MAX,

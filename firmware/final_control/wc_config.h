@@ -77,6 +77,7 @@
 #define WC_FAULT_REVERSE_SPEED 1.0f // rad/s: setpoint and measured speed both beyond it, opposite signs
 #define WC_FAULT_REVERSE_TICKS 3   // ticks of measured speed against the setpoint: reversed encoder
 #define WC_FAULT_EFFORT_PWM 20     // duty rise (8 %) toward a steady setpoint without any gain in speed: the motor does not respond
+#define WC_FAULT_EFFORT_SHORTFALL 0.8f // ...while the wheel turns slower than this fraction of its setpoint
 #define WC_FAULT_EFFORT_TICKS 4    // consecutive ticks of that effort without progress: the motor fault
 #define WC_FAULT_ILLEGAL_PER_TICK 4 // illegal transitions in one tick: implausible encoder
 #define WC_STORM_EDGES 58          // edges of one encoder in one Timer0 period (1.024 ms) that mask it: > 2x top speed
@@ -90,10 +91,11 @@
 #define WC_MODE_PPM 2
 
 // ---- Ranges of the runtime parameters (get:/set:; the defaults are the constants above) ---
-#define WC_GAIN_P_MAX 100.0f       // kp_l, kp_r in [0, GAIN_P_MAX]
+#define WC_GAIN_P_MIN 1.0f         // kp_l, kp_r in [GAIN_P_MIN, GAIN_P_MAX] (tests/test_gain_safety.py: pure integral control oscillates)
+#define WC_GAIN_P_MAX 10.0f
 #define WC_GAIN_I_MIN 0.01f        // ki_l, ki_r in [GAIN_I_MIN, GAIN_I_MAX] (the anti-windup divides by ki)
-#define WC_GAIN_I_MAX 100.0f
-#define WC_GAIN_D_MAX 10.0f        // kd_l, kd_r in [0, GAIN_D_MAX]
+#define WC_GAIN_I_MAX 10.0f
+#define WC_GAIN_D_MAX 0.2f         // kd_l, kd_r in [0, GAIN_D_MAX]
 #define WC_MAX_WHEEL_MIN 0.1f      // max_wheel in [MAX_WHEEL_MIN, MAX_WHEEL_SPEED] rad/s
 #define WC_ACCEL_MIN 0.5f          // max_accel in [ACCEL_MIN, ACCEL_MAX] rad/s^2
 #define WC_ACCEL_MAX 20.0f

@@ -64,7 +64,8 @@ def no_effect(applied_pwm: int, applied_dir: int, setpoint: float, measured: flo
     if not toward or setpoint != effort_setpoint or progress > effort_speed:
         return False, (applied_pwm, progress, setpoint, 0)
     effort_pwm = min(effort_pwm, applied_pwm)
-    ticks = (ticks + 1) & 0xFF if applied_pwm >= effort_pwm + C.FAULT_EFFORT_PWM else 0
+    shortfall = abs(measured) < f32(C.FAULT_EFFORT_SHORTFALL * abs(setpoint))
+    ticks = (ticks + 1) & 0xFF if shortfall and applied_pwm >= effort_pwm + C.FAULT_EFFORT_PWM else 0
     return ticks >= C.FAULT_EFFORT_TICKS, (effort_pwm, effort_speed, effort_setpoint, ticks)
 
 
