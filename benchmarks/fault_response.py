@@ -57,8 +57,8 @@ def table(rows: list[dict[str, object]]) -> str:
         bounds = "kept" if not r["violations"] else "BROKEN: " + "; ".join(map(str, r["violations"]))  # type: ignore[call-overload]
         out.append(f"| {r['scenario']} | {r['backend']} | {r['event'] or '-'} | {_f(r['detected_after_s'])} "
                    f"| {_f(r['commanded_mps'])} | {_f(r['peak_after_mps'])} | {_f(r['pwm_zero_after_s'])} "
-                   f"| {_f(r['standstill_after_s'])} | {_f(r['travel_after_m'])} | {_f(r['max_tick_gap_ms'], 1)} "
-                   f"| {diffs} | {bounds} |")
+                   f"| {_f(r['standstill_after_s'])} | {_f(r['travel_after_m'])} "
+                   f"| {_f(r['max_tick_gap_ms'], 1)} | {diffs} | {bounds} |")
     return "\n".join(out)
 
 

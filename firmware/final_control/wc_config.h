@@ -12,6 +12,8 @@
 #define WC_PROTOCOL_VERSION 3      // sent in the HELLO reply
 #define WC_FIRMWARE_VERSION "3.0.0" // final_control's version, sent in the HELLO reply
 #define WC_SEQ_MAX 65535UL         // largest sequence number of a v3 frame
+#define WC_NUMBER_MAX_DIGITS 24    // most digits of a number before its exponent (leading zeros count): ERR:number past it
+#define WC_NUMBER_MAX_EXP_DIGITS 2 // most digits of a number's exponent: ERR:range past it
 
 // ---- Timing ----------------------------------------------------------------
 #define WC_CONTROL_PERIOD_MS 50UL  // control tick and feedback period

@@ -53,14 +53,54 @@ def split_fields(buf: bytes, max_fields: int) -> list[bytes] | None:
     return fields
 
 
+def number_in_reach(field: bytes, start: int) -> None:
+    """``numberInReach``, before ``strtod``: at most ``NUMBER_MAX_DIGITS`` digits before
+    the exponent (leading zeros count), else ``ParseError("number")``, and at most
+    ``NUMBER_MAX_EXP_DIGITS`` exponent digits, else ``ParseError("range")``. A second
+    point, junk or no digit at all is left to ``strtod``."""
+    n = len(field)
+
+    def char(i: int) -> int:
+        return field[i] if i < n else 0
+
+    i = start
+    if char(i) in (0x2B, 0x2D):
+        i += 1
+    digits = 0
+    point = False
+    while True:
+        c = char(i)
+        if 0x30 <= c <= 0x39:
+            digits += 1
+            if digits > C.NUMBER_MAX_DIGITS:
+                raise ParseError("number")
+        elif c == 0x2E and not point:
+            point = True
+        else:
+            break
+        i += 1
+    if digits == 0 or char(i) not in (0x45, 0x65):
+        return
+    i += 1
+    if char(i) in (0x2B, 0x2D):
+        i += 1
+    exp_digits = 0
+    while 0x30 <= char(i) <= 0x39:
+        exp_digits += 1
+        if exp_digits > C.NUMBER_MAX_EXP_DIGITS:
+            raise ParseError("range")
+        i += 1
+
+
 def parse_number(field: bytes, start: int, allow_sign: bool) -> float:
     """``parseNumber``: all of ``field[start:]`` through avr-libc's ``strtod``. It must
     start with a digit or a point (or a sign, with ``allow_sign``); else
-    ``ParseError("number")``."""
+    ``ParseError("number")``; ``number_in_reach`` bounds its digits and exponent first."""
     c = field[start] if start < len(field) else 0
     digit_or_point = 0x30 <= c <= 0x39 or c == 0x2E
     if not digit_or_point and not (allow_sign and c in (0x2B, 0x2D)):
         raise ParseError("number")
+    number_in_reach(field, start)
     value, end = strtod(field, start)
     if end == start or end != len(field):
         raise ParseError("number")

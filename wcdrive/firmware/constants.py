@@ -16,6 +16,8 @@ FIRMWARE_VERSION = text("FIRMWARE_VERSION")
 #: ``WC_BUILD_ID``, which the Makefile computes from the sources (the same hash).
 BUILD_ID = build_id()
 SEQ_MAX = integer("SEQ_MAX")
+NUMBER_MAX_DIGITS = integer("NUMBER_MAX_DIGITS")
+NUMBER_MAX_EXP_DIGITS = integer("NUMBER_MAX_EXP_DIGITS")
 
 # Timing
 CONTROL_PERIOD_MS = integer("CONTROL_PERIOD_MS")

@@ -79,6 +79,10 @@ def encode_set(name: str, value: float) -> bytes:
         if value != int(value):
             raise ValueError("watchdog_ms is a whole number of milliseconds")
         return f"set:{name}={int(value)}".encode()
+    if abs(value) < 1e-99:
+        # 0 in binary32 as on the board, and "1e-100" has more exponent digits than
+        # the board takes (NUMBER_MAX_EXP_DIGITS: ERR:range).
+        value = 0.0
     return f"set:{name}={value:.6g}".encode()
 
 

@@ -179,9 +179,14 @@ class VirtualMega:
     """The firmware ELF running in simavr, advanced only by this object's calls."""
 
     def __init__(self, elf: str | Path | None = None, *, millis_start: int | None = None,
-                 vcd: str | Path | None = None) -> None:
+                 vcd: str | Path | None = None, hooks: tuple[str, ...] = ()) -> None:
+        """``hooks``: the ELF symbols of further functions whose entries are logged (and
+        may be broken on) besides ``HOOKS``, e.g. to time a stretch of code."""
         self.elf = Path(elf) if elf is not None else firmware_elf()
         self.variables, self.functions = read_symbols(self.elf)
+        missing = [name for name in hooks if name not in self.functions]
+        if missing:
+            raise HarnessError(f"no function {', '.join(missing)} in {self.elf}")
         self._c = _lib()
         err = ctypes.create_string_buffer(256)
         handle = self._c.wcsim_new(str(self.elf).encode(), err, len(err))
@@ -189,8 +194,8 @@ class VirtualMega:
             raise HarnessError(err.value.decode())
         self._s = handle
         self._hook_names: list[str] = []
-        for name in HOOKS:
-            if name in self.functions:
+        for name in HOOKS + tuple(hooks):
+            if name in self.functions and name not in self._hook_names:
                 index = self._c.wcsim_add_hook(self._s, self.functions[name])
                 if index >= 0:
                     self._hook_names.append(name)
