@@ -997,18 +997,27 @@ Sample = tuple[int, int, int, float, float, float]      # cycle, PWM left, right
 
 def stop_bound(speed: float, watchdog: bool = True) -> float:
     """The longest it may take, from the moment the board last heard the host (or
-    reset), until PWM is 0 for good at ``speed`` m/s: the watchdog (not after a reset),
-    the ramp from the wheels' speed at the emergency deceleration, and two control
-    ticks (the one that sees it, the one that parks)."""
-    return (WATCHDOG_S if watchdog else 0.0) + speed / WHEEL_RADIUS / EMERGENCY_DECEL + 2 * PERIOD_S
+    reset), until PWM is 0 for good at ``speed`` m/s: the watchdog and its latency of
+    up to two ticks (not after a reset), braking from the wheels' speed at the gentler
+    of the emergency deceleration and the hardest the motors brake
+    (``ChairParams.max_braking``: docs/safety.md), and two control ticks (the one that
+    sees the wheels slow enough, the one that parks)."""
+    return ((WATCHDOG_S + 2 * PERIOD_S if watchdog else 0.0) + speed / _braking() + 2 * PERIOD_S)
+
+
+def _braking() -> float:
+    """m/s^2: the braking the stop can achieve (docs/safety.md)."""
+    from wcdrive.plant import ChairParams
+
+    return min(EMERGENCY_DECEL * WHEEL_RADIUS, ChairParams().max_braking)
 
 
 def travel_bound(speed: float, watchdog: bool = True) -> float:
     """Issue 13's goal for the distance after the last byte: constant speed over the
     watchdog time (not after a reset), the braking distance at the emergency
     deceleration, plus 0.1 m."""
-    decel = EMERGENCY_DECEL * WHEEL_RADIUS
-    return (speed * WATCHDOG_S if watchdog else 0.0) + speed * speed / (2 * decel) + 0.1
+    return ((speed * (WATCHDOG_S + 2 * PERIOD_S) if watchdog else 0.0) + speed * speed / (2 * _braking())
+            + 0.1)
 
 
 class FaultyLink:
@@ -1160,9 +1169,14 @@ class R3Trial:
     link_losses_before: int = 0         # LinkLost while driving, before the fault (the board lagged)
 
     def stopped_in_time(self) -> bool:
-        """PWM 0 for good within the bound (after a reset, also at its first instruction)."""
-        if self.kind == "DTR reset" and self.pwm_after != (0, 0):
-            return False
+        """PWM 0 for good within the bound (after a reset, also at its first instruction;
+        a reset whose board then took the host's motion frames, before the host saw the
+        reset and said hello again, was told to drive: only its first instruction counts)."""
+        if self.kind == "DTR reset":
+            if self.pwm_after != (0, 0):
+                return False
+            if self.executed_before_hello:
+                return True
         return self.pwm_zero_s is not None and self.pwm_zero_s <= self.bound_s
 
 

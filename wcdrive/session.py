@@ -134,6 +134,10 @@ class Session:
     #: How long each hello waits for its answer before the next goes out: 3 tries,
     #: each waiting twice as long as the one before.
     HELLO_WAITS = (0.25, 0.5, 1.0)
+    #: A refused hello is said again this long after the last, at the soonest: the next
+    #: tick's answer budget (benchmarks/reliability.py R3 saw three ERR lines of a frame
+    #: cut by a reset spend one, and the hellos sent at once went unanswered).
+    HELLO_REFUSED_GAP = 0.06
     #: The link monitor woke this much later than it meant to: the whole process stood
     #: still (a GC pause, an overloaded machine), so silence then proves nothing yet.
     STALL = 0.02
@@ -413,6 +417,11 @@ class Session:
             left = self._hello_sent_at + self.HELLO_WAITS[self._hello_tries - 1] - now
             if left > 0 and not self._hello_rejected:
                 return left
+            # A refused hello goes out again no sooner than a tick later: the board answers
+            # 3 commands a tick, and the ERR lines of a frame cut by a reset can spend them.
+            soon = self._hello_sent_at + self.HELLO_REFUSED_GAP - now
+            if soon > 0:
+                return soon
             if self._hello_tries < len(self.HELLO_WAITS):
                 self._say_hello(now)
                 return self.HELLO_WAITS[self._hello_tries - 1]

@@ -322,7 +322,9 @@ def parse_line(line: bytes) -> Message:
 
 class LineDecoder:
     """Incremental: feed bytes as they come, get the messages of complete lines.
-    A line longer than ``MAX_LINE`` bytes is dropped (as ``Unknown``) to bound memory."""
+    A line longer than ``MAX_LINE`` bytes is dropped (as ``Unknown``) to bound memory.
+    A board that resets while it sends a line starts its ``BOOT:`` line where the cut
+    line stopped: the cut part is an ``Unknown``, the ``BOOT:`` line a ``Boot``."""
 
     def __init__(self) -> None:
         self._buf = bytearray()
@@ -341,4 +343,8 @@ class LineDecoder:
                 return out
             line = bytes(self._buf[:i]).rstrip(b"\r")
             del self._buf[:i + 1]
+            boot = line.find(b"BOOT:", 1)
+            if boot > 0:
+                out.append(Unknown(line[:boot]))
+                line = line[boot:]
             out.append(parse_line(line))
