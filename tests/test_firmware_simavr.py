@@ -217,17 +217,18 @@ def test_ppm_loss_stops_and_is_reported(mega: VirtualMega) -> None:
 
 
 def test_reversal_stops_pivots_then_applies_the_command(mega: VirtualMega) -> None:
-    boot(mega)
+    rig = ChairOnPins(mega)
+    rig.run_for(0.06)
     for _ in range(5):
-        send_and_run(mega, b"x:0.3,t:0,", 0.1)
-    send_and_run(mega, b"x:-0.3,t:0,", 0.01)
+        rig.send_and_run(b"x:0.3,t:0,", 0.1)
+    rig.send_and_run(b"x:-0.3,t:0,", 0.01)
     assert mega.read("pivotPhase") == 1                       # stopping first
     assert (mega.read("targetR"), mega.read("targetL")) == (0.0, 0.0)
     phases = []
-    for k in range(40):
+    for k in range(60):
         if k % 2 == 0:                       # the host keeps sending at 10 Hz
             mega.send(b"x:-0.3,t:0,")
-        mega.run_for(0.05)
+        rig.run_for(0.05)
         phases.append((mega.read("pivotPhase"), mega.read("targetR"), mega.read("targetL")))
         if phases[-1][0] == 0:
             break
@@ -236,16 +237,20 @@ def test_reversal_stops_pivots_then_applies_the_command(mega: VirtualMega) -> No
     assert 5 <= len(rotating) <= 6                            # 6 ticks, sampled every 50 ms
     assert phases[-1][0] == 0
     assert mega.read("targetR") < 0 and mega.read("targetL") < 0
+    assert mega.read("faultFlags") == 0
 
 
 def test_stop_command_cancels_a_pivot(mega: VirtualMega) -> None:
-    boot(mega)
+    rig = ChairOnPins(mega)
+    rig.run_for(0.06)
     for _ in range(5):
-        send_and_run(mega, b"x:0.3,t:0,", 0.1)
-    send_and_run(mega, b"x:-0.3,t:0,", 0.03)
-    send_and_run(mega, b"x:0,t:0,", 0.06)
+        rig.send_and_run(b"x:0.3,t:0,", 0.1)
+    rig.send_and_run(b"x:-0.3,t:0,", 0.03)
+    assert mega.read("pivotPhase") == 1
+    rig.send_and_run(b"x:0,t:0,", 0.06)
     assert mega.read("pivotPhase") == 0
     assert (mega.read("targetR"), mega.read("targetL")) == (0.0, 0.0)
+    assert mega.read("faultFlags") == 0
 
 
 def test_no_heap_and_stack_headroom(mega: VirtualMega) -> None:
