@@ -30,7 +30,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from wcdrive.avr.timer0 import F_CPU, OVERFLOW_CYCLES, Timer0, storm_window
+from wcdrive.avr.timer0 import F_CPU, OVERFLOW_CYCLES, TIMER0_START_CYCLE, Timer0, storm_window
 from wcdrive.avr.uart import UART_BYTE_CYCLES
 from wcdrive.firmware.final_control import Firmware, boot_line
 from wcdrive.firmware.quadrature import QuadratureDecoder
@@ -48,12 +48,12 @@ __all__ = ["FIRST_OVERFLOW_CYCLE", "F_CPU", "RESET_CAUSE", "SERIAL_READY_CYCLES"
 
 #: The first Timer0 overflow completes at this cycle after reset (measured on the ELF
 #: in simavr).
-FIRST_OVERFLOW_CYCLE = 21_250
+FIRST_OVERFLOW_CYCLE = TIMER0_START_CYCLE + OVERFLOW_CYCLES
 #: The BOOT line's cause after ``PortLoop.reset()``: the RESET pin, as DTR pulls it.
 RESET_CAUSE = "EXTERNAL"
 #: Cycles from a reset until ``setup()``'s ``Serial.begin`` enables the receiver
 #: (measured on the ELF in simavr): bytes that arrive earlier are lost.
-SERIAL_READY_CYCLES = 9_800
+SERIAL_READY_CYCLES = 9_950
 
 
 class _Encoder:

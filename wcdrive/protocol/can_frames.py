@@ -143,15 +143,15 @@ def board_text(value: float) -> bytes:
                 if bits(strtod(candidate)[0]) == bits(value):
                     return candidate
     # Too small for 12 decimals (down to the subnormals): a mantissa and an exponent.
-    for digits in range(6, 13):
-        mantissa, _, exponent = f"{value:.{digits - 1}e}".partition("e")
+    for significant in range(6, 13):
+        mantissa, _, exponent = f"{value:.{significant - 1}e}".partition("e")
         whole = int(mantissa.replace(".", ""))
         for delta in sorted(range(-12, 13), key=abs):
             m = whole + delta
             if m <= 0:
                 continue
             text = str(m)
-            if len(text) != digits:                      # carried into another decade
+            if len(text) != significant:                 # carried into another decade
                 continue
             candidate = f"{text[0]}.{text[1:]}e{int(exponent)}".encode()
             if bits(strtod(candidate)[0]) == bits(value):
