@@ -1169,14 +1169,12 @@ class R3Trial:
     link_losses_before: int = 0         # LinkLost while driving, before the fault (the board lagged)
 
     def stopped_in_time(self) -> bool:
-        """PWM 0 for good within the bound (after a reset, also at its first instruction;
-        a reset whose board then took the host's motion frames, before the host saw the
-        reset and said hello again, was told to drive: only its first instruction counts)."""
+        """PWM 0 for good within the bound; after a reset, PWM 0 from its first
+        instruction (issue 14: "PWM reaches 0"). The fresh firmware then finds the chair
+        still rolling and brakes it under its PID, setpoint 0, until it has been still
+        for 3 ticks: ``pwm_zero_s`` reports that, and it is not a drive."""
         if self.kind == "DTR reset":
-            if self.pwm_after != (0, 0):
-                return False
-            if self.executed_before_hello:
-                return True
+            return self.pwm_after == (0, 0)
         return self.pwm_zero_s is not None and self.pwm_zero_s <= self.bound_s
 
 
