@@ -16,6 +16,17 @@ tick, the encoder and illegal-transition counts the tick latched (themselves che
 against the Python quadrature decoder run over the trace's edges) and the free RAM
 loop() measured before the tick.
 
+Two more checks cannot look away. Every byte the host sent must reach the firmware's
+parser, or be lost where the firmware saw the loss: the harness models the USART's
+two-frame FIFO and its data overrun (``VirtualMega.rx_lost``), the firmware's RX
+interrupt counts a full ring and an overrun (``rxLost``) and marks the place, and
+``loop()`` hands the mark to ``rxGap`` (an event here, given to the port as it is:
+which bytes the chip loses is a matter of its timing, which the port does not model;
+what the firmware does about it is). Bytes lost unseen are mismatches (``lost_bytes``).
+And the firmware must keep ticking: a gap between control ticks longer than the period
+plus ``TICK_TOLERANCE_MS``, or a ``millis()`` that does not follow the clock, is a
+mismatch (``stalls``).
+
 A run may reset the board (``VirtualMega.reset``, or its watchdog): at each reset the
 port starts again from ``setup()`` with the new boot's ``lastControlTime`` and the
 BOOT line of the reset's cause (MCUSR); the state the firmware shows right after its
@@ -26,19 +37,26 @@ at the reset is lost on the chip, so each boot's bytes only need to start the po
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from wcdrive.avr.f32 import bits
-from wcdrive.boards.simavr.virtual_mega import F_CPU, VirtualMega
+from wcdrive.boards.simavr.virtual_mega import F_CPU, RxLoss, VirtualMega
+from wcdrive.firmware.constants import CONTROL_PERIOD_MS
 from wcdrive.firmware.final_control import Firmware, boot_line, reset_cause_name
 from wcdrive.firmware.quadrature import ILLEGAL, QUAD_TABLE
 from wcdrive.firmware.state import FLOAT_FIELDS, INPUT_FIELDS, INT_FIELDS, FirmwareState
 from wcdrive.hil.traces import Trace
 
-_WATCHED = FLOAT_FIELDS + INT_FIELDS + INPUT_FIELDS + ("txDropped",)
+_WATCHED = FLOAT_FIELDS + INT_FIELDS + INPUT_FIELDS + ("rxLost",)
+
+#: How late a control tick may be before the gap counts as a stall (ms past the period).
+TICK_TOLERANCE_MS = 10
+#: How far ``millis()`` may drift from the cycle clock between two ticks (ms).
+MILLIS_TOLERANCE_MS = 2
 _BOOL_FIELDS = {"cmdSinceTick", "watchdogArmed", "emergencyStop", "ppmLost", "parked",
                 "estopLatched", "tlmEnabled"}
 
@@ -49,8 +67,8 @@ class Event:
     ``controlTick`` (``arg`` its ``millis()``) at ``cycle``, with the globals, PWM and
     DIR it left (read at the next event)."""
 
-    kind: str                 # "byte" or "tick"
-    arg: int                  # the byte, or millis() passed to controlTick
+    kind: str                 # "byte", "tick" or "gap" (rxGap: bytes lost before the next)
+    arg: int                  # the byte, millis() passed to controlTick, or rxGap's count
     cycle: int
     after: dict[str, float | int] = field(default_factory=dict)
     pwm: tuple[int, int] = (0, 0)
@@ -72,6 +90,13 @@ class Recording:
     resets: list[tuple[int, int, dict[str, float | int]]] = field(default_factory=list)
     #: The cycle of each byte of ``tx`` (empty: not kept; then no reset may occur).
     tx_cycles: list[int] = field(default_factory=list)
+    #: Every byte sent to the board: (the cycle it reached the USART, byte), in order.
+    rx_wire: list[tuple[int, int]] = field(default_factory=list)
+    #: The bytes the USART lost (overrun, or sent while the receiver was off).
+    rx_lost: list[RxLoss] = field(default_factory=list)
+    #: Whether ``rx_wire`` is complete: False for recordings that did not log it (then
+    #: the delivery check is skipped).
+    rx_logged: bool = False
 
 
 @dataclass
@@ -93,13 +118,21 @@ class Mismatch:
 @dataclass
 class Report:
     """What ``compare`` found: events, ticks and values compared, the mismatches and the
-    firmware's TX byte count."""
+    firmware's TX byte count; the received bytes lost unseen (``lost_bytes``, each also a
+    mismatch), those lost and accounted for (``rx_lost``: a full ring or an overrun, seen
+    by the firmware and the port alike; ``rx_off``: sent while the receiver was off,
+    before ``Serial.begin`` or during a reset, or still in the ring at a reset), and the
+    stalls of the control tick (each also a mismatch)."""
 
     events: int
     ticks: int
     fields_compared: int
     mismatches: list[Mismatch]
     tx_bytes: int
+    lost_bytes: int = 0
+    rx_lost: int = 0
+    rx_off: int = 0
+    stalls: int = 0
 
 
 def _hexf(x: float) -> str:
@@ -118,7 +151,7 @@ class Recorder:
         self.resets: list[tuple[int, int, dict[str, float | int]]] = []
         self._reset_pending: tuple[int, int] | None = None
         self._boot_state: dict[str, float | int] = {}
-        mega.break_on("processByte", "controlTick")
+        mega.break_on("processByte", "controlTick", "rxGap")
 
     def reset(self, cause: str = "external") -> None:
         """Resets the Mega (``VirtualMega.reset``) after closing the last event with the
@@ -138,14 +171,18 @@ class Recorder:
             self.resets.append((*self._reset_pending, self._boot_state))
             self._reset_pending = None
 
-    def _close_last(self) -> None:
+    def _close_last(self, at_event: bool = True) -> None:
+        """Reads the state the last event left. ``at_event``: the run stopped at the next
+        event; otherwise at the end of a stretch, perhaps inside setup(), so the state is
+        not yet the one after setup()."""
         state, pwm, direction = self._snapshot()
         if self._reset_pending is not None:
-            self._boot_state = state          # the last event before the reset stays as it was
+            if at_event:
+                self._boot_state = state      # the last event before the reset stays as it was
         elif self.events:
             last = self.events[-1]
             last.after, last.pwm, last.direction = state, pwm, direction
-        elif self.initial is None:
+        elif self.initial is None and at_event:
             self.initial = state
 
     def run_until(self, cycle: int) -> None:
@@ -155,19 +192,24 @@ class Recorder:
             hit = mega.hit_log[-1]
             self._close_last()
             self._end_reset()
-            kind = "byte" if hit.function == "processByte" else "tick"
-            arg = (hit.arg >> 16) & 0xFF if kind == "byte" else hit.arg
+            kind = {"processByte": "byte", "controlTick": "tick"}.get(hit.function, "gap")
+            arg = hit.arg if kind == "tick" else (hit.arg >> 16) & 0xFF   # the byte; rxGap's lost
             self.events.append(Event(kind, arg, hit.cycle))
-        self._close_last()
+        self._close_last(at_event=False)
 
     def recording(self, trace: Trace) -> Recording:
         """What was logged so far, as the ``Recording`` of ``trace``."""
-        assert self.initial is not None, "run_until() first"
+        if self.initial is None:
+            self.initial = self._snapshot()[0]     # no event yet: the state now
+        if self._reset_pending is not None:
+            self._boot_state = self._snapshot()[0]  # no event since the last reset
         tx = bytes(b for _, b in self.mega.tx_log)
         self._end_reset()
         resets = list(self.resets)
         tx_cycles = [c for c, _ in self.mega.tx_log]
-        return Recording(trace, self.initial, self.events, tx, self.mega.cycle, resets, tx_cycles)
+        mega = self.mega
+        return Recording(trace, self.initial, self.events, tx, mega.cycle, resets, tx_cycles,
+                         list(mega.rx_wire), list(mega.rx_lost), rx_logged=True)
 
 
 def record(trace: Trace, elf: str | Path | None = None) -> Recording:
@@ -228,6 +270,8 @@ def compare(recording: Recording) -> Report:
         tx = boots[-1]
         if ev.kind == "byte":
             tx += fw.feed(bytes([ev.arg]))
+        elif ev.kind == "gap":
+            fw.rx_gap(ev.arg)
         else:
             ticks += 1
             latched = {name: int(ev.after[name])
@@ -247,7 +291,8 @@ def compare(recording: Recording) -> Report:
             before = events[i - 1].after if i > 0 else recording.initial
             tx += fw.tick(ev.arg, latched["encTickL"], latched["encTickR"], latched["illTickL"],
                           latched["illTickR"], free_ram=int(before["freeRam"]),
-                          storm_l=latched["stormTickL"], storm_r=latched["stormTickR"])
+                          storm_l=latched["stormTickL"], storm_r=latched["stormTickR"],
+                          rx_lost=int(ev.after["rxLostTick"]))
         diffs = _differences(fw.state, ev.after)
         fields_compared += len(FLOAT_FIELDS) + len(INT_FIELDS) + 4
         for name, port_value, fw_value in diffs:
@@ -256,8 +301,6 @@ def compare(recording: Recording) -> Report:
         if port_io != (ev.pwm, ev.direction):
             mismatches.append(Mismatch(i, ticks, "pins (pwm, dir)", str(port_io),
                                        str((ev.pwm, ev.direction))))
-        if int(ev.after.get("txDropped", 0)) != 0:
-            mismatches.append(Mismatch(i, ticks, "txDropped", "0", str(ev.after["txDropped"])))
         next_cycle = events[i + 1].cycle if i + 1 < len(events) else recording.end_cycle
         while resets and resets[0][0] <= next_cycle:
             # The board reset before the next event: the port starts again from setup()
@@ -291,7 +334,141 @@ def compare(recording: Recording) -> Report:
             mismatches.append(Mismatch(len(events), ticks, f"TX byte {where} (boot {k})",
                                        repr(sent[max(0, where - 20):where + 20]),
                                        repr(fw_tx[max(0, where - 20):where + 20])))
-    return Report(len(events), ticks, fields_compared, mismatches, len(recording.tx))
+    stalls = _stalls(recording)
+    mismatches.extend(stalls)
+    delivery = _delivery(recording) if recording.rx_logged else _Delivery()
+    mismatches.extend(delivery.mismatches)
+    return Report(len(events), ticks, fields_compared, mismatches, len(recording.tx),
+                  delivery.lost_bytes, delivery.rx_lost, delivery.rx_off, len(stalls))
+
+
+def _boots(recording: Recording) -> list[tuple[int, int]]:
+    """The cycle spans [start, end) of each boot of the run."""
+    cuts = [c for c, _, _ in recording.resets]
+    return list(zip([0, *cuts], [*cuts, recording.end_cycle], strict=True))
+
+
+def _stalls(recording: Recording) -> list[Mismatch]:
+    """The control tick must keep running, boot by boot: no gap between ticks (or from a
+    boot to its first tick, or from the last tick to the end) longer than the period
+    plus ``TICK_TOLERANCE_MS`` (a boot's first tick may also take setup()'s time, the
+    period again), and ``millis()`` moving with the clock between ticks."""
+    out: list[Mismatch] = []
+    per_ms = F_CPU // 1000
+    limit = (CONTROL_PERIOD_MS + TICK_TOLERANCE_MS) * per_ms
+    ticks = [(i, ev) for i, ev in enumerate(recording.events) if ev.kind == "tick"]
+    count = 0
+    for start, end in _boots(recording):
+        mine = [(i, ev) for i, ev in ticks if start <= ev.cycle < end]
+        marks = [(-1, start), *((i, ev.cycle) for i, ev in mine), (-1, end)]
+        for k, ((where, a), (_, b)) in enumerate(itertools.pairwise(marks)):
+            allowed = limit * 2 if k == 0 else limit
+            if b - a > allowed:
+                out.append(Mismatch(where, count + k, "stall",
+                                    f"a control tick every {CONTROL_PERIOD_MS} ms",
+                                    f"none for {(b - a) / per_ms:.1f} ms (cycles {a}..{b})"))
+        for (_, e0), (j, e1) in itertools.pairwise(mine):
+            clock_ms = (e1.cycle - e0.cycle) / per_ms
+            millis_ms = (e1.arg - e0.arg) & 0xFFFFFFFF
+            if abs(millis_ms - clock_ms) > MILLIS_TOLERANCE_MS:
+                out.append(Mismatch(j, count, "stall", f"millis() +{clock_ms:.1f} (the clock)",
+                                    f"millis() +{millis_ms}"))
+        count += len(mine)
+    return out
+
+
+@dataclass
+class _Delivery:
+    mismatches: list[Mismatch] = field(default_factory=list)
+    lost_bytes: int = 0
+    rx_lost: int = 0
+    rx_off: int = 0
+
+
+def _delivery(recording: Recording) -> _Delivery:
+    """Every byte the host sent, boot by boot, against what reached ``processByte``: the
+    firmware's bytes must be the host's less those lost, and each loss must be marked
+    (an ``rxGap`` event before the next byte) and counted (``rxLost``); see the module
+    docstring."""
+    d = _Delivery()
+    lost = {loss.index: loss for loss in recording.rx_lost}
+    d.rx_off = sum(1 for loss in recording.rx_lost if loss.cause == "receiver_off")
+    events = recording.events
+    count_before = [recording.initial] + [booted for _, _, booted in recording.resets]
+    for k, (start, end) in enumerate(_boots(recording)):
+        # The host's bytes that reached the USART in this boot and were not lost there:
+        # (index, byte, carries DOR: the first after a run of overrun losses).
+        host: list[tuple[int, int, bool]] = []
+        for index, (cycle, byte) in enumerate(recording.rx_wire):
+            if start <= cycle < end and index not in lost:
+                prev = lost.get(index - 1)
+                host.append((index, byte, prev is not None and prev.cause == "overrun"))
+        wire = bytes(b for _, b, _ in host)
+        mine = [(i, ev) for i, ev in enumerate(events) if start <= ev.cycle < end and ev.kind != "tick"]
+        # (first event, losses counted before it: rxGap's count, -1 none, bytes)
+        segments: list[tuple[int, int, bytearray]] = []
+        for i, ev in mine:
+            if ev.kind == "gap":
+                segments.append((i, ev.arg, bytearray()))
+            elif not segments:
+                segments.append((i, -1, bytearray([ev.arg])))
+            else:
+                segments[-1][2].append(ev.arg)
+        p = ring_drops = 0
+        dor_read = 0
+        for i, counted_here, data in segments:
+            gap = counted_here >= 0
+            if not data:
+                continue
+            # rxGap's count says how many bytes the ring dropped here (less one if the
+            # next byte carries an overrun); 255 is a saturated count: search instead.
+            at = -1
+            if 0 <= counted_here < 255:
+                for dor in (1, 0):
+                    k = p + counted_here - dor
+                    if p <= k < len(host) and host[k][2] == bool(dor) and wire.startswith(bytes(data), k):
+                        at = k
+                        break
+            if at < 0:
+                at = wire.find(bytes(data), p)
+            if at < 0:
+                d.mismatches.append(Mismatch(i, 0, "RX", "the host's bytes", f"{bytes(data)[:40]!r} "
+                                             f"(boot {k}): not what was sent"))
+                d.lost_bytes += len(data)
+                break
+            skipped = at - p
+            dor_first = host[at][2]
+            dor_inside = [host[j][0] for j in range(at + 1, at + len(data)) if host[j][2]]
+            if not gap and (skipped or dor_first):
+                d.mismatches.append(Mismatch(i, 0, "RX", "a gap mark (rxGap)",
+                                             f"{skipped or 'overrun'} bytes lost unseen before "
+                                             f"byte {host[at][0]} (boot {k})"))
+                d.lost_bytes += max(skipped, 1)
+            elif gap and not skipped and not dor_first:
+                d.mismatches.append(Mismatch(i, 0, "RX", "no loss", f"a gap mark before byte "
+                                             f"{host[at][0]} (boot {k})"))
+            if dor_inside:
+                d.mismatches.append(Mismatch(i, 0, "RX", "a gap mark (rxGap)",
+                                             f"overrun unseen before byte {dor_inside[0]} (boot {k})"))
+                d.lost_bytes += len(dor_inside)
+            ring_drops += skipped
+            dor_read += int(dor_first) + len(dor_inside)
+            p = at + len(data)
+        # What the firmware counted: every ring drop and overrun before the last byte it
+        # read, and perhaps some of the bytes after it (still in the ring or USART, or
+        # dropped); the bytes still in flight at a reset are lost with the reset.
+        in_boot = [ev for ev in events if start <= ev.cycle < end]
+        final = in_boot[-1].after if in_boot and in_boot[-1].after else count_before[k]
+        counted = int(final.get("rxLost", 0))
+        trailing = len(host) - p
+        expected = ring_drops + dor_read
+        if not expected <= counted <= expected + trailing + sum(1 for _, _, dor in host[p:] if dor):
+            d.mismatches.append(Mismatch(len(events), 0, "rxLost", f"{expected} (+ up to {trailing})",
+                                         f"{counted} (boot {k})"))
+        d.rx_lost += counted
+        if k < len(recording.resets):
+            d.rx_off += max(0, trailing - max(0, counted - expected))
+    return d
 
 
 def _count_possible(decoded: tuple[np.ndarray, np.ndarray], count: int, start: int,

@@ -5,10 +5,15 @@
 Runs N random traces (wcdrive.hil.traces) on the firmware in simavr and through the port
 (wcdrive.hil.lockstep), and ends with one line:
 
-    traces=N ticks=M mismatches=K
+    traces=N ticks=M mismatches=K lost_bytes=L stalls=S rx_lost=R
 
-It exits 1 when K > 0, after printing the first mismatch (the tick, the field and
-both values in hex) and the trace that produced it.
+K counts every difference, L the bytes the host sent that the firmware lost without
+seeing the loss, S the stalls of the control tick (a tick more than 10 ms late, or a
+``millis()`` that does not follow the clock); L and S are also among the K. R counts
+the received bytes lost and accounted for on both sides (a full RX ring, an overrun:
+``ERR:overrun``); it is a figure, not a failure. It exits 1 when K, L or S > 0, after
+printing the first mismatch (the tick, the field and both values in hex) and the trace
+that produced it.
 """
 
 from __future__ import annotations
@@ -16,6 +21,7 @@ from __future__ import annotations
 import argparse
 import sys
 from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
 from pathlib import Path
 
 from wcdrive.boards.simavr.build import firmware_elf
@@ -24,12 +30,26 @@ from wcdrive.hil.lockstep import compare, record
 from wcdrive.hil.traces import RandomDraw, generate_trace
 
 
-def _check(args: tuple[int, float, str | None]) -> tuple[int, int, int, int, list[str], str]:
+@dataclass
+class _Result:
+    seed: int
+    ticks: int
+    fields: int
+    mismatches: int
+    lost_bytes: int
+    stalls: int
+    rx_lost: int
+    first: list[str]
+    trace: str
+
+
+def _check(args: tuple[int, float, str | None]) -> _Result:
     seed, duration, elf = args
     trace = generate_trace(RandomDraw(seed), duration)
     report = compare(record(trace, elf))
     first = [str(m) for m in report.mismatches[:5]]
-    return seed, report.ticks, report.fields_compared, len(report.mismatches), first, trace.describe()
+    return _Result(seed, report.ticks, report.fields_compared, len(report.mismatches),
+                   report.lost_bytes, report.stalls, report.rx_lost, first, trace.describe())
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -48,24 +68,27 @@ def run(args: argparse.Namespace) -> int:
         return 2
     elf = str(args.elf) if args.elf else str(firmware_elf())
     work = [(args.seed * 1_000_003 + k, args.duration, elf) for k in range(args.traces)]
-    ticks = fields = mismatches = 0
-    first_failure: tuple[int, list[str], str] | None = None
+    ticks = fields = mismatches = lost = stalls = rx_lost = 0
+    first_failure: _Result | None = None
     with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
-        for seed, t, f, m, first, described in pool.map(_check, work):
-            ticks += t
-            fields += f
-            mismatches += m
-            if m and first_failure is None:
-                first_failure = (seed, first, described)
+        for r in pool.map(_check, work):
+            ticks += r.ticks
+            fields += r.fields
+            mismatches += r.mismatches
+            lost += r.lost_bytes
+            stalls += r.stalls
+            rx_lost += r.rx_lost
+            if r.mismatches and first_failure is None:
+                first_failure = r
     if first_failure is not None:
-        seed, first, described = first_failure
-        print(f"first mismatch, trace seed {seed}:")
-        for line in first:
+        print(f"first mismatch, trace seed {first_failure.seed}:")
+        for line in first_failure.first:
             print(f"  {line}")
-        print(described)
+        print(first_failure.trace)
     print(f"compared after each of the firmware's events: {fields} values ({len(FLOAT_FIELDS)}"
           f" controller floats bit for bit, {len(INT_FIELDS)} integers and flags, PWM duty and DIR"
-          " of both motors), and the whole TX byte stream of every trace")
-    print(f"traces={args.traces} ticks={ticks} mismatches={mismatches}")
-    return 1 if mismatches else 0
-
+          " of both motors), the whole TX byte stream, every byte sent against what the"
+          " firmware received, and the tick's regularity, of every trace")
+    print(f"traces={args.traces} ticks={ticks} mismatches={mismatches} lost_bytes={lost} "
+          f"stalls={stalls} rx_lost={rx_lost}")
+    return 1 if mismatches or lost or stalls else 0

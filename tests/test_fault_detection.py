@@ -171,17 +171,3 @@ def test_no_fault_while_parked_with_idle_encoders() -> None:
     assert b"EVT:" not in out and fw.state.faultFlags == 0
 
 
-def test_the_longest_tlm_line_is_the_one_protocol_md_budgets() -> None:
-    """PROTOCOL.md, "Output budget": the TLM line with every field at its widest."""
-    from pathlib import Path
-
-    from wcdrive.firmware.output import send_telemetry
-    from wcdrive.firmware.state import FirmwareState
-
-    widest = FirmwareState(rxCount=2**32 - 1, lastSeq=65535, pwmL=255, pwmR=255, illTickL=2**32 - 1,
-                           illTickR=2**32 - 1, watchdogArmed=1, emergencyStop=1, estopLatched=1,
-                           ppmLost=1, parked=1, pivotPhase=2, faultFlags=0x10 | 0x20,
-                           rejectedCount=2**32 - 1, crcRejected=2**32 - 1, freeRam=65535)
-    n = len(send_telemetry(widest, 2**32 - 1))
-    text = (Path(__file__).resolve().parents[1] / "protocol" / "PROTOCOL.md").read_text()
-    assert f"one `TLM:` line ({n} bytes at the longest)" in text

@@ -119,6 +119,11 @@ def replay(recording: Recording) -> ReplayReport:
         end = i - 1 if i > 0 and lines[i - 1] in event_lines else i
         between = b"".join(lines[start:end])
         if i in tlm_of:
+            if tlm_of[i].rx_lost:
+                report.mismatch = (f"tick {k}: the board lost {tlm_of[i].rx_lost} received bytes "
+                                   "(TLM rx_lost): where they fell in the stream is not recorded, "
+                                   "so the replay stops here")
+                break
             rx = tlm_of[i].rx
             if rx < pos or rx > len(sent):
                 report.mismatch = f"tick {k}: the board had received {rx} bytes, the host sent {len(sent)}"

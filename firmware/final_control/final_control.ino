@@ -25,6 +25,7 @@
 #include <avr/wdt.h>
 
 #include "wc_config.h"
+#include "HardwareSerial_private.h"   // the core's HardwareSerial constructor and TX interrupt
 
 #if SERIAL_TX_BUFFER_SIZE < 512
 #warning "build with -DSERIAL_TX_BUFFER_SIZE=512 (see README.md): output lines may be dropped"
@@ -199,12 +200,71 @@ bool tlmEnabled = false;                    // after "hello": TLM lines, and v3 
 bool unframedLine = false;                  // the line being parsed is not a v3 frame
 uint16_t lastSeq = 0;                       // sequence number of the last framed line
 uint32_t rxCount = 0;                       // bytes received (through processByte)
+uint32_t rxGaps = 0;                        // losses loop() met in the byte stream (rxGap's "lost")
+uint32_t rxLostTick = 0;                    // rxLost (the RX interrupt's count) latched at the last tick
 
 uint32_t rejectedCount = 0;                 // every rejected command
 uint32_t crcRejected = 0;                   // framed lines with a bad or missing CRC
 uint32_t errSuppressed = 0;                 // replies not sent (rate limit)
-uint32_t txDropped = 0;                     // lines not sent for lack of TX room
+uint32_t txDropped = 0;                     // lines not sent: over the output budget (txCredit)
+uint32_t txRingFull = 0;                    // lines not sent: no room in the TX ring (never, if the budget holds)
+uint16_t txCredit = WC_TX_CREDIT_MAX;       // bytes the board may still queue (the output budget)
 uint8_t errLinesThisTick = 0;
+
+// ---------------------------------------------------------------------------
+// The serial port. The core's Serial (HardwareSerial0.cpp) drops a received byte silently
+// when its 64-byte ring is full and ignores the USART's data overrun flag. WcSerial is the
+// core's class (the same rings and TX path) with its own receive interrupt: it counts
+// every loss (rxLost) and marks where in the byte stream it happened, so that loop() can
+// throw away the line that lost a byte (rxGap, ERR:overrun) instead of splicing its ends.
+// HardwareSerial0.o is then not linked (nothing names its Serial).
+// ---------------------------------------------------------------------------
+volatile uint32_t rxLost = 0;               // bytes dropped for a full ring, plus USART overruns
+volatile uint8_t rxLostAt[SERIAL_RX_BUFFER_SIZE];   // losses just before each ring slot (255 at most)
+
+class WcSerial : public HardwareSerial {
+ public:
+  using HardwareSerial::HardwareSerial;
+
+  // USART0_RX: the byte and its status. DOR0 set: frames were lost before this one; a
+  // frame or parity error: this one is garbage; a full ring: this one is dropped. Each
+  // marks a gap before the ring slot the next byte will take.
+  inline void rxInterrupt() {
+    uint8_t status = UCSR0A;   // the registers themselves, not through the class's pointers
+    uint8_t c = UDR0;
+    rx_buffer_index_t head = _rx_buffer_head;
+    rx_buffer_index_t next = (rx_buffer_index_t)((head + 1) % SERIAL_RX_BUFFER_SIZE);
+    if (status & (_BV(DOR0) | _BV(FE0) | _BV(UPE0))) {
+      rxLost++;
+      if (rxLostAt[head] != 255) rxLostAt[head]++;
+      if (status & (_BV(FE0) | _BV(UPE0))) return;
+    }
+    if (next == _rx_buffer_tail) {
+      rxLost++;
+      if (rxLostAt[head] != 255) rxLostAt[head]++;
+      return;
+    }
+    _rx_buffer[head] = c;
+    _rx_buffer_head = next;
+  }
+
+  // The next received byte (-1: none), and the losses counted just before it (0: none;
+  // an overrun counts one, however many frames it cost).
+  int readMarked(uint8_t& lost) {
+    rx_buffer_index_t tail = _rx_buffer_tail;
+    if (_rx_buffer_head == tail) return -1;
+    lost = rxLostAt[tail];
+    if (lost) rxLostAt[tail] = 0;   // the ISR writes this slot only while it is free
+    unsigned char c = _rx_buffer[tail];
+    _rx_buffer_tail = (rx_buffer_index_t)((tail + 1) % SERIAL_RX_BUFFER_SIZE);
+    return c;
+  }
+};
+
+static WcSerial wcSerial(&UBRR0H, &UBRR0L, &UCSR0A, &UCSR0B, &UCSR0C, &UDR0);
+
+ISR(USART0_RX_vect) { wcSerial.rxInterrupt(); }
+ISR(USART0_UDRE_vect) { wcSerial._tx_udr_empty_irq(); }
 
 // ---------------------------------------------------------------------------
 // Output lines: formatted with Arduino's Print into a fixed buffer and written
@@ -218,11 +278,18 @@ class LineBuffer : public Print {
     return 1;
   }
   using Print::write;
+  // Queues the line if the output budget allows it: txCredit bytes, refilled at each
+  // control tick at WC_TX_CREDIT_PER_MS per elapsed millisecond, less than the UART
+  // drains, so the TX ring never fills and which lines go is decided by the budget
+  // alone (the port computes the same). The ring check stays as a second guard.
   void send() {
-    if (Serial.availableForWrite() >= (int)len_) {
-      Serial.write(buf_, len_);
-    } else {
+    if (len_ > txCredit) {
       txDropped++;
+    } else if (wcSerial.availableForWrite() < (int)len_) {
+      txRingFull++;
+    } else {
+      txCredit -= len_;
+      wcSerial.write(buf_, len_);
     }
     len_ = 0;
   }
@@ -440,13 +507,22 @@ static void sendTelemetry(uint32_t now) {
   line.print(',');
   line.print(freeRam);
   line.print(',');
-  line.println(faultFlags);
+  line.print(faultFlags);
+  line.print(',');
+  line.println(rxLostTick);
   line.send();
 }
 
 extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
-  float dt = (float)(now - lastControlTime) / 1000.0f;
+  uint32_t elapsed = now - lastControlTime;
+  float dt = (float)elapsed / 1000.0f;
   lastControlTime = now;
+  // The output budget refills by what the UART surely sent meanwhile.
+  if (elapsed >= WC_TX_CREDIT_MAX / WC_TX_CREDIT_PER_MS) {
+    txCredit = WC_TX_CREDIT_MAX;
+  } else {
+    txCredit = (uint16_t)min((uint32_t)WC_TX_CREDIT_MAX, txCredit + elapsed * WC_TX_CREDIT_PER_MS);
+  }
   tickCount++;
 
   uint32_t illDeltaL, illDeltaR;
@@ -459,6 +535,7 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
     illTickR = illegalR;
     stormTickL = stormL;
     stormTickR = stormR;
+    rxLostTick = rxLost;
   }
   int32_t deltaL = (int32_t)((uint32_t)encTickL - (uint32_t)prevEncL);
   int32_t deltaR = (int32_t)((uint32_t)encTickR - (uint32_t)prevEncR);
@@ -574,7 +651,7 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
 // ---------------------------------------------------------------------------
 enum ParseResult : uint8_t {
   PARSE_OK, ERR_SYNTAX, ERR_NUMBER, ERR_RANGE, ERR_FIELDS, ERR_OVERLONG, ERR_CHECKSUM, ERR_ESTOP,
-  ERR_BUSY, ERR_PARAM, ERR_UNFRAMED, ERR_FAULT
+  ERR_BUSY, ERR_PARAM, ERR_UNFRAMED, ERR_FAULT, ERR_OVERRUN
 };
 // What a command answers besides ACK/ERR.
 enum DataReply : uint8_t { DATA_NONE, DATA_HELLO, DATA_PARAM };
@@ -582,6 +659,7 @@ enum DataReply : uint8_t { DATA_NONE, DATA_HELLO, DATA_PARAM };
 #define DISCARD_NONE 0
 #define DISCARD_TO_COMMA 1      // an overlong seed command: up to ',' or the line end
 #define DISCARD_TO_EOL 2        // an overlong framed ($) line: up to the line end
+#define DISCARD_OVERRUN 3       // bytes were lost: up to ',' or the line end, then ERR:overrun
 
 static char cmdBuf[WC_CMD_MAX_LEN + 1];
 uint8_t cmdLen = 0;
@@ -601,9 +679,10 @@ static const char R_BUSY[] PROGMEM = "busy";
 static const char R_PARAM[] PROGMEM = "param";
 static const char R_UNFRAMED[] PROGMEM = "unframed";
 static const char R_FAULT[] PROGMEM = "fault";
+static const char R_OVERRUN[] PROGMEM = "overrun";
 static const char* const REASONS[] = {
   R_SYNTAX, R_SYNTAX, R_NUMBER, R_RANGE, R_FIELDS, R_OVERLONG, R_CHECKSUM, R_ESTOP, R_BUSY,
-  R_PARAM, R_UNFRAMED, R_FAULT,
+  R_PARAM, R_UNFRAMED, R_FAULT, R_OVERRUN,
 };
 
 // Runtime parameters: name, variable, range. watchdog_ms (the last) is an integer.
@@ -1007,10 +1086,26 @@ static void finishCommand() {
   cmdCommas = 0;
 }
 
+// Bytes were lost before the next one (loop() found losses counted at its ring slot,
+// "lost": bytes dropped for a full ring, one per overrun): the command being received
+// lost a byte, so it is thrown away, and so is what follows up to the next ',' or line
+// end (the lost bytes may have held a line end: the two pieces must not join into one
+// command). The discard ends with ERR:overrun. Not inlined: the lock-step harness stops
+// at its entry, as at processByte's, and reads "lost".
+extern "C" __attribute__((noinline)) void rxGap(uint8_t lost) {
+  rxGaps += lost;
+  cmdLen = 0;
+  cmdCommas = 0;
+  cmdDiscarding = DISCARD_OVERRUN;
+}
+
 extern "C" __attribute__((noinline)) void processByte(uint8_t c) {
   rxCount++;
   if (c == '\n' || c == '\r') {
-    if (cmdDiscarding != DISCARD_NONE) {
+    if (cmdDiscarding == DISCARD_OVERRUN) {
+      cmdDiscarding = DISCARD_NONE;
+      reject(ERR_OVERRUN);
+    } else if (cmdDiscarding != DISCARD_NONE) {
       cmdDiscarding = DISCARD_NONE;
     } else if (cmdLen > 0) {
       finishCommand();
@@ -1018,7 +1113,12 @@ extern "C" __attribute__((noinline)) void processByte(uint8_t c) {
     return;
   }
   if (cmdDiscarding != DISCARD_NONE) {
-    if (c == ',' && cmdDiscarding == DISCARD_TO_COMMA) cmdDiscarding = DISCARD_NONE;
+    if (c == ',' && cmdDiscarding == DISCARD_OVERRUN) {
+      cmdDiscarding = DISCARD_NONE;
+      reject(ERR_OVERRUN);
+    } else if (c == ',' && cmdDiscarding == DISCARD_TO_COMMA) {
+      cmdDiscarding = DISCARD_NONE;
+    }
     return;
   }
   if (cmdLen >= WC_CMD_MAX_LEN) {
@@ -1082,7 +1182,7 @@ void setup() {
   pinMode(WC_PIN_ENC_R_A, INPUT);
   pinMode(WC_PIN_ENC_R_B, INPUT);
 
-  Serial.begin(WC_BAUD);
+  wcSerial.begin(WC_BAUD);
 
   lastEncodedL = readEncoderL();
   lastEncodedR = readEncoderR();
@@ -1101,6 +1201,8 @@ void setup() {
   line.print(F("BOOT:final_control,"));
   line.println(resetCauseName(resetCause));
   line.send();
+  // The budget starts after the BOOT line: WC_TX_CREDIT_MAX leaves the ring room for it.
+  txCredit = WC_TX_CREDIT_MAX;
   wdt_enable(WC_HW_WATCHDOG);   // a loop() pass that hangs resets the board
   lastControlTime = millis();
 }
@@ -1116,8 +1218,12 @@ static uint16_t measureFreeRam() {
 void loop() {
   wdt_reset();
   // Bounded: at most one RX buffer's worth per pass.
-  for (uint8_t n = 0; n < 64 && Serial.available() > 0; n++) {
-    processByte((uint8_t)Serial.read());
+  for (uint8_t n = 0; n < SERIAL_RX_BUFFER_SIZE; n++) {
+    uint8_t lost = 0;
+    int c = wcSerial.readMarked(lost);
+    if (c < 0) break;
+    if (lost) rxGap(lost);
+    processByte((uint8_t)c);
   }
   uint32_t now = millis();
   if (now - lastControlTime >= WC_CONTROL_PERIOD_MS) {

@@ -14,6 +14,8 @@
 #define WC_SEQ_MAX 65535UL         // largest sequence number of a v3 frame
 #define WC_NUMBER_MAX_DIGITS 24    // most digits of a number before its exponent (leading zeros count): ERR:number past it
 #define WC_NUMBER_MAX_EXP_DIGITS 2 // most digits of a number's exponent: ERR:range past it
+#define WC_TX_CREDIT_MAX 480       // output budget: bytes the board may queue at once (its TX ring holds 511; 31 are kept for the BOOT line)
+#define WC_TX_CREDIT_PER_MS 8      // output budget: bytes added per millisecond between control ticks (the UART sends 10.7 a ms)
 
 // ---- Timing ----------------------------------------------------------------
 #define WC_CONTROL_PERIOD_MS 50UL  // control tick and feedback period

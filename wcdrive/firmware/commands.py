@@ -20,12 +20,12 @@ from wcdrive.avr.avrlibc import strtod
 from wcdrive.avr.f32 import constrain, div, f32, from_int
 from wcdrive.firmware import constants as C
 from wcdrive.firmware.motion import accept_command, emergency_halt
-from wcdrive.firmware.output import DATA_HELLO, DATA_NONE, DATA_PARAM, answer, reject, send_event
+from wcdrive.firmware.output import DATA_HELLO, DATA_NONE, DATA_PARAM, answer, reject, send, send_event
 from wcdrive.firmware.params import BY_NAME, PARAMS
 from wcdrive.firmware.state import FirmwareState
 
 NEWLINE, RETURN, COMMA, DOLLAR = 0x0A, 0x0D, 0x2C, 0x24
-DISCARD_NONE, DISCARD_TO_COMMA, DISCARD_TO_EOL = 0, 1, 2
+DISCARD_NONE, DISCARD_TO_COMMA, DISCARD_TO_EOL, DISCARD_OVERRUN = 0, 1, 2, 3
 _PPM_PER_US = div(C.PPM_MAX_WHEEL, float(C.PPM_SPAN))
 
 
@@ -320,7 +320,7 @@ def move_to(s: FirmwareState, body: bytes, out: bytearray) -> str | None:
         s.cmdSinceTick = 1
         emergency_halt(s)
         if not s.ppmLost:
-            out += send_event("PPM_LOST")
+            send(s, send_event("PPM_LOST"), out)
         s.ppmLost = 1
         return None
     mode, right, left = result
@@ -342,7 +342,7 @@ def latch_estop(s: FirmwareState, out: bytearray) -> None:
     s.cmdSinceTick = 0
     s.watchdogArmed = 0
     if not s.estopLatched:
-        out += send_event("ESTOP")
+        send(s, send_event("ESTOP"), out)
     s.estopLatched = 1
 
 
@@ -436,17 +436,34 @@ def _reset(s: FirmwareState) -> None:
     s.cmdCommas = 0
 
 
+def rx_gap(s: FirmwareState, lost: int) -> None:
+    """``rxGap(lost)``: bytes were lost before the next one (``lost``: bytes dropped for
+    a full RX ring, plus one for a USART overrun). The command being received is thrown
+    away, and so is what follows up to the next ``,`` or line end, which is answered
+    ``ERR:overrun``: the lost bytes may have held a line end, and the two pieces must not
+    join into one command."""
+    s.rxGaps = (s.rxGaps + lost) & 0xFFFFFFFF
+    _reset(s)
+    s.cmdDiscarding = DISCARD_OVERRUN
+
+
 def process_byte(s: FirmwareState, c: int, out: bytearray) -> None:
     """One received byte, as ``processByte`` handles it."""
     s.rxCount = (s.rxCount + 1) & 0xFFFFFFFF
     if c == NEWLINE or c == RETURN:
-        if s.cmdDiscarding:
+        if s.cmdDiscarding == DISCARD_OVERRUN:
+            s.cmdDiscarding = DISCARD_NONE
+            reject(s, "overrun", out)
+        elif s.cmdDiscarding:
             s.cmdDiscarding = DISCARD_NONE
         elif s.cmdLen > 0:
             finish_command(s, out)
         return
     if s.cmdDiscarding:
-        if c == COMMA and s.cmdDiscarding == DISCARD_TO_COMMA:
+        if c == COMMA and s.cmdDiscarding == DISCARD_OVERRUN:
+            s.cmdDiscarding = DISCARD_NONE
+            reject(s, "overrun", out)
+        elif c == COMMA and s.cmdDiscarding == DISCARD_TO_COMMA:
             s.cmdDiscarding = DISCARD_NONE
         return
     if s.cmdLen >= C.CMD_MAX_LEN:

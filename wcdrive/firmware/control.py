@@ -7,7 +7,14 @@ from __future__ import annotations
 from wcdrive.avr.f32 import div, f32, from_int
 from wcdrive.firmware import constants as C
 from wcdrive.firmware.motion import emergency_halt, pivot_step
-from wcdrive.firmware.output import feedback_line, send_event, send_fault_events, send_telemetry
+from wcdrive.firmware.output import (
+    feedback_line,
+    refill_credit,
+    send,
+    send_event,
+    send_fault_events,
+    send_telemetry,
+)
 from wcdrive.firmware.state import FirmwareState
 
 _OUT_MAX = C.PID_OUT_MAX
@@ -97,8 +104,15 @@ def check_wheel(delta: int, illegal: int, storm: int, applied_pwm: int, applied_
 
 def wheel_faults(check: int, stall: int, reversed_: int, implausible: int, motor: int) -> int:
     """``wheelFaults``: the fault bits of one wheel's verdict."""
-    return {WHEEL_STALLED: stall, WHEEL_REVERSED: reversed_, WHEEL_IMPLAUSIBLE: implausible,
-            WHEEL_NO_EFFECT: motor}.get(check, 0)
+    if check == WHEEL_STALLED:
+        return stall
+    if check == WHEEL_REVERSED:
+        return reversed_
+    if check == WHEEL_IMPLAUSIBLE:
+        return implausible
+    if check == WHEEL_NO_EFFECT:
+        return motor
+    return 0
 
 
 def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_r: int,
@@ -127,7 +141,7 @@ def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_
         s.cmdSinceTick = 0
         s.watchdogArmed = 0
         s.stallTicksL = s.stallTicksR = s.reverseTicksL = s.reverseTicksR = 0
-        out += send_fault_events(faults)
+        send_fault_events(s, faults, out)
     return check_l, check_r
 
 
@@ -136,11 +150,15 @@ def _i32(x: int) -> int:
 
 
 def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: bytearray,
-                 illegal_l: int = 0, illegal_r: int = 0, storm_l: int = 0, storm_r: int = 0) -> None:
-    """``controlTick(now)`` with what it latches atomically from the encoder ISRs: the
-    counts, the illegal-transition counts and the storm flags."""
-    dt = div(from_int((now - s.lastControlTime) & 0xFFFFFFFF), 1000.0)
+                 illegal_l: int = 0, illegal_r: int = 0, storm_l: int = 0, storm_r: int = 0,
+                 rx_lost: int = 0) -> None:
+    """``controlTick(now)`` with what it latches atomically from the interrupts: the
+    encoder counts, the illegal-transition counts, the storm flags and the RX
+    interrupt's count of lost bytes (``rxLost``)."""
+    elapsed = (now - s.lastControlTime) & 0xFFFFFFFF
+    dt = div(from_int(elapsed), 1000.0)
     s.lastControlTime = now & 0xFFFFFFFF
+    refill_credit(s, elapsed)
     s.tickCount = (s.tickCount + 1) & 0xFFFFFFFF
 
     s.encTickL, s.encTickR = _i32(count_l), _i32(count_r)
@@ -148,6 +166,7 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
     ill_r = (illegal_r - s.illTickR) & 0xFFFFFFFF
     s.illTickL, s.illTickR = illegal_l & 0xFFFFFFFF, illegal_r & 0xFFFFFFFF
     s.stormTickL, s.stormTickR = int(bool(storm_l)), int(bool(storm_r))
+    s.rxLostTick = rx_lost & 0xFFFFFFFF
     delta_l = _i32(s.encTickL - s.prevEncL)
     delta_r = _i32(s.encTickR - s.prevEncR)
     s.prevEncL, s.prevEncR = s.encTickL, s.encTickR
@@ -167,7 +186,7 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
     if s.watchdogArmed and ((now - s.lastCmdTime) & 0xFFFFFFFF) >= s.watchdogMs:
         s.watchdogArmed = 0
         emergency_halt(s)
-        out += send_event("WATCHDOG")
+        send(s, send_event("WATCHDOG"), out)
 
     max_change = f32((s.estopDecel if s.emergencyStop else s.maxAccel) * dt)
     s.setpointL = ramp_toward(s.setpointL, s.targetL, max_change)
@@ -202,7 +221,7 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
 
     pivot_step(s)
 
-    out += feedback_line(s)
+    send(s, feedback_line(s), out)
     if s.tlmEnabled:
-        out += send_telemetry(s, now & 0xFFFFFFFF)
+        send(s, send_telemetry(s, now & 0xFFFFFFFF), out)
     s.errLinesThisTick = 0

@@ -18,7 +18,7 @@ RAM) is an argument here.
 
 from __future__ import annotations
 
-from wcdrive.firmware.commands import process_bytes
+from wcdrive.firmware.commands import process_bytes, rx_gap
 from wcdrive.firmware.constants import CONTROL_PERIOD_MS
 from wcdrive.firmware.control import control_tick
 from wcdrive.firmware.state import FirmwareState
@@ -47,7 +47,7 @@ def boot_line(cause: str = "POWER_ON") -> bytes:
 #: What ``measureFreeRam()`` reports on the Mega build (bytes between the heap and the
 #: stack in loop()); the simulated board reports it too. tests/test_protocol_v2.py checks
 #: it against the ELF running in simavr, so a firmware change that moves it fails there.
-FREE_RAM = 6931
+FREE_RAM = 6847
 
 
 class Firmware:
@@ -79,19 +79,26 @@ class Firmware:
         process_bytes(self.state, data, out)
         return bytes(out)
 
+    def rx_gap(self, lost: int = 1) -> None:
+        """``rxGap(lost)``: loop() found ``lost`` losses counted before the next byte it
+        reads (bytes dropped for a full ring, one per USART overrun; 255 at most)."""
+        rx_gap(self.state, lost)
+
     def due(self, now: int) -> bool:
         """Whether a ``loop()`` pass at ``millis() == now`` runs the control tick."""
         return ((now - self.state.lastControlTime) & 0xFFFFFFFF) >= CONTROL_PERIOD_MS
 
     def tick(self, now: int, count_l: int, count_r: int, illegal_l: int = 0, illegal_r: int = 0,
-             free_ram: int | None = None, storm_l: int = 0, storm_r: int = 0) -> bytes:
-        """``controlTick(now)``. What it latches from the encoder ISRs (counts, illegal
-        transitions, storm flags) are inputs, and so is ``free_ram`` (what loop()
-        measured before the tick; None: ``self.free_ram``, which starts at the figure of
-        the Mega build, ``FREE_RAM``)."""
+             free_ram: int | None = None, storm_l: int = 0, storm_r: int = 0,
+             rx_lost: int = 0) -> bytes:
+        """``controlTick(now)``. What it latches from the interrupts (encoder counts,
+        illegal transitions, storm flags, the RX interrupt's lost bytes) are inputs, and
+        so is ``free_ram`` (what loop() measured before the tick; None: ``self.free_ram``,
+        which starts at the figure of the Mega build, ``FREE_RAM``)."""
         self.state.freeRam = self.free_ram if free_ram is None else free_ram
         out = bytearray()
-        control_tick(self.state, now, count_l, count_r, out, illegal_l, illegal_r, storm_l, storm_r)
+        control_tick(self.state, now, count_l, count_r, out, illegal_l, illegal_r, storm_l, storm_r,
+                     rx_lost)
         return bytes(out)
 
 

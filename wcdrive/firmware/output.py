@@ -1,21 +1,46 @@
-"""Lines the firmware sends: formatted whole, as ``LineBuffer`` does, then written.
-
-The firmware writes a line only when the TX ring has room for all of it; with its
-512-byte ring (``-DSERIAL_TX_BUFFER_SIZE=512``, firmware/final_control/Makefile) and
-the per-tick limits that can never fail ("Output budget" in protocol/PROTOCOL.md), so
-the port appends every line. That ``txDropped`` stays 0 is checked in the firmware
-after every event of the differential runs (``wcdrive.hil.lockstep``).
+"""Lines the firmware sends: formatted whole, as ``LineBuffer`` does, then written
+through ``send`` (``LineBuffer::send``), which keeps the output budget: a line goes
+only if it fits ``txCredit``, which each control tick refills by ``TX_CREDIT_PER_MS`` a
+millisecond up to ``TX_CREDIT_MAX``; one that does not fit is counted in ``txDropped``.
+The budget is below what the UART drains, so the firmware's TX ring never fills and
+the same lines are dropped on both sides ("Output budget" in protocol/PROTOCOL.md).
 """
 
 from __future__ import annotations
 
 from wcdrive.avr.arduino_print import print_float, print_long, print_unsigned
-from wcdrive.firmware.constants import ERR_LINES_PER_TICK, FIRMWARE_VERSION, MODE_NAMES, PROTOCOL_VERSION
+from wcdrive.firmware.constants import (
+    ERR_LINES_PER_TICK,
+    FIRMWARE_VERSION,
+    MODE_NAMES,
+    PROTOCOL_VERSION,
+    TX_CREDIT_MAX,
+    TX_CREDIT_PER_MS,
+)
 from wcdrive.firmware.params import PARAMS
 from wcdrive.firmware.state import FirmwareState
 from wcdrive.protocol.codec import FAULT_NAMES
 
 CRLF = b"\r\n"
+
+
+def send(s: FirmwareState, line: bytes, out: bytearray) -> None:
+    """``LineBuffer::send``: ``line`` goes out if the output budget has room for it,
+    else it is counted in ``txDropped``. (The sketch's second guard, a full TX ring,
+    ``txRingFull``, cannot happen within the budget; the differential runs check that.)"""
+    if len(line) > s.txCredit:
+        s.txDropped = (s.txDropped + 1) & 0xFFFFFFFF
+    else:
+        s.txCredit -= len(line)
+        out += line
+
+
+def refill_credit(s: FirmwareState, elapsed: int) -> None:
+    """The control tick's refill of the output budget, ``elapsed`` ms after the last."""
+    if elapsed >= TX_CREDIT_MAX // TX_CREDIT_PER_MS:
+        s.txCredit = TX_CREDIT_MAX
+    else:
+        s.txCredit = min(TX_CREDIT_MAX, s.txCredit + elapsed * TX_CREDIT_PER_MS)
 
 
 def feedback_line(s: FirmwareState) -> bytes:
@@ -32,10 +57,11 @@ def send_event(what: str) -> bytes:
     return b"EVT:" + what.encode() + CRLF
 
 
-def send_fault_events(faults: int) -> bytes:
+def send_fault_events(s: FirmwareState, faults: int, out: bytearray) -> None:
     """``sendFaultEvents``: one ``EVT:FAULT,<name>`` line per fault bit set."""
-    return b"".join(b"EVT:FAULT," + name.encode() + CRLF
-                    for i, name in enumerate(FAULT_NAMES) if faults & (1 << i))
+    for i, name in enumerate(FAULT_NAMES):
+        if faults & (1 << i):
+            send(s, b"EVT:FAULT," + name.encode() + CRLF, out)
 
 
 def send_telemetry(s: FirmwareState, now: int) -> bytes:
@@ -44,9 +70,9 @@ def send_telemetry(s: FirmwareState, now: int) -> bytes:
              | (4 if s.estopLatched else 0) | (8 if s.ppmLost else 0) | (16 if s.parked else 0)
              | ((s.pivotPhase << 5) & 0xFF) | (128 if s.faultFlags else 0))
     # Every field is unsigned and in range, so %d prints what Print::print prints.
-    return b"TLM:%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d\r\n" % (
+    return b"TLM:%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d\r\n" % (
         now, s.rxCount, s.lastSeq, s.pwmL, s.pwmR, s.dirL, s.dirR, s.illTickL, s.illTickR,
-        flags, s.rejectedCount, s.crcRejected, s.freeRam, s.faultFlags)
+        flags, s.rejectedCount, s.crcRejected, s.freeRam, s.faultFlags, s.rxLostTick)
 
 
 DATA_NONE, DATA_HELLO, DATA_PARAM = 0, 1, 2
@@ -62,20 +88,20 @@ def answer(s: FirmwareState, reason: str | None, seq: int, data: int, param: int
         return
     s.errLinesThisTick += 1
     if reason is None and data == DATA_HELLO:
-        out += b"HELLO:%d,final_control,%s,%s\r\n" % (PROTOCOL_VERSION, FIRMWARE_VERSION.encode(),
-                                                        s.buildId.encode())
+        send(s, b"HELLO:%d,final_control,%s,%s\r\n" % (PROTOCOL_VERSION, FIRMWARE_VERSION.encode(),
+                                                        s.buildId.encode()), out)
     elif reason is None and data == DATA_PARAM:
         p = PARAMS[param]
         value = getattr(s, p.field)
         text = print_unsigned(value) if p.integer else print_float(value, 4)
-        out += b"PAR:" + p.name.encode() + b"," + text + CRLF
+        send(s, b"PAR:" + p.name.encode() + b"," + text + CRLF, out)
     if seq >= 0:
         if reason is None:
-            out += b"ACK:%d\r\n" % seq
+            send(s, b"ACK:%d\r\n" % seq, out)
         else:
-            out += b"NAK:%d,%s\r\n" % (seq, reason.encode())
+            send(s, b"NAK:%d,%s\r\n" % (seq, reason.encode()), out)
     elif reason is not None:
-        out += b"ERR:" + reason.encode() + CRLF
+        send(s, b"ERR:" + reason.encode() + CRLF, out)
 
 
 def reject(s: FirmwareState, reason: str, out: bytearray) -> None:

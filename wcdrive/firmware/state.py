@@ -30,7 +30,7 @@ INT_FIELDS = (
     "illTickL", "illTickR", "watchdogMs", "estopLatched", "tlmEnabled", "unframedLine", "lastSeq",
     "rxCount", "crcRejected", "stormTickL", "stormTickR", "faultFlags", "stallTicksL",
     "stallTicksR", "reverseTicksL", "reverseTicksR", "effortPwmL", "effortPwmR",
-    "effortTicksL", "effortTicksR",
+    "effortTicksL", "effortTicksR", "txDropped", "txRingFull", "txCredit", "rxGaps", "rxLostTick",
 )
 
 #: Globals the tick takes as inputs rather than computes (loop() measures them).
@@ -122,6 +122,15 @@ class FirmwareState:
     crcRejected: int = 0
     errSuppressed: int = 0
     errLinesThisTick: int = 0
+    #: The output budget (``LineBuffer::send``): bytes that may still be queued, and the
+    #: lines dropped for want of it; ``txRingFull`` counts the sketch's second guard.
+    txCredit: int = C.TX_CREDIT_MAX
+    txDropped: int = 0
+    txRingFull: int = 0
+    #: Losses ``loop()`` met in the received bytes (the sum of ``rxGap``'s), and the RX interrupt's
+    #: count of lost bytes latched at the last tick (an input, like the encoder counts).
+    rxGaps: int = 0
+    rxLostTick: int = 0
     cmdBuf: bytearray = field(default_factory=bytearray)
     cmdLen: int = 0
     cmdCommas: int = 0

@@ -58,7 +58,7 @@ CONTROL_OPS = {1: b"hello", 2: b"estop", 3: b"reset"}
 PARAM_NAMES = tuple(PARAM_RANGES)
 MODES = ("WHEEL", "CMDVEL", "PPM")
 REASONS = ("", "syntax", "number", "range", "fields", "overlong", "checksum", "estop", "busy",
-           "param", "unframed", "fault")
+           "param", "unframed", "fault", "overrun")
 EVENTS = ("", "WATCHDOG", "PPM_LOST", "ESTOP", "FAULT,ENC_STALL_L", "FAULT,ENC_STALL_R",
           "FAULT,ENC_REVERSED_L", "FAULT,ENC_REVERSED_R", "FAULT,ENC_IMPLAUSIBLE_L",
           "FAULT,ENC_IMPLAUSIBLE_R", "FAULT,DRIVER_DEAD", "FAULT,MOTOR_L", "FAULT,MOTOR_R")

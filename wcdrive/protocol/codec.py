@@ -191,6 +191,9 @@ class ExtendedTelemetry:
     crc_rejected: int
     free_ram: int
     faults: int = 0
+    #: Bytes the board lost on receive (a full RX ring, one per USART overrun), counted
+    #: since boot; each loss also discards the command it hit (``ERR:overrun``).
+    rx_lost: int = 0
 
     @property
     def fault_latched(self) -> bool:
@@ -284,7 +287,7 @@ def _float(text: bytes) -> float:
     return -value if text.startswith(b"-") else value
 
 
-_TLM = re.compile(rb"TLM:(\d+(?:,\d+){12}(?:,\d+)?)")
+_TLM = re.compile(rb"TLM:(\d+(?:,\d+){12}(?:,\d+){0,2})")
 _HELLO = re.compile(rb"HELLO:(\d+),([\w.-]+)(?:,([\w.-]+),([0-9a-f]+))?")
 _PARAM = re.compile(rb"PAR:(\w+),(\d+(?:\.\d+)?)")
 _ACK = re.compile(rb"ACK:(\d+)")

@@ -65,8 +65,8 @@ VARIABLE_FORMATS = {
     "i": ("encoderValueL", "encoderValueR", "encTickL", "encTickR", "prevEncL", "prevEncR"),
     "I": ("illegalL", "illegalR", "lastControlTime", "tickCount", "lastCmdTime", "rejectedCount",
           "errSuppressed", "txDropped", "timer0_millis", "timer0_overflow_count", "illTickL",
-          "illTickR", "rxCount", "crcRejected"),
-    "H": ("freeRam", "watchdogMs", "lastSeq", "faultFlags"),
+          "illTickR", "rxCount", "crcRejected", "txRingFull", "rxGaps", "rxLost", "rxLostTick"),
+    "H": ("freeRam", "watchdogMs", "lastSeq", "faultFlags", "txCredit"),
     "B": ("mode", "pwmL", "pwmR", "dirL", "dirR", "pivotPhase", "pivotTicksLeft", "cmdSinceTick",
           "watchdogArmed", "emergencyStop", "ppmLost", "stillTicks", "parked", "cmdLen",
           "cmdCommas", "cmdDiscarding", "errLinesThisTick", "lastEncodedL", "lastEncodedR",
@@ -77,13 +77,29 @@ VARIABLE_FORMATS = {
 _FORMAT_OF = {name: fmt for fmt, names in VARIABLE_FORMATS.items() for name in names}
 
 #: Functions whose entries are logged: (name, what the harness records).
-HOOKS = ("processByte", "controlTick", "main", "doneOp")
+HOOKS = ("processByte", "controlTick", "rxGap", "main", "doneOp")
 
 
 #: Reset causes by the harness's code (wcsim.c, ``WCSIM_RESET_*``).
 RESET_CAUSES = ("power_on", "external", "brownout", "watchdog")
 #: MCUSR's flags (ATmega2560 datasheet, 11.5.1).
 PORF, EXTRF, BORF, WDRF, JTRF = 0x01, 0x02, 0x04, 0x08, 0x10
+
+
+#: Why the USART0 receiver lost a byte (wcsim.c, ``wcsim_rx_lost_t``).
+RX_LOSS_CAUSES = ("overrun", "receiver_off")
+
+
+@dataclass(frozen=True)
+class RxLoss:
+    """A byte the USART0 receiver lost (the harness models its two-frame FIFO and shift
+    register, and data overrun): the cycle, its index among the bytes sent to the board
+    (0 the first since power-on), the byte, and why (``RX_LOSS_CAUSES``)."""
+
+    cycle: int
+    index: int
+    byte: int
+    cause: str
 
 
 class HarnessError(RuntimeError):
@@ -157,6 +173,10 @@ def _load_library() -> ctypes.CDLL:
         "wcsim_mcusr": (ctypes.c_uint8, [p]),
         "wcsim_resets_count": (sz, [p]),
         "wcsim_resets_take": (sz, [p, ctypes.POINTER(u64), u8p, u8p, sz]),
+        "wcsim_rx_index": (u64, [p]),
+        "wcsim_rx_held": (i32, [p]),
+        "wcsim_rx_lost_count": (sz, [p]),
+        "wcsim_rx_lost_take": (sz, [p, ctypes.POINTER(u64), ctypes.POINTER(u64), u8p, u8p, sz]),
     }
     for name, (restype, argtypes) in sig.items():
         fn = getattr(lib, name)
@@ -203,6 +223,11 @@ class VirtualMega:
         self._closed_cycle = 0
         self._pin_level: dict[tuple[str, int], int] = {}
         self.tx_log: list[tuple[int, int]] = []
+        #: Every byte sent to the board, as (the cycle it reaches the USART, byte), in the
+        #: order the receiver gets them (``RxLoss.index`` counts in this list).
+        self.rx_wire: list[tuple[int, int]] = []
+        #: Every byte the USART0 receiver lost (overrun, or sent while it was off).
+        self.rx_lost: list[RxLoss] = []
         self.hit_log: list[Hit] = []
         #: Every reset since power-on, the first power-on (cycle 0) included.
         self.resets: list[Reset] = []
@@ -346,11 +371,13 @@ class VirtualMega:
 
     def send(self, data: bytes, at: int | None = None) -> list[int]:
         """Queues bytes on the RX wire, one per byte time, starting at ``at`` (default:
-        now, or when the previous bytes have gone). Returns each byte's cycle."""
+        now, or when the previous bytes have gone). Returns the cycle each byte starts
+        at; it reaches the USART (its stop bit done) one byte time later."""
         start = max(self.cycle if at is None else int(at), self._uart_free_at)
         cycles = [start + i * UART_BYTE_CYCLES for i in range(len(data))]
         for cycle, byte in zip(cycles, data, strict=True):
-            self._c.wcsim_schedule(self._s, cycle, 1, 0, 0, byte)
+            self._c.wcsim_schedule(self._s, cycle + UART_BYTE_CYCLES, 1, 0, 0, byte)
+            self.rx_wire.append((cycle + UART_BYTE_CYCLES, byte))
         if data:
             self._uart_free_at = cycles[-1] + UART_BYTE_CYCLES
         return cycles
@@ -415,6 +442,15 @@ class VirtualMega:
             data = (ctypes.c_uint8 * n)()
             got = self._c.wcsim_tx_take(self._s, cycles, data, n)
             self.tx_log.extend(zip(list(cycles[:got]), list(data[:got]), strict=True))
+        n = self._c.wcsim_rx_lost_count(self._s)
+        if n:
+            cycles = (ctypes.c_uint64 * n)()
+            indices = (ctypes.c_uint64 * n)()
+            data = (ctypes.c_uint8 * n)()
+            why = (ctypes.c_uint8 * n)()
+            got = self._c.wcsim_rx_lost_take(self._s, cycles, indices, data, why, n)
+            self.rx_lost.extend(RxLoss(cycles[i], indices[i], data[i], RX_LOSS_CAUSES[why[i]])
+                                for i in range(got))
         n = self._c.wcsim_hits_count(self._s)
         if n:
             cycles = (ctypes.c_uint64 * n)()
@@ -433,6 +469,16 @@ class VirtualMega:
     def take_tx_text(self) -> str:
         """The UART bytes sent since the last take, as text."""
         return bytes(b for _, b in self.take_tx()).decode("latin-1")
+
+    @property
+    def rx_sent(self) -> int:
+        """Bytes that have reached the USART0 receiver since power-on."""
+        return int(self._c.wcsim_rx_index(self._s))
+
+    @property
+    def rx_held(self) -> int:
+        """Bytes the USART0 receiver holds now (its FIFO and shift register, 0 to 3)."""
+        return int(self._c.wcsim_rx_held(self._s))
 
     def take_hits(self) -> list[Hit]:
         """The hooked function entries since the last take."""

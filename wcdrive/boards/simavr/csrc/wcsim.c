@@ -8,6 +8,10 @@
  * at which the firmware wrote it; entries to chosen functions (by flash byte
  * address) are logged with the cycle and the argument registers r22..r25.
  *
+ * The USART0 receiver is the harness's (see rx_arrive): the chip's two-frame FIFO and
+ * shift register, with data overrun (DOR0) when the firmware reads too late, where
+ * simavr 1.6 queues 64 bytes and never overruns. Every byte lost is logged.
+ *
  * Resets (wcsim_reset: DTR/external, brown-out, power-on; and the AVR watchdog's own)
  * restart the core without stopping the clock: the cycle count runs on, so queued
  * stimulus and logs keep their meaning. MCUSR shows the cause as the hardware's does;
@@ -66,6 +70,25 @@ typedef struct {
     uint8_t mcusr;   /* MCUSR right after the reset */
 } wcsim_reset_t;
 
+/* A byte the USART0 receiver lost: its cycle, its index among the bytes that reached the
+ * receiver (0 the first), its value and why: 0 overrun (DOR0), 1 receiver disabled. */
+typedef struct {
+    uint64_t cycle;
+    uint64_t index;
+    uint8_t byte;
+    uint8_t why;
+} wcsim_rx_lost_t;
+
+/* USART0's receive side as the ATmega2560 has it (datasheet, "Receiving Frames"): a
+ * two-frame FIFO read through UDR0 and the receive shift register. data[0..1] are the
+ * FIFO, data[2] the frame waiting in the shift register; dor[i] the DOR0 flag stored with
+ * frame i. */
+typedef struct {
+    uint8_t data[3];
+    uint8_t dor[3];
+    uint8_t n;
+} wcsim_rx_t;
+
 /* Ports 'A'..'L' by letter - 'A': the input levels driven from outside. */
 #define WCSIM_PORTS 12
 
@@ -96,6 +119,12 @@ typedef struct {
     uint8_t driven[WCSIM_PORTS], level[WCSIM_PORTS];
     wcsim_reset_t *resets;
     size_t n_resets, cap_resets;
+    /* the USART0 receiver */
+    avr_uart_t *uart;
+    wcsim_rx_t rx;
+    uint64_t rx_index;           /* bytes that reached the receiver so far */
+    wcsim_rx_lost_t *rx_lost;
+    size_t n_rx_lost, cap_rx_lost;
 } wcsim_t;
 
 static void no_sleep(avr_t *avr, avr_cycle_count_t how_long) {
@@ -128,6 +157,80 @@ static void on_uart_tx(struct avr_irq_t *irq, uint32_t value, void *param) {
     s->tx[s->n_tx].cycle = s->avr->cycle;
     s->tx[s->n_tx].byte = (uint8_t)value;
     s->n_tx++;
+}
+
+/* USART0 (simavr's module for it: its registers, RXC vector and DOR0 bit). */
+static avr_uart_t *find_uart0(avr_t *avr) {
+    for (avr_io_t *io = avr->io_port; io; io = io->next) {
+        if (io->kind && strcmp(io->kind, "uart") == 0 && ((avr_uart_t *)io)->name == '0')
+            return (avr_uart_t *)io;
+    }
+    return NULL;
+}
+
+/* UCSR0A and the RX interrupt as the FIFO's head makes them: RXC0 while the FIFO holds a
+ * frame (the interrupt taken again after each read, as on the chip), DOR0 the head's. */
+static void rx_update(wcsim_t *s) {
+    avr_t *avr = s->avr;
+    avr_uart_t *u = s->uart;
+    wcsim_rx_t *r = &s->rx;
+    if (r->n > 0 && r->dor[0]) avr_regbit_set(avr, u->dor);
+    else avr_regbit_clear(avr, u->dor);
+    if (r->n > 0) {
+        if (!u->rxc.pending) avr_raise_interrupt(avr, &u->rxc);
+    } else {
+        avr_regbit_clear(avr, u->rxc.raised);
+    }
+}
+
+static void log_rx_lost(wcsim_t *s, uint64_t index, uint8_t byte, uint8_t why) {
+    wcsim_rx_lost_t *l = grow(s->rx_lost, &s->cap_rx_lost, s->n_rx_lost + 1, sizeof(*l));
+    if (!l) return;
+    s->rx_lost = l;
+    l = &s->rx_lost[s->n_rx_lost++];
+    l->cycle = s->avr->cycle;
+    l->index = index;
+    l->byte = byte;
+    l->why = why;
+}
+
+/* A byte from the wire, its stop bit done now. With the receiver disabled it is lost. It
+ * joins the FIFO, or waits in the shift register; when both are full the frame waiting
+ * there is lost (data overrun) and this one takes its place, carrying DOR0: "one or more
+ * serial frames were lost between the frame last read from UDRn and the next one". */
+static void rx_arrive(wcsim_t *s, uint8_t byte) {
+    uint64_t index = s->rx_index++;
+    wcsim_rx_t *r = &s->rx;
+    if (!s->uart || !avr_regbit_get(s->avr, s->uart->rxen)) {
+        log_rx_lost(s, index, byte, 1);
+        return;
+    }
+    if (r->n < 3) {
+        r->data[r->n] = byte;
+        r->dor[r->n] = 0;
+        r->n++;
+    } else {
+        log_rx_lost(s, index - 1, r->data[2], 0);   /* the frame in the shift register */
+        r->data[2] = byte;
+        r->dor[2] = 1;
+    }
+    rx_update(s);
+}
+
+/* UDR0 read by the firmware: the FIFO's head; the shift register's frame moves up. */
+static uint8_t rx_udr_read(avr_t *avr, avr_io_addr_t addr, void *param) {
+    wcsim_t *s = (wcsim_t *)param;
+    wcsim_rx_t *r = &s->rx;
+    if (r->n > 0) {
+        avr->data[addr] = r->data[0];
+        r->data[0] = r->data[1];
+        r->dor[0] = r->dor[1];
+        r->data[1] = r->data[2];
+        r->dor[1] = r->dor[2];
+        r->n--;
+    }
+    rx_update(s);
+    return avr->data[addr];
 }
 
 static uint8_t mcusr_get(wcsim_t *s) { return s->avr->data[s->avr->reset_flags.porf.reg]; }
@@ -196,6 +299,8 @@ static void after_reset(wcsim_t *s, int cause, uint8_t mcusr_before) {
             if (s->driven[p] & (1u << b)) avr_raise_irq(irq, (s->level[p] >> b) & 1u);
         }
     }
+    s->rx.n = 0;          /* the USART is reset with the chip: its FIFO is empty */
+    if (s->uart) rx_update(s);
     s->at_break = 0;
     s->crashed = 0;
     log_reset(s, cause);
@@ -229,6 +334,13 @@ wcsim_t *wcsim_new(const char *elf_path, char *err, int errlen) {
     avr_ioctl(s->avr, AVR_IOCTL_UART_SET_FLAGS('0'), &flags);
     avr_irq_register_notify(avr_io_getirq(s->avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUTPUT),
                             on_uart_tx, s);
+    /* The receiver is the harness's: UDR0 reads come here, not to simavr's 64-byte queue. */
+    s->uart = find_uart0(s->avr);
+    if (s->uart) {
+        avr_io_addr_t io = AVR_DATA_TO_IO(s->uart->r_udr);
+        s->avr->io[io].r.c = rx_udr_read;
+        s->avr->io[io].r.param = s;
+    }
     static const char *pwm_names[] = {"8>pwm_left", "8>pwm_right"};
     s->pwm_irq = avr_alloc_irq(&s->avr->irq_pool, 0, 2, pwm_names);
     s->run_fn = s->avr->run;
@@ -240,6 +352,7 @@ wcsim_t *wcsim_new(const char *elf_path, char *err, int errlen) {
 void wcsim_free(wcsim_t *s) {
     if (!s) return;
     if (s->vcd_on) avr_vcd_close(&s->vcd);
+    free(s->rx_lost);
     free(s->events);
     free(s->tx);
     free(s->hits);
@@ -282,7 +395,7 @@ static void apply_event(wcsim_t *s, const wcsim_event_t *e) {
         avr_irq_t *irq = avr_io_getirq(s->avr, AVR_IOCTL_IOPORT_GETIRQ(e->port), e->bit);
         if (irq) avr_raise_irq(irq, e->value);
     } else {
-        avr_raise_irq(avr_io_getirq(s->avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_INPUT), e->value);
+        rx_arrive(s, e->value);
     }
 }
 
@@ -397,6 +510,26 @@ int wcsim_run_until(wcsim_t *s, uint64_t target) {
 }
 
 size_t wcsim_tx_count(wcsim_t *s) { return s->n_tx; }
+
+/* Bytes that reached the receiver so far, and those it holds (FIFO and shift register). */
+uint64_t wcsim_rx_index(wcsim_t *s) { return s->rx_index; }
+int wcsim_rx_held(wcsim_t *s) { return s->rx.n; }
+size_t wcsim_rx_lost_count(wcsim_t *s) { return s->n_rx_lost; }
+
+/* Copies and removes up to max entries from the front of the log of lost bytes. */
+size_t wcsim_rx_lost_take(wcsim_t *s, uint64_t *cycles, uint64_t *indices, uint8_t *bytes,
+                          uint8_t *why, size_t max) {
+    size_t n = s->n_rx_lost < max ? s->n_rx_lost : max;
+    for (size_t i = 0; i < n; i++) {
+        cycles[i] = s->rx_lost[i].cycle;
+        indices[i] = s->rx_lost[i].index;
+        bytes[i] = s->rx_lost[i].byte;
+        why[i] = s->rx_lost[i].why;
+    }
+    memmove(s->rx_lost, s->rx_lost + n, (s->n_rx_lost - n) * sizeof(*s->rx_lost));
+    s->n_rx_lost -= n;
+    return n;
+}
 
 /* Copies and removes up to max TX entries from the front of the log. */
 size_t wcsim_tx_take(wcsim_t *s, uint64_t *cycles, uint8_t *bytes, size_t max) {
