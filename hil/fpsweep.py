@@ -175,8 +175,8 @@ def _targeted(op: str, rng: np.random.Generator, n: int) -> dict[str, tuple[np.n
         tie = (high << s.astype(np.uint64)) | (np.uint64(1) << (s - 1).astype(np.uint64))
         beside = (tie.astype(np.int64) + r(-1, 2, k)).astype(np.uint64)
         out["near tie"] = ((beside & np.uint64(0xFFFFFFFF)).astype(U32), zero)
-        small = r(-(2**25), 2**25, k)
-        out["|n| < 2^25"] = ((small & 0xFFFFFFFF).astype(U32), zero)
+        little = r(-(2**25), 2**25, k)
+        out["|n| < 2^25"] = ((little & 0xFFFFFFFF).astype(U32), zero)
         bounds = np.array([0, 1, 0xFFFFFFFF, 0x7FFFFFFF, 0x80000000, 0x80000001, 2**24 - 1, 2**24,
                            2**24 + 1, 2**25 + 1, 2**31 - 64, 2**31 - 65, 2**32 - 128, 2**32 - 129],
                           dtype=U32)
