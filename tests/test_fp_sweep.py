@@ -79,7 +79,7 @@ def test_an_ieee_multiplication_fails_the_sweep(avr: AvrMath, monkeypatch: pytes
     monkeypatch.setitem(fpsweep._BINARY, "mul", F.mul)
     result = fpsweep.sweep(avr, "mul", SLICE_PAIRS, seed=3)
     assert result.mismatches > 0
-    cls, a, b, on_avr, ported = result.examples[0]
+    _cls, a, b, on_avr, ported = result.examples[0]
     assert on_avr != ported and ported == F.bits(F.f32(F.from_bits(a) * F.from_bits(b)))
 
 
