@@ -266,6 +266,7 @@ class SweepResult:
     not_ieee_examples: list[tuple[int, int, int, int]] = field(default_factory=list)  # a, b, avr, ieee
 
     def describe(self) -> str:
+        """Counts per class, the mismatches kept, and the AVR's departures from IEEE."""
         lines = [f"{self.op}: pairs={self.count} mismatches={self.mismatches}"]
         for cls, (count, bad) in self.by_class.items():
             lines.append(f"  {cls}: {count} pairs, {bad} mismatches")
