@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import math
 import struct
-from fractions import Fraction
 
 _F32 = struct.Struct("<f")
 _U32 = struct.Struct("<I")
@@ -145,20 +144,22 @@ def _div_by_zero(a: float, b: float) -> float:
 def _div_subnormal(a: float, b: float) -> float:
     """Quotients near or below the smallest normal: avr-libc's denormalisation."""
     negative = (a < 0) != (b < 0)
-    quotient = abs(Fraction(a)) / abs(Fraction(b))
+    na, da = abs(a).as_integer_ratio()
+    nb, db = abs(b).as_integer_ratio()
+    num, den = na * db, da * nb        # the exact quotient num / den
     # Normalise: quotient = (q + frac) * 2**(e - 149) with 2**23 <= q < 2**24.
-    e = quotient.numerator.bit_length() - quotient.denominator.bit_length() + 126
+    e = num.bit_length() - den.bit_length() + 126
     while True:
-        scaled = quotient * Fraction(2) ** (149 - e)
-        if scaled < 2**23:
+        s = 149 - e
+        n, d = (num << s, den) if s >= 0 else (num, den << -s)
+        if n < d << 23:
             e -= 1
-        elif scaled >= 2**24:
+        elif n >= d << 24:
             e += 1
         else:
             break
-    q = scaled.numerator // scaled.denominator
-    frac = scaled - q
-    extra = 0x00 if frac < Fraction(1, 2) else 0x80 if frac == Fraction(1, 2) else 0xFF
+    q, r = divmod(n, d)
+    extra = 0x00 if 2 * r < d else 0x80 if 2 * r == d else 0xFF
     if e >= 0:
         return f32(a / b)  # normal: the rounding below is exact rounding
     shift = -e
