@@ -14,6 +14,14 @@ the received bytes lost and accounted for on both sides (a full RX ring, an over
 ``ERR:overrun``); it is a figure, not a failure. It exits 1 when K, L or S > 0, after
 printing the first mismatch (the tick, the field and both values in hex) and the trace
 that produced it.
+
+    wcdrive verify --fp N [--seed S] [--jobs 2]
+
+instead runs the binary32 sweep (wcdrive.hil.fpsweep): N operand pairs for each float
+operation the sketch calls, on the AVR (firmware/fpcheck, built with the installed
+toolchain) against the port's wcdrive.avr.f32, and prints one line per operation,
+``op pairs=P mismatches=K``, then ``fp pairs=P mismatches=K``; exit status 1 on any
+mismatch. For users who change the toolchain (avr-gcc, avr-libc).
 """
 
 from __future__ import annotations
@@ -26,6 +34,8 @@ from pathlib import Path
 
 from wcdrive.boards.simavr.build import firmware_elf
 from wcdrive.firmware.state import FLOAT_FIELDS, INT_FIELDS
+from wcdrive.hil.fpcheck import AvrMath
+from wcdrive.hil.fpsweep import OPERATIONS, SweepResult, sweep
 from wcdrive.hil.lockstep import compare, record
 from wcdrive.hil.traces import RandomDraw, generate_trace
 
@@ -59,10 +69,42 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--elf", type=Path, help="firmware ELF (default: build firmware/final_control)")
     parser.add_argument("--duration", type=float, default=5.0, help="simulated seconds per trace")
     parser.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
+    parser.add_argument("--fp", type=int, metavar="N",
+                        help="instead: the binary32 sweep, N pairs per float operation (see above)")
+
+
+def _sweep(job: tuple[str, int, int]) -> SweepResult:
+    op, n, seed = job
+    avr = AvrMath()
+    try:
+        return sweep(avr, op, n, seed)
+    finally:
+        avr.close()
+
+
+def run_fp(pairs: int, seed: int, jobs: int) -> int:
+    """The binary32 sweep; exit status 1 on any mismatch."""
+    count = mismatches = 0
+    with ProcessPoolExecutor(max_workers=max(1, jobs)) as pool:
+        for result in pool.map(_sweep, [(op, pairs, seed) for op in OPERATIONS]):
+            count += result.count
+            mismatches += result.mismatches
+            print(f"{result.op} pairs={result.count} mismatches={result.mismatches}"
+                  + (f" not_ieee={result.not_ieee}" if result.op in ("add", "sub", "mul", "div") else ""),
+                  flush=True)
+            if result.mismatches:
+                print(result.describe(), flush=True)
+    print(f"fp pairs={count} mismatches={mismatches}")
+    return 1 if mismatches else 0
 
 
 def run(args: argparse.Namespace) -> int:
     """Runs the check; exit status 1 on any mismatch, 2 on bad arguments."""
+    if args.fp is not None:
+        if args.fp < 1:
+            print("wcdrive verify: --fp must be >= 1", file=sys.stderr)
+            return 2
+        return run_fp(args.fp, args.seed, args.jobs)
     if args.traces < 1 or args.duration <= 0:
         print("wcdrive verify: --traces must be >= 1 and --duration > 0", file=sys.stderr)
         return 2

@@ -4,6 +4,7 @@
     wcdrive sim [SCENARIO ...] [--backend port|simavr] [--json] [--out DIR] [--no-plots]
     wcdrive sim --list
     wcdrive verify --traces N --seed S [--elf PATH]      the port against the firmware in simavr
+    wcdrive verify --fp N [--seed S]                     binary32 on the AVR against the port, N pairs/op
     wcdrive bench {flash,run,record,replay,plot} ...     a real board on USB
     wcdrive pty [--avr [--realtime]] [--speed S] [--link PATH]   a simulated chair on a pty
     wcdrive can-gateway --chair URL_OR_PATH --interface I --channel C

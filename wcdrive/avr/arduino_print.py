@@ -5,7 +5,7 @@ from __future__ import annotations
 import functools
 import math
 
-from wcdrive.avr.f32 import div, f32
+from wcdrive.avr.f32 import div, f32, mul
 
 _OVF = 4294967040.0
 
@@ -50,7 +50,7 @@ def print_float(number: float, digits: int = 2) -> bytes:
     if digits > 0:
         out += b"."
     for _ in range(digits):
-        remainder = f32(remainder * 10.0)
+        remainder = mul(remainder, 10.0)
         to_print = int(remainder) & 0xFFFF
         out += str(to_print).encode()
         remainder = f32(remainder - float(to_print))

@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 import re
 
-from wcdrive.avr.f32 import f32
+from wcdrive.avr.f32 import f32, mul
 
 _POW_P10 = tuple(f32(float(f"1e{p}")) for p in (1, 2, 4, 8, 16, 32))
 _POW_M10 = tuple(f32(float(f"1e-{p}")) for p in (1, 2, 4, 8, 16, 32))
@@ -46,7 +46,7 @@ def _scale(value: int, exp: int, negative: bool) -> float:
         power = 32
         while power:
             while e >= power:
-                x = f32(x * table[index])
+                x = mul(x, table[index])   # __mulsf3: not correctly rounded below 2**-126
                 e -= power
             index -= 1
             power >>= 1

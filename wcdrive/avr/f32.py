@@ -2,17 +2,28 @@
 
 ``float`` and ``double`` are both IEEE binary32 on the AVR. For binary32 operands,
 one IEEE double operation rounded once to binary32 is the correctly rounded binary32
-result of + - * / (53 >= 2*24 + 2), which is what avr-libc returns, except for
-division whose quotient is subnormal: there avr-libc's ``__divsf3x`` denormalises a
-truncated 40-bit quotient and loses sticky bits. ``div`` reproduces that path
-exactly from the integer long division.
+result of + - * / (53 >= 2*24 + 2), which is what avr-libc returns, except:
+
+- multiplication whose exact product is below 2**-126: ``__mulsf3x`` shifts its
+  48-bit product right to denormalise it and drops the bits shifted out, so the
+  sticky bit misses them (``mul`` models the integer path);
+- division whose quotient is subnormal: ``__divsf3x`` denormalises a truncated
+  quotient and loses sticky bits (``div`` models it);
+- NaN results: ``__fp_nan`` loads only the top two bytes, 0xFFC0, and leaves the low
+  two bytes of the first operand: a NaN result is 0xFFC0xxxx, xxxx from ``a``;
+- float to integer outside the range (undefined in C): ``__fixsfsi`` gives INT32_MIN
+  for NaN, inf and |x| >= 2**31; ``__fixunssfsi`` gives 0 for NaN, inf and
+  |x| >= 2**32, and wraps negative values modulo 2**32.
+
+Comparisons (``__cmpsf2``, ``__gesf2``, ``__unordsf2``) are IEEE's, so the port
+compares Python floats. See docs/avr-arithmetic.md for the sweep that checks all of
+this on the AVR.
 """
 
 from __future__ import annotations
 
 import math
 import struct
-from fractions import Fraction
 
 _F32 = struct.Struct("<f")
 _U32 = struct.Struct("<I")
@@ -41,19 +52,70 @@ def from_bits(word: int) -> float:
     return _unpack(_U32.pack(word & 0xFFFFFFFF))[0]
 
 
+def _nan(a: float) -> float:
+    """avr-libc's NaN result: 0xFFC0 over the low 16 bits of the first operand."""
+    return from_bits(0xFFC00000 | (bits(a) & 0xFFFF))
+
+
 def add(a: float, b: float) -> float:
-    """``a + b`` in binary32 (one rounding)."""
-    return f32(a + b)
+    """``a + b`` as ``__addsf3``: correctly rounded; NaN as ``_nan``."""
+    r = a + b
+    return _nan(a) if r != r else f32(r)
 
 
 def sub(a: float, b: float) -> float:
-    """``a - b`` in binary32 (one rounding)."""
-    return f32(a - b)
+    """``a - b`` as ``__subsf3``: correctly rounded; NaN as ``_nan``."""
+    r = a - b
+    return _nan(a) if r != r else f32(r)
 
 
 def mul(a: float, b: float) -> float:
-    """``a * b`` in binary32 (one rounding)."""
-    return f32(a * b)
+    """``a * b`` as avr-libc's ``__mulsf3`` computes it: correctly rounded unless the
+    exact product is below 2**-126 (see ``_mul_small``)."""
+    p = a * b                      # exact: 48 significant bits, no double underflow
+    if p != p:
+        return _nan(a)
+    if p == 0.0 or abs(p) >= MIN_NORMAL:   # zero operand, normal, overflow
+        return f32(p)
+    return _mul_small(a, b)
+
+
+def _split(word: int) -> tuple[int, int]:
+    """``__fp_splitA``: (exponent 1..254, 24-bit mantissa) of a finite nonzero value;
+    subnormals get exponent 1 and no hidden bit."""
+    exponent = (word >> 23) & 0xFF
+    mantissa = word & 0x7FFFFF
+    if exponent == 0:
+        return 1, mantissa
+    return exponent, mantissa | 0x800000
+
+
+def _mul_small(a: float, b: float) -> float:
+    """``__mulsf3x`` + ``__fp_round`` for finite nonzero operands, bit for bit."""
+    wa, wb = bits(a), bits(b)
+    sign = (wa ^ wb) & 0x80000000
+    ea, ma = _split(wa)
+    eb, mb = _split(wb)
+    product = ma * mb                  # rA2.rA1.rA0.rAE.ZH.ZL, 48 bits
+    e = ea + eb - 127
+    if e < 0:
+        if e < -24:
+            return from_bits(sign)     # __fp_szero
+        product >>= -e                 # lsr/ror: the bits shifted out of ZL are lost
+        e = 0
+    elif e > 0:
+        while not product & (1 << 47):     # normalise, down to exponent 0 at most
+            product <<= 1
+            e -= 1
+            if e == 0:
+                break
+        if e >= 254:
+            return from_bits(sign | 0x7F800000)
+    word = (e << 23) + (product >> 24)     # the hidden bit carries into the exponent
+    guard = (product >> 23) & 1
+    if guard and (product & 0x7FFFFF or word & 1):   # __fp_round, ties to even
+        word += 1
+    return from_bits(sign | word)
 
 
 _TWO_MIN_NORMAL = 2.0 * MIN_NORMAL
@@ -65,14 +127,16 @@ def div(a: float, b: float) -> float:
         q = a / b
     except ZeroDivisionError:
         return _div_by_zero(a, b)
-    if abs(q) >= _TWO_MIN_NORMAL or q == 0.0 or q != q:   # normal, inf, zero or NaN
+    if q != q:
+        return _nan(a)
+    if abs(q) >= _TWO_MIN_NORMAL or q == 0.0:   # normal, inf or zero
         return f32(q)
     return _div_subnormal(a, b)
 
 
 def _div_by_zero(a: float, b: float) -> float:
     if a == 0.0 or math.isnan(a):
-        return math.nan
+        return _nan(a)
     negative = (math.copysign(1.0, a) < 0) != (math.copysign(1.0, b) < 0)
     return -math.inf if negative else math.inf
 
@@ -80,20 +144,22 @@ def _div_by_zero(a: float, b: float) -> float:
 def _div_subnormal(a: float, b: float) -> float:
     """Quotients near or below the smallest normal: avr-libc's denormalisation."""
     negative = (a < 0) != (b < 0)
-    quotient = abs(Fraction(a)) / abs(Fraction(b))
+    na, da = abs(a).as_integer_ratio()
+    nb, db = abs(b).as_integer_ratio()
+    num, den = na * db, da * nb        # the exact quotient num / den
     # Normalise: quotient = (q + frac) * 2**(e - 149) with 2**23 <= q < 2**24.
-    e = quotient.numerator.bit_length() - quotient.denominator.bit_length() + 126
+    e = num.bit_length() - den.bit_length() + 126
     while True:
-        scaled = quotient * Fraction(2) ** (149 - e)
-        if scaled < 2**23:
+        s = 149 - e
+        n, d = (num << s, den) if s >= 0 else (num, den << -s)
+        if n < d << 23:
             e -= 1
-        elif scaled >= 2**24:
+        elif n >= d << 24:
             e += 1
         else:
             break
-    q = scaled.numerator // scaled.denominator
-    frac = scaled - q
-    extra = 0x00 if frac < Fraction(1, 2) else 0x80 if frac == Fraction(1, 2) else 0xFF
+    q, r = divmod(n, d)
+    extra = 0x00 if 2 * r < d else 0x80 if 2 * r == d else 0xFF
     if e >= 0:
         return f32(a / b)  # normal: the rounding below is exact rounding
     shift = -e
@@ -120,12 +186,18 @@ def from_int(n: int) -> float:
 
 
 def to_int_trunc(x: float) -> int:
-    """``(int)``/``(long)`` of a float in range: truncation toward zero."""
+    """``(long)x`` as ``__fixsfsi``: truncation toward zero; INT32_MIN for NaN, inf and
+    |x| >= 2**31. (``(int)x`` is its low 16 bits.)"""
+    if x != x or abs(x) >= 2.0**31:
+        return -(2**31)
     return int(x)
 
 
 def to_u32(x: float) -> int:
-    """``(unsigned long)`` of a non-negative float below 2**32."""
+    """``(unsigned long)x`` as ``__fixunssfsi``: truncation of |x|, negated modulo 2**32
+    for negative x; 0 for NaN, inf and |x| >= 2**32."""
+    if x != x or abs(x) >= 2.0**32:
+        return 0
     return int(x) & 0xFFFFFFFF
 
 
