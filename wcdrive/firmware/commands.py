@@ -17,7 +17,7 @@ import functools
 import re
 
 from wcdrive.avr.avrlibc import strtod
-from wcdrive.avr.f32 import constrain, div, f32, from_int
+from wcdrive.avr.f32 import add, constrain, div, from_int, mul, sub
 from wcdrive.firmware import constants as C
 from wcdrive.firmware.motion import accept_command, emergency_halt
 from wcdrive.firmware.output import DATA_HELLO, DATA_NONE, DATA_PARAM, answer, reject, send, send_event
@@ -150,14 +150,14 @@ def parse_cmd_vel(buf: bytes, max_wheel: float) -> tuple[int, float, float]:
         raise ParseError("syntax")
     x = parse_bounded(f[0], 2, True, C.MAX_LINEAR)
     t = parse_bounded(f[1], 2, True, C.MAX_ANGULAR)
-    half_turn = div(f32(t * C.WHEELBASE), 2.0)
-    right = div(f32(x + half_turn), C.WHEEL_RADIUS)
-    left = div(f32(x - half_turn), C.WHEEL_RADIUS)
+    half_turn = div(mul(t, C.WHEELBASE), 2.0)
+    right = div(add(x, half_turn), C.WHEEL_RADIUS)
+    left = div(sub(x, half_turn), C.WHEEL_RADIUS)
     peak = abs(right) if abs(right) > abs(left) else abs(left)
     if peak > max_wheel:
         k = div(max_wheel, peak)
-        right = f32(right * k)
-        left = f32(left * k)
+        right = mul(right, k)
+        left = mul(left, k)
     return C.MODE_CMDVEL, right, left
 
 
@@ -188,11 +188,11 @@ def parse_ppm(buf: bytes, max_wheel: float) -> tuple[int, float, float] | None:
             lost = True
     if lost:
         return None
-    fwd = f32(from_int(shape_stick(channels[C.PPM_FWD_CHANNEL] - C.PPM_NEUTRAL)) * _PPM_PER_US)
-    turn = f32(from_int(shape_stick(channels[C.PPM_TURN_CHANNEL] - C.PPM_NEUTRAL)) * _PPM_PER_US)
+    fwd = mul(from_int(shape_stick(channels[C.PPM_FWD_CHANNEL] - C.PPM_NEUTRAL)), _PPM_PER_US)
+    turn = mul(from_int(shape_stick(channels[C.PPM_TURN_CHANNEL] - C.PPM_NEUTRAL)), _PPM_PER_US)
     cap = max_wheel if max_wheel < C.PPM_MAX_WHEEL else C.PPM_MAX_WHEEL
-    right = constrain(f32(fwd - turn), -cap, cap)
-    left = constrain(f32(fwd + turn), -cap, cap)
+    right = constrain(sub(fwd, turn), -cap, cap)
+    left = constrain(add(fwd, turn), -cap, cap)
     return C.MODE_PPM, right, left
 
 

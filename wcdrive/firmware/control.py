@@ -4,7 +4,7 @@ and feedback."""
 
 from __future__ import annotations
 
-from wcdrive.avr.f32 import div, f32, from_int
+from wcdrive.avr.f32 import add, div, from_int, mul, neg, sub, to_int_trunc
 from wcdrive.firmware import constants as C
 from wcdrive.firmware.motion import emergency_halt, pivot_step
 from wcdrive.firmware.output import (
@@ -23,33 +23,33 @@ _OUT_MAX = C.PID_OUT_MAX
 def compute_pid(setpoint: float, measurement: float, integral: float, prev_meas: float,
                 kp: float, ki: float, kd: float, dt: float) -> tuple[float, float]:
     """``computePID``: returns ``(clamped output, new integral)``."""
-    error = f32(setpoint - measurement)
-    integral = f32(integral + f32(error * dt))
+    error = sub(setpoint, measurement)
+    integral = add(integral, mul(error, dt))
     limit = div(_OUT_MAX, ki)
     # constrain(integral, -limit, limit)
     integral = -limit if integral < -limit else (limit if integral > limit else integral)
-    derivative = div(-f32(measurement - prev_meas), dt)
-    p_term = f32(kp * error)
-    d_term = f32(kd * derivative)
-    output = f32(f32(p_term + f32(ki * integral)) + d_term)
+    derivative = div(neg(sub(measurement, prev_meas)), dt)
+    p_term = mul(kp, error)
+    d_term = mul(kd, derivative)
+    output = add(add(p_term, mul(ki, integral)), d_term)
     clamped = -_OUT_MAX if output < -_OUT_MAX else (_OUT_MAX if output > _OUT_MAX else output)
     if output != clamped:
-        integral = div(f32(f32(clamped - p_term) - d_term), ki)
+        integral = div(sub(sub(clamped, p_term), d_term), ki)
     return clamped, integral
 
 
 def ramp_toward(current: float, target: float, max_change: float) -> float:
     """``rampToward``: ``current`` moved toward ``target`` by at most ``max_change``."""
-    diff = f32(target - current)
+    diff = sub(target, current)
     if abs(diff) <= max_change:
         return target
-    return f32(current + (max_change if diff > 0.0 else -max_change))
+    return add(current, max_change if diff > 0.0 else neg(max_change))
 
 
 def set_motor(output: float) -> tuple[int, int]:
     """``setMotor``: ``(pwm duty, dir level)`` for a PID output."""
     direction = C.HIGH if output >= 0.0 else C.LOW
-    return int(f32(abs(output) * C.PWM_SCALE)) & 0xFF, direction
+    return to_int_trunc(mul(abs(output), C.PWM_SCALE)) & 0xFF, direction
 
 
 WHEEL_OK, WHEEL_SUSPECT, WHEEL_STALLED, WHEEL_REVERSED, WHEEL_IMPLAUSIBLE, WHEEL_NO_EFFECT = range(6)
@@ -71,7 +71,7 @@ def no_effect(applied_pwm: int, applied_dir: int, setpoint: float, measured: flo
     if not toward or setpoint != effort_setpoint or progress > effort_speed:
         return False, (applied_pwm, progress, setpoint, 0)
     effort_pwm = min(effort_pwm, applied_pwm)
-    shortfall = abs(measured) < f32(C.FAULT_EFFORT_SHORTFALL * abs(setpoint))
+    shortfall = abs(measured) < mul(C.FAULT_EFFORT_SHORTFALL, abs(setpoint))
     ticks = (ticks + 1) & 0xFF if shortfall and applied_pwm >= effort_pwm + C.FAULT_EFFORT_PWM else 0
     return ticks >= C.FAULT_EFFORT_TICKS, (effort_pwm, effort_speed, effort_setpoint, ticks)
 
@@ -172,10 +172,10 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
     s.prevEncL, s.prevEncR = s.encTickL, s.encTickR
 
     per_second = div(C.TWO_PI, dt)
-    s.rawVelL = f32(-div(from_int(delta_l), C.CPR) * per_second)
-    s.rawVelR = f32(div(from_int(delta_r), C.CPR) * per_second)
-    s.filtVelL = f32(f32(C.ALPHA * s.rawVelL) + f32(C.ONE_MINUS_ALPHA * s.filtVelL))
-    s.filtVelR = f32(f32(C.ALPHA * s.rawVelR) + f32(C.ONE_MINUS_ALPHA * s.filtVelR))
+    s.rawVelL = mul(neg(div(from_int(delta_l), C.CPR)), per_second)
+    s.rawVelR = mul(div(from_int(delta_r), C.CPR), per_second)
+    s.filtVelL = add(mul(C.ALPHA, s.rawVelL), mul(C.ONE_MINUS_ALPHA, s.filtVelL))
+    s.filtVelR = add(mul(C.ALPHA, s.rawVelR), mul(C.ONE_MINUS_ALPHA, s.filtVelR))
 
     check_l, check_r = _check_faults(s, delta_l, delta_r, ill_l, ill_r, out)
 
@@ -188,7 +188,7 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
         emergency_halt(s)
         send(s, send_event("WATCHDOG"), out)
 
-    max_change = f32((s.estopDecel if s.emergencyStop else s.maxAccel) * dt)
+    max_change = mul(s.estopDecel if s.emergencyStop else s.maxAccel, dt)
     s.setpointL = ramp_toward(s.setpointL, s.targetL, max_change)
     s.setpointR = ramp_toward(s.setpointR, s.targetR, max_change)
 

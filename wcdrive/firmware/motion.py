@@ -7,7 +7,7 @@ the pending command. ``pivot_step`` runs once per control tick, after the output
 
 from __future__ import annotations
 
-from wcdrive.avr.f32 import f32
+from wcdrive.avr.f32 import add, mul
 from wcdrive.firmware.constants import (
     PIVOT_SPEED,
     PIVOT_START_SPEED,
@@ -48,7 +48,7 @@ def accept_command(s: FirmwareState, new_mode: int, right: float, left: float) -
     s.mode = new_mode
     s.cmdSinceTick = 1
     s.emergencyStop = 0
-    travel = f32(f32(f32(right + left) * 0.5) * WHEEL_RADIUS)
+    travel = mul(mul(add(right, left), 0.5), WHEEL_RADIUS)
     if right == 0.0 and left == 0.0:
         s.pivotPhase = PIVOT_NONE
         s.pivotTicksLeft = 0

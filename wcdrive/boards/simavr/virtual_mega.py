@@ -419,7 +419,10 @@ class VirtualMega:
         ports = (ctypes.c_uint8 * n)(*[ord(e[1][0]) for e in events])
         bits = (ctypes.c_uint8 * n)(*[e[1][1] for e in events])
         values = (ctypes.c_uint8 * n)(*[e[2] for e in events])
-        if self._c.wcsim_schedule_many(self._s, n, cycles, kinds, ports, bits, values) != 0:
+        status = self._c.wcsim_schedule_many(self._s, n, cycles, kinds, ports, bits, values)
+        if status == -2:
+            raise ValueError("pin events must be in cycle order")
+        if status != 0:
             raise HarnessError("out of memory queueing pin events")
 
     # ---- observation -------------------------------------------------------------

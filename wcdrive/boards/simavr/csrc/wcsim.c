@@ -104,6 +104,7 @@ typedef struct {
     /* hook log */
     uint32_t hook_pc[WCSIM_MAX_HOOKS];
     int n_hooks;
+    uint8_t *hook_bits;   /* one bit per flash word: a hook starts there (one test per instruction) */
     uint32_t break_mask;  /* run_until stops before the hooks whose bit is set */
     int at_break;         /* stopped at a break: do not log the same entry twice */
     wcsim_hit_t *hits;
@@ -353,6 +354,7 @@ void wcsim_free(wcsim_t *s) {
     if (!s) return;
     if (s->vcd_on) avr_vcd_close(&s->vcd);
     free(s->rx_lost);
+    free(s->hook_bits);
     free(s->events);
     free(s->tx);
     free(s->hits);
@@ -399,17 +401,50 @@ static void apply_event(wcsim_t *s, const wcsim_event_t *e) {
     }
 }
 
-/* Queues n events at once (sorted by cycle), for encoder edge trains. */
+/* Queues n events at once, for encoder edge trains: the batch (sorted by cycle) is merged
+ * with the pending queue in one pass, the queue's events first at equal cycles (as
+ * one wcsim_schedule call after another would order them). Linear: a second encoder's
+ * train no longer shifts the first one's events one insertion at a time. */
 int wcsim_schedule_many(wcsim_t *s, size_t n, const uint64_t *cycles, const uint8_t *kinds,
                         const uint8_t *ports, const uint8_t *bits, const uint8_t *values) {
-    for (size_t i = 0; i < n; i++) {
-        if (wcsim_schedule(s, cycles[i], kinds[i], ports[i], bits[i], values[i]) != 0) return -1;
+    if (n == 0) return 0;
+    for (size_t i = 1; i < n; i++) {
+        if (cycles[i] < cycles[i - 1]) return -2;
     }
+    size_t pending = s->n_events - s->next_event;
+    wcsim_event_t *merged = malloc((pending + n) * sizeof(*merged));
+    if (!merged) return -1;
+    size_t a = s->next_event, b = 0, k = 0;
+    while (a < s->n_events || b < n) {
+        if (b >= n || (a < s->n_events && s->events[a].cycle <= cycles[b])) {
+            merged[k++] = s->events[a++];
+        } else {
+            merged[k].cycle = cycles[b];
+            merged[k].kind = kinds[b];
+            merged[k].port = ports[b];
+            merged[k].bit = bits[b];
+            merged[k].value = values[b];
+            k++;
+            b++;
+        }
+    }
+    free(s->events);
+    s->events = merged;
+    s->cap_events = pending + n;
+    s->n_events = pending + n;
+    s->next_event = 0;
     return 0;
 }
 
 int wcsim_add_hook(wcsim_t *s, uint32_t pc_byte_addr) {
     if (s->n_hooks >= WCSIM_MAX_HOOKS) return -1;
+    uint32_t words = (s->avr->flashend + 1) / 2;
+    if (pc_byte_addr / 2 >= words) return -1;
+    if (!s->hook_bits) {
+        s->hook_bits = calloc(words / 8 + 1, 1);
+        if (!s->hook_bits) return -1;
+    }
+    s->hook_bits[pc_byte_addr >> 4] |= (uint8_t)(1u << ((pc_byte_addr >> 1) & 7));
     s->hook_pc[s->n_hooks] = pc_byte_addr;
     return s->n_hooks++;
 }
@@ -490,8 +525,10 @@ int wcsim_run_until(wcsim_t *s, uint64_t target) {
             else { s->crashed = 1; return -1; }   /* not simavr 1.6's watchdog: unknown state */
             continue;
         }
+        uint32_t pc = avr->pc;
+        if (s->hook_bits && (s->hook_bits[pc >> 4] & (1u << ((pc >> 1) & 7))))
         for (int h = 0; h < s->n_hooks; h++) {
-            if (avr->pc == s->hook_pc[h] && !s->at_break) {
+            if (pc == s->hook_pc[h] && !s->at_break) {
                 record_hit(s, h);
                 if (s->break_mask & (1u << h)) {
                     s->at_break = 1;
