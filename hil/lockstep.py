@@ -53,6 +53,8 @@ from wcdrive.hil.traces import Trace
 
 _WATCHED = FLOAT_FIELDS + INT_FIELDS + INPUT_FIELDS + ("rxLost",)
 
+#: How long the Mega may run past the end of a trace to finish its last event (s).
+FINISH_S = 0.02
 #: How late a control tick may be before the gap counts as a stall (ms past the period).
 TICK_TOLERANCE_MS = 10
 #: How far ``millis()`` may drift from the cycle clock between two ticks (ms).
@@ -198,7 +200,14 @@ class Recorder:
         self._close_last(at_event=False)
 
     def recording(self, trace: Trace) -> Recording:
-        """What was logged so far, as the ``Recording`` of ``trace``."""
+        """What was logged so far, as the ``Recording`` of ``trace``. The last event may
+        still be running where the trace ends (a tick takes a few ms): the Mega runs on
+        until the next event starts, or ``FINISH_S`` at most, so that the state it left
+        is complete; that next event and anything after it are not part of the run."""
+        end = self.mega.cycle
+        if self.events and self._reset_pending is None:
+            self.mega.run_to_break(end + round(FINISH_S * F_CPU))
+            self._close_last(at_event=False)
         if self.initial is None:
             self.initial = self._snapshot()[0]     # no event yet: the state now
         if self._reset_pending is not None:
@@ -208,8 +217,8 @@ class Recorder:
         resets = list(self.resets)
         tx_cycles = [c for c, _ in self.mega.tx_log]
         mega = self.mega
-        return Recording(trace, self.initial, self.events, tx, mega.cycle, resets, tx_cycles,
-                         list(mega.rx_wire), list(mega.rx_lost), rx_logged=True)
+        return Recording(trace, self.initial, self.events, tx, end, resets, tx_cycles,
+                         list(mega.rx_wire), [x for x in mega.rx_lost if x.cycle < end], rx_logged=True)
 
 
 def record(trace: Trace, elf: str | Path | None = None) -> Recording:
@@ -264,6 +273,7 @@ def compare(recording: Recording) -> Report:
     # setup(), somewhere between a reset and the first event after it): the candidates.
     offsets: dict[tuple[str, int], set[int]] = {(side, k): {0} for side in ("left", "right") for k in (0, 1)}
     resets = list(recording.resets)
+    masked: dict[str, tuple[int, int, int]] = {}     # side: (cycle, count, illegal) frozen
     ticks = 0
     events = recording.events
     for i, ev in enumerate(events):
@@ -280,7 +290,22 @@ def compare(recording: Recording) -> Report:
             exit_cycle = events[i + 1].cycle if i + 1 < len(events) else recording.end_cycle
             for side, suffix in (("left", "L"), ("right", "R")):
                 if latched["stormTick" + suffix]:
-                    continue        # masked by the storm guard: its count stopped early
+                    # Masked by the storm guard: its count stopped early. Remember the
+                    # frozen counts and when: a "reset" unmasks it and counting goes on
+                    # from there.
+                    masked[side] = (ev.cycle, latched["encTick" + suffix], latched["illTick" + suffix])
+                    continue
+                if side in masked:
+                    # Unmasked since the last tick: the ISR took up counting from the
+                    # frozen counts at the unmask, somewhere between the two ticks.
+                    since, frozen_count, frozen_illegal = masked.pop(side)
+                    for k, frozen in ((0, frozen_count), (1, frozen_illegal)):
+                        counts, cycles = decoded[side][k]
+                        lo = int(np.searchsorted(cycles, since, "right"))
+                        hi = int(np.searchsorted(cycles, ev.cycle, "right"))
+                        base = {int(counts[lo - 1]) if lo > 0 else 0}
+                        base.update(int(c) for c in counts[lo:hi])
+                        offsets[(side, k)] = {c - frozen for c in base}
                 for what, k in (("encTick", 0), ("illTick", 1)):
                     value = latched[what + suffix]
                     if not any(_count_possible(decoded[side][k], value + offset, ev.cycle, exit_cycle)
@@ -306,6 +331,7 @@ def compare(recording: Recording) -> Report:
             # The board reset before the next event: the port starts again from setup()
             # and must match the new boot's state.
             cycle, mcusr, booted = resets.pop(0)
+            masked.clear()                  # the new boot counts from 0, unmasked
             fw = Firmware(FirmwareState(lastControlTime=int(booted["lastControlTime"])))
             boots.append(bytearray(boot_line(reset_cause_name(mcusr))))
             for side in ("left", "right"):

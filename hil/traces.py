@@ -10,7 +10,10 @@ to 40,000 edges/s and boots with ``millis()`` just below its 2**32 wrap; and pro
 v3: frames with sequence numbers and good, bad or missing CRCs (one or more flipped
 bits, lower-case hex, no sequence number, the ``$`` flipped to ``,``), hello (which
 turns the TLM lines on and from then on refuses unframed lines, but for stops and
-estop), get/set of every parameter in and out of range, estop and reset.
+estop), get/set of every parameter in and out of range, estop and reset; bursts of
+20 to 150 commands back to back (loop() falls behind: received bytes are lost and
+accounted for, the output budget is spent) and encoder storms of 60,000 to 500,000
+edges/s (the storm guard, the implausible-encoder fault).
 """
 
 from __future__ import annotations
@@ -111,6 +114,8 @@ class Trace:
     serial: list[tuple[float, bytes]] = field(default_factory=list)
     encoders: dict[str, EdgeTrain] = field(default_factory=dict)
     millis_start: int | None = None
+    #: Encoder storms in the trains (``storm``): (side, start s, end s).
+    storms: list[tuple[str, float, float]] = field(default_factory=list)
 
     def describe(self) -> str:
         """The trace as text for a failure report, one serial write a line."""
@@ -119,6 +124,7 @@ class Trace:
         for side, train in self.encoders.items():
             lines.append(f"  {side}: {train.times.size} edges, count {train.start_count}"
                          f" -> {train.end_count}")
+        lines += [f"  storm on {side} from {a:.4f}s to {b:.4f}s" for side, a, b in self.storms]
         return "\n".join(lines)
 
 
@@ -353,6 +359,47 @@ def _with_illegal(draw: Draw, train: EdgeTrain) -> EdgeTrain:
     return EdgeTrain(train.times, states, train.start_count, train.end_count)
 
 
+def storm(draw: Draw, encoders: dict[str, EdgeTrain],
+          duration: float) -> tuple[dict[str, EdgeTrain], tuple[str, float, float]]:
+    """One encoder with a burst of chatter in it: channel A toggling at 100,000 to
+    500,000 edges/s for 2.5 to 20 ms (a loose connector, EMI), that wheel's own edges in
+    the window dropped; the storm guard masks it within the first Timer0 period and the
+    tick latches an implausible-encoder fault. The other wheel is still from just before
+    the storm until the guard has surely tripped: its interrupts would compete with the
+    storm's for those 0.6 ms, and the edges it would lose are beyond the decoder model's
+    latency (issue 16's timing budget)."""
+    side = draw.choice(["left", "right"])
+    rate = draw.real(100_000.0, 500_000.0)
+    length = draw.real(0.0025, 0.02)
+    t0 = draw.real(0.1, max(0.1, duration - 0.1))
+    n = max(2, int(rate * length) // 2 * 2)
+
+    def cut(train: EdgeTrain, start: float, stop: float,
+            inserted: tuple[np.ndarray, np.ndarray]) -> EdgeTrain:
+        before, after = train.times < start, train.times > stop
+        times = np.concatenate((train.times[before], inserted[0], train.times[after]))
+        states = np.concatenate((train.states[before], inserted[1].astype(train.states.dtype),
+                                 train.states[after]))
+        return EdgeTrain(times, states, train.start_count, train.end_count)
+
+    train = encoders[side]
+    previous = train.states[train.times < t0]
+    state = int(previous[-1]) if previous.size else 0b11
+    toggles = np.where(np.arange(n) % 2 == 0, state ^ 0b10, state)
+    out = dict(encoders)
+    out[side] = cut(train, t0, t0 + n / rate, (t0 + np.arange(n) / rate, toggles))
+    other = "right" if side == "left" else "left"
+    empty = (np.zeros(0), np.zeros(0, dtype=np.uint8))
+    out[other] = cut(encoders[other], t0 - 0.0002, t0 + 0.002, empty)
+    return out, (side, t0, t0 + n / rate)
+
+
+def burst(draw: Draw, travel_sign: list[int], said_hello: list[bool]) -> bytes:
+    """20 to 150 commands back to back in one write: more than loop() can parse while a
+    tick formats its lines, and answers enough to test the output budget."""
+    return b"".join(command(draw, travel_sign, said_hello) + b"\n" for _ in range(draw.integer(20, 150)))
+
+
 def _phase(state: int) -> int:
     return (0b11, 0b01, 0b00, 0b10).index(int(state))
 
@@ -368,7 +415,10 @@ def generate_trace(draw: Draw, duration: float) -> Trace:
     travel_sign = [1]
     said_hello = [False]
     while t < duration - 0.05:
-        data = command(draw, travel_sign, said_hello) + terminator(draw)
+        if draw.boolean(0.02):
+            data = burst(draw, travel_sign, said_hello)
+        else:
+            data = command(draw, travel_sign, said_hello) + terminator(draw)
         serial.append((t, data))
         gap = draw.integer(0, 9)
         if gap == 0:
@@ -378,4 +428,9 @@ def generate_trace(draw: Draw, duration: float) -> Trace:
         else:
             t += draw.real(0.03, 0.35)       # inside a pivot, often
     encoders = {side: encoder_motion(draw, duration) for side in ("left", "right")}
-    return Trace(duration=duration, serial=serial, encoders=encoders, millis_start=millis_start)
+    storms = []
+    if draw.boolean(0.12):
+        encoders, where = storm(draw, encoders, duration)
+        storms.append(where)
+    return Trace(duration=duration, serial=serial, encoders=encoders, millis_start=millis_start,
+                 storms=storms)

@@ -24,6 +24,57 @@ def thorough() -> bool:
     return settings().max_examples >= 200
 
 
+# ---- how much the differential proof covered in this run ---------------------------
+# Every lock-step comparison (hil.lockstep.compare: the port against the firmware in
+# simavr, whichever test runs it) adds the simulated seconds it compared to the running
+# test's user_properties; the summary (on the controller, from every xdist worker's
+# reports) prints the total. Wrapped here, before any test module imports compare.
+_current: list[pytest.Item] = []
+
+
+def _count_compared_seconds() -> None:
+    from wcdrive.hil import lockstep
+
+    original = lockstep.compare
+
+    def compare(recording: lockstep.Recording) -> lockstep.Report:
+        report = original(recording)
+        if _current:
+            _current[-1].user_properties.append(("differential_s", recording.end_cycle / 16e6))
+        return report
+
+    compare.__doc__ = original.__doc__
+    lockstep.compare = compare
+
+
+_count_compared_seconds()
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_call(item: pytest.Item):
+    _current.append(item)
+    try:
+        return (yield)
+    finally:
+        _current.pop()
+
+
+_compared: dict[str, float] = {}
+
+
+def pytest_runtest_logreport(report: pytest.TestReport) -> None:
+    seconds = sum(v for k, v in report.user_properties if k == "differential_s")
+    if seconds and report.when == "call":
+        _compared[report.nodeid] = seconds
+
+
+def pytest_terminal_summary(terminalreporter) -> None:
+    if _compared:
+        terminalreporter.write_line(
+            f"differential (port against firmware, hil.lockstep.compare): {sum(_compared.values()):.0f} "
+            f"simulated s in {len(_compared)} tests")
+
+
 @pytest.fixture(scope="session")
 def elf() -> Path:
     from wcdrive.boards.simavr.build import firmware_elf

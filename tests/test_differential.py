@@ -1,6 +1,7 @@
 """The differential proof: the port against the compiled firmware in simavr, on
 traces hypothesis generates (issue: wcdrive.firmware). The ``ci`` profile runs
-2 x 100 traces of 5 simulated seconds; the default profile a few short ones."""
+2 x 200 traces of 5 simulated seconds (2,000 s; the summary line of a test run gives
+the total over every lock-step comparison); the default profile a few short ones."""
 
 from __future__ import annotations
 
@@ -18,7 +19,7 @@ from wcdrive.plant.encoders import edges_from_trajectory
 pytestmark = pytest.mark.simavr
 
 DURATION = 5.0 if thorough() else 1.5
-EXAMPLES = 100 if thorough() else 4
+EXAMPLES = 200 if thorough() else 4
 
 
 def _assert_same(trace: Trace, elf) -> None:
@@ -40,6 +41,14 @@ def test_port_matches_firmware(elf, half: str, data) -> None:
 @pytest.mark.parametrize("seed", [0, 1, 2, 128, 130])
 def test_port_matches_firmware_on_fixed_seeds(elf, seed: int) -> None:
     _assert_same(generate_trace(RandomDraw(seed), 2.0), elf)
+
+
+@pytest.mark.parametrize("seed", [
+    21000068,   # a storm masks the right encoder, "reset" unmasks it: counting goes on from the frozen count
+    21000079,   # the trace ends 1,455 cycles into processByte(','): its state read only once it is done
+])
+def test_regression_found_by_the_wider_generator(elf, seed: int) -> None:
+    _assert_same(generate_trace(RandomDraw(seed), 5.0), elf)
 
 
 def test_millis_wrap_inside_a_trace(elf) -> None:
@@ -75,7 +84,11 @@ def test_regression_generated_edge_rate_is_capped(seed: int) -> None:
     firmware's counting limit."""
     trace = generate_trace(RandomDraw(seed), 1.0)
     window = 0.002
-    for train in trace.encoders.values():
+    for side, train in trace.encoders.items():
+        for storm_side, a, b in trace.storms:        # a storm is meant to be faster
+            if storm_side == side:
+                keep = (train.times < a) | (train.times > b)
+                train = type(train)(train.times[keep], train.states[keep], 0, 0)
         if train.times.size > 1:
             ends = np.searchsorted(train.times, train.times + window, "right")
             most = int(np.max(ends - np.arange(train.times.size)))
