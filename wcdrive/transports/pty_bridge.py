@@ -4,6 +4,12 @@ outside programs (a ROS 2 node, miniterm, screen) open the simulated chair by pa
     wcdrive pty [--speed 1.0] [--link /tmp/ttyWC0]
 
 prints the device path and runs until interrupted.
+
+With ``on_open`` (the DTR model) the bridge does not hold the pty's slave open
+itself: it polls the master, whose POLLHUP ends when a program opens the device, and
+calls ``on_open`` then (a real Mega's USB-serial bridge pulls RESET when DTR rises on
+open). While no program has the device open, what the board sends is dropped, as a
+closed port drops it. An open and close within one poll period (20 ms) is not seen.
 """
 
 from __future__ import annotations
@@ -15,6 +21,7 @@ import threading
 import time
 import tty
 from pathlib import Path
+from collections.abc import Callable
 from typing import Protocol
 
 
@@ -34,7 +41,9 @@ class SerialLike(Protocol):
 class PtyBridge:
     """A pseudo-terminal whose other end is ``board``; the bridge owns the board."""
 
-    def __init__(self, board: SerialLike, link: str | Path | None = None) -> None:
+    def __init__(self, board: SerialLike, link: str | Path | None = None,
+                 on_open: Callable[[], object] | None = None) -> None:
+        """``on_open``: called each time a program opens the device (DTR: reset the board)."""
         self.board = board
         self._master, self._slave = os.openpty()
         tty.setraw(self._slave)
@@ -43,6 +52,13 @@ class PtyBridge:
         termios.tcsetattr(self._slave, termios.TCSANOW, attrs)
         os.set_blocking(self._master, False)
         self.device = os.ttyname(self._slave)
+        self.on_open = on_open
+        #: Opens of the device seen (with ``on_open``).
+        self.opens = 0
+        self._peer_open = on_open is None
+        if on_open is not None:
+            os.close(self._slave)
+            self._slave = -1
         self.link = Path(link) if link else None
         if self.link:
             if self.link.is_symlink() or self.link.exists():
@@ -69,6 +85,8 @@ class PtyBridge:
         for t in self._threads:
             t.join(timeout=2)
         for fd in (self._master, self._slave):
+            if fd < 0:
+                continue
             try:
                 os.close(fd)
             except OSError:
@@ -83,8 +101,30 @@ class PtyBridge:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
+    def _watch_open(self) -> bool:
+        """With ``on_open``: whether a program has the device open now; calls
+        ``on_open`` when one has just opened it."""
+        poller = select.poll()
+        poller.register(self._master, select.POLLHUP)
+        hung_up = any(ev & select.POLLHUP for _, ev in poller.poll(0))
+        if hung_up:
+            self._peer_open = False
+            time.sleep(0.02)
+            return False
+        if not self._peer_open:
+            self._peer_open = True
+            self.opens += 1
+            reset_input = getattr(self.board, "reset_input", None)
+            if reset_input is not None:
+                reset_input()            # what the board sent to nobody is gone
+            assert self.on_open is not None
+            self.on_open()
+        return True
+
     def _to_board(self) -> None:
         while not self._stop.is_set():
+            if self.on_open is not None and not self._watch_open():
+                continue
             readable, _, _ = select.select([self._master], [], [], 0.05)
             if readable:
                 try:
@@ -102,6 +142,9 @@ class PtyBridge:
         while not self._stop.is_set():
             if not pending:
                 pending = self.board.read(4096, timeout=0.05)
+                continue
+            if not self._peer_open:
+                pending = b""                    # nobody has the port open: lost
                 continue
             _, writable, _ = select.select([], [self._master], [], 0.05)
             if not writable:

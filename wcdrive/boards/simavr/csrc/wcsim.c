@@ -96,6 +96,11 @@ typedef struct {
     uint8_t driven[WCSIM_PORTS], level[WCSIM_PORTS];
     wcsim_reset_t *resets;
     size_t n_resets, cap_resets;
+    /* flow-controlled UART input (wcsim_feed, wcsim_run_fed): bytes wait here until the
+     * USART's receive FIFO has room, as a USB-serial bridge holds them */
+    uint8_t *feed;
+    size_t n_feed, cap_feed, next_feed;
+    avr_uart_t *uart0;
 } wcsim_t;
 
 static void no_sleep(avr_t *avr, avr_cycle_count_t how_long) {
@@ -244,6 +249,7 @@ void wcsim_free(wcsim_t *s) {
     free(s->tx);
     free(s->hits);
     free(s->resets);
+    free(s->feed);
     /* simavr 1.6 has no avr_free(); the MCU struct is reclaimed at exit. */
     free(s);
 }
@@ -476,4 +482,106 @@ void wcsim_vcd_close(wcsim_t *s) {
     avr_vcd_stop(&s->vcd);
     avr_vcd_close(&s->vcd);
     s->vcd_on = 0;
+}
+
+/* ---- a bare chip: flash loaded from Python, a bootloader, flow-controlled UART input ---- */
+
+static avr_uart_t *find_uart0(avr_t *avr) {
+    for (avr_io_t *io = avr->io_port; io; io = io->next) {
+        if (io->kind && strcmp(io->kind, "uart") == 0 && ((avr_uart_t *)io)->name == '0') return (avr_uart_t *)io;
+    }
+    return NULL;
+}
+
+/* A chip with erased flash (0xFF) and no ELF: wcsim_flash_write loads it, wcsim_set_reset_pc
+ * moves the reset vector (BOOTRST). Otherwise as wcsim_new. */
+wcsim_t *wcsim_new_chip(const char *mmcu, uint32_t frequency, char *err, int errlen) {
+    wcsim_t *s = calloc(1, sizeof(*s));
+    if (!s) return NULL;
+    avr_global_logger_set(quiet_logger);
+    s->avr = avr_make_mcu_by_name(mmcu);
+    if (!s->avr) {
+        snprintf(err, errlen, "simavr knows no MCU %s", mmcu);
+        free(s);
+        return NULL;
+    }
+    avr_init(s->avr);
+    s->avr->frequency = frequency;
+    s->avr->log = 0;
+    memset(s->avr->flash, 0xFF, s->avr->flashend + 1);
+    s->avr->codeend = s->avr->flashend;
+    s->avr->sleep = no_sleep;
+    uint32_t flags = 0;
+    avr_ioctl(s->avr, AVR_IOCTL_UART_GET_FLAGS('0'), &flags);
+    flags &= ~(AVR_UART_FLAG_STDIO | AVR_UART_FLAG_POLL_SLEEP);
+    avr_ioctl(s->avr, AVR_IOCTL_UART_SET_FLAGS('0'), &flags);
+    avr_irq_register_notify(avr_io_getirq(s->avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUTPUT),
+                            on_uart_tx, s);
+    static const char *pwm_names[] = {"8>pwm_left", "8>pwm_right"};
+    s->pwm_irq = avr_alloc_irq(&s->avr->irq_pool, 0, 2, pwm_names);
+    s->run_fn = s->avr->run;
+    s->wdt = find_watchdog(s->avr);
+    s->uart0 = find_uart0(s->avr);
+    log_reset(s, WCSIM_RESET_POWER_ON);
+    return s;
+}
+
+uint32_t wcsim_flash_size(wcsim_t *s) { return s->avr->flashend + 1; }
+
+int wcsim_flash_write(wcsim_t *s, uint32_t addr, const uint8_t *buf, uint32_t n) {
+    if ((uint64_t)addr + n > (uint64_t)s->avr->flashend + 1) return -1;
+    memcpy(s->avr->flash + addr, buf, n);
+    return 0;
+}
+
+int wcsim_flash_read(wcsim_t *s, uint32_t addr, uint8_t *buf, uint32_t n) {
+    if ((uint64_t)addr + n > (uint64_t)s->avr->flashend + 1) return -1;
+    memcpy(buf, s->avr->flash + addr, n);
+    return 0;
+}
+
+/* The reset vector (a byte address): BOOTRST programmed moves it to the boot section.
+ * Takes effect now when the core is still at the old vector, else at the next reset. */
+void wcsim_set_reset_pc(wcsim_t *s, uint32_t pc) {
+    if (s->avr->pc == s->avr->reset_pc) s->avr->pc = pc;
+    s->avr->reset_pc = pc;
+}
+
+uint32_t wcsim_pc(wcsim_t *s) { return s->avr->pc; }
+
+/* Bytes for the USART0 receiver, held until its FIFO has room (the XON side of
+ * simavr's UART): none is lost to an overrun; bytes that reach a disabled receiver
+ * are lost, as on the chip. */
+int wcsim_feed(wcsim_t *s, const uint8_t *buf, size_t n) {
+    if (s->next_feed == s->n_feed) s->next_feed = s->n_feed = 0;
+    uint8_t *f = grow(s->feed, &s->cap_feed, s->n_feed + n, 1);
+    if (!f) return -1;
+    s->feed = f;
+    memcpy(s->feed + s->n_feed, buf, n);
+    s->n_feed += n;
+    return 0;
+}
+
+size_t wcsim_feed_pending(wcsim_t *s) { return s->n_feed - s->next_feed; }
+
+void wcsim_feed_clear(wcsim_t *s) { s->next_feed = s->n_feed = 0; }
+
+static void feed_uart(wcsim_t *s) {
+    avr_irq_t *in = avr_io_getirq(s->avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_INPUT);
+    while (s->next_feed < s->n_feed) {
+        if (s->uart0 && ((s->uart0->input.write + 1) & (uart_fifo_fifo_size - 1)) == s->uart0->input.read) break;
+        avr_raise_irq(in, s->feed[s->next_feed++]);
+    }
+}
+
+/* wcsim_run_until, with the held bytes fed to the USART whenever its FIFO has room
+ * (checked every 64 cycles, well under a byte time). */
+int wcsim_run_fed(wcsim_t *s, uint64_t target) {
+    while (s->avr->cycle < target) {
+        feed_uart(s);
+        uint64_t step = s->avr->cycle + 64;
+        int r = wcsim_run_until(s, step < target ? step : target);
+        if (r != 0) return r;
+    }
+    return 0;
 }
