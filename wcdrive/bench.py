@@ -6,7 +6,7 @@
     wcdrive bench replay run.wcrec.json            # the port must agree, byte for byte
     wcdrive bench plot   run.wcrec.json --out DIR
 
-``--port`` takes what ``wcdrive.connect`` takes: a device path, ``simavr://?realtime=1`` (the
+``--port`` takes what ``wcdrive.connect`` takes: a device path, ``simavr://`` (the
 compiled firmware in simavr with the chair behind its pins: what CI uses in place of
 a board) or ``sim://``. ``run`` drives a scenario (``wcdrive sim --list``) the way a
 host would, in real time, recording every byte both ways from the board's reset;
@@ -296,14 +296,14 @@ def run_scenario(name: str, url: str, *, speed: float = 1.0,
 SIMULATED_SCHEMES = ("sim://", "simavr://", "wcsim://", "wcavr://")
 
 
-def wheels_off_the_ground(port: str, ask: Callable[[str], str] = input) -> bool:
+def wheels_off_the_ground(port: str, ask: Callable[[str], str] | None = None) -> bool:
     """Asks whether the chair on ``port`` is on blocks; True for "y"/"yes". A
     simulated board (``SIMULATED_SCHEMES``) is not asked about. No answer (no
     terminal) is a no."""
     if port.startswith(SIMULATED_SCHEMES):
         return True
     try:
-        answer = ask(f"The chair on {port} will move. Are its wheels off the ground? [y/N] ")
+        answer = (ask or input)(f"The chair on {port} will move. Are its wheels off the ground? [y/N] ")
     except EOFError:
         return False
     return answer.strip().lower() in ("y", "yes")

@@ -6,16 +6,21 @@ outside programs (a ROS 2 node, miniterm, screen) open the simulated chair by pa
 prints the device path and runs until interrupted.
 
 With ``on_open`` (the DTR model) the bridge does not hold the pty's slave open
-itself: it polls the master, whose POLLHUP ends when a program opens the device, and
-calls ``on_open`` then (a real Mega's USB-serial bridge pulls RESET when DTR rises on
-open). While no program has the device open, what the board sends is dropped, as a
-closed port drops it. An open and close within one poll period (20 ms) is not seen.
+itself, and calls ``on_open`` each time the first program opens the device (a real
+Mega's USB-serial bridge pulls RESET when DTR rises on open). It counts opens and
+closes with inotify on the slave, so that a close and an immediate reopen are two
+events; where inotify is missing it polls the master, whose POLLHUP ends when a
+program opens the device (an open right after a close may then be missed). While
+no program has the device open, what the board sends is dropped, as a closed port
+drops it.
 """
 
 from __future__ import annotations
 
+import ctypes
 import os
 import select
+import struct
 import termios
 import threading
 import time
@@ -23,6 +28,25 @@ import tty
 from pathlib import Path
 from collections.abc import Callable
 from typing import Protocol
+
+
+_IN_OPEN, _IN_CLOSE = 0x20, 0x08 | 0x10      # <sys/inotify.h>: IN_OPEN, IN_CLOSE_WRITE | _NOWRITE
+
+
+def _inotify(path: str) -> int | None:
+    """A non-blocking inotify descriptor watching opens and closes of ``path``, or
+    None where there is no inotify."""
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        fd = int(libc.inotify_init1(os.O_NONBLOCK | os.O_CLOEXEC))
+    except (OSError, AttributeError):
+        return None
+    if fd < 0:
+        return None
+    if libc.inotify_add_watch(fd, path.encode(), _IN_OPEN | _IN_CLOSE) < 0:
+        os.close(fd)
+        return None
+    return fd
 
 
 class SerialLike(Protocol):
@@ -67,6 +91,8 @@ class PtyBridge:
         self._stop = threading.Event()
         self._threads = [threading.Thread(target=self._to_board, daemon=True),
                          threading.Thread(target=self._from_board, daemon=True)]
+        if on_open is not None:
+            self._threads.append(threading.Thread(target=self._watch_opens, daemon=True))
 
     @property
     def path(self) -> str:
@@ -101,35 +127,65 @@ class PtyBridge:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-    def _watch_open(self) -> bool:
-        """With ``on_open``: whether a program has the device open now; calls
-        ``on_open`` when one has just opened it."""
+    def _opened(self) -> None:
+        self._peer_open = True
+        self.opens += 1
+        reset_input = getattr(self.board, "reset_input", None)
+        if reset_input is not None:
+            reset_input()                    # what the board sent to nobody is gone
+        assert self.on_open is not None
+        self.on_open()
+
+    def _watch_opens(self) -> None:
+        """With ``on_open``: counts the opens and closes of the device (inotify's
+        IN_OPEN and IN_CLOSE on the pty's slave, so that a close and an immediate
+        reopen are two events) and calls ``on_open`` when the first program opens it.
+        Without inotify: the master's POLLHUP, which ends when a program opens it."""
+        watch = _inotify(self.device)
+        if watch is None:
+            self._watch_hangup()
+            return
+        holders = 0
+        try:
+            while not self._stop.is_set():
+                readable, _, _ = select.select([watch], [], [], 0.05)
+                if not readable:
+                    continue
+                data = os.read(watch, 4096)
+                for offset in range(0, len(data) - 15, 16):    # a file's events carry no name
+                    mask = struct.unpack_from("iIII", data, offset)[1]
+                    if mask & _IN_OPEN:
+                        holders += 1
+                        if holders == 1:
+                            self._opened()
+                    if mask & _IN_CLOSE:
+                        holders = max(0, holders - 1)
+                        self._peer_open = holders > 0
+        finally:
+            os.close(watch)
+
+    def _watch_hangup(self) -> None:
         poller = select.poll()
         poller.register(self._master, select.POLLHUP)
-        hung_up = any(ev & select.POLLHUP for _, ev in poller.poll(0))
-        if hung_up:
-            self._peer_open = False
-            time.sleep(0.02)
-            return False
-        if not self._peer_open:
-            self._peer_open = True
-            self.opens += 1
-            reset_input = getattr(self.board, "reset_input", None)
-            if reset_input is not None:
-                reset_input()            # what the board sent to nobody is gone
-            assert self.on_open is not None
-            self.on_open()
-        return True
+        while not self._stop.is_set():
+            hung_up = any(ev & select.POLLHUP for _, ev in poller.poll(0 if not self._peer_open else 100))
+            if hung_up:
+                self._peer_open = False
+                time.sleep(0.01)
+            elif not self._peer_open:
+                self._opened()
 
     def _to_board(self) -> None:
         while not self._stop.is_set():
-            if self.on_open is not None and not self._watch_open():
+            if not self._peer_open:
+                time.sleep(0.01)
                 continue
             readable, _, _ = select.select([self._master], [], [], 0.05)
             if readable:
                 try:
                     data = os.read(self._master, 4096)
-                except OSError:
+                except OSError:              # EIO: the device was closed (the watcher sees it)
+                    time.sleep(0.002)
                     continue
                 if data:
                     self.board.write(data)
