@@ -95,7 +95,7 @@ def bridge() -> Iterator[PtyBridge]:
 
 def avrdude(port: str, hex_path: Path) -> subprocess.CompletedProcess[str]:
     return subprocess.run(["avrdude", "-c", "wiring", "-p", "m2560", "-P", port, "-b", "115200", "-D",
-                           "-U", f"flash:w:{hex_path}:i"], capture_output=True, text=True, timeout=90)
+                           "-U", f"flash:w:{hex_path}:i"], capture_output=True, text=True, timeout=40)
 
 
 def read_for(port: str, seconds: float) -> bytes:

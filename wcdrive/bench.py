@@ -230,6 +230,11 @@ def flash(port: str, hex_path: str | Path | None = None, *, check: bool = True,
     return hello
 
 
+def _to_stderr(text: str) -> None:
+    sys.stderr.write(text)
+    sys.stderr.flush()
+
+
 def _flash(args: argparse.Namespace) -> int:
     if args.dry_run:
         if "://" in args.port:
@@ -237,7 +242,7 @@ def _flash(args: argparse.Namespace) -> int:
         print("$ " + shlex.join(flash_command(args.port, args.hex)), flush=True)
         return 0
     hello = flash(args.port, args.hex, check=not args.no_check, timeout=args.timeout,
-                  progress=lambda text: (sys.stderr.write(text), sys.stderr.flush()))
+                  progress=_to_stderr)
     print(hello or "flashed (unchecked)")
     return 0
 

@@ -6,7 +6,7 @@
     wcdrive verify --traces N --seed S [--elf PATH]      the port against the firmware in simavr
     wcdrive bench {flash,run,record,replay,plot} ...     a real board on USB
     wcdrive pty [--avr [--realtime] [--bootloader]] [--speed S] [--link PATH]
-                                                         a simulated chair on a pty (opening it resets the board)
+                                                         a simulated chair on a pty (opening resets it)
     wcdrive can-gateway --chair URL_OR_PATH --interface I --channel C
                                                          a chair's serial port on a CAN bus
 
@@ -106,13 +106,13 @@ def _pty(args: argparse.Namespace) -> int:
     if args.bootloader:
         from wcdrive.boards.simavr.bootloader_mega import BootloaderBoard
 
-        board = BootloaderBoard(flash_file=args.flash_file, program=args.program,
-                                realtime=args.realtime or args.speed != 1.0, speed=args.speed,
+        bl_board = BootloaderBoard(flash_file=args.flash_file, program=args.program,
+                                realtime=True, speed=args.speed,
                                 plant=not args.no_plant)
-        bridge = PtyBridge(board, link=args.link, on_open=board.reset).start()
-        board.start()
+        bridge = PtyBridge(bl_board, link=args.link, on_open=bl_board.reset).start()
+        bl_board.start()
         status = _serve(bridge)
-        print(f"stopped at {board.mega.time:.3f} s simulated", file=sys.stderr)
+        print(f"stopped at {bl_board.mega.time:.3f} s simulated", file=sys.stderr)
         return status
     if args.avr:
         from wcdrive.boards.simavr.mega_board import MegaBoard
@@ -182,7 +182,7 @@ def parser() -> argparse.ArgumentParser:
     pty.add_argument("--no-plant", action="store_true", help="--avr: leave the encoder pins still")
     pty.add_argument("--bootloader", action="store_true",
                      help="--avr: a Mega with the stk500v2 bootloader and no program until avrdude "
-                          "writes one (real time while the bootloader runs; then --realtime/--speed)")
+                          "writes one (real time while the bootloader runs, then --speed times real time)")
     pty.add_argument("--flash-file", help="--bootloader: keep the flash in this file across runs")
     pty.add_argument("--program", help="--bootloader: a HEX already in flash at start")
     pty.set_defaults(func=_pty)

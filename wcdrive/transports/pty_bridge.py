@@ -25,10 +25,9 @@ import termios
 import threading
 import time
 import tty
-from pathlib import Path
 from collections.abc import Callable
+from pathlib import Path
 from typing import Protocol
-
 
 _IN_OPEN, _IN_CLOSE = 0x20, 0x08 | 0x10      # <sys/inotify.h>: IN_OPEN, IN_CLOSE_WRITE | _NOWRITE
 
@@ -80,9 +79,11 @@ class PtyBridge:
         #: Opens of the device seen (with ``on_open``).
         self.opens = 0
         self._peer_open = on_open is None
+        self._watch: int | None = None
         if on_open is not None:
             os.close(self._slave)
             self._slave = -1
+            self._watch = _inotify(self.device)      # from now on, no open is missed
         self.link = Path(link) if link else None
         if self.link:
             if self.link.is_symlink() or self.link.exists():
@@ -141,7 +142,7 @@ class PtyBridge:
         IN_OPEN and IN_CLOSE on the pty's slave, so that a close and an immediate
         reopen are two events) and calls ``on_open`` when the first program opens it.
         Without inotify: the master's POLLHUP, which ends when a program opens it."""
-        watch = _inotify(self.device)
+        watch = self._watch
         if watch is None:
             self._watch_hangup()
             return

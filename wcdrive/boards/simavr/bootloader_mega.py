@@ -30,7 +30,7 @@ from pathlib import Path
 
 from wcdrive.avr.timer0 import F_CPU
 from wcdrive.boards.simavr.mega_board import MegaBoard
-from wcdrive.boards.simavr.virtual_mega import ENCODER_PINS, HarnessError, VirtualMega, _lib
+from wcdrive.boards.simavr.virtual_mega import ENCODER_PINS, HarnessError, Reset, VirtualMega, _lib
 from wcdrive.plant import ChairParams
 
 __all__ = ["BOOTLOADER_HEX", "BOOT_START", "BootloaderBoard", "BootloaderMega", "HexError",
@@ -68,7 +68,8 @@ def parse_ihex(text: str) -> dict[int, bytes]:
             raise HexError(f"line {number}: wrong length")
         if sum(record) & 0xFF:
             raise HexError(f"line {number}: bad checksum")
-        count, address, kind, data = record[0], (record[1] << 8) | record[2], record[3], record[4:4 + record[0]]
+        count, address, kind = record[0], (record[1] << 8) | record[2], record[3]
+        data = record[4:4 + count]
         if kind == 0:
             for i in range(count):
                 memory[base + address + i] = data[i]
@@ -210,7 +211,7 @@ class BootloaderMega(VirtualMega):
         """Bytes handed to ``send`` that the USART has not taken yet."""
         return int(self._c.wcsim_feed_pending(self._s))
 
-    def reset(self, cause: str = "external"):  # type: ignore[no-untyped-def]
+    def reset(self, cause: str = "external") -> Reset:
         """``VirtualMega.reset``; the bytes not yet taken by the USART are lost."""
         self._c.wcsim_feed_clear(self._s)
         return super().reset(cause)
