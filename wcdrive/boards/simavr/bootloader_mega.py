@@ -160,11 +160,13 @@ class BootloaderMega(VirtualMega):
             self.write_flash(start, data)
 
     def write_flash(self, address: int, data: bytes) -> None:
+        """Writes ``data`` into flash at byte ``address`` (as a programmer would)."""
         buf = (ctypes.c_uint8 * len(data)).from_buffer_copy(data)
         if self._c.wcsim_flash_write(self._s, address, buf, len(data)) != 0:
             raise ValueError(f"flash {address:#x}+{len(data)} is outside the chip's flash")
 
     def read_flash(self, address: int = 0, size: int = FLASH_SIZE) -> bytes:
+        """``size`` bytes of flash from byte ``address`` (default: all of it)."""
         buf = (ctypes.c_uint8 * size)()
         if self._c.wcsim_flash_read(self._s, address, buf, size) != 0:
             raise ValueError(f"flash {address:#x}+{size} is outside the chip's flash")
@@ -180,6 +182,7 @@ class BootloaderMega(VirtualMega):
         return self.flash_file
 
     def close(self) -> None:
+        """Saves the flash (``save_flash``), then frees the simulator."""
         if self._s:
             self.save_flash()
         super().close()
@@ -217,12 +220,14 @@ class BootloaderMega(VirtualMega):
         return super().reset(cause)
 
     def run_until(self, cycle: int) -> None:
+        """Runs to ``cycle``, feeding the held bytes to the USART as it takes them."""
         status = self._c.wcsim_run_fed(self._s, int(cycle))
         self._collect()
         if status < 0:
             raise HarnessError(f"the AVR core stopped (crashed) at cycle {self.cycle}, pc {self.pc:#x}")
 
     def run_to_break(self, cycle: int) -> bool:
+        """``run_until``: a chip with no ELF has no hooks to break on; returns False."""
         self.run_until(cycle)
         return False
 
