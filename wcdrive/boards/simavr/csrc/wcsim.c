@@ -29,6 +29,7 @@
 #include <simavr/avr_ioport.h>
 #include <simavr/avr_uart.h>
 #include <simavr/avr_watchdog.h>
+#include <simavr/avr_extint.h>
 
 #define WCSIM_MAX_HOOKS 16
 
@@ -493,6 +494,16 @@ static avr_uart_t *find_uart0(avr_t *avr) {
     return NULL;
 }
 
+/* INT0..7 at their reset value (ISC 00, low level) with a pin held low make simavr
+ * 1.6 poll that pin every cycle even while the interrupt is disabled: the bootloader's
+ * case after a reset with an encoder line low, about 5x slower (measured). Off, a
+ * level interrupt fires once when the level comes, not again while it lasts; neither
+ * the bootloader nor final_control (CHANGE interrupts) uses level interrupts. simavr
+ * turns it back on at every reset, so wcsim_run_fed checks it. */
+static void chip_lax_level_trigger(wcsim_t *s) {
+    for (uint8_t i = 0; i < 8; i++) avr_extint_set_strict_lvl_trig(s->avr, i, 0);
+}
+
 /* A chip with erased flash (0xFF) and no ELF: wcsim_flash_write loads it, wcsim_set_reset_pc
  * moves the reset vector (BOOTRST). Otherwise as wcsim_new. */
 wcsim_t *wcsim_new_chip(const char *mmcu, uint32_t frequency, char *err, int errlen) {
@@ -522,6 +533,7 @@ wcsim_t *wcsim_new_chip(const char *mmcu, uint32_t frequency, char *err, int err
     s->run_fn = s->avr->run;
     s->wdt = find_watchdog(s->avr);
     s->uart0 = find_uart0(s->avr);
+    chip_lax_level_trigger(s);
     log_reset(s, WCSIM_RESET_POWER_ON);
     return s;
 }
@@ -578,6 +590,7 @@ static void feed_uart(wcsim_t *s) {
  * (checked every 64 cycles, well under a byte time). */
 int wcsim_run_fed(wcsim_t *s, uint64_t target) {
     while (s->avr->cycle < target) {
+        if (avr_extint_is_strict_lvl_trig(s->avr, 4)) chip_lax_level_trigger(s);
         feed_uart(s);
         uint64_t step = s->avr->cycle + 64;
         int r = wcsim_run_until(s, step < target ? step : target);
