@@ -81,7 +81,7 @@ def stand_in(**kwargs: object) -> PtyBridge:
     """``wcdrive pty --avr --bootloader`` from Python: the board behind a pty whose
     opening resets it."""
     board = BootloaderBoard(**kwargs)  # type: ignore[arg-type]
-    bridge = PtyBridge(board, on_open=board.reset).start()
+    bridge = PtyBridge(board, on_open=board.dtr).start()
     board.start()
     return bridge
 
@@ -222,6 +222,14 @@ def test_bench_flash_confirms_the_build_id_or_says_the_board_did_not_answer(
     assert f"build {build_id()} is the HEX's" in err
     with pytest.raises(bench.FlashError, match="did not answer hello"):
         bench.flash(bridge.device, tiny["atmega2560"])
+
+
+def test_the_build_id_check_compares_with_the_hex(firmware_hex: Path) -> None:
+    runs = bench.check_hex(firmware_hex)
+    assert bench.check_build_id(f"HELLO:3,final_control,3.0.0,{build_id()}", runs, firmware_hex) == build_id()
+    other = "0123abcd" if build_id() != "0123abcd" else "89abcdef"
+    with pytest.raises(bench.FlashError, match=f"says build {other}.*not in final_control.hex"):
+        bench.check_build_id(f"HELLO:3,final_control,3.0.0,{other}", runs, firmware_hex)
 
 
 def test_the_whole_bench_flow_on_the_bootloader_stand_in(tmp_path: Path, bridge: PtyBridge,

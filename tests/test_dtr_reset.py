@@ -5,6 +5,9 @@ instead of jumping back to the origin when the board's counts restart at 0."""
 
 from __future__ import annotations
 
+import signal
+import subprocess
+import sys
 import time
 
 import pytest
@@ -18,7 +21,7 @@ from wcdrive.transports.pty_bridge import PtyBridge
 
 def test_opening_the_pty_resets_the_board_every_time() -> None:
     board = SimulatedBoard()
-    bridge = PtyBridge(board.start(), on_open=board.reset).start()
+    bridge = PtyBridge(board.start(), on_open=board.dtr).start()
     try:
         boots = []
         for _ in range(3):
@@ -27,10 +30,36 @@ def test_opening_the_pty_resets_the_board_every_time() -> None:
                 end = time.monotonic() + 0.6
                 while time.monotonic() < end:
                     data += link.read(256)
-            boots.append(data.count(b"BOOT:"))
+            boots.append(data.count(b",EXTERNAL\r\n"))
         assert boots == [1, 1, 1] and bridge.opens == 3
     finally:
         bridge.close()
+
+
+@pytest.mark.parametrize("args", [["pty"], pytest.param(["pty", "--avr"], marks=pytest.mark.simavr)],
+                         ids=["pty", "pty-avr"])
+def test_wcdrive_pty_resets_its_board_at_each_open(args: list[str]) -> None:
+    proc = subprocess.Popen([sys.executable, "-m", "wcdrive", *args], stdout=subprocess.PIPE,
+                            stderr=subprocess.DEVNULL, text=True)
+    try:
+        assert proc.stdout is not None
+        device = proc.stdout.readline().strip()
+        boots = []
+        for _ in range(2):
+            with serial.Serial(device, 115200, timeout=0.05) as link:
+                data = b""
+                end = time.monotonic() + 1.0
+                while time.monotonic() < end:
+                    data += link.read(256)
+            # The BOOT line comes first (pyserial flushes the input as it opens the port,
+            # which may take its head: this board boots at once, with no bootloader).
+            first = data.split(b"\r\n")[0]
+            boots.append(data.count(b",EXTERNAL\r\n") if b"BOOT:final_control,EXTERNAL".endswith(first)
+                         else repr(data[:80]))
+        assert boots == [1, 1], boots                 # each open: a fresh boot, first thing
+    finally:
+        proc.send_signal(signal.SIGINT)
+        proc.wait(timeout=10)
 
 
 def _drive(chair: wcdrive.Wheelchair, seconds: float) -> None:
@@ -58,7 +87,7 @@ def test_a_reset_mid_run_is_greeted_again_and_odometry_carries_on(elf, bootloade
         board = BootloaderBoard(program=elf.with_suffix(".hex"))
     else:
         board = MegaBoard(elf, realtime=True)
-    bridge = PtyBridge(board, on_open=board.reset).start()
+    bridge = PtyBridge(board, on_open=board.dtr).start()
     board.start()
     try:
         with wcdrive.connect(bridge.device) as chair:

@@ -221,13 +221,20 @@ def flash(port: str, hex_path: str | Path | None = None, *, check: bool = True,
     if not hello:
         raise FlashError(f"the board on {port} did not answer hello within 6 s after flashing "
                          "(not final_control? --no-check skips this)")
-    build = hello.split(",")[-1]
-    data = b"".join(runs.values())
-    if (build.encode() + b"\0") not in data:
-        raise FlashError(f"the board says build {build} ({hello}), which is not in {hex_path.name}: "
-                         "the flash did not take")
+    build = check_build_id(hello, runs, hex_path)
     log(f"{hello}: build {build} is the HEX's ({time.monotonic() - t2:.1f} s)")
     return hello
+
+
+def check_build_id(hello: str, runs: dict[int, bytes], hex_path: Path) -> str:
+    """The build id of a ``HELLO:`` line, or ``FlashError`` when that id (a string the
+    sketch keeps in flash) is not in the HEX's data."""
+    build = hello.split(",")[-1]
+    data = b"".join(runs.values())
+    if len(build) != 8 or (build.encode() + b"\0") not in data:
+        raise FlashError(f"the board says build {build} ({hello}), which is not in {hex_path.name}: "
+                         "the flash did not take")
+    return build
 
 
 def _to_stderr(text: str) -> None:

@@ -109,7 +109,7 @@ def _pty(args: argparse.Namespace) -> int:
         bl_board = BootloaderBoard(flash_file=args.flash_file, program=args.program,
                                 realtime=True, speed=args.speed,
                                 plant=not args.no_plant)
-        bridge = PtyBridge(bl_board, link=args.link, on_open=bl_board.reset).start()
+        bridge = PtyBridge(bl_board, link=args.link, on_open=bl_board.dtr).start()
         bl_board.start()
         status = _serve(bridge)
         print(f"stopped at {bl_board.mega.time:.3f} s simulated", file=sys.stderr)
@@ -118,13 +118,13 @@ def _pty(args: argparse.Namespace) -> int:
         from wcdrive.boards.simavr.mega_board import MegaBoard
 
         board = MegaBoard(args.elf, realtime=args.realtime, plant=not args.no_plant)
-        bridge = PtyBridge(board, link=args.link, on_open=board.reset).start()
+        bridge = PtyBridge(board, link=args.link, on_open=board.dtr).start()
         board.start()
         status = _serve(bridge)
         print(f"stopped at {board.mega.time:.3f} s simulated", file=sys.stderr)
         return status
     sim = SimulatedBoard(speed=args.speed, seed=args.seed)
-    return _serve(PtyBridge(sim.start(), link=args.link, on_open=sim.reset).start())
+    return _serve(PtyBridge(sim.start(), link=args.link, on_open=sim.dtr).start())
 
 
 def _can_gateway(args: argparse.Namespace) -> int:

@@ -47,10 +47,8 @@ class SimulatedBoard(ThreadedBoard):
         with self._lock:
             return self.plant.pose
 
-    def reset(self) -> None:
-        """Resets the board now (``PortLoop.reset``), as DTR does when its port opens."""
-        with self._lock:
-            self.loop.reset()
+    def _dtr_reset(self) -> None:
+        self.loop.reset()
 
     def _send(self, data: bytes) -> None:
         self.loop.send(data)

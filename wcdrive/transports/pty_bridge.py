@@ -65,8 +65,13 @@ class PtyBridge:
     """A pseudo-terminal whose other end is ``board``; the bridge owns the board."""
 
     def __init__(self, board: SerialLike, link: str | Path | None = None,
-                 on_open: Callable[[], object] | None = None) -> None:
-        """``on_open``: called each time a program opens the device (DTR: reset the board)."""
+                 on_open: Callable[[], object] | None = None, reset_delay: float = 0.02) -> None:
+        """``on_open``: called each time a program opens the device: a ``ThreadedBoard``'s
+        ``dtr`` (resets the board and drops what it sent while the port was closed),
+        ``reset_delay`` s after the open: a real board's USB-serial bridge learns of DTR
+        after the host's open has returned, and pyserial's open ends by flushing the
+        input, which would otherwise take the start of a board's BOOT line."""
+        self.reset_delay = reset_delay
         self.board = board
         self._master, self._slave = os.openpty()
         tty.setraw(self._slave)
@@ -79,6 +84,7 @@ class PtyBridge:
         #: Opens of the device seen (with ``on_open``).
         self.opens = 0
         self._peer_open = on_open is None
+        self._holders = 0                    # programs that have the device open (with on_open)
         self._watch: int | None = None
         if on_open is not None:
             os.close(self._slave)
@@ -90,6 +96,7 @@ class PtyBridge:
                 self.link.unlink()
             self.link.symlink_to(self.device)
         self._stop = threading.Event()
+        self._open_seen = threading.Event()
         self._threads = [threading.Thread(target=self._to_board, daemon=True),
                          threading.Thread(target=self._from_board, daemon=True)]
         if on_open is not None:
@@ -129,13 +136,8 @@ class PtyBridge:
         self.close()
 
     def _opened(self) -> None:
-        self._peer_open = True
         self.opens += 1
-        reset_input = getattr(self.board, "reset_input", None)
-        if reset_input is not None:
-            reset_input()                    # what the board sent to nobody is gone
-        assert self.on_open is not None
-        self.on_open()
+        self._open_seen.set()                # _from_board resets the board: it alone reads it
 
     def _watch_opens(self) -> None:
         """With ``on_open``: counts the opens and closes of the device (inotify's
@@ -146,7 +148,6 @@ class PtyBridge:
         if watch is None:
             self._watch_hangup()
             return
-        holders = 0
         try:
             while not self._stop.is_set():
                 readable, _, _ = select.select([watch], [], [], 0.05)
@@ -156,12 +157,13 @@ class PtyBridge:
                 for offset in range(0, len(data) - 15, 16):    # a file's events carry no name
                     mask = struct.unpack_from("iIII", data, offset)[1]
                     if mask & _IN_OPEN:
-                        holders += 1
-                        if holders == 1:
+                        self._holders += 1
+                        if self._holders == 1:
                             self._opened()
                     if mask & _IN_CLOSE:
-                        holders = max(0, holders - 1)
-                        self._peer_open = holders > 0
+                        self._holders = max(0, self._holders - 1)
+                        if self._holders == 0:
+                            self._peer_open = False
         finally:
             os.close(watch)
 
@@ -169,11 +171,13 @@ class PtyBridge:
         poller = select.poll()
         poller.register(self._master, select.POLLHUP)
         while not self._stop.is_set():
-            hung_up = any(ev & select.POLLHUP for _, ev in poller.poll(0 if not self._peer_open else 100))
+            hung_up = any(ev & select.POLLHUP for _, ev in poller.poll(100 if self._holders else 0))
             if hung_up:
+                self._holders = 0
                 self._peer_open = False
                 time.sleep(0.01)
-            elif not self._peer_open:
+            elif not self._holders:
+                self._holders = 1
                 self._opened()
 
     def _to_board(self) -> None:
@@ -195,13 +199,24 @@ class PtyBridge:
         # The master is non-blocking: when nobody reads the device its buffer fills, and
         # a blocking write would hang here (and ``close``) for good. The board's bytes
         # wait in ``pending`` (and the board's buffer) until there is room.
+        # With ``on_open`` this thread also resets the board when the device is opened:
+        # it is the only reader of the board, so what it reads after ``on_open`` (a
+        # ``dtr`` clears the board's output under its lock) is all from after the reset.
         pending = b""
         while not self._stop.is_set():
+            if self._open_seen.is_set():
+                self._open_seen.clear()
+                pending = b""                    # sent while nobody had the port open: lost
+                time.sleep(self.reset_delay)
+                assert self.on_open is not None
+                self.on_open()
+                self._peer_open = self._holders > 0
+                continue
             if not pending:
                 pending = self.board.read(4096, timeout=0.05)
                 continue
             if not self._peer_open:
-                pending = b""                    # nobody has the port open: lost
+                pending = b""                    # sent while nobody had the port open: lost
                 continue
             _, writable, _ = select.select([], [self._master], [], 0.05)
             if not writable:

@@ -81,6 +81,9 @@ class MegaBoard(ThreadedBoard):
         with self._lock:
             return self.mega.reset(cause)
 
+    def _dtr_reset(self) -> None:
+        self.mega.reset("external")
+
     def _send(self, data: bytes) -> None:
         self.mega.send(data)
 
