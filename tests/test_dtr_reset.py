@@ -124,3 +124,35 @@ def test_a_reset_mid_run_is_greeted_again_and_odometry_carries_on(elf, bootloade
             assert abs(after - truth) < 0.25 * truth, (after, truth)
     finally:
         bridge.close()
+
+
+def test_a_device_that_comes_back_is_reopened_reset_and_greeted_again(tmp_path) -> None:
+    """Unplugged and plugged in again (the pty and its link go, a new board comes
+    back under the same link): the session reopens it, which resets the board (DTR);
+    it greets the new board, drives it, and the odometry carries on."""
+    link = tmp_path / "ttyWC"
+    first = SimulatedBoard()
+    bridge = PtyBridge(first.start(), link=link, on_open=first.dtr).start()
+    second: PtyBridge | None = None
+    try:
+        with wcdrive.connect(str(link), reconnect_timeout=20) as chair:
+            _drive(chair, 1.5)
+            before = chair.odometry.pose.x
+            assert before > 0.1
+            bridge.close()                                    # unplugged
+            time.sleep(0.5)
+            board = SimulatedBoard()
+            second = PtyBridge(board.start(), link=link, on_open=board.dtr).start()
+            end = time.monotonic() + 20
+            while not ("RECONNECTED" in chair.events and chair.protocol_version == 3) \
+                    and time.monotonic() < end:
+                time.sleep(0.05)
+            assert "RECONNECTED" in chair.events and chair.protocol_version == 3, chair.events
+            assert second.opens == 1 and chair.reset_cause == "EXTERNAL"
+            _drive(chair, 1.5)
+            after = chair.odometry.pose.x
+            assert after > before + 0.1, (before, after)
+    finally:
+        bridge.close()
+        if second is not None:
+            second.close()
