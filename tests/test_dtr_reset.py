@@ -8,6 +8,7 @@ from __future__ import annotations
 import signal
 import subprocess
 import sys
+import threading
 import time
 
 import pytest
@@ -156,3 +157,43 @@ def test_a_device_that_comes_back_is_reopened_reset_and_greeted_again(tmp_path) 
         bridge.close()
         if second is not None:
             second.close()
+
+
+@pytest.mark.simavr
+def test_a_bench_run_with_a_reset_in_it_replays_boot_by_boot(elf, tmp_path) -> None:
+    from wcdrive import bench
+    from wcdrive.replay import replay
+
+    scenario = tmp_path / "short.toml"
+    scenario.write_text('name = "short"\ndescription = "3 s"\nhost_rate_hz = 10\n\n'
+                        '[[segment]]\nwheel = [5.0, 5.0]\nduration = 1.5\n\n'
+                        '[[segment]]\nwheel = [10.0, 10.0]\nduration = 1.5\n')
+    board = MegaBoard(elf, realtime=True)
+    bridge = PtyBridge(board, on_open=board.dtr).start()
+    board.start()
+    timer = threading.Timer(2.5, board.reset)             # mid-run, in the second segment
+    timer.start()
+    try:
+        recording = bench.run_scenario(str(scenario), bridge.device)
+    finally:
+        timer.cancel()
+        bridge.close()
+    assert recording.received_bytes.count(b"BOOT:final_control") == 2
+    report = replay(recording)
+    assert report.agrees, report
+    assert "the board reset 1 time(s) during the recording" in report.notes and report.ticks > 50
+    # A byte the board sent after the reset, changed: the search for where the host's
+    # bytes start again does not make it agree.
+    stream = recording.received_bytes
+    at = stream.index(b"TLM:", stream.rindex(b"BOOT:final_control"))
+    for _ in range(4):
+        at = stream.index(b"TLM:", at + 1)                # the 5th TLM line after the reset
+    chunks, pos = recording.received, 0
+    for i, (t, data) in enumerate(chunks):
+        if pos <= at + 4 < pos + len(data):
+            k = at + 4 - pos
+            chunks[i] = (t, data[:k] + (b"9" if data[k:k + 1] != b"9" else b"8") + data[k + 1:])
+            break
+        pos += len(data)
+    tampered = replay(recording)
+    assert not tampered.agrees and "boot 1" in str(tampered.mismatch), tampered
