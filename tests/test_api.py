@@ -43,7 +43,7 @@ def chair(request, elf):
         gateway.close()
         board.close()
     else:
-        c = wcdrive.connect(f"simavr://{elf}")
+        c = wcdrive.connect(f"simavr://{elf}?realtime=0")
         yield c
         c.close()
 

@@ -272,7 +272,7 @@ def test_every_library_module_imports_with_the_harness_blocked() -> None:
 def test_simavr_drives_the_chair_with_the_harness_blocked(elf: Path) -> None:
     code = _BLOCK_HIL + textwrap.dedent(f"""
         import time, wcdrive
-        with wcdrive.connect("simavr://{elf}") as chair:
+        with wcdrive.connect("simavr://{elf}?realtime=0") as chair:
             start = chair.wait_for_telemetry()
             end = time.monotonic() + 2.0
             while time.monotonic() < end:

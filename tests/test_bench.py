@@ -19,7 +19,7 @@ from wcdrive.transports.recording import Recording, RecordingPort
 @pytest.fixture(scope="module")
 def simavr_recording(elf) -> Recording:
     """The step-response scenario driven on the ELF in simavr (chair behind the pins)."""
-    return bench.run_scenario("step_response", f"simavr://{elf}", speed=4.0)
+    return bench.run_scenario("step_response", f"simavr://{elf}?realtime=0", speed=4.0)
 
 
 def test_a_session_on_the_firmware_replays_through_the_port(simavr_recording) -> None:
@@ -108,7 +108,7 @@ def test_bench_cli_records_replays_and_plots(tmp_path, elf, capsys) -> None:
     scenario.write_text(SILENCE)
     out = tmp_path / "wd.wcrec.json"
     # 2 s of wall-clock silence is > 0.55 s of board time even on a loaded machine.
-    assert wcdrive_main(["bench", "run", str(scenario), "--port", f"simavr://{elf}", "--record",
+    assert wcdrive_main(["bench", "run", str(scenario), "--port", f"simavr://{elf}?realtime=0", "--record",
                          str(out), "--plot", str(tmp_path / "plots")]) == 0
     assert (tmp_path / "plots" / "bench.png").stat().st_size > 10000
     assert wcdrive_main(["bench", "replay", str(out)]) == 0

@@ -104,7 +104,7 @@ def test_no_corrupted_frame_moves_the_simulated_chair() -> None:
 
 @pytest.mark.simavr
 def test_no_corrupted_frame_moves_the_firmware(elf) -> None:
-    received, _ = _attack(f"wcavr://{elf}")
+    received, _ = _attack(f"wcavr://{elf}?realtime=0")
     _check(received)
 
 

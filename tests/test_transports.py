@@ -163,7 +163,7 @@ def test_plain_pyserial_finds_wcsim_in_a_fresh_interpreter() -> None:
 @pytest.mark.simavr
 def test_wcavr_url_opens_the_firmware_in_simavr_driving_the_chair(elf) -> None:
     """``serial_for_url("wcavr://<elf>")``: the compiled firmware behind a pyserial port."""
-    port = serial.serial_for_url(f"wcavr://{elf}", timeout=0.5)
+    port = serial.serial_for_url(f"wcavr://{elf}?realtime=0", timeout=0.5)
     try:
         assert port.readline() == b"BOOT:final_control,POWER_ON\r\n"
         got = b""

@@ -10,9 +10,11 @@
 
 URLs map onto pyserial (the query goes to the handler, which alone parses it):
 
-- ``sim://[?speed=S&seed=N]`` -> ``wcsim://``: in process, the bit-exact port + pymunk plant;
-- ``simavr://[path/to.elf][?realtime=1]`` -> ``wcavr://``: the compiled firmware in
-  simavr driving the pymunk chair, as fast as it can unless ``realtime=1``;
+- ``sim://[?speed=S&seed=N]`` -> ``wcsim://``: in process, the bit-exact port + pymunk
+  plant, at real time (``speed=S``: S times real time);
+- ``simavr://[path/to.elf][?realtime=0&speed=S]`` -> ``wcavr://``: the compiled firmware
+  in simavr driving the pymunk chair, at real time by default like a real board
+  (``speed=S``: S times real time; ``realtime=0``: as fast as simavr runs);
 - ``can://<interface>/<channel>`` -> ``wccan://``: a chair behind a ``wcdrive can-gateway``;
 - any ``scheme://`` pyserial opens (``wcsim://``, ``socket://``, ``rfc2217://``);
 - a device path such as ``/dev/ttyACM0``: opened exclusively (a second program gets

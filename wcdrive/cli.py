@@ -6,7 +6,8 @@
     wcdrive verify --traces N --seed S [--elf PATH]      the port against the firmware in simavr
     wcdrive verify --fp N [--seed S]                     binary32 on the AVR against the port, N pairs/op
     wcdrive bench {flash,run,record,replay,plot} ...     a real board on USB
-    wcdrive pty [--avr [--realtime]] [--speed S] [--link PATH]   a simulated chair on a pty
+    wcdrive pty [--avr [--realtime] [--bootloader]] [--speed S] [--link PATH]
+                                                         a simulated chair on a pty (opening resets it)
     wcdrive can-gateway --chair URL_OR_PATH --interface I --channel C
                                                          a chair's serial port on a CAN bus
 
@@ -102,17 +103,29 @@ def _serve(bridge: PtyBridge) -> int:
 
 
 def _pty(args: argparse.Namespace) -> int:
+    # Opening the pty resets the board (DTR), as opening a real Mega's port does.
+    if args.bootloader:
+        from wcdrive.boards.simavr.bootloader_mega import BootloaderBoard
+
+        bl_board = BootloaderBoard(flash_file=args.flash_file, program=args.program,
+                                realtime=True, speed=args.speed,
+                                plant=not args.no_plant)
+        bridge = PtyBridge(bl_board, link=args.link, on_open=bl_board.dtr).start()
+        bl_board.start()
+        status = _serve(bridge)
+        print(f"stopped at {bl_board.mega.time:.3f} s simulated", file=sys.stderr)
+        return status
     if args.avr:
         from wcdrive.boards.simavr.mega_board import MegaBoard
 
         board = MegaBoard(args.elf, realtime=args.realtime, plant=not args.no_plant)
-        bridge = PtyBridge(board, link=args.link).start()
+        bridge = PtyBridge(board, link=args.link, on_open=board.dtr).start()
         board.start()
         status = _serve(bridge)
         print(f"stopped at {board.mega.time:.3f} s simulated", file=sys.stderr)
         return status
-    return _serve(PtyBridge(SimulatedBoard(speed=args.speed, seed=args.seed).start(),
-                            link=args.link).start())
+    sim = SimulatedBoard(speed=args.speed, seed=args.seed)
+    return _serve(PtyBridge(sim.start(), link=args.link, on_open=sim.dtr).start())
 
 
 def _can_gateway(args: argparse.Namespace) -> int:
@@ -168,6 +181,11 @@ def parser() -> argparse.ArgumentParser:
     pty.add_argument("--seed", type=int, default=0, help="gyro noise seed")
     pty.add_argument("--elf", help="--avr: firmware ELF (default: build the bundled firmware)")
     pty.add_argument("--no-plant", action="store_true", help="--avr: leave the encoder pins still")
+    pty.add_argument("--bootloader", action="store_true",
+                     help="--avr: a Mega with the stk500v2 bootloader and no program until avrdude "
+                          "writes one (real time while the bootloader runs, then --speed times real time)")
+    pty.add_argument("--flash-file", help="--bootloader: keep the flash in this file across runs")
+    pty.add_argument("--program", help="--bootloader: a HEX already in flash at start")
     pty.set_defaults(func=_pty)
 
     gw = sub.add_parser("can-gateway", help="put a chair's serial port on a CAN bus (protocol/CAN.md)")

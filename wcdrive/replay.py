@@ -72,18 +72,94 @@ def _lines(data: bytes) -> list[bytes]:
     return [p + b"\r\n" for p in parts[:-1]]
 
 
+_BOOT = b"BOOT:final_control"
+
+
 def replay(recording: Recording) -> ReplayReport:
     """Feeds ``recording`` to the port from its boot state, tick by tick (the module
     docstring says how), and compares what it sends with what the board sent. Raises
-    ReplayError when the recording cannot be replayed."""
-    report = ReplayReport()
+    ReplayError when the recording cannot be replayed.
+
+    A board that reset during the recording (a ``BOOT:`` line after the first) is
+    replayed boot by boot, each from a fresh port: the host's bytes that the board got
+    after a reset start at a byte the host wrote within a second before that ``BOOT:``
+    line arrived (or half a second after it), often in the middle of a line the reset
+    cut; the first such byte (line starts first) with which the port agrees is taken
+    (``notes`` says which)."""
     received = recording.received_bytes
-    boot = received.rfind(b"BOOT:final_control")
-    if boot < 0:
+    boots = []
+    at = received.find(_BOOT)
+    while at >= 0:
+        boots.append(at)
+        at = received.find(_BOOT, at + 1)
+    if not boots:
         raise ReplayError("no BOOT line: the recording must start at the board's reset "
                           "(open the port so that the Mega resets, as connect() does)")
-    lines = _lines(received[boot:])[1:]
     sent = recording.sent_bytes
+    if len(boots) == 1:
+        return _replay_boot(received[boots[0]:], sent)
+    report = ReplayReport()
+    report.notes.append(f"the board reset {len(boots) - 1} time(s) during the recording")
+    for j, start in enumerate(boots):
+        segment = received[start:boots[j + 1] if j + 1 < len(boots) else len(received)]
+        candidates = [0] if j == 0 else _offsets_near(recording, _time_at(recording.received, start))
+        tried: list[tuple[int, ReplayReport]] = []
+        for offset in candidates:
+            try:
+                attempt = _replay_boot(segment, sent[offset:])
+            except ReplayError as exc:
+                attempt = ReplayReport(mismatch=str(exc))
+            tried.append((offset, attempt))
+            if attempt.agrees:
+                break
+        if not tried:
+            report.mismatch = f"boot {j}: no line the host wrote near that reset"
+            break
+        offset, best = next(((o, r) for o, r in tried if r.agrees),
+                            max(tried, key=lambda item: item[1].ticks))
+        report.ticks += best.ticks
+        report.bytes_compared += best.bytes_compared
+        report.bytes_fed = offset + best.bytes_fed
+        if j:
+            report.notes.append(f"boot {j}: the host's bytes from {offset} on")
+        report.notes.extend(f"boot {j}: {note}" for note in best.notes)
+        if not best.agrees:
+            report.mismatch = f"boot {j}: {best.mismatch}"
+            break
+    return report
+
+
+def _time_at(chunks: list[tuple[float, bytes]], index: int) -> float:
+    """The host time of the chunk that holds byte ``index`` of the stream."""
+    pos = 0
+    for t, data in chunks:
+        pos += len(data)
+        if index < pos:
+            return t
+    return chunks[-1][0] if chunks else 0.0
+
+
+def _offsets_near(recording: Recording, t: float) -> list[int]:
+    """Offsets in the host's bytes written from 1 s before ``t`` to 0.5 s after it:
+    where a line starts first, then the others (a reset may cut a line, and the new
+    board gets its tail)."""
+    starts: list[int] = []
+    others: list[int] = []
+    pos, previous = 0, ord("\n")
+    for when, data in recording.sent:
+        for k, byte in enumerate(data):
+            if t - 1.0 <= when <= t + 0.5:
+                (starts if previous == ord("\n") else others).append(pos + k)
+            previous = byte
+        pos += len(data)
+    return starts + others
+
+
+def _replay_boot(segment: bytes, sent: bytes) -> ReplayReport:
+    """One boot: ``segment`` starts at its BOOT line; ``sent`` at the first byte the
+    board may have received after that reset."""
+    report = ReplayReport()
+    lines = _lines(segment)[1:]
     # Ticks: each ENC line, its TLM (if any) and the lines between it and the next.
     tick_starts = [i for i, line in enumerate(lines) if line.startswith(b"ENC:")]
     while tick_starts and tick_starts[-1] + 1 >= len(lines):

@@ -145,8 +145,10 @@ class Session:
     def __init__(self, port: Port, on_feedback: FeedbackHandler, *, name: str | None = None,
                  reopen: Callable[[], Port] | None = None, reconnect_timeout: float = 60.0,
                  legacy: bool = False, link_timeout: float = 0.15,
-                 on_link: Callable[[LinkEvent], None] | None = None) -> None:
+                 on_link: Callable[[LinkEvent], None] | None = None,
+                 on_board_reset: Callable[[], None] | None = None) -> None:
         self.port = port
+        self._on_board_reset = on_board_reset
         self.name = name or _port_name(port)
         self._on_feedback = on_feedback
         self._on_link = on_link
@@ -712,7 +714,10 @@ class Session:
 
     def _forget_board(self) -> None:
         """The board has reset (a reopened device, or a ``BOOT:`` line mid-session): what
-        the host knew of it is gone, and the handshake starts over."""
+        the host knew of it is gone, and the handshake starts over; ``on_board_reset``
+        is told (the odometry re-bases its counts)."""
+        if self._on_board_reset is not None:
+            self._on_board_reset()
         self._pending_feedback = None
         self._last_data = None
         self.status = None                  # the old board's; the new one reports anew

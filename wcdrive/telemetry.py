@@ -75,19 +75,38 @@ class TelemetryHub:
         self._link_subscribers: list[queue.Queue[Telemetry | LinkEvent]] = []
         self._callbacks: list[Callable[[Telemetry], None]] = []
         self._link_callbacks: list[Callable[[LinkEvent], None]] = []
+        # The board's counts restart at 0 when it resets: the odometry gets them plus
+        # this offset, re-based at the first tick after a reset so the pose carries on.
+        self._count_offset = (0, 0)
+        self._last_counts: tuple[int, int] | None = None
+        self._rebase = False
 
     def deliver(self, now: float, msg: Feedback, extended: ExtendedTelemetry | None) -> None:
         """One tick arrived at host time ``now``."""
         t = Telemetry(now, msg.count_left, msg.count_right, msg.vel_left, msg.vel_right, msg.mode,
                       extended)
         with self._lock:
-            self._odometry.update(now, msg.count_left, msg.count_right)
+            if self._rebase and self._last_counts is not None:
+                self._count_offset = (self._last_counts[0] - msg.count_left,
+                                      self._last_counts[1] - msg.count_right)
+            self._rebase = False
+            counts = (msg.count_left + self._count_offset[0], msg.count_right + self._count_offset[1])
+            self._last_counts = counts
+            self._odometry.update(now, *counts)
             self._history.append((now, msg.count_left, msg.count_right, msg.vel_left, msg.vel_right))
             subscribers, callbacks = list(self._subscribers), list(self._callbacks)
         for q in subscribers:
             q.put(t)
         for cb in callbacks:
             cb(t)
+
+    def board_reset(self) -> None:
+        """The board has reset (its counts start again from 0): the next tick re-bases
+        the odometry's counts on the last ones, so that the pose carries on from where
+        it was (the travel between the last tick and the reset is not seen). The raw
+        counts in ``telemetry()`` and ``arrays()`` are the board's."""
+        with self._lock:
+            self._rebase = True
 
     def deliver_link(self, event: LinkEvent) -> None:
         """The link was lost or restored: to the ``on_link`` callbacks and the iterators

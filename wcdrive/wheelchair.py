@@ -167,7 +167,8 @@ class Wheelchair:
         self._hub = TelemetryHub(odometry_method)
         self._session = session = Session(
             port, self._hub.deliver, name=name, reopen=reopen, reconnect_timeout=reconnect_timeout,
-            legacy=legacy, link_timeout=link_timeout, on_link=self._hub.deliver_link)
+            legacy=legacy, link_timeout=link_timeout, on_link=self._hub.deliver_link,
+            on_board_reset=self._hub.board_reset)
         self._finalizer = weakref.finalize(self, _shutdown, session, on_close)
         for key, finalizer in tuple(_OPEN.items()):
             if not finalizer.alive:

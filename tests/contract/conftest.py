@@ -100,7 +100,8 @@ def _make(name: str, request: pytest.FixtureRequest) -> Backend:
         return Backend(name, _wcsim)
     if name == "wcavr":
         elf = request.getfixturevalue("elf")
-        return Backend(name, lambda timeout: serial.serial_for_url(f"wcavr://{elf}", timeout=timeout))
+        return Backend(name, lambda timeout: serial.serial_for_url(f"wcavr://{elf}?realtime=0",
+                                                                   timeout=timeout))
     if name == "pty":
         from wcdrive.boards.sim_board import SimulatedBoard
         from wcdrive.transports.pty_bridge import PtyBridge

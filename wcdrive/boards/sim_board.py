@@ -47,6 +47,9 @@ class SimulatedBoard(ThreadedBoard):
         with self._lock:
             return self.plant.pose
 
+    def _dtr_reset(self) -> None:
+        self.loop.reset()
+
     def _send(self, data: bytes) -> None:
         self.loop.send(data)
 

@@ -36,6 +36,9 @@ class ThreadedBoard:
     def _shutdown(self) -> None:
         pass
 
+    def _dtr_reset(self) -> None:
+        raise NotImplementedError(f"{type(self).__name__} has no reset")
+
     # ---- lifecycle ---------------------------------------------------------------
     def start(self):
         """Starts the board's thread; returns the board."""
@@ -81,11 +84,19 @@ class ThreadedBoard:
         """Drops what the board sent and was not read yet."""
         self._rx.clear()
 
+    def dtr(self) -> None:
+        """A program opened the board's port: DTR resets the board, and what it sent
+        before, to a port nobody had open, is gone (one step, between two of the
+        board's steps, so no byte from before the reset is read after it)."""
+        with self._lock:
+            self._dtr_reset()
+            self._rx.clear()
+
     def _run(self) -> None:
         while not self._stop.is_set():
             with self._lock:
                 out = self._advance()
-            if out:
-                self._rx.put(out)
+                if out:
+                    self._rx.put(out)            # under the lock: a reset sees whole steps
             pause = self._pause()
             time.sleep(pause if pause > 0 else 0)

@@ -1,8 +1,11 @@
-"""``wcavr://[path/to.elf][?realtime=1&plant=0]``: the compiled firmware in simavr as a
-pyserial port, the pymunk chair behind its pins (``plant=0``: wheels still).
+"""``wcavr://[path/to.elf][?realtime=0&speed=S&plant=0]``: the compiled firmware in simavr as
+a pyserial port, the pymunk chair behind its pins (``plant=0``: wheels still).
 
-Without ``realtime=1`` the virtual Mega runs as fast as it can (about 1.5x real time
-with the chair); the ELF defaults to firmware/final_control, built on first use.
+The virtual Mega runs at real time by default, as a real board does, so that a
+program paced by the wall clock sees the chair a real one would be. ``speed=S`` runs
+it at S times real time; ``realtime=0`` runs it as fast as simavr can (about 1.5x
+real time with the chair on this machine's CI; tests that do not depend on the
+wall clock use it). The ELF defaults to firmware/final_control, built on first use.
 """
 
 from __future__ import annotations
@@ -13,6 +16,8 @@ from serial.serialutil import SerialException
 
 from wcdrive.urlhandler.board_serial import BoardSerial
 
+_USAGE = "wcavr://[elf][?realtime=0&speed=S&plant=0]"
+
 
 class Serial(BoardSerial):
     """pyserial's ``serial_for_url("wcavr://...")``: a ``MegaBoard`` per open."""
@@ -22,11 +27,20 @@ class Serial(BoardSerial):
 
         parts = urllib.parse.urlsplit(url)
         if parts.scheme != "wcavr":
-            raise SerialException(f"expected wcavr://[elf][?realtime=1&plant=0], got {url!r}")
+            raise SerialException(f"expected {_USAGE}, got {url!r}")
         options = {k: v[0] for k, v in urllib.parse.parse_qs(parts.query, True).items()}
-        unknown = set(options) - {"realtime", "plant"}
+        unknown = set(options) - {"realtime", "plant", "speed"}
         if unknown:
-            raise SerialException(f"wcavr://: unknown option {sorted(unknown)[0]!r}")
+            raise SerialException(f"wcavr://: unknown option {sorted(unknown)[0]!r} ({_USAGE})")
+        realtime = options.get("realtime", "1") not in ("0", "false")
+        try:
+            speed = float(options.get("speed", "1"))
+        except ValueError:
+            raise SerialException(f"wcavr://: speed must be a number ({_USAGE})") from None
+        if not 0.01 <= speed <= 1000.0:
+            raise SerialException("wcavr:// speed must be within 0.01 .. 1000")
+        if not realtime and "speed" in options:
+            raise SerialException("wcavr://: realtime=0 runs flat out; give speed= or realtime=0, not both")
         elf = (parts.netloc + parts.path) or None
-        return MegaBoard(elf, realtime=options.get("realtime", "0") in ("1", "true"),
+        return MegaBoard(elf, realtime=realtime, speed=speed,
                          plant=options.get("plant", "1") not in ("0", "false"))

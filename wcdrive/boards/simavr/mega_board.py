@@ -37,11 +37,13 @@ class MegaBoard(ThreadedBoard):
     (``write``, ``read``, ``close``) that ``PtyBridge`` expects."""
 
     def __init__(self, elf: str | Path | None = None, *, realtime: bool = False,
-                 plant: ChairParams | bool = True, speed: float = 1.0) -> None:
+                 plant: ChairParams | bool = True, speed: float = 1.0,
+                 mega: VirtualMega | None = None) -> None:
+        """``mega``: a Mega made elsewhere (``BootloaderMega``) in place of ``VirtualMega(elf)``."""
         if not speed > 0:
             raise ValueError(f"speed must be positive, got {speed}")
         super().__init__("virtual-mega")
-        self.mega = VirtualMega(elf)
+        self.mega = mega if mega is not None else VirtualMega(elf)
         self.realtime = realtime
         #: With ``realtime``: simulated seconds per wall-clock second.
         self.speed = speed
@@ -78,6 +80,9 @@ class MegaBoard(ThreadedBoard):
         before the reset stays readable."""
         with self._lock:
             return self.mega.reset(cause)
+
+    def _dtr_reset(self) -> None:
+        self.mega.reset("external")
 
     def _send(self, data: bytes) -> None:
         self.mega.send(data)

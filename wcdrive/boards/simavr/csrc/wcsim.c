@@ -10,7 +10,9 @@
  *
  * The USART0 receiver is the harness's (see rx_arrive): the chip's two-frame FIFO and
  * shift register, with data overrun (DOR0) when the firmware reads too late, where
- * simavr 1.6 queues 64 bytes and never overruns. Every byte lost is logged.
+ * simavr 1.6 queues 64 bytes and never overruns. Every byte lost is logged. (The bare
+ * chip of wcsim_new_chip, the bootloader stand-in, keeps simavr's queue and feeds it
+ * with flow control, wcsim_feed: what avrdude talks to.)
  *
  * Resets (wcsim_reset: DTR/external, brown-out, power-on; and the AVR watchdog's own)
  * restart the core without stopping the clock: the cycle count runs on, so queued
@@ -33,6 +35,7 @@
 #include <simavr/avr_ioport.h>
 #include <simavr/avr_uart.h>
 #include <simavr/avr_watchdog.h>
+#include <simavr/avr_extint.h>
 
 #define WCSIM_MAX_HOOKS 16
 
@@ -126,6 +129,11 @@ typedef struct {
     uint64_t rx_index;           /* bytes that reached the receiver so far */
     wcsim_rx_lost_t *rx_lost;
     size_t n_rx_lost, cap_rx_lost;
+    /* flow-controlled UART input (wcsim_feed, wcsim_run_fed): bytes wait here until the
+     * USART's receive FIFO has room, as a USB-serial bridge holds them */
+    uint8_t *feed;
+    size_t n_feed, cap_feed, next_feed;
+    avr_uart_t *uart0;
 } wcsim_t;
 
 static void no_sleep(avr_t *avr, avr_cycle_count_t how_long) {
@@ -359,6 +367,7 @@ void wcsim_free(wcsim_t *s) {
     free(s->tx);
     free(s->hits);
     free(s->resets);
+    free(s->feed);
     /* simavr 1.6 has no avr_free(); the MCU struct is reclaimed at exit. */
     free(s);
 }
@@ -646,4 +655,111 @@ void wcsim_vcd_close(wcsim_t *s) {
     avr_vcd_stop(&s->vcd);
     avr_vcd_close(&s->vcd);
     s->vcd_on = 0;
+}
+
+/* ---- a bare chip: flash loaded from Python, a bootloader, flow-controlled UART input ---- */
+
+/* INT0..7 at their reset value (ISC 00, low level) with a pin held low make simavr
+ * 1.6 poll that pin every cycle even while the interrupt is disabled: the bootloader's
+ * case after a reset with an encoder line low, about 5x slower (measured). Off, a
+ * level interrupt fires once when the level comes, not again while it lasts; neither
+ * the bootloader nor final_control (CHANGE interrupts) uses level interrupts. simavr
+ * turns it back on at every reset, so wcsim_run_fed checks it. */
+static void chip_lax_level_trigger(wcsim_t *s) {
+    for (uint8_t i = 0; i < 8; i++) avr_extint_set_strict_lvl_trig(s->avr, i, 0);
+}
+
+/* A chip with erased flash (0xFF) and no ELF: wcsim_flash_write loads it, wcsim_set_reset_pc
+ * moves the reset vector (BOOTRST). Otherwise as wcsim_new. */
+wcsim_t *wcsim_new_chip(const char *mmcu, uint32_t frequency, char *err, int errlen) {
+    wcsim_t *s = calloc(1, sizeof(*s));
+    if (!s) return NULL;
+    avr_global_logger_set(quiet_logger);
+    s->avr = avr_make_mcu_by_name(mmcu);
+    if (!s->avr) {
+        snprintf(err, errlen, "simavr knows no MCU %s", mmcu);
+        free(s);
+        return NULL;
+    }
+    avr_init(s->avr);
+    s->avr->frequency = frequency;
+    s->avr->log = 0;
+    memset(s->avr->flash, 0xFF, s->avr->flashend + 1);
+    s->avr->codeend = s->avr->flashend;
+    s->avr->sleep = no_sleep;
+    uint32_t flags = 0;
+    avr_ioctl(s->avr, AVR_IOCTL_UART_GET_FLAGS('0'), &flags);
+    flags &= ~(AVR_UART_FLAG_STDIO | AVR_UART_FLAG_POLL_SLEEP);
+    avr_ioctl(s->avr, AVR_IOCTL_UART_SET_FLAGS('0'), &flags);
+    avr_irq_register_notify(avr_io_getirq(s->avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUTPUT),
+                            on_uart_tx, s);
+    static const char *pwm_names[] = {"8>pwm_left", "8>pwm_right"};
+    s->pwm_irq = avr_alloc_irq(&s->avr->irq_pool, 0, 2, pwm_names);
+    s->run_fn = s->avr->run;
+    s->wdt = find_watchdog(s->avr);
+    s->uart0 = find_uart0(s->avr);
+    chip_lax_level_trigger(s);
+    log_reset(s, WCSIM_RESET_POWER_ON);
+    return s;
+}
+
+uint32_t wcsim_flash_size(wcsim_t *s) { return s->avr->flashend + 1; }
+
+int wcsim_flash_write(wcsim_t *s, uint32_t addr, const uint8_t *buf, uint32_t n) {
+    if ((uint64_t)addr + n > (uint64_t)s->avr->flashend + 1) return -1;
+    memcpy(s->avr->flash + addr, buf, n);
+    return 0;
+}
+
+int wcsim_flash_read(wcsim_t *s, uint32_t addr, uint8_t *buf, uint32_t n) {
+    if ((uint64_t)addr + n > (uint64_t)s->avr->flashend + 1) return -1;
+    memcpy(buf, s->avr->flash + addr, n);
+    return 0;
+}
+
+/* The reset vector (a byte address): BOOTRST programmed moves it to the boot section.
+ * Takes effect now when the core is still at the old vector, else at the next reset. */
+void wcsim_set_reset_pc(wcsim_t *s, uint32_t pc) {
+    if (s->avr->pc == s->avr->reset_pc) s->avr->pc = pc;
+    s->avr->reset_pc = pc;
+}
+
+uint32_t wcsim_pc(wcsim_t *s) { return s->avr->pc; }
+
+/* Bytes for the USART0 receiver, held until its FIFO has room (the XON side of
+ * simavr's UART): none is lost to an overrun; bytes that reach a disabled receiver
+ * are lost, as on the chip. */
+int wcsim_feed(wcsim_t *s, const uint8_t *buf, size_t n) {
+    if (s->next_feed == s->n_feed) s->next_feed = s->n_feed = 0;
+    uint8_t *f = grow(s->feed, &s->cap_feed, s->n_feed + n, 1);
+    if (!f) return -1;
+    s->feed = f;
+    memcpy(s->feed + s->n_feed, buf, n);
+    s->n_feed += n;
+    return 0;
+}
+
+size_t wcsim_feed_pending(wcsim_t *s) { return s->n_feed - s->next_feed; }
+
+void wcsim_feed_clear(wcsim_t *s) { s->next_feed = s->n_feed = 0; }
+
+static void feed_uart(wcsim_t *s) {
+    avr_irq_t *in = avr_io_getirq(s->avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_INPUT);
+    while (s->next_feed < s->n_feed) {
+        if (s->uart0 && ((s->uart0->input.write + 1) & (uart_fifo_fifo_size - 1)) == s->uart0->input.read) break;
+        avr_raise_irq(in, s->feed[s->next_feed++]);
+    }
+}
+
+/* wcsim_run_until, with the held bytes fed to the USART whenever its FIFO has room
+ * (checked every 64 cycles, well under a byte time). */
+int wcsim_run_fed(wcsim_t *s, uint64_t target) {
+    while (s->avr->cycle < target) {
+        if (avr_extint_is_strict_lvl_trig(s->avr, 4)) chip_lax_level_trigger(s);
+        feed_uart(s);
+        uint64_t step = s->avr->cycle + 64;
+        int r = wcsim_run_until(s, step < target ? step : target);
+        if (r != 0) return r;
+    }
+    return 0;
 }
