@@ -64,9 +64,9 @@ from wcdrive.errors import (
 )
 from wcdrive.transports.port import Port
 from wcdrive.transports.recording import RecordingPort
-from wcdrive.wheelchair import LINK_TIMEOUT, LinkEvent, LinkLost, LinkRestored, Telemetry, Wheelchair
+from wcdrive.wheelchair import LINK_TIMEOUT, LinkEvent, LinkLost, LinkRestored, Reset, Telemetry, Wheelchair
 
-__all__ = ["SCHEMES", "LinkEvent", "LinkLost", "LinkRestored", "Telemetry", "Wheelchair", "connect"]
+__all__ = ["SCHEMES", "LinkEvent", "LinkLost", "LinkRestored", "Reset", "Telemetry", "Wheelchair", "connect"]
 
 #: wcdrive's short URL schemes and the pyserial scheme each one is.
 SCHEMES = {"sim": "wcsim", "simavr": "wcavr", "can": "wccan"}

@@ -10,6 +10,8 @@ that asked for them.
 
 from __future__ import annotations
 
+import dataclasses
+import math
 import queue
 import threading
 import time
@@ -18,10 +20,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from wcdrive.boardclock import BoardClock
 from wcdrive.odometry import OdometryEstimate, WheelOdometry
 from wcdrive.protocol.codec import ExtendedTelemetry, Feedback
 
-__all__ = ["LinkEvent", "LinkLost", "LinkRestored", "Telemetry", "TelemetryHub"]
+__all__ = ["LinkEvent", "LinkLost", "LinkRestored", "Reset", "Telemetry", "TelemetryHub"]
 
 
 @dataclass(frozen=True)
@@ -35,6 +38,10 @@ class Telemetry:
     vel_right: float
     mode: str
     extended: ExtendedTelemetry | None = None   # the TLM line of the same tick (after hello)
+    #: The board's clock at the tick (s; continuous over resets) and the host time it
+    #: maps to (``wcdrive.boardclock``): stamp navigation data with these.
+    board_time: float | None = None
+    stamp: float | None = None
 
 
 @dataclass(frozen=True)
@@ -60,8 +67,23 @@ class LinkRestored:
     down_for: float          # seconds since the ``LinkLost``
 
 
+@dataclass(frozen=True)
+class Reset:
+    """The board's counts (and clock) restarted: a board reset or a reopened device. The
+    odometry re-baselined its counts and its pose carries on from ``pose``."""
+
+    time: float              # host monotonic time of the first tick after it (s)
+    board_time: float        # the board time it continues from (s)
+    cause: str               # "millis" (the board's clock went back) or "counts" (they jumped)
+    pose: tuple[float, float, float]   # the odometry's x, y, heading at the reset
+
+
 #: What ``Wheelchair.on_link`` callbacks and ``telemetry(link_events=True)`` get.
-LinkEvent = LinkLost | LinkRestored
+LinkEvent = LinkLost | LinkRestored | Reset
+
+#: rad/s of wheel speed beyond any the chair reaches: counts that move faster between
+#: two ticks restarted (a board without ``TLM:``, or one whose clock did not go back).
+_COUNT_JUMP_RAD_S = 40.0
 
 
 class TelemetryHub:
@@ -70,6 +92,9 @@ class TelemetryHub:
     def __init__(self, odometry_method: str = "position") -> None:
         self._lock = threading.Lock()
         self._odometry = WheelOdometry(method=odometry_method)
+        self.clock = BoardClock()
+        self.resets: list[Reset] = []
+        self._last_counts: tuple[int, int] | None = None
         self._history: list[tuple[float, int, int, float, float]] = []
         self._subscribers: list[queue.Queue[Telemetry | LinkEvent]] = []
         self._link_subscribers: list[queue.Queue[Telemetry | LinkEvent]] = []
@@ -77,13 +102,33 @@ class TelemetryHub:
         self._link_callbacks: list[Callable[[LinkEvent], None]] = []
 
     def deliver(self, now: float, msg: Feedback, extended: ExtendedTelemetry | None) -> None:
-        """One tick arrived at host time ``now``."""
-        t = Telemetry(now, msg.count_left, msg.count_right, msg.vel_left, msg.vel_right, msg.mode,
-                      extended)
+        """One tick arrived at host time ``now``: timed by the board's clock
+        (``wcdrive.boardclock``); a restart of the counts re-baselines the odometry and
+        sends a ``Reset``."""
+        reset: Reset | None = None
         with self._lock:
-            self._odometry.update(now, msg.count_left, msg.count_right)
+            previous = self.clock.last
+            sample = self.clock.update(now, extended.millis if extended is not None else None)
+            cause = "millis" if sample.reset else None
+            if cause is None and self._last_counts is not None and previous is not None:
+                limit = _COUNT_JUMP_RAD_S * max(sample.board - previous.board, self.clock.tick_period) \
+                    * self._odometry.p.counts_per_rev / (2 * math.pi)
+                if max(abs(msg.count_left - self._last_counts[0]),
+                       abs(msg.count_right - self._last_counts[1])) > limit:
+                    cause = "counts"
+            if cause is not None:
+                self._odometry.rebaseline()
+                p = self._odometry.pose
+                reset = Reset(now, sample.board, cause, (p.x, p.y, p.theta))
+                self.resets.append(reset)
+            self._last_counts = (msg.count_left, msg.count_right)
+            self._odometry.update(sample.board, msg.count_left, msg.count_right)
             self._history.append((now, msg.count_left, msg.count_right, msg.vel_left, msg.vel_right))
             subscribers, callbacks = list(self._subscribers), list(self._callbacks)
+        if reset is not None:
+            self.deliver_link(reset)
+        t = Telemetry(now, msg.count_left, msg.count_right, msg.vel_left, msg.vel_right, msg.mode,
+                      extended, sample.board, sample.host)
         for q in subscribers:
             q.put(t)
         for cb in callbacks:
@@ -148,9 +193,14 @@ class TelemetryHub:
                 "count_right": rows[:, 2].astype(np.int64), "vel_left": rows[:, 3], "vel_right": rows[:, 4]}
 
     def odometry(self, at: float | None = None) -> OdometryEstimate:
-        """The odometry extrapolated to host time ``at`` (default: now)."""
+        """The odometry stamped host time ``at`` (default: now), with the board time of
+        its last tick and the host time that maps to."""
         with self._lock:
-            return self._odometry.estimate(time.monotonic() if at is None else at)
+            estimate = self._odometry.estimate(time.monotonic() if at is None else at)
+            last = self.clock.last
+        if last is None:
+            return estimate
+        return dataclasses.replace(estimate, board_time=last.board, stamp=last.host)
 
     def odometry_stream(self, closed: threading.Event, rate_hz: float = 50.0) -> Iterator[OdometryEstimate]:
         """The odometry at ``rate_hz`` on a steady grid of host times, until ``closed``."""

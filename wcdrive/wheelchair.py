@@ -34,6 +34,7 @@ import numpy as np
 
 from wcdrive.avr.avrlibc import strtod
 from wcdrive.avr.f32 import f32
+from wcdrive.boardclock import BoardClock
 from wcdrive.errors import (
     WcdriveCommandError,
     WcdriveConnectionError,
@@ -59,11 +60,11 @@ from wcdrive.protocol.codec import (
 )
 from wcdrive.protocol.spec import integer
 from wcdrive.session import Session
-from wcdrive.telemetry import LinkEvent, LinkLost, LinkRestored, Telemetry, TelemetryHub
+from wcdrive.telemetry import LinkEvent, LinkLost, LinkRestored, Reset, Telemetry, TelemetryHub
 from wcdrive.transports.port import Port
 from wcdrive.transports.recording import Recording
 
-__all__ = ["LINK_TIMEOUT", "LinkEvent", "LinkLost", "LinkRestored", "Telemetry", "Wheelchair",
+__all__ = ["LINK_TIMEOUT", "LinkEvent", "LinkLost", "LinkRestored", "Reset", "Telemetry", "Wheelchair",
            "install_signal_handlers", "stop_all"]
 
 #: Default ``link_timeout``: three feedback periods (150 ms) without a line from the board.
@@ -258,7 +259,8 @@ class Wheelchair:
         """Calls ``callback`` with a ``LinkLost`` when the board goes silent for
         ``link_timeout`` s (or its device vanishes) and a ``LinkRestored`` when its
         lines flow again; from the link monitor or the reader thread, one at a time,
-        in order. Keep it short: the link waits for it."""
+        in order. Keep it short: the link waits for it. A ``Reset`` comes when the
+        board's counts restart (a reset, a reopened device): the odometry carries on."""
         self._hub.on_link(callback)
 
     def _require_link(self, what: str) -> None:
@@ -466,8 +468,14 @@ class Wheelchair:
 
     @property
     def odometry(self) -> OdometryEstimate:
-        """The odometry estimate now."""
+        """The odometry estimate now (twist timed by the board's clock)."""
         return self._hub.odometry()
+
+    @property
+    def board_clock(self) -> BoardClock:
+        """The board's clock as the host tracks it: ``board_clock.filter.rate`` (host s
+        per board s), ``to_host(board_time)``, ``resets``."""
+        return self._hub.clock
 
     def odometry_stream(self, rate_hz: float = 50.0) -> Iterator[OdometryEstimate]:
         """The odometry estimate at ``rate_hz`` (50 Hz by default, as the guide's EKF
