@@ -71,7 +71,7 @@ def _sim(args: argparse.Namespace) -> int:
             print(f"wcdrive sim: {exc}", file=sys.stderr)
             return 2
         progress = _Progress(sc.name, sys.stderr.isatty() and not args.json)
-        result = runner.run(sc, backend=args.backend, seed=args.seed, dt=args.dt, progress=progress)
+        result = runner.run(sc, backend=args.backend, seed=args.seed, dt=args.dt, progress=progress, ekf=True)
         progress.done()
         results.append(result)
         if not args.json:

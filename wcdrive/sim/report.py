@@ -21,7 +21,11 @@ def table(result: SimResult) -> str:
     ]
     for key, label in (("odom_wheel", "wheel odometry (position)"),
                        ("odom_velocity", "wheel odometry (velocity)"),
-                       ("odom_gyro", "wheels + gyro heading")):
+                       ("odom_gyro", "wheels + gyro heading"),
+                       ("odom_ekf", "EKF, seed 000 (wheels x, y, vx)"),
+                       ("odom_ekf_vel", "EKF, wheel velocities")):
+        if key + "_x" not in m:
+            continue
         rows.append((label, f"{m[key + '_x']:.3f}", f"{m[key + '_y']:.3f}", f"{m[key + '_heading_deg']:.2f}",
                      f"{m[key + '_position_error_m']:.4f}", f"{m[key + '_heading_error_deg']:.3f}"))
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]

@@ -21,6 +21,7 @@ spot is not "still"), and its travel the longer of their two paths.
 from __future__ import annotations
 
 import math
+import re
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -33,6 +34,7 @@ from wcdrive.boards.simavr.plant_on_pins import PlantOnPins
 from wcdrive.boards.simavr.virtual_mega import VirtualMega
 from wcdrive.hil.lockstep import Recorder, compare
 from wcdrive.hil.traces import Trace
+from wcdrive.localization import Ekf2D, EkfConfig
 from wcdrive.odometry import GyroIntegrator, OdometryParams, WheelOdometry
 from wcdrive.plant import Gyro, Plant
 from wcdrive.plant.encoders import EdgeTrain
@@ -88,6 +90,17 @@ class SimResult:
     faults: tuple[Fault, ...] = ()
     #: ``fault_metrics``: when the fault figures count from (None: no fault, no silence).
     fault_at: float | None = None
+    #: (n, 3): the seeds' EKF (``wcdrive.localization``) on velocity odometry and the
+    #: gyro: seed 000's ekf.yaml (wheels: x, y, vx), and seed 002's scheme (wheels: vx, vy).
+    #: None unless the run asked for them (``run(..., ekf=True)``).
+    odom_ekf: np.ndarray | None = None
+    odom_ekf_vel: np.ndarray | None = None
+    #: The gyro's samples (s, rad/s), every line the board sent (s, line) and the
+    #: host's velocity commands (s, m/s, rad/s): what ``wcdrive sim --mcap`` records.
+    gyro_time: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    gyro_rate: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    serial_lines: list[tuple[float, str]] = field(default_factory=list)
+    cmd_vel: list[tuple[float, float, float]] = field(default_factory=list)
 
     def fault_metrics(self) -> dict[str, float | None]:
         """The fault figures: ``max_tick_gap_ms`` (the longest interval between two
@@ -149,7 +162,10 @@ class SimResult:
             "truth_x": tx, "truth_y": ty, "truth_heading_deg": math.degrees(tth),
         }
         for name, est in (("odom_wheel", self.odom_wheel), ("odom_velocity", self.odom_velocity),
-                          ("odom_gyro", self.odom_gyro)):
+                          ("odom_gyro", self.odom_gyro), ("odom_ekf", self.odom_ekf),
+                          ("odom_ekf_vel", self.odom_ekf_vel)):
+            if est is None:
+                continue
             ex, ey, eth = est[-1]
             out[f"{name}_x"], out[f"{name}_y"] = ex, ey
             out[f"{name}_heading_deg"] = math.degrees(eth)
@@ -176,7 +192,7 @@ def _wrap(a: float) -> float:
 class _Host:
     """The navigation host: parses feedback lines and keeps three odometries."""
 
-    def __init__(self, plant_params, gyro: Gyro) -> None:
+    def __init__(self, plant_params, gyro: Gyro, ekf: bool = False) -> None:
         op = OdometryParams(wheel_radius=plant_params.wheel_radius, wheelbase=plant_params.wheelbase,
                             counts_per_rev=plant_params.counts_per_rev)
         self.decoder = LineDecoder()
@@ -185,6 +201,11 @@ class _Host:
         self.gyro_odom = WheelOdometry(op, "position")
         self.gyro = gyro
         self.integrator = GyroIntegrator()
+        self.ekf = Ekf2D()
+        self.ekf_vel = Ekf2D(EkfConfig.wheel_velocities())
+        #: The EKFs run only when asked (``run(..., ekf=True)``): at the gyro's 400 Hz they
+        #: take 9 times as long as the rest of the run.
+        self.ekfs: tuple[Ekf2D, ...] = (self.ekf, self.ekf_vel) if ekf else ()
         self._gyro_index = 0
         self.lines = {"feedback": 0, "error": 0, "event": 0, "other": 0}
 
@@ -195,9 +216,14 @@ class _Host:
                 times, rates = self.gyro.times, self.gyro.rates
                 while self._gyro_index < len(times) and times[self._gyro_index] <= t:
                     self.integrator.add(times[self._gyro_index], rates[self._gyro_index])
+                    for ekf in self.ekfs:
+                        ekf.imu(times[self._gyro_index], self.integrator.heading, rates[self._gyro_index])
                     self._gyro_index += 1
                 self.position.update(t, msg.count_left, msg.count_right)
                 self.velocity.update(t, msg.count_left, msg.count_right)
+                v = self.velocity
+                for ekf in self.ekfs:
+                    ekf.odometry(t, v.pose.x, v.pose.y, v.pose.theta, v.linear, v.angular)
                 self.gyro_odom.use_gyro_heading(self.integrator.heading_at(t))
                 self.gyro_odom.update(t, msg.count_left, msg.count_right)
             else:
@@ -205,8 +231,9 @@ class _Host:
                 self.lines[key if key in self.lines else "other"] += 1
 
     def poses(self) -> tuple[tuple[float, float, float], ...]:
-        return tuple((o.pose.x, o.pose.y, o.pose.theta)
-                     for o in (self.position, self.velocity, self.gyro_odom))
+        return (*((o.pose.x, o.pose.y, o.pose.theta)
+                  for o in (self.position, self.velocity, self.gyro_odom)), self.ekf.pose,
+                self.ekf_vel.pose)
 
 
 class _Log:
@@ -215,21 +242,22 @@ class _Log:
         self.tick_cycles: list[int] = []
 
     def add(self, cycle: int, plant: Plant, host: _Host, setpoint, measured, pwm, counts) -> None:
-        wheel, velocity, gyro = host.poses()
+        wheel, velocity, gyro, ekf, ekf_vel = host.poses()
         heading = plant.pose[2]
         caster = tuple(_wrap(c - heading) for c in plant.caster_heading)
         self.rows.append((cycle / F_CPU, plant.pose, wheel, velocity, gyro, setpoint, measured,
-                          (plant.left.speed, plant.right.speed), pwm, caster, counts))
+                          (plant.left.speed, plant.right.speed), pwm, caster, counts, ekf, ekf_vel))
         self.tick_cycles.append(cycle)
 
     def arrays(self) -> dict[str, np.ndarray]:
         names = ("tick_time", "truth", "odom_wheel", "odom_velocity", "odom_gyro", "setpoint",
-                 "measured", "wheel_speed", "pwm", "caster", "counts")
+                 "measured", "wheel_speed", "pwm", "caster", "counts", "odom_ekf", "odom_ekf_vel")
         out: dict[str, np.ndarray]
         if not self.rows:
             z3, z2 = np.zeros((1, 3)), np.zeros((1, 2))
             out = {n: z2 for n in names}
-            out.update(tick_time=np.zeros(1), truth=z3, odom_wheel=z3, odom_velocity=z3, odom_gyro=z3)
+            out.update(tick_time=np.zeros(1), truth=z3, odom_wheel=z3, odom_velocity=z3, odom_gyro=z3,
+                       odom_ekf=z3, odom_ekf_vel=z3)
         else:
             cols = list(zip(*self.rows, strict=True))
             out = {n: np.array(c, dtype=float) for n, c in zip(names, cols, strict=True)}
@@ -245,6 +273,7 @@ class _Lines:
         self._partial = bytearray()
         self.events: list[tuple[float, str]] = []
         self.boots: list[tuple[float, str]] = []
+        self.all: list[tuple[float, str]] = []
 
     def feed(self, cycle: int, data: bytes) -> None:
         self._partial += data
@@ -254,6 +283,7 @@ class _Lines:
                 return
             line = bytes(self._partial[:end]).rstrip(b"\r").decode("latin-1")
             del self._partial[:end + 1]
+            self.all.append((cycle / F_CPU, line))
             if line.startswith("EVT:"):
                 self.events.append((round(cycle / F_CPU, 6), line))
             elif line.startswith("BOOT:"):
@@ -339,11 +369,12 @@ def fault_time(scenario: Scenario, wire: WireSchedule) -> float | None:
 
 
 def run(scenario: Scenario, *, backend: str = "port", seed: int = 0, dt: float = 0.001,
-        progress: Callable[[float], None] | None = None, elf=None) -> SimResult:
+        progress: Callable[[float], None] | None = None, elf=None, ekf: bool = False) -> SimResult:
     """Runs ``scenario`` in closed loop: ``backend`` "port" (the Python port) or "simavr"
     (the ELF ``elf``, by default the bundled firmware, built if needed), the plant
     stepping every ``dt`` s, with the scenario's faults. ``seed`` seeds the gyro;
-    ``progress`` is called now and then with the fraction done."""
+    ``progress`` is called now and then with the fraction done; ``ekf`` runs the seeds'
+    EKFs (``odom_ekf``, ``odom_ekf_vel``) on the host too."""
     if backend not in ("port", "simavr"):
         raise ValueError("backend must be 'port' or 'simavr'")
     if not 1e-5 <= dt <= 0.01:
@@ -352,7 +383,7 @@ def run(scenario: Scenario, *, backend: str = "port", seed: int = 0, dt: float =
     plant = Plant(params)
     plant.start_motion_log()
     gyro = Gyro(params, seed)
-    host = _Host(params, gyro)
+    host = _Host(params, gyro, ekf)
     log = _Log()
     lines = _Lines()
     step_cycles = round(dt * F_CPU)
@@ -379,7 +410,38 @@ def run(scenario: Scenario, *, backend: str = "port", seed: int = 0, dt: float =
                      step_contact_speed=contact, step_volts=motion[:, 4:6],
                      events=lines.events, boots=lines.boots, faults=scenario.faults,
                      fault_at=fault_time(scenario, wire),
-                     **extra, **log.arrays())  # type: ignore[arg-type]
+                     gyro_time=np.array(gyro.times), gyro_rate=np.array(gyro.rates),
+                     serial_lines=lines.all, cmd_vel=_cmd_vel(commands),
+                     **extra, **_without_ekf(log.arrays(), ekf))  # type: ignore[arg-type]
+
+
+def _without_ekf(arrays: dict[str, np.ndarray], ekf: bool) -> dict[str, np.ndarray]:
+    if not ekf:
+        arrays.pop("odom_ekf")
+        arrays.pop("odom_ekf_vel")
+    return arrays
+
+
+def _cmd_vel(commands: list[tuple[int, bytes]]) -> list[tuple[float, float, float]]:
+    """The host's motion commands as (s, m/s, rad/s): ``x:``/``t:`` as sent, wheel
+    commands (``r``/``l`` rad/s) through the chair's kinematics (other commands: none)."""
+    from wcdrive.protocol.spec import real
+
+    radius, base = real("WHEEL_RADIUS"), real("WHEELBASE")
+    out = []
+    for cycle, data in commands:
+        text = data.decode("latin-1")
+        if m := _CMDVEL.fullmatch(text.strip()):
+            out.append((cycle / F_CPU, float(m[1]), float(m[2])))
+        elif m := _WHEEL.fullmatch(text.strip()):
+            r = float(m[2]) * (-1 if m[1] == "n" else 1)
+            lft = float(m[4]) * (-1 if m[3] == "n" else 1)
+            out.append((cycle / F_CPU, 0.5 * radius * (r + lft), radius * (r - lft) / base))
+    return out
+
+
+_CMDVEL = re.compile(r"x:(-?[\d.]+),t:(-?[\d.]+),")
+_WHEEL = re.compile(r"r([pn])([\d.]+),l([pn])([\d.]+),")
 
 
 def _run_port(plant, gyro, host, log, lines, wire, faults, end_cycle, dt, progress) -> dict:
