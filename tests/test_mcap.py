@@ -108,3 +108,36 @@ def test_values_are_the_runs(square) -> None:
     assert commands == {(0.3, 0.0), (0.0, 0.5), (0.0, 0.0)}
     lines = [m.status[0].message for _, m in by_topic["/diagnostics/serial"]]
     assert lines[0].startswith("BOOT:") and any(line.startswith("ENC:") for line in lines)
+
+
+def test_a_connected_chair_records_mcap(tmp_path: Path) -> None:
+    """``connect("sim://?speed=4", record="run.mcap")``: the chair's ticks, commands and
+    lines, and the simulated board's truth and gyro; the stamps are the board's clock
+    mapped to the host (80 ticks a host second at speed 4) and the twist is the truth's."""
+    import time
+
+    import wcdrive
+
+    path = tmp_path / "run.mcap"
+    with wcdrive.connect("sim://?speed=4", record=str(path)) as chair:
+        start = time.monotonic()
+        while time.monotonic() - start < 1.5:
+            chair.set_velocity(0.4, 0.0)
+            time.sleep(0.05)
+    by_topic: dict[str, list] = defaultdict(list)
+    with AnyReader([path]) as reader:
+        for conn, log_time, raw in reader.messages():
+            by_topic[conn.topic].append((log_time * 1e-9, reader.deserialize(raw, conn.msgtype)))
+    assert set(by_topic) == set(TOPICS) - {"/odometry/filtered"}
+    odom = by_topic["/odom"]
+    stamps = np.array([_stamp(m) for _, m in odom])
+    assert np.all(np.diff(stamps) > 0)
+    assert abs(stamps[-1] - time.time()) < 5.0                       # wall-clock epoch
+    assert (len(stamps) - 1) / (stamps[-1] - stamps[0]) == pytest.approx(80.0, rel=0.05)
+    late = [(t, m.twist.twist.linear.x) for t, m in odom if t > stamps[-1] - 0.5]
+    truth = [m.twist.twist.linear.x for t, m in by_topic["/ground_truth"] if t > stamps[-1] - 0.5]
+    assert np.mean([v for _, v in late]) == pytest.approx(np.mean(truth), rel=0.05)
+    assert {round(m.linear.x, 3) for _, m in by_topic["/cmd_vel"]} >= {0.4}
+    assert any(m.status[0].message.startswith("TLM:") for _, m in by_topic["/diagnostics/serial"])
+    imu_rate = (len(by_topic["/imu"]) - 1) / (by_topic["/imu"][-1][0] - by_topic["/imu"][0][0])
+    assert imu_rate == pytest.approx(4 * 400.0, rel=0.1)

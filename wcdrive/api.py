@@ -125,16 +125,41 @@ def _default_link_timeout(port: Port) -> float:
     return LINK_TIMEOUT
 
 
-def connect(url: str = "sim://", *, boot_timeout: float = 10.0, record: bool = False,
+def connect(url: str = "sim://", *, boot_timeout: float = 10.0, record: bool | str = False,
             legacy: bool = False, link_timeout: float | None = None, **options: Any) -> Wheelchair:
     """Opens ``url``, waits for the board's boot and feedback, says hello (module
     docstring). ``record``: keep every byte both ways (``chair.recording``) for
-    ``wcdrive.replay``. ``legacy``: drive a board that never answers hello with
+    ``wcdrive.replay``; ``record="run.mcap"``: write ROS 2 messages (odometry, tf, the
+    wheels, the commands, the board's lines; on a simulated board its ground truth and
+    gyro too) into that MCAP file, finished when the chair closes
+    (``wcdrive.ros2.ChairPublisher``). ``legacy``: drive a board that never answers hello with
     protocol v1 instead of raising ``WcdriveProtocolError``. ``link_timeout``: seconds
     without a line before the link counts as lost (default 0.15 s, longer for a
     simulated board slower than real time). ``options`` go to ``Wheelchair``
     (``odometry_method``, ``reconnect_timeout``, ``stop_on_signals``)."""
+    publisher = None
+    if isinstance(record, str):
+        from wcdrive import ros2
+        from wcdrive.protocol.spec import real
+
+        publisher = ros2.ChairPublisher(ros2.McapSink(record), real("WHEEL_RADIUS"), real("WHEELBASE"),
+                                        round(real("CPR")))
+        user_close = options.pop("on_close", None)
+
+        def close_sink() -> None:
+            try:
+                if user_close is not None:
+                    user_close()
+            finally:
+                publisher.sink.close()
+
+        options["on_close"] = close_sink
+
     def wrap(port: Port) -> Port:
+        if publisher is not None:
+            from wcdrive.ros2 import TapPort
+
+            return TapPort(port, publisher)
         return RecordingPort(port) if record else port
 
     if "://" in url:
@@ -150,12 +175,16 @@ def connect(url: str = "sim://", *, boot_timeout: float = 10.0, record: bool = F
     if url.startswith("/"):
         def reopen() -> Port:
             again = _open_device(url)
+            if publisher is not None:
+                return wrap(again)
             return RecordingPort(again, first.recording) if isinstance(first, RecordingPort) else again
 
         options.setdefault("reopen", reopen)
     chair = Wheelchair(first, legacy=legacy,
                        link_timeout=_default_link_timeout(port) if link_timeout is None else link_timeout,
                        **options)
+    if publisher is not None:
+        publisher.attach(chair, getattr(port, "board", None))
     try:
         chair.wait_for_telemetry(boot_timeout)   # the Mega resets on open: wait for it
         chair.wait_for_handshake(boot_timeout)

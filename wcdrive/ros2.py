@@ -256,3 +256,154 @@ class LiveSink:
     def close(self) -> None:
         """Stops the server."""
         self.server.stop()
+
+
+# ---- a connected chair ------------------------------------------------------------------
+_CMDVEL = re.compile(rb"x:(-?[\d.]+),t:(-?[\d.]+),")
+_WHEEL = re.compile(rb"r([pn])([\d.]+),l([pn])([\d.]+),")
+
+
+class ChairPublisher:
+    """A connected chair's data as ROS 2 messages on ``sink`` (``connect(url,
+    record="run.mcap")``). Per tick: ``/odom`` (``chair.odometry``, its covariances),
+    ``/tf`` and ``/joint_states``, stamped with the tick's board time mapped to the
+    host (``Telemetry.stamp``); ``/cmd_vel`` for every velocity or wheel command the host
+    writes and ``/diagnostics/serial`` for every line the board sends, stamped when the
+    host wrote or read them. A simulated board (``sim://``, ``simavr://``) adds
+    ``/ground_truth`` and ``/imu`` (its gyro) on its own clock, mapped the same way.
+    Stamps are on the wall clock (``time.time``'s epoch)."""
+
+    def __init__(self, sink: Sink, wheel_radius: float, wheelbase: float, counts_per_rev: int) -> None:
+        import time as _time
+
+        self.sink = sink
+        self._wall = _time.time() - _time.monotonic()
+        self._monotonic = _time.monotonic
+        self._radius, self._base = wheel_radius, wheelbase
+        self._per_count = 2.0 * math.pi / counts_per_rev
+        self._partial = bytearray()
+        self._lock = threading.Lock()
+        self._chair: Any = None
+        self._board: Any = None
+        self._gyro_seen = 0
+
+    def attach(self, chair: Any, board: Any = None) -> None:
+        """Subscribes to ``chair``'s ticks; ``board``: the simulated board, if any."""
+        self._chair, self._board = chair, board
+        chair.on_telemetry(self._tick)
+
+    def wrote(self, data: bytes) -> None:
+        """Bytes the host wrote: a velocity or wheel command is a ``/cmd_vel``."""
+        t = self._monotonic() + self._wall
+        if m := _CMDVEL.search(data):
+            self.sink.publish("/cmd_vel", twist(float(m[1]), float(m[2])), t)
+        elif m := _WHEEL.search(data):
+            r = float(m[2]) * (-1 if m[1] == b"n" else 1)
+            left = float(m[4]) * (-1 if m[3] == b"n" else 1)
+            self.sink.publish("/cmd_vel", twist(0.5 * self._radius * (r + left),
+                                                self._radius * (r - left) / self._base), t)
+
+    def read(self, data: bytes) -> None:
+        """Bytes the host read: each whole line is a ``/diagnostics/serial``."""
+        t = self._monotonic() + self._wall
+        with self._lock:
+            self._partial += data
+            lines = []
+            while (end := self._partial.find(b"\n")) >= 0:
+                lines.append(bytes(self._partial[:end]).rstrip(b"\r").decode("latin-1"))
+                del self._partial[:end + 1]
+        for line in lines:
+            self.sink.publish("/diagnostics/serial", serial_line(t, line), t)
+
+    def _tick(self, tel: Any) -> None:
+        chair = self._chair
+        if chair is None or tel.stamp is None:
+            return
+        t = tel.stamp + self._wall
+        est = chair.odometry
+        p = est.pose
+        self.sink.publish("/odom", odometry(t, p.x, p.y, p.theta, est.linear, est.angular,
+                                            est.pose_covariance, est.twist_covariance), t)
+        self.sink.publish("/tf", tf(t, p.x, p.y, p.theta), t)
+        self.sink.publish("/joint_states", joint_state(
+            t, (-tel.count_left * self._per_count, tel.count_right * self._per_count),
+            (tel.vel_left, tel.vel_right)), t)
+        if self._board is not None:
+            self._simulated(chair)
+
+    def _simulated(self, chair: Any) -> None:
+        board = self._board
+        pins = getattr(board, "_pins", None)
+        gyro = getattr(getattr(board, "loop", None), "gyro", None) or getattr(pins, "gyro", None)
+        with board._lock:
+            plant = board.plant
+            if plant is None:
+                return
+            x, y, th = plant.pose
+            v, _ = plant.axle_velocity()
+            w, now = plant.yaw_rate, plant.time
+            samples: list[tuple[float, float]] = []
+            if gyro is not None:
+                samples = list(zip(gyro.times[self._gyro_seen:], gyro.rates[self._gyro_seen:], strict=True))
+                self._gyro_seen = len(gyro.times)
+        clock = chair.board_clock
+        t = clock.to_host(now) + self._wall
+        self.sink.publish("/ground_truth", odometry(t, x, y, th, v, w), t)
+        variance = math.radians(getattr(getattr(plant, "p", None), "gyro_noise_dps", 0.0)) ** 2
+        for ts, rate in samples:
+            stamp_s = clock.to_host(ts) + self._wall
+            self.sink.publish("/imu", imu(stamp_s, rate, variance), stamp_s)
+
+
+class TapPort:
+    """Wraps a ``Port``: what goes through also goes to a ``ChairPublisher``. It is a
+    ``Port`` itself."""
+
+    def __init__(self, port: Any, publisher: ChairPublisher) -> None:
+        self.port = port
+        self.publisher = publisher
+
+    @property
+    def timeout(self) -> float | None:
+        """The wrapped port's ``timeout``."""
+        return self.port.timeout
+
+    @timeout.setter
+    def timeout(self, value: float | None) -> None:
+        self.port.timeout = value
+
+    @property
+    def board(self) -> Any:
+        """The wrapped port's simulated board, if it has one."""
+        return getattr(self.port, "board", None)
+
+    def write(self, data: bytes) -> int | None:
+        """Writes through, then publishes."""
+        n = self.port.write(data)
+        self.publisher.wrote(bytes(data))
+        return n
+
+    def read(self, size: int = 1) -> bytes:
+        """Reads through, then publishes."""
+        data: bytes = self.port.read(size)
+        if data:
+            self.publisher.read(data)
+        return data
+
+    @property
+    def in_waiting(self) -> int:
+        """The wrapped port's."""
+        return int(self.port.in_waiting)
+
+    @property
+    def is_open(self) -> bool:
+        """The wrapped port's (True for a port without one)."""
+        return bool(getattr(self.port, "is_open", True))
+
+    def flush(self) -> None:
+        """Flushes the wrapped port."""
+        self.port.flush()
+
+    def close(self) -> None:
+        """Closes the wrapped port."""
+        self.port.close()
