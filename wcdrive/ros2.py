@@ -227,6 +227,11 @@ class LiveSink:
         self._channels: dict[str, Any] = {}
         self._encoders: dict[str, Callable[[dict[str, Any]], bytes]] = {}
         self._lock = threading.Lock()
+        # Every channel before any client: one made while a client is connected is
+        # advertised before the server knows it, and a quick subscribe to it is refused
+        # ("Unknown channel ID", foxglove-sdk 0.30).
+        for topic in TOPICS:
+            self._channel(topic)
 
     @property
     def port(self) -> int:
