@@ -60,7 +60,8 @@ def _sim(args: argparse.Namespace) -> int:
     if args.list:
         for path in scenario.bundled():
             sc = scenario.load(str(path))
-            print(f"{sc.name:28s} {sc.duration:7.1f} s  {sc.description}")
+            loop = "closed loop" if sc.closed_loop else "open loop  "   # open: timed commands
+            print(f"{sc.name:28s} {sc.duration:7.1f} s  {loop}  {sc.description}")
         return 0
     names = [p.stem for p in scenario.bundled()] if args.all else (args.scenario or ["square"])
     results = []

@@ -35,11 +35,12 @@ from wcdrive.boards.simavr.virtual_mega import VirtualMega
 from wcdrive.hil.lockstep import Recorder, compare
 from wcdrive.hil.traces import Trace
 from wcdrive.localization import Ekf2D, EkfConfig
+from wcdrive.navigation import PurePursuit
 from wcdrive.odometry import GyroIntegrator, OdometryParams, WheelOdometry
 from wcdrive.plant import Gyro, Plant
 from wcdrive.plant.encoders import EdgeTrain
 from wcdrive.plant.faults import Fault
-from wcdrive.protocol.codec import Feedback, LineDecoder
+from wcdrive.protocol.codec import Feedback, LineDecoder, encode_cmdvel
 from wcdrive.sim.scenario import Scenario
 
 #: m/s: the chair is at a standstill once its speed stays below this.
@@ -101,6 +102,13 @@ class SimResult:
     gyro_rate: np.ndarray = field(default_factory=lambda: np.zeros(0))
     serial_lines: list[tuple[float, str]] = field(default_factory=list)
     cmd_vel: list[tuple[float, float, float]] = field(default_factory=list)
+    #: A closed-loop run (a ``path`` scenario): the goal (m), the time the host's
+    #: estimate reached it (None: never), the published bound on the true error (m) and
+    #: which estimate the host steered by.
+    goal: tuple[float, float] | None = None
+    goal_reached_s: float | None = None
+    goal_tolerance: float | None = None
+    steered_by: str | None = None
 
     def fault_metrics(self) -> dict[str, float | None]:
         """The fault figures: ``max_tick_gap_ms`` (the longest interval between two
@@ -182,6 +190,14 @@ class SimResult:
         out["events"] = [[t, line] for t, line in self.events]
         out["boots"] = [[t, line] for t, line in self.boots]
         out.update(self.fault_metrics())
+        out["closed_loop"] = self.goal is not None
+        if self.goal is not None:
+            gx, gy = self.goal
+            error = math.hypot(tx - gx, ty - gy)
+            out.update(goal_x=gx, goal_y=gy, goal_error_m=error, goal_reached_s=self.goal_reached_s,
+                       goal_tolerance_m=self.goal_tolerance, steered_by=self.steered_by,
+                       goal_within_tolerance=self.goal_reached_s is not None
+                       and error <= (self.goal_tolerance or 0.0))
         return out
 
 
@@ -234,6 +250,44 @@ class _Host:
         return (*((o.pose.x, o.pose.y, o.pose.theta)
                   for o in (self.position, self.velocity, self.gyro_odom)), self.ekf.pose,
                 self.ekf_vel.pose)
+
+
+class _Pilot:
+    """The closed-loop host: every host period, a ``cmdvel`` from pure pursuit
+    (``wcdrive.navigation``) on its own estimate (wheel odometry or the EKF); after the
+    goal, stops for ``settle_s``."""
+
+    def __init__(self, scenario: Scenario, host: _Host) -> None:
+        assert scenario.path is not None
+        self.ctl = PurePursuit(scenario.path, scenario.follow)
+        self.host = host
+        self.localization = scenario.follow.localization
+        self.period = round(F_CPU / scenario.host_rate_hz)
+        self.next = round(0.02 * F_CPU)
+        self.settle = round(scenario.settle_s * F_CPU)
+        self.sent: list[tuple[int, bytes]] = []
+        self.done_at: int | None = None
+
+    def pose(self) -> tuple[float, float, float]:
+        if self.localization == "ekf":
+            return self.host.ekf_vel.pose
+        p = self.host.position.pose
+        return p.x, p.y, p.theta
+
+    def step(self) -> tuple[int, bytes]:
+        """The command due at ``next``; moves ``next`` on a period."""
+        cycle = self.next
+        v, w, done = self.ctl.command(*self.pose())
+        if done and self.done_at is None:
+            self.done_at = cycle
+        data = encode_cmdvel(v, w)
+        self.sent.append((cycle, data))
+        self.next += self.period
+        return cycle, data
+
+    def finished(self) -> bool:
+        """The goal was reached and the chair has had ``settle_s`` to stop."""
+        return self.done_at is not None and self.next >= self.done_at + self.settle
 
 
 class _Log:
@@ -383,26 +437,36 @@ def run(scenario: Scenario, *, backend: str = "port", seed: int = 0, dt: float =
     plant = Plant(params)
     plant.start_motion_log()
     gyro = Gyro(params, seed)
-    host = _Host(params, gyro, ekf)
+    closed = scenario.closed_loop
+    host = _Host(params, gyro, ekf or (closed and scenario.follow.localization == "ekf"))
+    pilot = _Pilot(scenario, host) if closed else None
     log = _Log()
     lines = _Lines()
     step_cycles = round(dt * F_CPU)
     end_cycle = round(scenario.duration * F_CPU)
     commands = [(round(t * F_CPU), data) for t, data in scenario.host_commands()
-                if t < scenario.duration]
+                if t < scenario.duration and not (closed and t >= 0.02)]   # closed: params only
     wire = wire_schedule(commands, scenario.faults)
     wall0 = time.perf_counter()
     if backend == "port":
-        extra = _run_port(plant, gyro, host, log, lines, wire, scenario.faults, end_cycle, dt, progress)
+        extra = _run_port(plant, gyro, host, log, lines, wire, scenario.faults, end_cycle, dt, progress,
+                          pilot)
     else:
         extra = _run_simavr(plant, gyro, host, log, lines, wire, scenario.faults, step_cycles, end_cycle,
-                            dt, progress, elf)
+                            dt, progress, elf, pilot)
     wall = time.perf_counter() - wall0
+    duration = extra.pop("end_cycle", end_cycle) / F_CPU
+    goal: dict[str, object] = {}
+    if pilot is not None:
+        commands += pilot.sent
+        goal = {"goal": pilot.ctl.goal, "goal_tolerance": scenario.follow.truth_tolerance,
+                "goal_reached_s": None if pilot.done_at is None else pilot.done_at / F_CPU,
+                "steered_by": scenario.follow.localization}
     motion = plant.take_motion_log()
     half = 0.5 * params.wheelbase
     contact = np.stack((np.hypot(motion[:, 1] - motion[:, 3] * half, motion[:, 2]),
                         np.hypot(motion[:, 1] + motion[:, 3] * half, motion[:, 2])), axis=1)
-    return SimResult(scenario=scenario.name, backend=backend, duration=scenario.duration, wall_time=wall,
+    return SimResult(scenario=scenario.name, backend=backend, duration=duration, wall_time=wall,
                      ticks=len(log.rows), caster_scrub_energy=plant.caster_scrub_energy,
                      caster_scrub_time=plant.caster_scrub_time, caster_swivel_work=plant.caster_swivel_work,
                      caster_side_impulse=plant.caster_side_impulse, lines=dict(host.lines),
@@ -412,7 +476,7 @@ def run(scenario: Scenario, *, backend: str = "port", seed: int = 0, dt: float =
                      fault_at=fault_time(scenario, wire),
                      gyro_time=np.array(gyro.times), gyro_rate=np.array(gyro.rates),
                      serial_lines=lines.all, cmd_vel=_cmd_vel(commands),
-                     **extra, **_without_ekf(log.arrays(), ekf))  # type: ignore[arg-type]
+                     **goal, **extra, **_without_ekf(log.arrays(), ekf))  # type: ignore[arg-type]
 
 
 def _without_ekf(arrays: dict[str, np.ndarray], ekf: bool) -> dict[str, np.ndarray]:
@@ -444,7 +508,8 @@ _CMDVEL = re.compile(r"x:(-?[\d.]+),t:(-?[\d.]+),")
 _WHEEL = re.compile(r"r([pn])([\d.]+),l([pn])([\d.]+),")
 
 
-def _run_port(plant, gyro, host, log, lines, wire, faults, end_cycle, dt, progress) -> dict:
+def _run_port(plant, gyro, host, log, lines, wire, faults, end_cycle, dt, progress,
+              pilot: _Pilot | None = None) -> dict:
     loop = PortLoop(plant, gyro, dt, faults=faults)
     for cycle, data in wire.runs:
         loop.send(data, at=cycle)
@@ -465,13 +530,23 @@ def _run_port(plant, gyro, host, log, lines, wire, faults, end_cycle, dt, progre
             progress(t * F_CPU / end_cycle)
             last_progress[0] = t
 
-    loop.run_until(end_cycle, on_tick)
+    if pilot is None:
+        loop.run_until(end_cycle, on_tick)
+        take()
+        return {}
+    while pilot.next < end_cycle and not pilot.finished():
+        loop.run_until(pilot.next, on_tick)
+        take()
+        cycle, data = pilot.step()
+        loop.send(data, at=cycle)
+    end = min(pilot.next, end_cycle)
+    loop.run_until(end, on_tick)
     take()
-    return {}
+    return {"end_cycle": end}
 
 
 def _run_simavr(plant, gyro, host, log, lines, wire, faults, step_cycles, end_cycle, dt, progress,
-                elf) -> dict:
+                elf, pilot: _Pilot | None = None) -> dict:
     mega = VirtualMega(elf)
     recorder = Recorder(mega)
     pins = PlantOnPins(mega, plant, gyro, faults=faults)
@@ -481,8 +556,17 @@ def _run_simavr(plant, gyro, host, log, lines, wire, faults, step_cycles, end_cy
     runs = wire.runs
     next_run = 0
     steps = end_cycle // step_cycles
+    piloted: list[tuple[int, bytes]] = []
     for k in range(steps):
         t0, t1 = k * dt, (k + 1) * dt
+        if pilot is not None:
+            if pilot.finished():
+                end_cycle = k * step_cycles
+                break
+            while pilot.next < (k + 1) * step_cycles:
+                cycle, data = pilot.step()
+                mega.send(data, at=cycle)
+                piloted.append((cycle, data))
         # The host's bytes are queued a step ahead, so that the harness's queue stays
         # short (an encoder storm queues millions of edges).
         while next_run < len(runs) and runs[next_run][0] < (k + 1) * step_cycles:
@@ -511,9 +595,11 @@ def _run_simavr(plant, gyro, host, log, lines, wire, faults, step_cycles, end_cy
         if parts:
             encoders[side] = EdgeTrain(np.concatenate([p.times for p in parts]),
                                        np.concatenate([p.states for p in parts]), 0, 0)
-    trace = Trace(duration=end_cycle / F_CPU, serial=[(c / F_CPU, d) for c, d in runs],
+    trace = Trace(duration=end_cycle / F_CPU, serial=[(c / F_CPU, d) for c, d in sorted(runs + piloted)],
                   encoders=encoders)
     report = compare(recorder.recording(trace))
     mega.close()
-    return {"firmware_differences": len(report.mismatches),
-            "firmware_events_compared": report.events}
+    out = {"firmware_differences": len(report.mismatches), "firmware_events_compared": report.events}
+    if pilot is not None:
+        out["end_cycle"] = end_cycle
+    return out
