@@ -72,6 +72,7 @@ def test_closed_loop_scenarios_reach_their_goals_on_the_port(name: str) -> None:
     assert m["goal_error_m"] <= sc.follow.truth_tolerance, m["goal_error_m"]
     assert m["goal_within_tolerance"] is True
     assert result.duration < sc.duration                         # ended once there
+    assert not any("FAULT" in line for _, line in result.events)  # no detector tripped
     assert sc.path is not None
     for wx, wy in sc.path:                                       # and drove by every waypoint
         nearest = min(math.hypot(x - wx, y - wy) for x, y, _ in result.truth)
@@ -98,3 +99,11 @@ def test_the_list_labels_open_and_closed_loop() -> None:
         assert "closed loop" in rows[name]
     for name in ("square", "l_shape", "corridor_100m", "slip_turn"):
         assert "open loop" in rows[name]
+
+
+def test_bench_run_refuses_a_closed_loop_scenario() -> None:
+    """``wcdrive bench run`` replays timed segments; a path scenario has none."""
+    from wcdrive import bench
+
+    with pytest.raises(scenario.ScenarioError, match="closed-loop"):
+        bench.run_scenario("square_closed", "sim://")

@@ -75,6 +75,9 @@ def run_scenario(name: str, url: str, *, speed: float = 1.0,
     raises ``Interrupted`` with the recording so far."""
 
     sc = scenario.load(name)
+    if sc.closed_loop:                          # its commands come from the odometry
+        raise scenario.ScenarioError(f"{sc.name} is a closed-loop (path) scenario: wcdrive sim runs "
+                                     "those; bench run replays timed segments")
     period = 1.0 / (sc.host_rate_hz * speed)
     recording: Recording | None = None
     try:
