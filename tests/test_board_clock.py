@@ -95,10 +95,13 @@ def test_twist_on_simavr_is_the_plants() -> None:
 def test_a_reset_mid_drive_keeps_the_pose_and_tells_the_subscribers() -> None:
     """The board resets while driving (``PortLoop.reset``: millis and counts from 0, a
     fresh setup, hello again): the pose carries on, board time and the stamps go on
-    forward, and ``Reset`` reaches ``on_link`` callbacks and ``telemetry(link_events=True)``."""
+    forward, and a ``Reset`` reaches ``on_reset`` callbacks (and ``chair.resets``);
+    ``on_link`` gets no ``Reset`` (it keeps its LinkLost/LinkRestored pairs)."""
     seen: list[object] = []
+    links: list[object] = []
     with wcdrive.connect("sim://?speed=4") as chair:
-        chair.on_link(seen.append)
+        chair.on_reset(seen.append)
+        chair.on_link(links.append)
         stream = chair.telemetry(timeout=5.0, link_events=True)
         next(stream)                                 # subscribed from here on
         board = chair._session.port.board            # type: ignore[attr-defined]
@@ -121,7 +124,8 @@ def test_a_reset_mid_drive_keeps_the_pose_and_tells_the_subscribers() -> None:
         with board._lock:
             truth = board.plant.pose
         resets = [e for e in seen if isinstance(e, wcdrive.Reset)]
-        assert len(resets) == 1 and resets[0].cause == "millis"
+        assert len(resets) == 1 and resets[0].cause == "millis" and chair.resets == resets
+        assert not any(isinstance(e, wcdrive.Reset) for e in links)
         assert resets[0].pose[0] >= before.pose.x - 1e-9          # from where it was
         assert after.pose.x > before.pose.x + 0.5                 # and on from there
         assert after.pose.x == pytest.approx(truth[0], abs=0.1)    # still the chair's x
@@ -132,7 +136,6 @@ def test_a_reset_mid_drive_keeps_the_pose_and_tells_the_subscribers() -> None:
             events.append(item)
             if isinstance(item, wcdrive.Telemetry) and item.board_time and item.board_time > after.board_time:
                 break
-        assert any(isinstance(e, wcdrive.Reset) for e in events)
         stamps = [e.board_time or 0.0 for e in events if isinstance(e, wcdrive.Telemetry)]
         assert all(b > a for a, b in itertools.pairwise(stamps))
         assert not math.isnan(after.pose.theta)

@@ -79,7 +79,7 @@ class Reset:
 
 
 #: What ``Wheelchair.on_link`` callbacks and ``telemetry(link_events=True)`` get.
-LinkEvent = LinkLost | LinkRestored | Reset
+LinkEvent = LinkLost | LinkRestored
 
 #: rad/s of wheel speed beyond any the chair reaches: counts that move faster between
 #: two ticks restarted (a board without ``TLM:``, or one whose clock did not go back).
@@ -94,6 +94,7 @@ class TelemetryHub:
         self._odometry = WheelOdometry(method=odometry_method)
         self.clock = BoardClock()
         self.resets: list[Reset] = []
+        self._reset_callbacks: list[Callable[[Reset], None]] = []
         self._last_counts: tuple[int, int] | None = None
         self._history: list[tuple[float, int, int, float, float]] = []
         self._subscribers: list[queue.Queue[Telemetry | LinkEvent]] = []
@@ -125,8 +126,10 @@ class TelemetryHub:
             self._odometry.update(sample.board, msg.count_left, msg.count_right)
             self._history.append((now, msg.count_left, msg.count_right, msg.vel_left, msg.vel_right))
             subscribers, callbacks = list(self._subscribers), list(self._callbacks)
+            reset_callbacks = list(self._reset_callbacks)
         if reset is not None:
-            self.deliver_link(reset)
+            for reset_cb in reset_callbacks:
+                reset_cb(reset)
         t = Telemetry(now, msg.count_left, msg.count_right, msg.vel_left, msg.vel_right, msg.mode,
                       extended, sample.board, sample.host)
         for q in subscribers:
@@ -179,6 +182,11 @@ class TelemetryHub:
         """Calls ``callback`` from the reader thread with every tick."""
         with self._lock:
             self._callbacks.append(callback)
+
+    def on_reset(self, callback: Callable[[Reset], None]) -> None:
+        """Calls ``callback`` with every ``Reset``, before the tick that shows it."""
+        with self._lock:
+            self._reset_callbacks.append(callback)
 
     def on_link(self, callback: Callable[[LinkEvent], None]) -> None:
         """Calls ``callback`` with every ``LinkLost``/``LinkRestored``."""

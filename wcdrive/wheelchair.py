@@ -259,9 +259,19 @@ class Wheelchair:
         """Calls ``callback`` with a ``LinkLost`` when the board goes silent for
         ``link_timeout`` s (or its device vanishes) and a ``LinkRestored`` when its
         lines flow again; from the link monitor or the reader thread, one at a time,
-        in order. Keep it short: the link waits for it. A ``Reset`` comes when the
-        board's counts restart (a reset, a reopened device): the odometry carries on."""
+        in order. Keep it short: the link waits for it."""
         self._hub.on_link(callback)
+
+    def on_reset(self, callback: Callable[[Reset], None]) -> None:
+        """Calls ``callback`` with a ``Reset`` when the board's counts restart (a board
+        reset, a reopened device), from the reader thread: the odometry re-baselined
+        its counts and its pose carries on. ``resets`` keeps them all."""
+        self._hub.on_reset(callback)
+
+    @property
+    def resets(self) -> list[Reset]:
+        """Every ``Reset`` so far."""
+        return list(self._hub.resets)
 
     def _require_link(self, what: str) -> None:
         """Raises when ``what`` cannot go out: the chair is closed, the handshake
