@@ -107,3 +107,10 @@ def test_bench_run_refuses_a_closed_loop_scenario() -> None:
 
     with pytest.raises(scenario.ScenarioError, match="closed-loop"):
         bench.run_scenario("square_closed", "sim://")
+
+
+def test_the_table_states_the_goal() -> None:
+    from wcdrive.sim import report
+
+    text = report.table(runner.run(scenario.load("l_shape_closed")))
+    assert "goal (2.00, 1.00) reached at" in text and "(tolerance 0.10 m: within)" in text
