@@ -4,6 +4,9 @@ by the board's clock in order, with the run's values."""
 
 from __future__ import annotations
 
+import contextlib
+import io
+import itertools
 import json
 import math
 from collections import defaultdict
@@ -29,9 +32,6 @@ def _stamp(msg) -> float:
 @pytest.fixture(scope="module")
 def square(tmp_path_factory: pytest.TempPathFactory) -> tuple[dict, dict[str, list], dict[str, str]]:
     out = tmp_path_factory.mktemp("mcap") / "square.mcap"
-    import contextlib
-    import io
-
     buf = io.StringIO()
     with contextlib.redirect_stdout(buf):
         assert wcdrive_main(["sim", "square", "--json", "--no-plots", "--mcap", str(out)]) == 0
@@ -141,3 +141,23 @@ def test_a_connected_chair_records_mcap(tmp_path: Path) -> None:
     assert any(m.status[0].message.startswith("TLM:") for _, m in by_topic["/diagnostics/serial"])
     imu_rate = (len(by_topic["/imu"]) - 1) / (by_topic["/imu"][-1][0] - by_topic["/imu"][0][0])
     assert imu_rate == pytest.approx(4 * 400.0, rel=0.1)
+
+
+def test_bench_run_writes_mcap_beside_its_recording(tmp_path: Path) -> None:
+    """``wcdrive bench run ... --mcap FILE --record FILE``: the recording for replay and
+    the ROS 2 messages, from one run (here on ``sim://?speed=4``)."""
+    toml = tmp_path / "short.toml"
+    toml.write_text('name = "short"\nsettle_s = 0.5\n[[segment]]\ncmdvel = [0.3, 0.2]\nduration = 2.0\n')
+    mcap, rec = tmp_path / "bench.mcap", tmp_path / "bench.wcrec.json"
+    with contextlib.redirect_stdout(io.StringIO()):
+        assert wcdrive_main(["bench", "run", str(toml), "--port", "sim://?speed=4",
+                             "--mcap", str(mcap), "--record", str(rec)]) == 0
+    assert rec.stat().st_size > 1000
+    by_topic: dict[str, list] = defaultdict(list)
+    with AnyReader([mcap]) as reader:
+        for conn, log_time, raw in reader.messages():
+            by_topic[conn.topic].append((log_time * 1e-9, reader.deserialize(raw, conn.msgtype)))
+    assert {"/odom", "/tf", "/joint_states", "/cmd_vel", "/diagnostics/serial"} <= set(by_topic)
+    assert {(round(m.linear.x, 3), round(m.angular.z, 3)) for _, m in by_topic["/cmd_vel"]} >= {(0.3, 0.2)}
+    stamps = [_stamp(m) for _, m in by_topic["/odom"]]
+    assert len(stamps) > 30 and all(b > a for a, b in itertools.pairwise(stamps))

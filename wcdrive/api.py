@@ -126,24 +126,28 @@ def _default_link_timeout(port: Port) -> float:
 
 
 def connect(url: str = "sim://", *, boot_timeout: float = 10.0, record: bool | str = False,
-            legacy: bool = False, link_timeout: float | None = None, **options: Any) -> Wheelchair:
+            legacy: bool = False, link_timeout: float | None = None, ros: Any = None,
+            **options: Any) -> Wheelchair:
     """Opens ``url``, waits for the board's boot and feedback, says hello (module
     docstring). ``record``: keep every byte both ways (``chair.recording``) for
     ``wcdrive.replay``; ``record="run.mcap"``: write ROS 2 messages (odometry, tf, the
     wheels, the commands, the board's lines; on a simulated board its ground truth and
     gyro too) into that MCAP file, finished when the chair closes
-    (``wcdrive.ros2.ChairPublisher``). ``legacy``: drive a board that never answers hello with
+    (``wcdrive.ros2.ChairPublisher``). ``ros``: publish those messages to this sink
+    instead (a ``wcdrive.ros2.McapSink`` or ``LiveSink``; closed with the chair), with
+    ``record=True`` too if wanted. ``legacy``: drive a board that never answers hello with
     protocol v1 instead of raising ``WcdriveProtocolError``. ``link_timeout``: seconds
     without a line before the link counts as lost (default 0.15 s, longer for a
     simulated board slower than real time). ``options`` go to ``Wheelchair``
     (``odometry_method``, ``reconnect_timeout``, ``stop_on_signals``)."""
     publisher = None
-    if isinstance(record, str):
+    if isinstance(record, str) or ros is not None:
         from wcdrive import ros2
         from wcdrive.protocol.spec import real
 
-        publisher = ros2.ChairPublisher(ros2.McapSink(record), real("WHEEL_RADIUS"), real("WHEELBASE"),
-                                        round(real("CPR")))
+        sink = ros if ros is not None else ros2.McapSink(str(record))
+        record = record is True
+        publisher = ros2.ChairPublisher(sink, real("WHEEL_RADIUS"), real("WHEELBASE"), round(real("CPR")))
         user_close = options.pop("on_close", None)
 
         def close_sink() -> None:
@@ -159,7 +163,7 @@ def connect(url: str = "sim://", *, boot_timeout: float = 10.0, record: bool | s
         if publisher is not None:
             from wcdrive.ros2 import TapPort
 
-            return TapPort(port, publisher)
+            return TapPort(RecordingPort(port) if record else port, publisher)
         return RecordingPort(port) if record else port
 
     if "://" in url:
@@ -175,9 +179,13 @@ def connect(url: str = "sim://", *, boot_timeout: float = 10.0, record: bool | s
     if url.startswith("/"):
         def reopen() -> Port:
             again = _open_device(url)
+            recording = getattr(first, "recording", None)
+            again_port = RecordingPort(again, recording) if recording is not None else again
             if publisher is not None:
-                return wrap(again)
-            return RecordingPort(again, first.recording) if isinstance(first, RecordingPort) else again
+                from wcdrive.ros2 import TapPort
+
+                return TapPort(again_port, publisher)
+            return again_port
 
         options.setdefault("reopen", reopen)
     chair = Wheelchair(first, legacy=legacy,

@@ -227,6 +227,7 @@ class LiveSink:
         self._channels: dict[str, Any] = {}
         self._encoders: dict[str, Callable[[dict[str, Any]], bytes]] = {}
         self._lock = threading.Lock()
+        self._closed = False
         # Every channel before any client: one made while a client is connected is
         # advertised before the server knows it, and a quick subscribe to it is refused
         # ("Unknown channel ID", foxglove-sdk 0.30).
@@ -259,7 +260,11 @@ class LiveSink:
         channel.log(encode(message), log_time=max(0, round(log_time * 1e9)))
 
     def close(self) -> None:
-        """Stops the server."""
+        """Stops the server. Safe to call twice."""
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
         self.server.stop()
 
 
@@ -381,6 +386,11 @@ class TapPort:
     def board(self) -> Any:
         """The wrapped port's simulated board, if it has one."""
         return getattr(self.port, "board", None)
+
+    @property
+    def recording(self) -> Any:
+        """The wrapped port's recording (a ``RecordingPort``'s), if it has one."""
+        return getattr(self.port, "recording", None)
 
     def write(self, data: bytes) -> int | None:
         """Writes through, then publishes."""
