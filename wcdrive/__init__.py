@@ -7,7 +7,7 @@ if "wcdrive.urlhandler" not in _serial.protocol_handler_packages:
 
 __version__ = "0.1.0"
 
-from wcdrive.api import LinkEvent, LinkLost, LinkRestored, Telemetry, Wheelchair, connect
+from wcdrive.api import LinkEvent, LinkLost, LinkRestored, Reset, Telemetry, Wheelchair, connect
 from wcdrive.errors import (
     WcdriveBusyError,
     WcdriveCommandError,
@@ -21,7 +21,7 @@ from wcdrive.errors import (
 )
 from wcdrive.wheelchair import stop_all
 
-__all__ = ["LinkEvent", "LinkLost", "LinkRestored", "Telemetry", "WcdriveBusyError",
+__all__ = ["LinkEvent", "LinkLost", "LinkRestored", "Reset", "Telemetry", "WcdriveBusyError",
            "WcdriveCommandError", "WcdriveConnectionError", "WcdriveError", "WcdriveEstopError",
            "WcdriveFaultError", "WcdrivePermissionError", "WcdriveProtocolError", "WcdriveTimeoutError",
            "Wheelchair", "connect", "stop_all"]

@@ -66,9 +66,9 @@ from wcdrive.errors import (
 )
 from wcdrive.transports.port import Port
 from wcdrive.transports.recording import RecordingPort
-from wcdrive.wheelchair import LINK_TIMEOUT, LinkEvent, LinkLost, LinkRestored, Telemetry, Wheelchair
+from wcdrive.wheelchair import LINK_TIMEOUT, LinkEvent, LinkLost, LinkRestored, Reset, Telemetry, Wheelchair
 
-__all__ = ["SCHEMES", "LinkEvent", "LinkLost", "LinkRestored", "Telemetry", "Wheelchair", "connect"]
+__all__ = ["SCHEMES", "LinkEvent", "LinkLost", "LinkRestored", "Reset", "Telemetry", "Wheelchair", "connect"]
 
 #: wcdrive's short URL schemes and the pyserial scheme each one is.
 SCHEMES = {"sim": "wcsim", "simavr": "wcavr", "can": "wccan"}
@@ -127,16 +127,45 @@ def _default_link_timeout(port: Port) -> float:
     return LINK_TIMEOUT
 
 
-def connect(url: str = "sim://", *, boot_timeout: float = 10.0, record: bool = False,
-            legacy: bool = False, link_timeout: float | None = None, **options: Any) -> Wheelchair:
+def connect(url: str = "sim://", *, boot_timeout: float = 10.0, record: bool | str = False,
+            legacy: bool = False, link_timeout: float | None = None, ros: Any = None,
+            **options: Any) -> Wheelchair:
     """Opens ``url``, waits for the board's boot and feedback, says hello (module
     docstring). ``record``: keep every byte both ways (``chair.recording``) for
-    ``wcdrive.replay``. ``legacy``: drive a board that never answers hello with
+    ``wcdrive.replay``; ``record="run.mcap"``: write ROS 2 messages (odometry, tf, the
+    wheels, the commands, the board's lines; on a simulated board its ground truth and
+    gyro too) into that MCAP file, finished when the chair closes
+    (``wcdrive.ros2.ChairPublisher``). ``ros``: publish those messages to this sink
+    instead (a ``wcdrive.ros2.McapSink`` or ``LiveSink``; closed with the chair), with
+    ``record=True`` too if wanted. ``legacy``: drive a board that never answers hello with
     protocol v1 instead of raising ``WcdriveProtocolError``. ``link_timeout``: seconds
     without a line before the link counts as lost (default 0.15 s, longer for a
     simulated board slower than real time). ``options`` go to ``Wheelchair``
     (``odometry_method``, ``reconnect_timeout``, ``stop_on_signals``)."""
+    publisher = None
+    if isinstance(record, str) or ros is not None:
+        from wcdrive import ros2
+        from wcdrive.protocol.spec import real
+
+        sink = ros if ros is not None else ros2.McapSink(str(record))
+        record = record is True
+        publisher = ros2.ChairPublisher(sink, real("WHEEL_RADIUS"), real("WHEELBASE"), round(real("CPR")))
+        user_close = options.pop("on_close", None)
+
+        def close_sink() -> None:
+            try:
+                if user_close is not None:
+                    user_close()
+            finally:
+                publisher.sink.close()
+
+        options["on_close"] = close_sink
+
     def wrap(port: Port) -> Port:
+        if publisher is not None:
+            from wcdrive.ros2 import TapPort
+
+            return TapPort(RecordingPort(port) if record else port, publisher)
         return RecordingPort(port) if record else port
 
     if "://" in url:
@@ -152,12 +181,20 @@ def connect(url: str = "sim://", *, boot_timeout: float = 10.0, record: bool = F
     if url.startswith("/"):
         def reopen() -> Port:
             again = _open_device(url)
-            return RecordingPort(again, first.recording) if isinstance(first, RecordingPort) else again
+            recording = getattr(first, "recording", None)
+            again_port = RecordingPort(again, recording) if recording is not None else again
+            if publisher is not None:
+                from wcdrive.ros2 import TapPort
+
+                return TapPort(again_port, publisher)
+            return again_port
 
         options.setdefault("reopen", reopen)
     chair = Wheelchair(first, legacy=legacy,
                        link_timeout=_default_link_timeout(port) if link_timeout is None else link_timeout,
                        **options)
+    if publisher is not None:
+        publisher.attach(chair, getattr(port, "board", None))
     try:
         chair.wait_for_telemetry(boot_timeout)   # the Mega resets on open: wait for it
         chair.wait_for_handshake(boot_timeout)

@@ -2,6 +2,7 @@
 
     wcdrive bench flash  --port /dev/ttyACM0 [--hex H] [--no-check] [--dry-run]
     wcdrive bench run    SCENARIO --port /dev/ttyACM0 [--record run.wcrec.json] [--plot DIR]
+                         [--mcap run.mcap | --live]   (ROS 2 messages, wcdrive.ros2)
     wcdrive bench record SCENARIO --port /dev/ttyACM0 --out run.wcrec.json
     wcdrive bench replay run.wcrec.json            # the port must agree, byte for byte
     wcdrive bench plot   run.wcrec.json --out DIR
@@ -264,7 +265,8 @@ class Interrupted(KeyboardInterrupt):
 
 
 def run_scenario(name: str, url: str, *, speed: float = 1.0,
-                 announce: Callable[[str], None] | None = None, progress: bool = False) -> Recording:
+                 announce: Callable[[str], None] | None = None, progress: bool = False,
+                 ros: Any = None) -> Recording:
     """Drives scenario ``name`` on the board at ``url`` and returns the recording;
     ``announce`` gets a line once the chair is connected; ``progress`` draws a tqdm bar
     of scenario time on stderr (on a terminal). Ctrl-C stops the chair and raises
@@ -272,10 +274,13 @@ def run_scenario(name: str, url: str, *, speed: float = 1.0,
     from tqdm import tqdm
 
     sc = scenario.load(name)
+    if sc.closed_loop:                          # its commands come from the odometry
+        raise scenario.ScenarioError(f"{sc.name} is a closed-loop (path) scenario: wcdrive sim runs "
+                                     "those; bench run replays timed segments")
     period = 1.0 / (sc.host_rate_hz * speed)
     recording: Recording | None = None
     try:
-        with wcdrive.connect(url, record=True) as chair:
+        with wcdrive.connect(url, record=True, ros=ros) as chair:   # ros: --mcap/--live sink
             recording = chair.recording
             recording.meta.update({"scenario": sc.name, "url": url, "protocol": chair.protocol_version,
                                    "firmware": chair.firmware, "firmware_version": chair.firmware_version,
@@ -329,14 +334,26 @@ def _run(args: argparse.Namespace) -> int:
         print(f"wcdrive bench {args.bench_command}: not started; put the chair on blocks, or pass --yes",
               file=sys.stderr)
         return 2
+    ros: Any = None
+    if args.mcap or args.live:
+        from wcdrive import ros2
+
+        if args.live:
+            ros = ros2.LiveSink(port=args.live_port)
+            announce(f"live: ws://127.0.0.1:{ros.port} (Foxglove)")
+        else:
+            ros = ros2.McapSink(args.mcap)
     try:
         recording = run_scenario(args.scenario, args.port, speed=args.speed, announce=announce,
-                                 progress=True)
+                                 progress=True, ros=ros)
     except Interrupted as exc:
         print(f"wcdrive bench {args.bench_command}: interrupted, the chair was stopped", file=sys.stderr)
         if args.record:
             print(f"partial recording: {exc.recording.save(args.record)}", file=sys.stderr)
         return 130
+    finally:
+        if ros is not None:
+            ros.close()                          # closed with the chair too, if it opened
     print(f"recorded {len(recording.sent_bytes)} bytes sent, {len(recording.received_bytes)} received")
     if args.record:
         print(f"recording: {recording.save(args.record)}")
@@ -420,6 +437,10 @@ def add_parser(sub: Any) -> None:
         r.add_argument("--plot", help="also write plots to this directory")
         r.add_argument("--yes", action="store_true",
                        help="do not ask whether the wheels are off the ground")
+        ros_out = r.add_mutually_exclusive_group()
+        ros_out.add_argument("--mcap", metavar="FILE", help="also write ROS 2 messages into an MCAP file")
+        ros_out.add_argument("--live", action="store_true", help="serve ROS 2 messages to Foxglove")
+        r.add_argument("--live-port", type=int, default=8765, help="--live: the port (default 8765)")
         r.add_argument("--speed", type=float, default=1.0,
                        help="scenario time per wall time (only for simulated boards)")
         r.set_defaults(func=_run)

@@ -62,7 +62,8 @@ def _sim(args: argparse.Namespace) -> int:
     if args.list:
         for path in scenario.bundled():
             sc = scenario.load(str(path))
-            print(f"{sc.name:28s} {sc.duration:7.1f} s  {sc.description}")
+            loop = "closed loop" if sc.closed_loop else "open loop  "   # open: timed commands
+            print(f"{sc.name:28s} {sc.duration:7.1f} s  {loop}  {sc.description}")
         return 0
     names = [p.stem for p in scenario.bundled()] if args.all else (args.scenario or ["square"])
     results = []
@@ -73,9 +74,11 @@ def _sim(args: argparse.Namespace) -> int:
             print(f"wcdrive sim: {exc}", file=sys.stderr)
             return 2
         progress = _Progress(sc.name, sys.stderr.isatty() and not args.json)
-        result = runner.run(sc, backend=args.backend, seed=args.seed, dt=args.dt, progress=progress)
+        result = runner.run(sc, backend=args.backend, seed=args.seed, dt=args.dt, progress=progress, ekf=True)
         progress.done()
         results.append(result)
+        if args.mcap or args.live:
+            _ros_out(args, sc, result, several=len(names) > 1)
         if not args.json:
             print(report.table(result))
         if not args.no_plots:
@@ -88,6 +91,29 @@ def _sim(args: argparse.Namespace) -> int:
         print(report.to_json(results))
     failed = [r for r in results if r.firmware_differences]
     return 1 if failed else 0
+
+
+def _ros_out(args: argparse.Namespace, sc: scenario.Scenario, result: runner.SimResult,
+             several: bool) -> None:
+    """``--mcap`` and ``--live``: the run as ROS 2 messages (``wcdrive.sim.rosout``)."""
+    from wcdrive import ros2
+    from wcdrive.sim import rosout
+
+    if args.mcap:
+        path = Path(args.mcap)
+        if several:
+            path = path.with_name(f"{path.stem}-{sc.name}{path.suffix or '.mcap'}")
+        counts = rosout.write_mcap(result, path, sc.params())
+        print(f"  mcap: {path} ({sum(counts.values())} messages on {len(counts)} topics)",
+              file=sys.stderr if args.json else sys.stdout)
+    if args.live:
+        sink = ros2.LiveSink(port=args.live_port)
+        print(f"  live: ws://127.0.0.1:{sink.port} (Foxglove), {sc.name} at the board's pace",
+              file=sys.stderr, flush=True)
+        try:
+            rosout.serve(result, sink, sc.params())
+        finally:
+            sink.close()
 
 
 def _serve(bridge: PtyBridge) -> int:
@@ -162,6 +188,13 @@ def parser() -> argparse.ArgumentParser:
     sim.add_argument("--no-plots", action="store_true", help="write no PNG plots")
     sim.add_argument("--seed", type=int, default=0, help="gyro noise seed")
     sim.add_argument("--dt", type=float, default=0.001, help="physics step in s (default 0.001)")
+    sim.add_argument("--mcap", metavar="FILE",
+                     help="write the run as ROS 2 messages into an MCAP file (with several "
+                          "scenarios: FILE-<name>.mcap)")
+    sim.add_argument("--live", action="store_true",
+                     help="serve the run's ROS 2 messages to Foxglove (WebSocket), paced by "
+                          "the board's clock")
+    sim.add_argument("--live-port", type=int, default=8765, help="--live: the port (default 8765)")
     sim.set_defaults(func=_sim)
 
     ver = sub.add_parser("verify", help="differential check of the port against the firmware in simavr",

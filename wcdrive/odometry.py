@@ -63,6 +63,10 @@ class OdometryEstimate:
     angular: float
     pose_covariance: np.ndarray = field(repr=False)
     twist_covariance: np.ndarray = field(repr=False)
+    #: The board's clock at the last tick (s, continuous over resets; None: not known),
+    #: and the host time it maps to (``wcdrive.boardclock``).
+    board_time: float | None = None
+    stamp: float | None = None
 
 
 def _cov6(xx: float, yy: float, tt: float, xy: float = 0.0, xt: float = 0.0, yt: float = 0.0) -> np.ndarray:
@@ -89,6 +93,11 @@ class WheelOdometry:
         self.linear = 0.0
         self.angular = 0.0
         self._gyro_heading: float | None = None
+
+    def rebaseline(self) -> None:
+        """The counts restarted (a board reset): the next sample only sets the starting
+        counts, and the pose carries on from where it is."""
+        self._last = None
 
     def use_gyro_heading(self, heading: float) -> None:
         """From now on, the next update takes this heading (from an integrated gyro)."""

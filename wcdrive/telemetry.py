@@ -10,6 +10,8 @@ that asked for them.
 
 from __future__ import annotations
 
+import dataclasses
+import math
 import queue
 import threading
 import time
@@ -18,10 +20,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from wcdrive.boardclock import BoardClock
 from wcdrive.odometry import OdometryEstimate, WheelOdometry
 from wcdrive.protocol.codec import ExtendedTelemetry, Feedback
 
-__all__ = ["LinkEvent", "LinkLost", "LinkRestored", "Telemetry", "TelemetryHub"]
+__all__ = ["LinkEvent", "LinkLost", "LinkRestored", "Reset", "Telemetry", "TelemetryHub"]
 
 
 @dataclass(frozen=True)
@@ -35,6 +38,10 @@ class Telemetry:
     vel_right: float
     mode: str
     extended: ExtendedTelemetry | None = None   # the TLM line of the same tick (after hello)
+    #: The board's clock at the tick (s; continuous over resets) and the host time it
+    #: maps to (``wcdrive.boardclock``): stamp navigation data with these.
+    board_time: float | None = None
+    stamp: float | None = None
 
 
 @dataclass(frozen=True)
@@ -60,8 +67,23 @@ class LinkRestored:
     down_for: float          # seconds since the ``LinkLost``
 
 
+@dataclass(frozen=True)
+class Reset:
+    """The board's counts (and clock) restarted: a board reset or a reopened device. The
+    odometry re-baselined its counts and its pose carries on from ``pose``."""
+
+    time: float              # host monotonic time of the first tick after it (s)
+    board_time: float        # the board time it continues from (s)
+    cause: str               # "boot" (the session saw the board restart), "millis" (its clock went back) or "counts" (they jumped)
+    pose: tuple[float, float, float]   # the odometry's x, y, heading at the reset
+
+
 #: What ``Wheelchair.on_link`` callbacks and ``telemetry(link_events=True)`` get.
 LinkEvent = LinkLost | LinkRestored
+
+#: rad/s of wheel speed beyond any the chair reaches: counts that move faster between
+#: two ticks restarted (a board without ``TLM:``, or one whose clock did not go back).
+_COUNT_JUMP_RAD_S = 40.0
 
 
 class TelemetryHub:
@@ -70,31 +92,52 @@ class TelemetryHub:
     def __init__(self, odometry_method: str = "position") -> None:
         self._lock = threading.Lock()
         self._odometry = WheelOdometry(method=odometry_method)
+        self.clock = BoardClock()
+        self.resets: list[Reset] = []
+        self._reset_callbacks: list[Callable[[Reset], None]] = []
+        self._last_counts: tuple[int, int] | None = None
         self._history: list[tuple[float, int, int, float, float]] = []
         self._subscribers: list[queue.Queue[Telemetry | LinkEvent]] = []
         self._link_subscribers: list[queue.Queue[Telemetry | LinkEvent]] = []
         self._callbacks: list[Callable[[Telemetry], None]] = []
         self._link_callbacks: list[Callable[[LinkEvent], None]] = []
-        # The board's counts restart at 0 when it resets: the odometry gets them plus
-        # this offset, re-based at the first tick after a reset so the pose carries on.
-        self._count_offset = (0, 0)
-        self._last_counts: tuple[int, int] | None = None
+        # Set by board_reset (the session saw the board restart): the next tick
+        # re-baselines the odometry, so the pose carries on.
         self._rebase = False
 
     def deliver(self, now: float, msg: Feedback, extended: ExtendedTelemetry | None) -> None:
-        """One tick arrived at host time ``now``."""
-        t = Telemetry(now, msg.count_left, msg.count_right, msg.vel_left, msg.vel_right, msg.mode,
-                      extended)
+        """One tick arrived at host time ``now``: timed by the board's clock
+        (``wcdrive.boardclock``); a restart of the counts re-baselines the odometry and
+        sends a ``Reset``."""
+        reset: Reset | None = None
         with self._lock:
-            if self._rebase and self._last_counts is not None:
-                self._count_offset = (self._last_counts[0] - msg.count_left,
-                                      self._last_counts[1] - msg.count_right)
+            previous = self.clock.last
+            sample = self.clock.update(now, extended.millis if extended is not None else None)
+            # A reset the session saw (BOOT, reset on open: board_reset), or one the
+            # board's clock shows (millis restarted), or counts that jumped.
+            cause = "boot" if self._rebase else "millis" if sample.reset else None
             self._rebase = False
-            counts = (msg.count_left + self._count_offset[0], msg.count_right + self._count_offset[1])
-            self._last_counts = counts
-            self._odometry.update(now, *counts)
+            if cause is None and self._last_counts is not None and previous is not None:
+                limit = _COUNT_JUMP_RAD_S * max(sample.board - previous.board, self.clock.tick_period) \
+                    * self._odometry.p.counts_per_rev / (2 * math.pi)
+                if max(abs(msg.count_left - self._last_counts[0]),
+                       abs(msg.count_right - self._last_counts[1])) > limit:
+                    cause = "counts"
+            if cause is not None:
+                self._odometry.rebaseline()
+                p = self._odometry.pose
+                reset = Reset(now, sample.board, cause, (p.x, p.y, p.theta))
+                self.resets.append(reset)
+            self._last_counts = (msg.count_left, msg.count_right)
+            self._odometry.update(sample.board, msg.count_left, msg.count_right)
             self._history.append((now, msg.count_left, msg.count_right, msg.vel_left, msg.vel_right))
             subscribers, callbacks = list(self._subscribers), list(self._callbacks)
+            reset_callbacks = list(self._reset_callbacks)
+        if reset is not None:
+            for reset_cb in reset_callbacks:
+                reset_cb(reset)
+        t = Telemetry(now, msg.count_left, msg.count_right, msg.vel_left, msg.vel_right, msg.mode,
+                      extended, sample.board, sample.host)
         for q in subscribers:
             q.put(t)
         for cb in callbacks:
@@ -154,6 +197,11 @@ class TelemetryHub:
         with self._lock:
             self._callbacks.append(callback)
 
+    def on_reset(self, callback: Callable[[Reset], None]) -> None:
+        """Calls ``callback`` with every ``Reset``, before the tick that shows it."""
+        with self._lock:
+            self._reset_callbacks.append(callback)
+
     def on_link(self, callback: Callable[[LinkEvent], None]) -> None:
         """Calls ``callback`` with every ``LinkLost``/``LinkRestored``."""
         with self._lock:
@@ -167,9 +215,14 @@ class TelemetryHub:
                 "count_right": rows[:, 2].astype(np.int64), "vel_left": rows[:, 3], "vel_right": rows[:, 4]}
 
     def odometry(self, at: float | None = None) -> OdometryEstimate:
-        """The odometry extrapolated to host time ``at`` (default: now)."""
+        """The odometry stamped host time ``at`` (default: now), with the board time of
+        its last tick and the host time that maps to."""
         with self._lock:
-            return self._odometry.estimate(time.monotonic() if at is None else at)
+            estimate = self._odometry.estimate(time.monotonic() if at is None else at)
+            last = self.clock.last
+        if last is None:
+            return estimate
+        return dataclasses.replace(estimate, board_time=last.board, stamp=last.host)
 
     def odometry_stream(self, closed: threading.Event, rate_hz: float = 50.0) -> Iterator[OdometryEstimate]:
         """The odometry at ``rate_hz`` on a steady grid of host times, until ``closed``."""

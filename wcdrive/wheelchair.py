@@ -34,6 +34,7 @@ import numpy as np
 
 from wcdrive.avr.avrlibc import strtod
 from wcdrive.avr.f32 import f32
+from wcdrive.boardclock import BoardClock
 from wcdrive.errors import (
     WcdriveCommandError,
     WcdriveConnectionError,
@@ -59,11 +60,11 @@ from wcdrive.protocol.codec import (
 )
 from wcdrive.protocol.spec import integer
 from wcdrive.session import Session
-from wcdrive.telemetry import LinkEvent, LinkLost, LinkRestored, Telemetry, TelemetryHub
+from wcdrive.telemetry import LinkEvent, LinkLost, LinkRestored, Reset, Telemetry, TelemetryHub
 from wcdrive.transports.port import Port
 from wcdrive.transports.recording import Recording
 
-__all__ = ["LINK_TIMEOUT", "LinkEvent", "LinkLost", "LinkRestored", "Telemetry", "Wheelchair",
+__all__ = ["LINK_TIMEOUT", "LinkEvent", "LinkLost", "LinkRestored", "Reset", "Telemetry", "Wheelchair",
            "install_signal_handlers", "stop_all"]
 
 #: Default ``link_timeout``: three feedback periods (150 ms) without a line from the board.
@@ -261,6 +262,17 @@ class Wheelchair:
         lines flow again; from the link monitor or the reader thread, one at a time,
         in order. Keep it short: the link waits for it."""
         self._hub.on_link(callback)
+
+    def on_reset(self, callback: Callable[[Reset], None]) -> None:
+        """Calls ``callback`` with a ``Reset`` when the board's counts restart (a board
+        reset, a reopened device), from the reader thread: the odometry re-baselined
+        its counts and its pose carries on. ``resets`` keeps them all."""
+        self._hub.on_reset(callback)
+
+    @property
+    def resets(self) -> list[Reset]:
+        """Every ``Reset`` so far."""
+        return list(self._hub.resets)
 
     def _require_link(self, what: str) -> None:
         """Raises when ``what`` cannot go out: the chair is closed, the handshake
@@ -467,8 +479,14 @@ class Wheelchair:
 
     @property
     def odometry(self) -> OdometryEstimate:
-        """The odometry estimate now."""
+        """The odometry estimate now (twist timed by the board's clock)."""
         return self._hub.odometry()
+
+    @property
+    def board_clock(self) -> BoardClock:
+        """The board's clock as the host tracks it: ``board_clock.filter.rate`` (host s
+        per board s), ``to_host(board_time)``, ``resets``."""
+        return self._hub.clock
 
     def odometry_stream(self, rate_hz: float = 50.0) -> Iterator[OdometryEstimate]:
         """The odometry estimate at ``rate_hz`` (50 Hz by default, as the guide's EKF

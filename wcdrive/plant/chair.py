@@ -14,7 +14,10 @@ dt)`` several:
   patch rolls without side slip, as fast as ``caster_max_swivel_rate`` allows; beyond
   that the patch scrubs sideways against ``mu N``. Swinging takes the bearing's
   friction torque, so a swinging caster pushes the chassis sideways with
-  ``T / trail`` (a massless caster's torque balance). Driving forward keeps the
+  ``T / trail`` (a massless caster's torque balance). The patch carries any side force
+  by sliding, at ``force / caster_stiffness`` (the tyre's law), or at its excess speed
+  once at ``mu N``: that sliding is the scrub (``caster_scrub_energy``, the force times
+  the sliding speed), which a pivot makes and straight driving does not. Driving forward keeps the
   casters trailing; reversing makes them swing round (an unstable equilibrium).
 * The chassis is a pymunk ``Body`` (mass, yaw inertia, centre of gravity ahead of the
   axle) in a ``Space``; the forces above are applied to it each step and pymunk
@@ -69,6 +72,8 @@ class ChairStruct(ctypes.Structure):
 
 #: rad/s: the swivel friction torque is regularised as ``T tanh(rate / scale)``.
 SWIVEL_RATE_SCALE = 0.2
+#: m/s: a caster patch sliding sideways faster than this counts as scrubbing.
+SCRUB_SLIP = 1e-4
 
 _KERNEL_SOURCE = Path(__file__).resolve().parent / "csrc" / "chair_kernel.c"
 _kernel: ctypes.CDLL | bool | None = None
@@ -242,7 +247,7 @@ class Plant:
 
     @property
     def caster_scrub_time(self) -> float:
-        """s during which a caster patch slid sideways faster than 1 mm/s."""
+        """s during which a caster patch slid sideways faster than 0.1 mm/s (``SCRUB_SLIP``)."""
         return self.s.scrub_time
 
     @property
@@ -391,9 +396,13 @@ class Plant:
             f_side = _clamp(f_swivel - s.c_caster * side_slip, -limit, limit)
             s.swivel_work += abs(s.swivel_friction * math.tanh(rate / SWIVEL_RATE_SCALE) * rate) * dt
             s.side_impulse += abs(f_side) * dt
-            if side_slip != 0.0:
-                s.scrub_energy += abs((f_side - f_swivel) * side_slip) * dt
-                scrubbing = scrubbing or abs(side_slip) > 1e-3
+            # The patch carries its side force by sliding (the tyre's law: c_caster N per
+            # m/s), the more so once the force is at the friction limit.
+            slip = abs(f_side) / s.c_caster
+            if abs(f_side) >= limit:
+                slip = max(slip, abs(side_slip))
+            s.scrub_energy += abs(f_side) * slip * dt
+            scrubbing = scrubbing or slip > SCRUB_SLIP
             roll = pu * ce + pv * se
             f_roll = -s.crr_c * n_c * math.tanh(roll / 0.01)
             fxc = f_roll * ce - f_side * se

@@ -21,7 +21,11 @@ def table(result: SimResult) -> str:
     ]
     for key, label in (("odom_wheel", "wheel odometry (position)"),
                        ("odom_velocity", "wheel odometry (velocity)"),
-                       ("odom_gyro", "wheels + gyro heading")):
+                       ("odom_gyro", "wheels + gyro heading"),
+                       ("odom_ekf", "EKF, seed 000 (wheels x, y, vx)"),
+                       ("odom_ekf_vel", "EKF, wheel velocities")):
+        if key + "_x" not in m:
+            continue
         rows.append((label, f"{m[key + '_x']:.3f}", f"{m[key + '_y']:.3f}", f"{m[key + '_heading_deg']:.2f}",
                      f"{m[key + '_position_error_m']:.4f}", f"{m[key + '_heading_error_deg']:.3f}"))
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
@@ -40,6 +44,13 @@ def table(result: SimResult) -> str:
         lines.append(f"  port vs firmware: {result.firmware_differences} differences over "
                      f"{result.firmware_events_compared} firmware events")
     lines.append(f"  control ticks: at most {m['max_tick_gap_ms']:.1f} ms apart")
+    if m.get("closed_loop"):
+        reached = m["goal_reached_s"]
+        lines.append(f"  closed loop ({m['steered_by']} odometry): "
+                     f"goal ({m['goal_x']:.2f}, {m['goal_y']:.2f}) "
+                     + (f"reached at {reached:.2f} s" if reached is not None else "never reached")
+                     + f", true error {m['goal_error_m']:.3f} m (tolerance {m['goal_tolerance_m']:.2f} m: "
+                     + ("within" if m["goal_within_tolerance"] else "NOT within") + ")")
     for fault in result.faults:
         what = fault.kind + (f" {fault.side}" if fault.side else "")
         what += f" at {fault.at:g} s" + (f" for {fault.duration:g} s" if fault.duration else "")

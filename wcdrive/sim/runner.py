@@ -21,6 +21,7 @@ spot is not "still"), and its travel the longer of their two paths.
 from __future__ import annotations
 
 import math
+import re
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -33,11 +34,13 @@ from wcdrive.boards.simavr.plant_on_pins import PlantOnPins
 from wcdrive.boards.simavr.virtual_mega import VirtualMega
 from wcdrive.hil.lockstep import Recorder, compare
 from wcdrive.hil.traces import Trace
+from wcdrive.localization import Ekf2D, EkfConfig
+from wcdrive.navigation import PurePursuit
 from wcdrive.odometry import GyroIntegrator, OdometryParams, WheelOdometry
 from wcdrive.plant import Gyro, Plant
 from wcdrive.plant.encoders import EdgeTrain
 from wcdrive.plant.faults import Fault
-from wcdrive.protocol.codec import Feedback, LineDecoder
+from wcdrive.protocol.codec import Feedback, LineDecoder, encode_cmdvel
 from wcdrive.sim.scenario import Scenario
 
 #: m/s: the chair is at a standstill once its speed stays below this.
@@ -88,6 +91,24 @@ class SimResult:
     faults: tuple[Fault, ...] = ()
     #: ``fault_metrics``: when the fault figures count from (None: no fault, no silence).
     fault_at: float | None = None
+    #: (n, 3): the seeds' EKF (``wcdrive.localization``) on velocity odometry and the
+    #: gyro: seed 000's ekf.yaml (wheels: x, y, vx), and seed 002's scheme (wheels: vx, vy).
+    #: None unless the run asked for them (``run(..., ekf=True)``).
+    odom_ekf: np.ndarray | None = None
+    odom_ekf_vel: np.ndarray | None = None
+    #: The gyro's samples (s, rad/s), every line the board sent (s, line) and the
+    #: host's velocity commands (s, m/s, rad/s): what ``wcdrive sim --mcap`` records.
+    gyro_time: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    gyro_rate: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    serial_lines: list[tuple[float, str]] = field(default_factory=list)
+    cmd_vel: list[tuple[float, float, float]] = field(default_factory=list)
+    #: A closed-loop run (a ``path`` scenario): the goal (m), the time the host's
+    #: estimate reached it (None: never), the published bound on the true error (m) and
+    #: which estimate the host steered by.
+    goal: tuple[float, float] | None = None
+    goal_reached_s: float | None = None
+    goal_tolerance: float | None = None
+    steered_by: str | None = None
 
     def fault_metrics(self) -> dict[str, float | None]:
         """The fault figures: ``max_tick_gap_ms`` (the longest interval between two
@@ -149,7 +170,10 @@ class SimResult:
             "truth_x": tx, "truth_y": ty, "truth_heading_deg": math.degrees(tth),
         }
         for name, est in (("odom_wheel", self.odom_wheel), ("odom_velocity", self.odom_velocity),
-                          ("odom_gyro", self.odom_gyro)):
+                          ("odom_gyro", self.odom_gyro), ("odom_ekf", self.odom_ekf),
+                          ("odom_ekf_vel", self.odom_ekf_vel)):
+            if est is None:
+                continue
             ex, ey, eth = est[-1]
             out[f"{name}_x"], out[f"{name}_y"] = ex, ey
             out[f"{name}_heading_deg"] = math.degrees(eth)
@@ -166,6 +190,14 @@ class SimResult:
         out["events"] = [[t, line] for t, line in self.events]
         out["boots"] = [[t, line] for t, line in self.boots]
         out.update(self.fault_metrics())
+        out["closed_loop"] = self.goal is not None
+        if self.goal is not None:
+            gx, gy = self.goal
+            error = math.hypot(tx - gx, ty - gy)
+            out.update(goal_x=gx, goal_y=gy, goal_error_m=error, goal_reached_s=self.goal_reached_s,
+                       goal_tolerance_m=self.goal_tolerance, steered_by=self.steered_by,
+                       goal_within_tolerance=self.goal_reached_s is not None
+                       and error <= (self.goal_tolerance or 0.0))
         return out
 
 
@@ -176,7 +208,7 @@ def _wrap(a: float) -> float:
 class _Host:
     """The navigation host: parses feedback lines and keeps three odometries."""
 
-    def __init__(self, plant_params, gyro: Gyro) -> None:
+    def __init__(self, plant_params, gyro: Gyro, ekf: bool = False) -> None:
         op = OdometryParams(wheel_radius=plant_params.wheel_radius, wheelbase=plant_params.wheelbase,
                             counts_per_rev=plant_params.counts_per_rev)
         self.decoder = LineDecoder()
@@ -185,6 +217,11 @@ class _Host:
         self.gyro_odom = WheelOdometry(op, "position")
         self.gyro = gyro
         self.integrator = GyroIntegrator()
+        self.ekf = Ekf2D()
+        self.ekf_vel = Ekf2D(EkfConfig.wheel_velocities())
+        #: The EKFs run only when asked (``run(..., ekf=True)``): at the gyro's 400 Hz they
+        #: take 9 times as long as the rest of the run.
+        self.ekfs: tuple[Ekf2D, ...] = (self.ekf, self.ekf_vel) if ekf else ()
         self._gyro_index = 0
         self.lines = {"feedback": 0, "error": 0, "event": 0, "other": 0}
 
@@ -195,9 +232,14 @@ class _Host:
                 times, rates = self.gyro.times, self.gyro.rates
                 while self._gyro_index < len(times) and times[self._gyro_index] <= t:
                     self.integrator.add(times[self._gyro_index], rates[self._gyro_index])
+                    for ekf in self.ekfs:
+                        ekf.imu(times[self._gyro_index], self.integrator.heading, rates[self._gyro_index])
                     self._gyro_index += 1
                 self.position.update(t, msg.count_left, msg.count_right)
                 self.velocity.update(t, msg.count_left, msg.count_right)
+                v = self.velocity
+                for ekf in self.ekfs:
+                    ekf.odometry(t, v.pose.x, v.pose.y, v.pose.theta, v.linear, v.angular)
                 self.gyro_odom.use_gyro_heading(self.integrator.heading_at(t))
                 self.gyro_odom.update(t, msg.count_left, msg.count_right)
             else:
@@ -205,8 +247,47 @@ class _Host:
                 self.lines[key if key in self.lines else "other"] += 1
 
     def poses(self) -> tuple[tuple[float, float, float], ...]:
-        return tuple((o.pose.x, o.pose.y, o.pose.theta)
-                     for o in (self.position, self.velocity, self.gyro_odom))
+        return (*((o.pose.x, o.pose.y, o.pose.theta)
+                  for o in (self.position, self.velocity, self.gyro_odom)), self.ekf.pose,
+                self.ekf_vel.pose)
+
+
+class _Pilot:
+    """The closed-loop host: every host period, a ``cmdvel`` from pure pursuit
+    (``wcdrive.navigation``) on its own estimate (wheel odometry or the EKF); after the
+    goal, stops for ``settle_s``."""
+
+    def __init__(self, scenario: Scenario, host: _Host) -> None:
+        assert scenario.path is not None
+        self.ctl = PurePursuit(scenario.path, scenario.follow)
+        self.host = host
+        self.localization = scenario.follow.localization
+        self.period = round(F_CPU / scenario.host_rate_hz)
+        self.next = round(0.02 * F_CPU)
+        self.settle = round(scenario.settle_s * F_CPU)
+        self.sent: list[tuple[int, bytes]] = []
+        self.done_at: int | None = None
+
+    def pose(self) -> tuple[float, float, float]:
+        if self.localization == "ekf":
+            return self.host.ekf_vel.pose
+        p = self.host.position.pose
+        return p.x, p.y, p.theta
+
+    def step(self) -> tuple[int, bytes]:
+        """The command due at ``next``; moves ``next`` on a period."""
+        cycle = self.next
+        v, w, done = self.ctl.command(*self.pose())
+        if done and self.done_at is None:
+            self.done_at = cycle
+        data = encode_cmdvel(v, w)
+        self.sent.append((cycle, data))
+        self.next += self.period
+        return cycle, data
+
+    def finished(self) -> bool:
+        """The goal was reached and the chair has had ``settle_s`` to stop."""
+        return self.done_at is not None and self.next >= self.done_at + self.settle
 
 
 class _Log:
@@ -215,21 +296,22 @@ class _Log:
         self.tick_cycles: list[int] = []
 
     def add(self, cycle: int, plant: Plant, host: _Host, setpoint, measured, pwm, counts) -> None:
-        wheel, velocity, gyro = host.poses()
+        wheel, velocity, gyro, ekf, ekf_vel = host.poses()
         heading = plant.pose[2]
         caster = tuple(_wrap(c - heading) for c in plant.caster_heading)
         self.rows.append((cycle / F_CPU, plant.pose, wheel, velocity, gyro, setpoint, measured,
-                          (plant.left.speed, plant.right.speed), pwm, caster, counts))
+                          (plant.left.speed, plant.right.speed), pwm, caster, counts, ekf, ekf_vel))
         self.tick_cycles.append(cycle)
 
     def arrays(self) -> dict[str, np.ndarray]:
         names = ("tick_time", "truth", "odom_wheel", "odom_velocity", "odom_gyro", "setpoint",
-                 "measured", "wheel_speed", "pwm", "caster", "counts")
+                 "measured", "wheel_speed", "pwm", "caster", "counts", "odom_ekf", "odom_ekf_vel")
         out: dict[str, np.ndarray]
         if not self.rows:
             z3, z2 = np.zeros((1, 3)), np.zeros((1, 2))
             out = {n: z2 for n in names}
-            out.update(tick_time=np.zeros(1), truth=z3, odom_wheel=z3, odom_velocity=z3, odom_gyro=z3)
+            out.update(tick_time=np.zeros(1), truth=z3, odom_wheel=z3, odom_velocity=z3, odom_gyro=z3,
+                       odom_ekf=z3, odom_ekf_vel=z3)
         else:
             cols = list(zip(*self.rows, strict=True))
             out = {n: np.array(c, dtype=float) for n, c in zip(names, cols, strict=True)}
@@ -245,6 +327,7 @@ class _Lines:
         self._partial = bytearray()
         self.events: list[tuple[float, str]] = []
         self.boots: list[tuple[float, str]] = []
+        self.all: list[tuple[float, str]] = []
 
     def feed(self, cycle: int, data: bytes) -> None:
         self._partial += data
@@ -254,6 +337,7 @@ class _Lines:
                 return
             line = bytes(self._partial[:end]).rstrip(b"\r").decode("latin-1")
             del self._partial[:end + 1]
+            self.all.append((cycle / F_CPU, line))
             if line.startswith("EVT:"):
                 self.events.append((round(cycle / F_CPU, 6), line))
             elif line.startswith("BOOT:"):
@@ -339,11 +423,12 @@ def fault_time(scenario: Scenario, wire: WireSchedule) -> float | None:
 
 
 def run(scenario: Scenario, *, backend: str = "port", seed: int = 0, dt: float = 0.001,
-        progress: Callable[[float], None] | None = None, elf=None) -> SimResult:
+        progress: Callable[[float], None] | None = None, elf=None, ekf: bool = False) -> SimResult:
     """Runs ``scenario`` in closed loop: ``backend`` "port" (the Python port) or "simavr"
     (the ELF ``elf``, by default the bundled firmware, built if needed), the plant
     stepping every ``dt`` s, with the scenario's faults. ``seed`` seeds the gyro;
-    ``progress`` is called now and then with the fraction done."""
+    ``progress`` is called now and then with the fraction done; ``ekf`` runs the seeds'
+    EKFs (``odom_ekf``, ``odom_ekf_vel``) on the host too."""
     if backend not in ("port", "simavr"):
         raise ValueError("backend must be 'port' or 'simavr'")
     if not 1e-5 <= dt <= 0.01:
@@ -352,26 +437,36 @@ def run(scenario: Scenario, *, backend: str = "port", seed: int = 0, dt: float =
     plant = Plant(params)
     plant.start_motion_log()
     gyro = Gyro(params, seed)
-    host = _Host(params, gyro)
+    closed = scenario.closed_loop
+    host = _Host(params, gyro, ekf or (closed and scenario.follow.localization == "ekf"))
+    pilot = _Pilot(scenario, host) if closed else None
     log = _Log()
     lines = _Lines()
     step_cycles = round(dt * F_CPU)
     end_cycle = round(scenario.duration * F_CPU)
     commands = [(round(t * F_CPU), data) for t, data in scenario.host_commands()
-                if t < scenario.duration]
+                if t < scenario.duration and not (closed and t >= 0.02)]   # closed: params only
     wire = wire_schedule(commands, scenario.faults)
     wall0 = time.perf_counter()
     if backend == "port":
-        extra = _run_port(plant, gyro, host, log, lines, wire, scenario.faults, end_cycle, dt, progress)
+        extra = _run_port(plant, gyro, host, log, lines, wire, scenario.faults, end_cycle, dt, progress,
+                          pilot)
     else:
         extra = _run_simavr(plant, gyro, host, log, lines, wire, scenario.faults, step_cycles, end_cycle,
-                            dt, progress, elf)
+                            dt, progress, elf, pilot)
     wall = time.perf_counter() - wall0
+    duration = extra.pop("end_cycle", end_cycle) / F_CPU
+    goal: dict[str, object] = {}
+    if pilot is not None:
+        commands += pilot.sent
+        goal = {"goal": pilot.ctl.goal, "goal_tolerance": scenario.follow.truth_tolerance,
+                "goal_reached_s": None if pilot.done_at is None else pilot.done_at / F_CPU,
+                "steered_by": scenario.follow.localization}
     motion = plant.take_motion_log()
     half = 0.5 * params.wheelbase
     contact = np.stack((np.hypot(motion[:, 1] - motion[:, 3] * half, motion[:, 2]),
                         np.hypot(motion[:, 1] + motion[:, 3] * half, motion[:, 2])), axis=1)
-    return SimResult(scenario=scenario.name, backend=backend, duration=scenario.duration, wall_time=wall,
+    return SimResult(scenario=scenario.name, backend=backend, duration=duration, wall_time=wall,
                      ticks=len(log.rows), caster_scrub_energy=plant.caster_scrub_energy,
                      caster_scrub_time=plant.caster_scrub_time, caster_swivel_work=plant.caster_swivel_work,
                      caster_side_impulse=plant.caster_side_impulse, lines=dict(host.lines),
@@ -379,10 +474,42 @@ def run(scenario: Scenario, *, backend: str = "port", seed: int = 0, dt: float =
                      step_contact_speed=contact, step_volts=motion[:, 4:6],
                      events=lines.events, boots=lines.boots, faults=scenario.faults,
                      fault_at=fault_time(scenario, wire),
-                     **extra, **log.arrays())  # type: ignore[arg-type]
+                     gyro_time=np.array(gyro.times), gyro_rate=np.array(gyro.rates),
+                     serial_lines=lines.all, cmd_vel=_cmd_vel(commands),
+                     **goal, **extra, **_without_ekf(log.arrays(), ekf))  # type: ignore[arg-type]
 
 
-def _run_port(plant, gyro, host, log, lines, wire, faults, end_cycle, dt, progress) -> dict:
+def _without_ekf(arrays: dict[str, np.ndarray], ekf: bool) -> dict[str, np.ndarray]:
+    if not ekf:
+        arrays.pop("odom_ekf")
+        arrays.pop("odom_ekf_vel")
+    return arrays
+
+
+def _cmd_vel(commands: list[tuple[int, bytes]]) -> list[tuple[float, float, float]]:
+    """The host's motion commands as (s, m/s, rad/s): ``x:``/``t:`` as sent, wheel
+    commands (``r``/``l`` rad/s) through the chair's kinematics (other commands: none)."""
+    from wcdrive.protocol.spec import real
+
+    radius, base = real("WHEEL_RADIUS"), real("WHEELBASE")
+    out = []
+    for cycle, data in commands:
+        text = data.decode("latin-1")
+        if m := _CMDVEL.fullmatch(text.strip()):
+            out.append((cycle / F_CPU, float(m[1]), float(m[2])))
+        elif m := _WHEEL.fullmatch(text.strip()):
+            r = float(m[2]) * (-1 if m[1] == "n" else 1)
+            lft = float(m[4]) * (-1 if m[3] == "n" else 1)
+            out.append((cycle / F_CPU, 0.5 * radius * (r + lft), radius * (r - lft) / base))
+    return out
+
+
+_CMDVEL = re.compile(r"x:(-?[\d.]+),t:(-?[\d.]+),")
+_WHEEL = re.compile(r"r([pn])([\d.]+),l([pn])([\d.]+),")
+
+
+def _run_port(plant, gyro, host, log, lines, wire, faults, end_cycle, dt, progress,
+              pilot: _Pilot | None = None) -> dict:
     loop = PortLoop(plant, gyro, dt, faults=faults)
     for cycle, data in wire.runs:
         loop.send(data, at=cycle)
@@ -403,13 +530,23 @@ def _run_port(plant, gyro, host, log, lines, wire, faults, end_cycle, dt, progre
             progress(t * F_CPU / end_cycle)
             last_progress[0] = t
 
-    loop.run_until(end_cycle, on_tick)
+    if pilot is None:
+        loop.run_until(end_cycle, on_tick)
+        take()
+        return {}
+    while pilot.next < end_cycle and not pilot.finished():
+        loop.run_until(pilot.next, on_tick)
+        take()
+        cycle, data = pilot.step()
+        loop.send(data, at=cycle)
+    end = min(pilot.next, end_cycle)
+    loop.run_until(end, on_tick)
     take()
-    return {}
+    return {"end_cycle": end}
 
 
 def _run_simavr(plant, gyro, host, log, lines, wire, faults, step_cycles, end_cycle, dt, progress,
-                elf) -> dict:
+                elf, pilot: _Pilot | None = None) -> dict:
     mega = VirtualMega(elf)
     recorder = Recorder(mega)
     pins = PlantOnPins(mega, plant, gyro, faults=faults)
@@ -419,8 +556,17 @@ def _run_simavr(plant, gyro, host, log, lines, wire, faults, step_cycles, end_cy
     runs = wire.runs
     next_run = 0
     steps = end_cycle // step_cycles
+    piloted: list[tuple[int, bytes]] = []
     for k in range(steps):
         t0, t1 = k * dt, (k + 1) * dt
+        if pilot is not None:
+            if pilot.finished():
+                end_cycle = k * step_cycles
+                break
+            while pilot.next < (k + 1) * step_cycles:
+                cycle, data = pilot.step()
+                mega.send(data, at=cycle)
+                piloted.append((cycle, data))
         # The host's bytes are queued a step ahead, so that the harness's queue stays
         # short (an encoder storm queues millions of edges).
         while next_run < len(runs) and runs[next_run][0] < (k + 1) * step_cycles:
@@ -449,9 +595,11 @@ def _run_simavr(plant, gyro, host, log, lines, wire, faults, step_cycles, end_cy
         if parts:
             encoders[side] = EdgeTrain(np.concatenate([p.times for p in parts]),
                                        np.concatenate([p.states for p in parts]), 0, 0)
-    trace = Trace(duration=end_cycle / F_CPU, serial=[(c / F_CPU, d) for c, d in runs],
+    trace = Trace(duration=end_cycle / F_CPU, serial=[(c / F_CPU, d) for c, d in sorted(runs + piloted)],
                   encoders=encoders)
     report = compare(recorder.recording(trace))
     mega.close()
-    return {"firmware_differences": len(report.mismatches),
-            "firmware_events_compared": report.events}
+    out = {"firmware_differences": len(report.mismatches), "firmware_events_compared": report.events}
+    if pilot is not None:
+        out["end_cycle"] = end_cycle
+    return out

@@ -19,6 +19,20 @@
     duration = 3.0           # optional: to the end of the scenario
     rate_hz = 200000         # encoder_noise: edges per second on channel A
 
+A closed-loop scenario gives a path instead of segments; the host follows it with a
+pure-pursuit controller (``wcdrive.navigation``) against its own odometry, sending a
+``cmdvel`` at ``host_rate_hz``:
+
+    path = [[1.0, 0.0], [1.0, 1.0]]   # waypoints (m) in the odometry frame, from (0, 0)
+    [follow]                 # optional, these are the defaults
+    speed = 0.3              # m/s cruise
+    lookahead = 0.35         # m
+    max_angular = 0.6        # rad/s
+    goal_tolerance = 0.05    # m: the host stops when its odometry is this close
+    timeout_s = 60           # the run ends here if the goal is not reached
+    localization = "wheel"   # or "ekf": the seeds' EKF on wheel velocities and the gyro
+    truth_tolerance = 0.15   # m: the published bound on the true final position's error
+
 Faults act the same way on both backends of ``wcdrive.sim.runner``: the encoder kinds on
 the encoder's wire, ``wheel_locked`` and ``motor_dead`` on the plant, ``reset`` on the
 board, and ``link_cut`` on the host's bytes, which stop reaching the board from ``at``
@@ -35,6 +49,7 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from wcdrive.navigation import FollowParams
 from wcdrive.plant.faults import FAULT_KINDS, SIDED_KINDS, Fault
 from wcdrive.plant.params import ChairParams
 from wcdrive.protocol.codec import encode_cmdvel, encode_ppm, encode_set, encode_wheel
@@ -83,10 +98,21 @@ class Scenario:
     source: Path | None = None
     faults: tuple[Fault, ...] = ()
     board_params: dict[str, float] = field(default_factory=dict)
+    #: A closed-loop scenario's waypoints (m) and how the host follows them; None: open loop.
+    path: tuple[tuple[float, float], ...] | None = None
+    follow: FollowParams = field(default_factory=FollowParams)
+
+    @property
+    def closed_loop(self) -> bool:
+        """True for a ``path`` scenario: the host steers by its odometry."""
+        return self.path is not None
 
     @property
     def duration(self) -> float:
-        """Seconds simulated: every segment, then ``settle_s``."""
+        """Seconds simulated at most: every segment, then ``settle_s`` (closed loop:
+        ``timeout_s``, then ``settle_s``)."""
+        if self.path is not None:
+            return self.follow.timeout_s + self.settle_s
         return sum(s.duration for s in self.segments) + self.settle_s
 
     def params(self) -> ChairParams:
@@ -137,6 +163,7 @@ def load(name_or_path: str) -> Scenario:
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(f"{path}: not valid TOML: {exc}") from exc
     segments = []
+    waypoints, follow = _path(data, path)
     for i, raw in enumerate(data.get("segment", [])):
         kinds = [k for k in _KINDS if k in raw]
         if len(kinds) != 1:
@@ -156,8 +183,10 @@ def load(name_or_path: str) -> Scenario:
         except ValueError as exc:
             raise ScenarioError(f"{path}: segment {i + 1}: {exc}") from exc
         segments.append(seg)
-    if not segments:
-        raise ScenarioError(f"{path}: no [[segment]] entries")
+    if not segments and waypoints is None:
+        raise ScenarioError(f"{path}: no [[segment]] entries (or a path)")
+    if segments and waypoints is not None:
+        raise ScenarioError(f"{path}: a scenario has [[segment]] entries or a path, not both")
     repeat = int(data.get("repeat", 1))
     if repeat < 1:
         raise ScenarioError(f"{path}: repeat must be >= 1")
@@ -173,6 +202,7 @@ def load(name_or_path: str) -> Scenario:
         name=str(data.get("name", path.stem)), description=str(data.get("description", "")),
         segments=tuple(segments) * repeat, host_rate_hz=rate,
         settle_s=float(data.get("settle_s", 1.5)), chair=chair, source=path,
+        path=waypoints, follow=follow,
     )
     board_params = dict(data.get("params", {}))
     for name, value in board_params.items():
@@ -187,6 +217,34 @@ def load(name_or_path: str) -> Scenario:
                    for i, raw in enumerate(raw_faults))
     return dataclasses.replace(scenario, faults=faults,
                                board_params={k: float(v) for k, v in board_params.items()})
+
+
+def _path(data: dict, where: Path) -> tuple[tuple[tuple[float, float], ...] | None, FollowParams]:
+    """A closed-loop scenario's ``path`` and ``[follow]`` table (module docstring)."""
+    raw_follow = data.get("follow", {})
+    if "path" not in data:
+        if raw_follow:
+            raise ScenarioError(f"{where}: [follow] without a path")
+        return None, FollowParams()
+    raw = data["path"]
+    try:
+        points = tuple((float(p[0]), float(p[1])) for p in raw)
+        if not points or any(len(p) != 2 for p in raw):
+            raise ValueError
+    except (TypeError, ValueError, IndexError):
+        raise ScenarioError(f"{where}: path is a list of [x, y] points (m)") from None
+    if data.get("fault"):
+        raise ScenarioError(f"{where}: a closed-loop scenario takes no [[fault]]")
+    known = {f.name for f in dataclasses.fields(FollowParams)}
+    unknown = set(raw_follow) - known
+    if unknown:
+        raise ScenarioError(f"{where}: unknown [follow] keys: {', '.join(sorted(unknown))} "
+                            f"(known: {', '.join(sorted(known))})")
+    try:
+        follow = FollowParams(**raw_follow)
+    except (TypeError, ValueError) as exc:
+        raise ScenarioError(f"{where}: [follow]: {exc}") from exc
+    return points, follow
 
 
 def parse_fault(raw: object, where: str, duration: float | None = None) -> Fault:

@@ -11,6 +11,7 @@
 #include <stdint.h>
 
 #define SWIVEL_RATE_SCALE 0.2   /* rad/s, as in chair.py */
+#define SCRUB_SLIP 1e-4         /* m/s, as in chair.py */
 
 typedef struct { double x, y; } vec_t;
 typedef vec_t (*get_vec_fn)(const void *);
@@ -131,10 +132,11 @@ static void step(chair_t *c, double dt) {
         double f_side = clampd(f_swivel - c->c_caster * side_slip, -limit, limit);
         c->swivel_work += fabs(c->swivel_friction * tanh(rate / SWIVEL_RATE_SCALE) * rate) * dt;
         c->side_impulse += fabs(f_side) * dt;
-        if (side_slip != 0.0) {
-            c->scrub_energy += fabs((f_side - f_swivel) * side_slip) * dt;
-            scrubbing = scrubbing || fabs(side_slip) > 1e-3;
-        }
+        /* the patch carries its side force by sliding (chair.py) */
+        double slip = fabs(f_side) / c->c_caster;
+        if (fabs(f_side) >= limit) slip = fmax(slip, fabs(side_slip));
+        c->scrub_energy += fabs(f_side) * slip * dt;
+        scrubbing = scrubbing || slip > SCRUB_SLIP;
         double roll = pu * ce + pv * se;
         double f_roll = -c->crr_c * n_c * tanh(roll / 0.01);
         double fxc = f_roll * ce - f_side * se;

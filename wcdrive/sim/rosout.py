@@ -1,0 +1,115 @@
+"""A simulated run as ROS 2 messages (``wcdrive.ros2``): ``wcdrive sim --mcap FILE``
+writes them into an MCAP file, ``wcdrive sim --live`` serves them to Foxglove at the
+pace of the simulated clock.
+
+Every stamp is the board's clock: the simulated Mega's, in s from its power-on (the
+cycle of the control tick, or of the line's last byte, over 16 MHz). Per control tick
+(20 Hz): ``/odom`` (the host's position-based wheel odometry; its twist from the tick's
+counts; seed 000's ekf.yaml covariances), ``/tf``, ``/joint_states`` (wheel angles from
+the counts, the firmware's filtered speeds), ``/ground_truth`` (the plant's pose, its
+twist from consecutive poses) and ``/odometry/filtered`` (the EKF on wheel velocities,
+when the run has one); ``/imu`` per gyro sample (400 Hz); ``/cmd_vel`` per velocity
+command the host sent; ``/diagnostics/serial`` per line the board sent.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from wcdrive import ros2
+from wcdrive.odometry import UNUSED, OdometryParams
+from wcdrive.plant.params import ChairParams
+from wcdrive.sim.runner import SimResult
+
+#: Seed 000's ekf.yaml: odom0_pose_covariance and odom0_twist_covariance (x, y, z,
+#: roll, pitch, yaw; 1e6 = "not used").
+ODOM_POSE_COVARIANCE = np.diag([0.05, 0.05, UNUSED, UNUSED, UNUSED, UNUSED])
+ODOM_TWIST_COVARIANCE = np.diag([0.1, 0.1, UNUSED, UNUSED, UNUSED, UNUSED])
+
+Message = tuple[float, str, dict[str, Any]]
+
+
+def _ticks(result: SimResult, params: ChairParams) -> Iterator[Message]:
+    op = OdometryParams(wheel_radius=params.wheel_radius, wheelbase=params.wheelbase,
+                        counts_per_rev=params.counts_per_rev)
+    per_count = 2.0 * math.pi / op.counts_per_rev
+    t = result.tick_time
+    counts = result.counts
+    for i in range(len(t)):
+        ti = float(t[i])
+        x, y, th = (float(v) for v in result.odom_wheel[i])
+        v = w = 0.0
+        gv = gw = 0.0
+        if i > 0 and t[i] > t[i - 1]:
+            dt = float(t[i] - t[i - 1])
+            d_left = -(counts[i, 0] - counts[i - 1, 0]) * per_count * op.wheel_radius
+            d_right = (counts[i, 1] - counts[i - 1, 1]) * per_count * op.wheel_radius
+            v, w = 0.5 * (d_left + d_right) / dt, (d_right - d_left) / op.wheelbase / dt
+            tx0, ty0, tt0 = result.truth[i - 1]
+            tx1, ty1, tt1 = result.truth[i]
+            gv = ((tx1 - tx0) * math.cos(tt1) + (ty1 - ty0) * math.sin(tt1)) / dt
+            gw = math.remainder(tt1 - tt0, 2 * math.pi) / dt
+        yield ti, "/odom", ros2.odometry(ti, x, y, th, v, w, ODOM_POSE_COVARIANCE, ODOM_TWIST_COVARIANCE)
+        yield ti, "/tf", ros2.tf(ti, x, y, th)
+        yield ti, "/joint_states", ros2.joint_state(
+            ti, (-float(counts[i, 0]) * per_count, float(counts[i, 1]) * per_count),
+            (float(result.measured[i, 0]), float(result.measured[i, 1])))
+        tx, ty, tth = (float(c) for c in result.truth[i])
+        yield ti, "/ground_truth", ros2.odometry(ti, tx, ty, tth, gv, gw)
+        if result.odom_ekf_vel is not None:
+            ex, ey, eth = (float(c) for c in result.odom_ekf_vel[i])
+            yield ti, "/odometry/filtered", ros2.odometry(ti, ex, ey, eth, 0.0, 0.0)
+
+
+def _imu(result: SimResult, params: ChairParams) -> Iterator[Message]:
+    variance = math.radians(params.gyro_noise_dps) ** 2
+    for t, rate in zip(result.gyro_time, result.gyro_rate, strict=True):
+        yield float(t), "/imu", ros2.imu(float(t), float(rate), variance)
+
+
+def messages(result: SimResult, params: ChairParams | None = None) -> Iterator[Message]:
+    """(board time s, topic, message) for every message of the run, in time order."""
+    params = params or ChairParams()
+    streams = [
+        _ticks(result, params),
+        _imu(result, params),
+        ((t, "/cmd_vel", ros2.twist(v, w)) for t, v, w in result.cmd_vel),
+        ((t, "/diagnostics/serial", ros2.serial_line(t, line)) for t, line in result.serial_lines),
+    ]
+    yield from heapq.merge(*streams, key=lambda m: m[0])
+
+
+def write_mcap(result: SimResult, path: str | Path, params: ChairParams | None = None) -> dict[str, int]:
+    """Writes the run into an MCAP file; returns the message count per topic."""
+    sink = ros2.McapSink(path)
+    counts: dict[str, int] = {}
+    try:
+        for t, topic, msg in messages(result, params):
+            sink.publish(topic, msg, t)
+            counts[topic] = counts.get(topic, 0) + 1
+    finally:
+        sink.close()
+    return counts
+
+
+def serve(result: SimResult, sink: ros2.Sink, params: ChairParams | None = None,
+          speed: float = 1.0) -> int:
+    """Publishes the run on ``sink`` paced by the board's clock (``speed`` times the
+    wall clock; 0: as fast as it goes); returns the number of messages."""
+    start = time.monotonic()
+    n = 0
+    for t, topic, msg in messages(result, params):
+        if speed > 0:
+            delay = start + t / speed - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+        sink.publish(topic, msg, t)
+        n += 1
+    return n
