@@ -74,7 +74,7 @@ class Reset:
 
     time: float              # host monotonic time of the first tick after it (s)
     board_time: float        # the board time it continues from (s)
-    cause: str               # "boot" (the session saw the board restart), "millis" (its clock went back) or "counts" (they jumped)
+    cause: str               # "boot" (seen by the session), "millis" (clock went back), "counts" (jumped)
     pose: tuple[float, float, float]   # the odometry's x, y, heading at the reset
 
 
