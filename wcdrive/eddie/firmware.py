@@ -173,7 +173,7 @@ class EddieFirmware:
     """The board: ``feed(data)`` takes received bytes and returns the reply bytes;
     ``tick(left, right)`` is one 20 ms Position Controller iteration given the wheels'
     positions (forward positive), returning the motor powers (-7520..7520).
-    ``time_s`` advances with the ticks (the ``WATCH`` timer)."""
+    ``ticks`` counts them (the ``WATCH`` timer)."""
 
     def __init__(self, *, eol: str = "firmware", hw_version: int = 0x0001, version: int = VERSION,
                  speed_of_sound: float = 343.0) -> None:
@@ -194,8 +194,8 @@ class EddieFirmware:
         self.blink: tuple[int, int] | None = None
         self.pd_running = True
         self.watch_s = 0
-        self.time_s = 0.0
-        self.last_command_s = 0.0
+        self.ticks = 0
+        self.last_command_tick = 0
         self.inputs = EddieInputs()
         self._buf = bytearray()
         self._overflow = False
@@ -260,7 +260,7 @@ class EddieFirmware:
         if handler is None:
             raise ParseError(ERR_COMMAND)
         reply = handler(self)
-        self.last_command_s = self.time_s
+        self.last_command_tick = self.ticks
         return reply
 
     def _hex(self) -> int:
@@ -549,8 +549,8 @@ class EddieFirmware:
     def tick(self, left_position: int, right_position: int) -> tuple[int, int]:
         """One ``PDLoop`` pass (right wheel first, as the source): reads the Position
         Controllers, returns the motor powers (left, right), -7520..7520."""
-        self.time_s += 1.0 / DIVISOR
-        if self.watch_s and self.time_s - self.last_command_s > self.watch_s:
+        self.ticks += 1
+        if self.watch_s and self.ticks - self.last_command_tick > self.watch_s * DIVISOR:
             for w in self.wheels:
                 w.set_power = 0
                 w.set_velocity = 0
