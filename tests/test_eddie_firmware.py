@@ -5,6 +5,8 @@ Spin source (docs/eddie.md), not by running the model."""
 
 from __future__ import annotations
 
+import itertools
+
 import pytest
 
 from wcdrive.eddie import firmware as fw
@@ -214,7 +216,7 @@ def test_acc_ramp_trvl_and_turn_on_the_plant() -> None:
     for _ in range(10):
         loop.run_until(loop.time + 0.02)
         mids.append(loop.firmware.wheels[0].mid_velocity)
-    steps = {b - a for a, b in zip(mids, mids[1:], strict=False)}
+    steps = {b - a for a, b in itertools.pairwise(mids)}
     assert steps == {1}                             # 50 / 50 Hz: one position/s per iteration
     loop.run_until(3.0)
     assert 38 <= loop.firmware.wheels[0].motor_speed <= 42
