@@ -6,6 +6,7 @@
     wcdrive verify --traces N --seed S [--elf PATH]      the port against the firmware in simavr
     wcdrive bench {flash,run,record,replay,plot} ...     a real board on USB
     wcdrive pty [--avr [--realtime]] [--speed S] [--link PATH]   a simulated chair on a pty
+    wcdrive pty --eddie [--speed S] [--eol tolerant]           a simulated Eddie board on a pty
     wcdrive can-gateway --chair URL_OR_PATH --interface I --channel C
                                                          a chair's serial port on a CAN bus
 
@@ -100,7 +101,17 @@ def _serve(bridge: PtyBridge) -> int:
         bridge.close()
 
 
+def eddie_pty(speed: float = 1.0, seed: int = 0, eol: str = "firmware",
+              link: str | None = None) -> PtyBridge:
+    """``wcdrive pty --eddie``'s bridge: a simulated Eddie board (``EddieSimBoard``) on a pty."""
+    from wcdrive.eddie.board import EddieSimBoard
+
+    return PtyBridge(EddieSimBoard(speed=speed, seed=seed, eol=eol).start(), link=link).start()
+
+
 def _pty(args: argparse.Namespace) -> int:
+    if args.eddie:
+        return _serve(eddie_pty(args.speed, args.seed, args.eol, args.link))
     if args.avr:
         from wcdrive.boards.simavr.mega_board import MegaBoard
 
@@ -158,6 +169,10 @@ def parser() -> argparse.ArgumentParser:
     bench.add_parser(sub)
 
     pty = sub.add_parser("pty", help="a simulated chair as a pseudo-terminal for outside programs")
+    pty.add_argument("--eddie", action="store_true",
+                     help="a simulated Parallax Eddie control board instead (docs/eddie.md)")
+    pty.add_argument("--eol", choices=("firmware", "tolerant"), default="firmware",
+                     help="--eddie: LF is stored as the firmware does, or ends a line too")
     pty.add_argument("--avr", action="store_true",
                      help="the compiled firmware in simavr (default: the Python port)")
     pty.add_argument("--speed", type=float, default=1.0, help="simulated time per wall time (the port)")

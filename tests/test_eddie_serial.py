@@ -1,0 +1,62 @@
+"""The simulated Eddie from outside: ``wceddie://`` through pyserial, ``wcdrive pty
+--eddie``, and a client written the way Eddie's ROS drivers are (tests/
+eddie_square_client.py) driving a square through the pty, its odometry against the
+plant's ground truth (the bounds are docs/eddie.md's figures)."""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import serial
+
+from wcdrive.cli import eddie_pty
+
+CLIENT = Path(__file__).with_name("eddie_square_client.py")
+
+
+def test_wceddie_url_answers_like_the_board() -> None:
+    with serial.serial_for_url("wceddie://?speed=4", timeout=0.5) as port:
+        port.write(b"VER\rdist\rGOSPD 1 2 3\r")
+        time.sleep(0.2)
+        assert port.read(200) == b"000C\r00000000 00000000\rERROR\r"
+    with pytest.raises(serial.SerialException, match="unknown option"):
+        serial.serial_for_url("wceddie://?colour=red")
+
+
+def test_wcdrive_pty_eddie_serves_a_board() -> None:
+    proc = subprocess.Popen([sys.executable, "-m", "wcdrive", "pty", "--eddie", "--speed", "4"],
+                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    try:
+        assert proc.stdout is not None
+        path = proc.stdout.readline().strip()
+        with serial.Serial(path, 115200, timeout=0.5) as port:
+            port.write(b"HWVER\r")
+            assert port.read_until(b"\r") == b"0001\r"
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
+
+
+def test_square_client_through_the_pty_odometry_matches_ground_truth() -> None:
+    bridge = eddie_pty(speed=2.0, seed=3)
+    board = bridge.board
+    try:
+        out = subprocess.run([sys.executable, str(CLIENT), bridge.path, "--side", "1.0"],
+                             capture_output=True, text=True, timeout=90, check=True)
+        odo = json.loads(out.stdout)
+        x, y, th = board.pose()              # type: ignore[attr-defined]
+    finally:
+        bridge.close()
+    error = math.hypot(odo["x"] - x, odo["y"] - y)
+    heading_error = abs(math.remainder(odo["theta"] - th, 2 * math.pi))
+    print(f"square: odometry ({odo['x']:.3f}, {odo['y']:.3f}, {odo['theta']:.3f}) "
+          f"truth ({x:.3f}, {y:.3f}, {th:.3f}): {error * 1000:.0f} mm, {math.degrees(heading_error):.1f} deg")
+    assert math.hypot(x, y) < 0.25                  # it did go round (a square, back near the start)
+    assert error < 0.05
+    assert math.degrees(heading_error) < 3.0
