@@ -19,9 +19,11 @@ from wcdrive.errors import (
     WcdriveProtocolError,
     WcdriveTimeoutError,
 )
+from wcdrive.eddie.robot import EddieRobot
+from wcdrive.robot import Robot
 from wcdrive.wheelchair import stop_all
 
-__all__ = ["LinkEvent", "LinkLost", "LinkRestored", "Telemetry", "WcdriveBusyError",
+__all__ = ["EddieRobot", "LinkEvent", "LinkLost", "LinkRestored", "Telemetry", "WcdriveBusyError",
            "WcdriveCommandError", "WcdriveConnectionError", "WcdriveError", "WcdriveEstopError",
            "WcdriveFaultError", "WcdrivePermissionError", "WcdriveProtocolError", "WcdriveTimeoutError",
-           "Wheelchair", "connect", "stop_all"]
+           "Robot", "Wheelchair", "connect", "stop_all"]
