@@ -8,6 +8,7 @@ if "wcdrive.urlhandler" not in _serial.protocol_handler_packages:
 __version__ = "0.1.0"
 
 from wcdrive.api import LinkEvent, LinkLost, LinkRestored, Telemetry, Wheelchair, connect
+from wcdrive.eddie.robot import EddieRobot
 from wcdrive.errors import (
     WcdriveBusyError,
     WcdriveCommandError,
@@ -19,11 +20,26 @@ from wcdrive.errors import (
     WcdriveProtocolError,
     WcdriveTimeoutError,
 )
-from wcdrive.eddie.robot import EddieRobot
 from wcdrive.robot import Robot
 from wcdrive.wheelchair import stop_all
 
-__all__ = ["EddieRobot", "LinkEvent", "LinkLost", "LinkRestored", "Telemetry", "WcdriveBusyError",
-           "WcdriveCommandError", "WcdriveConnectionError", "WcdriveError", "WcdriveEstopError",
-           "WcdriveFaultError", "WcdrivePermissionError", "WcdriveProtocolError", "WcdriveTimeoutError",
-           "Robot", "Wheelchair", "connect", "stop_all"]
+__all__ = [
+    "EddieRobot",
+    "LinkEvent",
+    "LinkLost",
+    "LinkRestored",
+    "Robot",
+    "Telemetry",
+    "WcdriveBusyError",
+    "WcdriveCommandError",
+    "WcdriveConnectionError",
+    "WcdriveError",
+    "WcdriveEstopError",
+    "WcdriveFaultError",
+    "WcdrivePermissionError",
+    "WcdriveProtocolError",
+    "WcdriveTimeoutError",
+    "Wheelchair",
+    "connect",
+    "stop_all",
+]

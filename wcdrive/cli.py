@@ -64,6 +64,8 @@ def _sim(args: argparse.Namespace) -> int:
             print(f"{sc.name:28s} {sc.duration:7.1f} s  {sc.description}")
         return 0
     names = [p.stem for p in scenario.bundled()] if args.all else (args.scenario or ["square"])
+    if args.robot == "eddie":
+        return _sim_eddie(args, names)
     results = []
     for name in names:
         try:
@@ -87,6 +89,24 @@ def _sim(args: argparse.Namespace) -> int:
         print(report.to_json(results))
     failed = [r for r in results if r.firmware_differences]
     return 1 if failed else 0
+
+
+def _sim_eddie(args: argparse.Namespace, names: list[str]) -> int:
+    from wcdrive.eddie import runner as eddie_runner
+
+    results = []
+    for name in names:
+        try:
+            sc = eddie_runner.load(name)
+        except scenario.ScenarioError as exc:
+            print(f"wcdrive sim: {exc}", file=sys.stderr)
+            return 2
+        results.append(eddie_runner.run(sc, seed=args.seed))
+        if not args.json:
+            print(eddie_runner.table(results[-1]) + "\n")
+    if args.json:
+        print(eddie_runner.to_json(results))
+    return 0
 
 
 def _serve(bridge: PtyBridge) -> int:
@@ -152,6 +172,8 @@ def parser() -> argparse.ArgumentParser:
     sim.add_argument("scenario", nargs="*", help="bundled scenario name or a .toml file (default: square)")
     sim.add_argument("--all", action="store_true", help="run every bundled scenario")
     sim.add_argument("--list", action="store_true", help="list the bundled scenarios")
+    sim.add_argument("--robot", choices=("mega", "eddie"), default="mega",
+                     help="the Mega chair (default) or the simulated Parallax Eddie (docs/eddie.md)")
     sim.add_argument("--backend", choices=("port", "simavr"), default="port",
                      help="the Python port (default) or the compiled firmware in simavr")
     sim.add_argument("--json", action="store_true", help="print the metrics as JSON")

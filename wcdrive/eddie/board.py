@@ -11,6 +11,7 @@ a background thread: what ``wceddie://`` and ``wcdrive pty --eddie`` open.
 
 from __future__ import annotations
 
+import math
 import time
 from collections import deque
 from collections.abc import Sequence
@@ -22,6 +23,7 @@ from wcdrive.plant import ChairParams, Plant
 
 BYTE_S = 10.0 / 115200.0
 STEP_S = 0.001
+TICK_STEPS = round(1.0 / (DIVISOR * STEP_S))    # plant steps per control iteration (20)
 Wall = tuple[tuple[float, float], tuple[float, float]]
 
 
@@ -38,11 +40,15 @@ class EddieLoop:
             add_wall(self.plant.space, a, b)
         self.sensors = RangeSensors(self.plant.space, seed)
         self.firmware = EddieFirmware(eol=eol)
-        self.time = 0.0
-        self._next_tick = 0.0
+        self.ms = 0                      # simulated time in whole plant steps
         self._rx: deque[tuple[float, int]] = deque()
         self._rx_free = 0.0
         self._out: list[tuple[float, bytes]] = []
+
+    @property
+    def time(self) -> float:
+        """Simulated seconds."""
+        return self.ms * STEP_S
 
     def send(self, data: bytes) -> None:
         """Queues received bytes, one every ``BYTE_S`` from now (or the last one)."""
@@ -59,13 +65,13 @@ class EddieLoop:
 
     def run_until(self, end: float) -> None:
         """Advances simulated time to ``end`` s."""
-        while self.time + STEP_S <= end + 1e-12:
+        last = math.floor(end / STEP_S + 1e-9)
+        while self.ms < last:
             self._handle_bytes(self.time)
-            if self.time >= self._next_tick - 1e-12:
+            if self.ms % TICK_STEPS == 0:
                 self._tick()
-                self._next_tick += 1.0 / DIVISOR
             self.plant.advance(1, STEP_S)
-            self.time += STEP_S
+            self.ms += 1
         self._handle_bytes(self.time)
 
     def _handle_bytes(self, now: float) -> None:
