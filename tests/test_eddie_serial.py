@@ -60,3 +60,28 @@ def test_square_client_through_the_pty_odometry_matches_ground_truth() -> None:
     assert math.hypot(x, y) < 0.25                  # it did go round (a square, back near the start)
     assert error < 0.05
     assert math.degrees(heading_error) < 3.0
+
+
+def test_connect_eddie_device_path_drives_through_a_tty() -> None:
+    """``eddie:///dev/...``: the real-board path (pyserial's posix port), here on the pty."""
+    import wcdrive
+
+    bridge = eddie_pty(speed=2.0)
+    try:
+        with wcdrive.connect(f"eddie://{bridge.path}") as bot:
+            assert isinstance(bot, wcdrive.EddieRobot) and bot.firmware_version == "000C"
+            for _ in range(10):
+                bot.set_velocity(0.2, 0.0)
+                time.sleep(0.1)
+            samples = []
+            bot.on_telemetry(samples.append)
+            time.sleep(0.5)
+            estimate = bot.odometry
+            x = estimate.pose.x
+        truth = bridge.board.pose()[0]              # type: ignore[attr-defined]
+    finally:
+        bridge.close()
+    assert len(samples) >= 10                       # DIST/HEAD/SPD polled at >= 20 Hz
+    assert samples[-1].mode == "eddie" and samples[-1].count_left > 0
+    assert 0.2 < x and abs(x - truth) < 0.03
+    assert estimate.pose_covariance[0, 0] > 0 and estimate.pose_covariance[1, 1] >= 0
