@@ -23,6 +23,8 @@ two's complement for negatives) and parses replies at fixed positions.
   the poll thread sends ``STOP 0``. Besides, ``connect`` sends ``WATCH 1`` (stop after
   1 s without any command, should the host die) and ignores the ``ERROR`` of a board
   that has no ``WATCH``.
+* Connecting: ``VER`` is asked until the board answers (``boot_timeout``, 3 s), in case
+  opening the port resets the Propeller; then ``RST`` (odometry starts at 0).
 * Telemetry: each poll gives a ``wcdrive.telemetry.Telemetry`` (``count_left``/
   ``count_right`` are ``DIST``'s positions, not mirrored; speeds in rad/s from ``SPD``;
   ``mode`` is ``"eddie"``).
@@ -77,7 +79,7 @@ class EddieRobot:
 
     def __init__(self, port: Port, *, name: str = "eddie", wheel_separation: float = WHEEL_SEPARATION,
                  poll_hz: float = 25.0, deadman_s: float = 0.5, reply_timeout: float = REPLY_TIMEOUT,
-                 watch: bool = True) -> None:
+                 watch: bool = True, boot_timeout: float = 3.0) -> None:
         if poll_hz < 20.0:
             raise ValueError("poll_hz must be at least 20")
         self._port = port
@@ -104,7 +106,7 @@ class EddieRobot:
         time.sleep(0.05)
         while self._port.in_waiting:
             self._port.read(self._port.in_waiting)
-        self.firmware_version = self.command("VER")
+        self.firmware_version = self._first_reply(boot_timeout)
         self._link_ok = True
         self.command("RST")
         if watch:
@@ -114,6 +116,17 @@ class EddieRobot:
                 self.events.append("board has no WATCH: host deadman only")
         self._thread = threading.Thread(target=self._poll, name=f"eddie-poll {name}", daemon=True)
         self._thread.start()
+
+    def _first_reply(self, boot_timeout: float) -> str:
+        """``VER``, asked again until ``boot_timeout``: a Propeller that resets when its
+        port opens takes about 1.5 s to boot from EEPROM (docs/eddie.md)."""
+        deadline = time.monotonic() + boot_timeout
+        while True:
+            try:
+                return self.command("VER")
+            except WcdriveTimeoutError:
+                if time.monotonic() > deadline:
+                    raise
 
     # ---- the wire ---------------------------------------------------------------------
     def command(self, text: str) -> str:
