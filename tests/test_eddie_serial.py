@@ -85,3 +85,19 @@ def test_connect_eddie_device_path_drives_through_a_tty() -> None:
     assert samples[-1].mode == "eddie" and samples[-1].count_left > 0
     assert 0.2 < x and abs(x - truth) < 0.03
     assert estimate.pose_covariance[0, 0] > 0 and estimate.pose_covariance[1, 1] >= 0
+
+
+def test_connect_eddie_to_a_silent_device_times_out() -> None:
+    import os
+
+    import wcdrive
+
+    master, slave = os.openpty()
+    try:
+        start = time.monotonic()
+        with pytest.raises(wcdrive.WcdriveTimeoutError, match="no reply to 'VER'"):
+            wcdrive.connect(f"eddie://{os.ttyname(slave)}", boot_timeout=0.5)
+        assert 0.5 < time.monotonic() - start < 2.0
+    finally:
+        os.close(master)
+        os.close(slave)

@@ -143,7 +143,7 @@ def connect(url: str = "sim://", *, boot_timeout: float = 10.0, record: bool = F
         return RecordingPort(port) if record else port
 
     if url.startswith(("eddie+sim://", "eddie://")):
-        return _connect_eddie(url, wrap, **options)
+        return _connect_eddie(url, wrap, boot_timeout=boot_timeout, **options)
 
     if "://" in url:
         port = _open_url(url)
@@ -174,7 +174,8 @@ def connect(url: str = "sim://", *, boot_timeout: float = 10.0, record: bool = F
 
 
 def _connect_eddie(url: str, wrap: Any, **options: Any) -> EddieRobot:
-    """``eddie+sim://...`` (``wceddie://...``) or ``eddie://<device path>``."""
+    """``eddie+sim://...`` (``wceddie://...``) or ``eddie://<device path>``; ``options``
+    go to ``EddieRobot`` (``boot_timeout``: how long to ask ``VER`` before giving up)."""
     if url.startswith("eddie+sim://"):
         port = _open_url("wceddie://" + url[len("eddie+sim://"):])
     else:
