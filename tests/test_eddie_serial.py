@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import json
 import math
+import re
+import signal
 import subprocess
 import sys
 import time
@@ -43,21 +45,27 @@ def test_wcdrive_pty_eddie_serves_a_board() -> None:
         proc.wait(timeout=10)
 
 
-def test_square_client_through_the_pty_odometry_matches_ground_truth() -> None:
-    bridge = eddie_pty(speed=2.0, seed=3)
-    board = bridge.board
+def test_square_client_through_wcdrive_pty_eddie_odometry_matches_ground_truth() -> None:
+    pty = subprocess.Popen([sys.executable, "-m", "wcdrive", "pty", "--eddie", "--speed", "2", "--seed", "3"],
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        out = subprocess.run([sys.executable, str(CLIENT), bridge.path, "--side", "1.0"],
+        assert pty.stdout is not None
+        path = pty.stdout.readline().strip()
+        out = subprocess.run([sys.executable, str(CLIENT), path, "--side", "1.0"],
                              capture_output=True, text=True, timeout=90, check=True)
         odo = json.loads(out.stdout)
-        x, y, th = board.pose()              # type: ignore[attr-defined]
     finally:
-        bridge.close()
+        pty.send_signal(signal.SIGINT)          # it prints the ground truth as it stops
+        _, err = pty.communicate(timeout=10)
+    found = re.search(r"ground truth x=(\S+) y=(\S+) heading=(\S+)", err)
+    assert found, err
+    x, y, th = (float(v) for v in found.groups())
     error = math.hypot(odo["x"] - x, odo["y"] - y)
     heading_error = abs(math.remainder(odo["theta"] - th, 2 * math.pi))
     print(f"square: odometry ({odo['x']:.3f}, {odo['y']:.3f}, {odo['theta']:.3f}) "
           f"truth ({x:.3f}, {y:.3f}, {th:.3f}): {error * 1000:.0f} mm, {math.degrees(heading_error):.1f} deg")
-    assert math.hypot(x, y) < 0.25                  # it did go round (a square, back near the start)
+    assert math.hypot(*odo["corners"][1][:2]) > 1.2  # it went round: the far corner ...
+    assert math.hypot(x, y) < 0.6                   # ... and back toward the start
     assert error < 0.05
     assert math.degrees(heading_error) < 3.0
 

@@ -131,7 +131,12 @@ def eddie_pty(speed: float = 1.0, seed: int = 0, eol: str = "firmware",
 
 def _pty(args: argparse.Namespace) -> int:
     if args.eddie:
-        return _serve(eddie_pty(args.speed, args.seed, args.eol, args.link))
+        bridge = eddie_pty(args.speed, args.seed, args.eol, args.link)
+        status = _serve(bridge)
+        x, y, heading = bridge.board.pose()     # type: ignore[attr-defined]
+        print(f"stopped at {bridge.board.time:.3f} s simulated; ground truth "  # type: ignore[attr-defined]
+              f"x={x:.4f} y={y:.4f} heading={heading:.4f}", file=sys.stderr)
+        return status
     if args.avr:
         from wcdrive.boards.simavr.mega_board import MegaBoard
 
