@@ -39,7 +39,7 @@ def test_go_to_goal_on_sim() -> None:
 
 
 def test_go_to_goal_on_eddie_sim() -> None:
-    _reach("eddie+sim://")
+    _reach("eddie+sim://?speed=2")
 
 
 @pytest.mark.simavr
