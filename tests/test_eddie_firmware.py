@@ -52,6 +52,12 @@ VECTORS: list[tuple[list[bytes], bytes, bytes]] = [
     ([b"OUT 70000\r", b"HIGH 10000\r"], b"READ\r", b"00010000\r"),
     ([b"OUT 70000\r", b"HIGH 70000\r", b"LOW 20000\r"], b"HIGHS\r", b"00050000\r"),
     ([b"HIGH FFFFFFFF\r"], b"HIGHS\r", b"00070000\r"),   # inputs too: the source masks GPIO only
+    ([], b"IN 1\r", b"\r"),
+    ([], b"OUT 1\r", b"\r"),
+    ([], b"HIGH 1\r", b"\r"),
+    ([], b"LOW 1\r", b"\r"),
+    ([], b"SGP 0\r", b"\r"),
+    ([b"SGP 0\r"], b"INS\r", b"00000000\r"),
     ([], b"OUT\r", b"ERROR\r"),
     ([], b"OUT 123456789\r", b"ERROR\r"),          # nine digits
     ([], b"OUT 7G\r", b"ERROR\r"),
@@ -249,3 +255,16 @@ def test_deadzone_as_written_biases_a_zero_error_forward() -> None:
     board.tick(0, 0)
     assert [w.set_power for w in board.wheels] == [470, 470]
     assert [w.motor_power for w in board.wheels] == [470, 470]
+
+
+@pytest.mark.parametrize(("distance", "positions"), [(b"10", 16), (b"20", 32)])
+def test_stop_slows_to_a_stop_over_the_distance(distance: bytes, positions: int) -> None:
+    loop = EddieLoop()
+    loop.send(b"GOSPD 1E 1E\r")                     # 30 positions/s
+    loop.run_until(3.0)
+    before = loop.firmware.distance()
+    loop.send(b"STOP " + distance + b"\r")
+    loop.run_until(8.0)
+    after = loop.firmware.distance()
+    assert [a - b for a, b in zip(after, before, strict=True)] == [positions, positions]
+    assert abs(loop.plant.axle_velocity()[0]) < 1e-3
