@@ -268,3 +268,18 @@ def test_stop_slows_to_a_stop_over_the_distance(distance: bytes, positions: int)
     after = loop.firmware.distance()
     assert [a - b for a, b in zip(after, before, strict=True)] == [positions, positions]
     assert abs(loop.plant.axle_velocity()[0]) < 1e-3
+
+
+def test_ping_and_stop_0_answer_after_the_firmwares_waits() -> None:
+    loop = EddieLoop()
+    loop.run_until(0.1)
+    loop.send(b"PING\rVER\r")
+    loop.run_until(0.2)
+    (t_ping, ping), (t_ver, ver) = loop.take_output()
+    assert ping.count(b" ") == 3 and ver == b"000C\r"
+    assert 0.025 <= t_ping - 0.1 < 0.028            # 5 bytes at 115200, then 25 ms
+    assert t_ver >= t_ping                          # VER waits in the buffer behind PING
+    loop.send(b"STOP 0\r")
+    loop.run_until(0.3)
+    ((t_stop, stop),) = loop.take_output()
+    assert stop == b"\r" and 0.020 <= t_stop - 0.2 < 0.023

@@ -5,8 +5,10 @@
 Controller iteration every 20 ms (the source's ``PDLoop``), the sensors read from the
 plant's pose before each iteration, replies out with ``take_output``. A received byte
 is handled 1/11520 s (10 bits at 115200 baud) after the one before it, its reply
-leaves at once. ``EddieSimBoard`` is one paced to the wall clock (times ``speed``) in
-a background thread: what ``wceddie://`` and ``wcdrive pty --eddie`` open.
+leaves at once, except after the firmware's waits (``PING`` 25 ms, ``STOP 0``
+20 ms), which hold the reply and the bytes behind it. ``EddieSimBoard`` is one paced
+to the wall clock (times ``speed``) in a background thread: what ``wceddie://`` and
+``wcdrive pty --eddie`` open.
 """
 
 from __future__ import annotations
@@ -44,6 +46,8 @@ class EddieLoop:
         self._rx: deque[tuple[float, int]] = deque()
         self._rx_free = 0.0
         self._out: list[tuple[float, bytes]] = []
+        self._pending: deque[tuple[float, bytes]] = deque()
+        self._busy_until = 0.0
 
     @property
     def time(self) -> float:
@@ -75,11 +79,15 @@ class EddieLoop:
         self._handle_bytes(self.time)
 
     def _handle_bytes(self, now: float) -> None:
-        while self._rx and self._rx[0][0] <= now + 1e-12:
+        while self._rx and self._rx[0][0] <= now + 1e-12 and now + 1e-12 >= self._busy_until:
             _, b = self._rx.popleft()
             reply = self.firmware.feed(bytes((b,)))
             if reply:
-                self._out.append((now, reply))
+                # a command that waits (PING, STOP 0) answers, and reads on, after its wait
+                self._busy_until = now + self.firmware.busy_s
+                self._pending.append((self._busy_until, reply))
+        while self._pending and self._pending[0][0] <= now + 1e-12:
+            self._out.append(self._pending.popleft())
 
     def _tick(self) -> None:
         pose = self.plant.pose

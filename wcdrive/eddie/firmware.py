@@ -64,6 +64,9 @@ MAX_WATCH_SECONDS = 0x1A
 #: Ping results are pulse widths in clock cycles; the reply is ``width >> 9``.
 PING_SHIFT = 9
 PING_MIN, PING_MAX = 18, 2900
+#: The main loop's waits: ``PING`` waits 25 ms for the echoes, ``STOP 0`` 20 ms.
+PING_WAIT_S = 1.0 / 40
+STOP_WAIT_S = 1.0 / DIVISOR
 
 #: Position samples the speed spans: 0.5 s of control iterations, and the one before.
 HISTORY = DIVISOR // 2 + 1
@@ -197,6 +200,9 @@ class EddieFirmware:
         self.ticks = 0
         self.last_command_tick = 0
         self.inputs = EddieInputs()
+        #: How long the last command kept the board's main loop (set by ``PING`` and
+        #: ``STOP 0``; the caller holds the reply and the next bytes that long).
+        self.busy_s = 0.0
         self._buf = bytearray()
         self._overflow = False
         self._last_cr = False
@@ -241,6 +247,7 @@ class EddieFirmware:
 
     def execute(self, line: bytes) -> bytes:
         """One command line (without its CR): the reply without its CR."""
+        self.busy_s = 0.0
         try:
             return self._parse(line)
         except ParseError as exc:
@@ -390,6 +397,8 @@ class EddieFirmware:
 
     def _c_ping(self) -> bytes:
         self._last()
+        if self.ping_mask:
+            self.busy_s = PING_WAIT_S               # ProcessPings: waitcnt(clkfreq / 40)
         values = [hexw(self.ping_value(pin), 3) for pin in range(32) if self.ping_mask >> pin & 1]
         return b" ".join(values)
 
@@ -471,6 +480,7 @@ class EddieFirmware:
                 w.still_cnt = 0
             self.mode = STOPPING
         else:
+            self.busy_s = STOP_WAIT_S               # waitcnt(clkfreq / DIVISOR) first
             for w in self.wheels:
                 w.set_power = 0
                 w.still_cnt = 0
