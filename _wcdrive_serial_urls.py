@@ -15,7 +15,7 @@ import importlib
 import sys
 from importlib.machinery import ModuleSpec
 
-SCHEMES = ("wcsim", "wcavr", "wccan")
+SCHEMES = ("wcsim", "wcavr", "wccan", "wceddie")
 _PREFIX = "serial.urlhandler.protocol_"
 
 

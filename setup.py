@@ -71,7 +71,7 @@ setup(
     packages=[*python_packages("wcdrive", "wcdrive"), *python_packages("hil", "wcdrive.hil"),
               *DATA],
     package_dir={"wcdrive": "wcdrive", "wcdrive.hil": "hil", **DATA},
-    package_data={"wcdrive": ["py.typed", "sim/scenarios/*.toml", "plant/csrc/*.c",
+    package_data={"wcdrive": ["py.typed", "sim/scenarios/*.toml", "eddie/scenarios/*.toml", "plant/csrc/*.c",
                               "boards/simavr/csrc/*.c"],
                   **{name: DATA_FILES for name in DATA}},
     py_modules=["_wcdrive_serial_urls"],

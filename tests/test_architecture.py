@@ -27,17 +27,18 @@ FLOORS: tuple[tuple[int, str, tuple[str, ...]], ...] = (
     (0, "utilities", ("wcdrive.errors", "wcdrive.resources", "wcdrive.native")),
     (1, "avr", ("wcdrive.avr",)),
     (2, "protocol", ("wcdrive.protocol",)),
-    (3, "firmware (port)", ("wcdrive.firmware",)),
-    (4, "plant", ("wcdrive.plant",)),
-    (5, "boards", ("wcdrive.boards",)),
+    (3, "firmware (port)", ("wcdrive.firmware", "wcdrive.eddie.firmware")),
+    (4, "plant", ("wcdrive.plant", "wcdrive.eddie.plant")),
+    (5, "boards", ("wcdrive.boards", "wcdrive.eddie.board")),
     (6, "transports", ("wcdrive.transports", "wcdrive.urlhandler")),
     (7, "session/telemetry/wheelchair", ("wcdrive.session", "wcdrive.telemetry", "wcdrive.odometry",
                                          "wcdrive.wheelchair", "wcdrive.boardclock",
                                          "wcdrive.localization", "wcdrive.ros2",
-                                         "wcdrive.navigation")),
+                                         "wcdrive.navigation", "wcdrive.robot", "wcdrive.eddie.robot")),
     (8, "api", ("wcdrive.api", "wcdrive")),
     (9, "hil (harness)", ("wcdrive.hil",)),
-    (10, "tools", ("wcdrive.cli", "wcdrive.sim", "wcdrive.bench", "wcdrive.replay", "wcdrive.__main__")),
+    (10, "tools", ("wcdrive.cli", "wcdrive.sim", "wcdrive.bench", "wcdrive.replay", "wcdrive.__main__",
+                    "wcdrive.eddie.runner")),
 )
 TOOLS_FLOOR = 10
 

@@ -8,6 +8,7 @@ if "wcdrive.urlhandler" not in _serial.protocol_handler_packages:
 __version__ = "0.1.0"
 
 from wcdrive.api import LinkEvent, LinkLost, LinkRestored, Reset, Telemetry, Wheelchair, connect
+from wcdrive.eddie.robot import EddieRobot
 from wcdrive.errors import (
     WcdriveBusyError,
     WcdriveCommandError,
@@ -19,9 +20,27 @@ from wcdrive.errors import (
     WcdriveProtocolError,
     WcdriveTimeoutError,
 )
+from wcdrive.robot import Robot
 from wcdrive.wheelchair import stop_all
 
-__all__ = ["LinkEvent", "LinkLost", "LinkRestored", "Reset", "Telemetry", "WcdriveBusyError",
-           "WcdriveCommandError", "WcdriveConnectionError", "WcdriveError", "WcdriveEstopError",
-           "WcdriveFaultError", "WcdrivePermissionError", "WcdriveProtocolError", "WcdriveTimeoutError",
-           "Wheelchair", "connect", "stop_all"]
+__all__ = [
+    "EddieRobot",
+    "LinkEvent",
+    "LinkLost",
+    "LinkRestored",
+    "Reset",
+    "Robot",
+    "Telemetry",
+    "WcdriveBusyError",
+    "WcdriveCommandError",
+    "WcdriveConnectionError",
+    "WcdriveError",
+    "WcdriveEstopError",
+    "WcdriveFaultError",
+    "WcdrivePermissionError",
+    "WcdriveProtocolError",
+    "WcdriveTimeoutError",
+    "Wheelchair",
+    "connect",
+    "stop_all",
+]

@@ -18,7 +18,10 @@ URLs map onto pyserial (the query goes to the handler, which alone parses it):
 - ``can://<interface>/<channel>`` -> ``wccan://``: a chair behind a ``wcdrive can-gateway``;
 - any ``scheme://`` pyserial opens (``wcsim://``, ``socket://``, ``rfc2217://``);
 - a device path such as ``/dev/ttyACM0``: opened exclusively (a second program gets
-  ``WcdriveBusyError``), reopened after an unplug.
+  ``WcdriveBusyError``), reopened after an unplug;
+- ``eddie+sim://[?speed=S&seed=N]`` -> ``wceddie://``: a simulated Parallax Eddie, and
+  ``eddie:///dev/ttyUSB0``: a real one. These return an ``EddieRobot``
+  (docs/eddie.md), which has the navigation surface of ``wcdrive.robot.Robot``.
 
 On connect the board resets (a real Mega does when its port opens); the API waits
 for it to boot, then says hello (a v3 frame, tried 3 times with growing waits). A
@@ -59,6 +62,7 @@ from typing import Any
 
 import serial
 
+from wcdrive.eddie.robot import EddieRobot
 from wcdrive.errors import (
     WcdriveBusyError,
     WcdriveConnectionError,
@@ -129,7 +133,7 @@ def _default_link_timeout(port: Port) -> float:
 
 def connect(url: str = "sim://", *, boot_timeout: float = 10.0, record: bool | str = False,
             legacy: bool = False, link_timeout: float | None = None, ros: Any = None,
-            **options: Any) -> Wheelchair:
+            **options: Any) -> Wheelchair | EddieRobot:
     """Opens ``url``, waits for the board's boot and feedback, says hello (module
     docstring). ``record``: keep every byte both ways (``chair.recording``) for
     ``wcdrive.replay``; ``record="run.mcap"``: write ROS 2 messages (odometry, tf, the
@@ -168,6 +172,9 @@ def connect(url: str = "sim://", *, boot_timeout: float = 10.0, record: bool | s
             return TapPort(RecordingPort(port) if record else port, publisher)
         return RecordingPort(port) if record else port
 
+    if url.startswith(("eddie+sim://", "eddie://")):
+        return _connect_eddie(url, wrap, boot_timeout=boot_timeout, **options)
+
     if "://" in url:
         port = _open_url(url)
     elif url.startswith("/"):
@@ -202,3 +209,21 @@ def connect(url: str = "sim://", *, boot_timeout: float = 10.0, record: bool | s
         chair.close()
         raise
     return chair
+
+
+def _connect_eddie(url: str, wrap: Any, **options: Any) -> EddieRobot:
+    """``eddie+sim://...`` (``wceddie://...``) or ``eddie://<device path>``; ``options``
+    go to ``EddieRobot`` (``boot_timeout``: how long to ask ``VER`` before giving up)."""
+    if url.startswith("eddie+sim://"):
+        port = _open_url("wceddie://" + url[len("eddie+sim://"):])
+    else:
+        path = url[len("eddie://"):]
+        if not path.startswith("/"):
+            raise WcdriveConnectionError(f"unsupported URL {url!r}: use eddie:///dev/ttyUSB0")
+        port = _open_device(path)
+    options.setdefault("name", url)
+    try:
+        return EddieRobot(wrap(port), **options)
+    except BaseException:
+        port.close()
+        raise

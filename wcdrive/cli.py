@@ -8,6 +8,7 @@
     wcdrive bench {flash,run,record,replay,plot} ...     a real board on USB
     wcdrive pty [--avr [--realtime] [--bootloader]] [--speed S] [--link PATH]
                                                          a simulated chair on a pty (opening resets it)
+    wcdrive pty --eddie [--speed S] [--eol tolerant]           a simulated Eddie board on a pty
     wcdrive can-gateway --chair URL_OR_PATH --interface I --channel C
                                                          a chair's serial port on a CAN bus
 
@@ -66,6 +67,8 @@ def _sim(args: argparse.Namespace) -> int:
             print(f"{sc.name:28s} {sc.duration:7.1f} s  {loop}  {sc.description}")
         return 0
     names = [p.stem for p in scenario.bundled()] if args.all else (args.scenario or ["square"])
+    if args.robot == "eddie":
+        return _sim_eddie(args, names)
     results = []
     for name in names:
         try:
@@ -116,6 +119,24 @@ def _ros_out(args: argparse.Namespace, sc: scenario.Scenario, result: runner.Sim
             sink.close()
 
 
+def _sim_eddie(args: argparse.Namespace, names: list[str]) -> int:
+    from wcdrive.eddie import runner as eddie_runner
+
+    results = []
+    for name in names:
+        try:
+            sc = eddie_runner.load(name)
+        except scenario.ScenarioError as exc:
+            print(f"wcdrive sim: {exc}", file=sys.stderr)
+            return 2
+        results.append(eddie_runner.run(sc, seed=args.seed))
+        if not args.json:
+            print(eddie_runner.table(results[-1]) + "\n")
+    if args.json:
+        print(eddie_runner.to_json(results))
+    return 0
+
+
 def _serve(bridge: PtyBridge) -> int:
     """Prints the device path, then serves until Ctrl-C; closes the bridge."""
     print(bridge.path, flush=True)
@@ -128,7 +149,22 @@ def _serve(bridge: PtyBridge) -> int:
         bridge.close()
 
 
+def eddie_pty(speed: float = 1.0, seed: int = 0, eol: str = "firmware",
+              link: str | None = None) -> PtyBridge:
+    """``wcdrive pty --eddie``'s bridge: a simulated Eddie board (``EddieSimBoard``) on a pty."""
+    from wcdrive.eddie.board import EddieSimBoard
+
+    return PtyBridge(EddieSimBoard(speed=speed, seed=seed, eol=eol).start(), link=link).start()
+
+
 def _pty(args: argparse.Namespace) -> int:
+    if args.eddie:
+        bridge = eddie_pty(args.speed, args.seed, args.eol, args.link)
+        status = _serve(bridge)
+        x, y, heading = bridge.board.pose()     # type: ignore[attr-defined]
+        print(f"stopped at {bridge.board.time:.3f} s simulated; ground truth "  # type: ignore[attr-defined]
+              f"x={x:.4f} y={y:.4f} heading={heading:.4f}", file=sys.stderr)
+        return status
     # Opening the pty resets the board (DTR), as opening a real Mega's port does.
     if args.bootloader:
         from wcdrive.boards.simavr.bootloader_mega import BootloaderBoard
@@ -181,6 +217,8 @@ def parser() -> argparse.ArgumentParser:
     sim.add_argument("scenario", nargs="*", help="bundled scenario name or a .toml file (default: square)")
     sim.add_argument("--all", action="store_true", help="run every bundled scenario")
     sim.add_argument("--list", action="store_true", help="list the bundled scenarios")
+    sim.add_argument("--robot", choices=("mega", "eddie"), default="mega",
+                     help="the Mega chair (default) or the simulated Parallax Eddie (docs/eddie.md)")
     sim.add_argument("--backend", choices=("port", "simavr"), default="port",
                      help="the Python port (default) or the compiled firmware in simavr")
     sim.add_argument("--json", action="store_true", help="print the metrics as JSON")
@@ -205,6 +243,10 @@ def parser() -> argparse.ArgumentParser:
     bench.add_parser(sub)
 
     pty = sub.add_parser("pty", help="a simulated chair as a pseudo-terminal for outside programs")
+    pty.add_argument("--eddie", action="store_true",
+                     help="a simulated Parallax Eddie control board instead (docs/eddie.md)")
+    pty.add_argument("--eol", choices=("firmware", "tolerant"), default="firmware",
+                     help="--eddie: LF is stored as the firmware does, or ends a line too")
     pty.add_argument("--avr", action="store_true",
                      help="the compiled firmware in simavr (default: the Python port)")
     pty.add_argument("--speed", type=float, default=1.0, help="simulated time per wall time (the port)")
