@@ -172,9 +172,11 @@ def serial_line(t: float, line: str, hardware_id: str = "wcdrive") -> dict[str, 
 class Sink(Protocol):
     """Where messages go: ``publish(topic, message, log_time)`` (log_time in s)."""
 
-    def publish(self, topic: str, message: dict[str, Any], log_time: float) -> None: ...
+    def publish(self, topic: str, message: dict[str, Any], log_time: float) -> None:
+        """Sends one message (a dict in the ROS 2 type's field layout) on ``topic``."""
 
-    def close(self) -> None: ...
+    def close(self) -> None:
+        """Flushes and releases whatever the sink holds (a file, a server)."""
 
 
 class McapSink:
