@@ -35,7 +35,8 @@ FLOORS: tuple[tuple[int, str, tuple[str, ...]], ...] = (
                                          "wcdrive.wheelchair")),
     (8, "api", ("wcdrive.api", "wcdrive")),
     (9, "hil (harness)", ("wcdrive.hil",)),
-    (10, "tools", ("wcdrive.cli", "wcdrive.sim", "wcdrive.bench", "wcdrive.replay", "wcdrive.__main__")),
+    (10, "tools", ("wcdrive.cli", "wcdrive.sim", "wcdrive.bench", "wcdrive.replay", "wcdrive.__main__",
+                   "wcdrive.testing", "wcdrive.sweep")),
 )
 TOOLS_FLOOR = 10
 
