@@ -36,7 +36,7 @@ FLOORS: tuple[tuple[int, str, tuple[str, ...]], ...] = (
     (8, "api", ("wcdrive.api", "wcdrive")),
     (9, "hil (harness)", ("wcdrive.hil",)),
     (10, "tools", ("wcdrive.cli", "wcdrive.sim", "wcdrive.bench", "wcdrive.replay", "wcdrive.__main__",
-                   "wcdrive.testing", "wcdrive.sweep")),
+                   "wcdrive.testing", "wcdrive.sweep", "wcdrive.console")),
 )
 TOOLS_FLOOR = 10
 
