@@ -24,7 +24,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 #: (floor, module prefixes). A module belongs to the floor of its longest prefix.
 FLOORS: tuple[tuple[int, str, tuple[str, ...]], ...] = (
-    (0, "utilities", ("wcdrive.errors", "wcdrive.resources", "wcdrive.native")),
+    (0, "utilities", ("wcdrive.errors", "wcdrive.resources", "wcdrive.native", "wcdrive.history")),
     (1, "avr", ("wcdrive.avr",)),
     (2, "protocol", ("wcdrive.protocol",)),
     (3, "firmware (port)", ("wcdrive.firmware",)),

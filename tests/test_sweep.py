@@ -40,7 +40,8 @@ def test_grid_and_random_expansion(tmp_path: Path) -> None:
     assert len(points) == 2 * 2 * 2
     assert {(p["scenario"], p["seed"], p["params"]["kp_l"]) for p in points} == {
         (s, seed, kp) for s in ("step_response", "watchdog") for seed in (0, 1) for kp in (1.0, 3.0)}
-    text = 'mode = "random"\nsamples = 5\n' + SPEC.replace("kp_l = [1.0, 3.0]", "kp_l = { min = 1.0, max = 3.0 }")
+    ranged = SPEC.replace("kp_l = [1.0, 3.0]", "kp_l = { min = 1.0, max = 3.0 }")
+    text = 'mode = "random"\nsamples = 5\n' + ranged
     rnd = sweep.load_spec(_spec(tmp_path, text))
     drawn = sweep.expand(rnd)
     assert len(drawn) == 5 and all(1.0 <= p["params"]["kp_l"] <= 3.0 for p in drawn)

@@ -13,6 +13,8 @@ import sys
 from types import TracebackType
 from typing import Any
 
+import serial
+
 from wcdrive.errors import (
     WcdriveCommandError,
     WcdriveConnectionError,
@@ -53,10 +55,10 @@ def exit_code(exc: BaseException) -> int:
         return COMMAND
     if isinstance(exc, BuildError):
         return BUILD
+    if isinstance(exc, serial.SerialException | ConnectionError | TimeoutError):
+        return CONNECTION
     if isinstance(exc, WcdriveError | ValueError | FileNotFoundError):
         return USAGE
-    if isinstance(exc, OSError) and "connect" in str(exc).lower():
-        return CONNECTION
     return INTERNAL
 
 

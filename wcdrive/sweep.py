@@ -248,7 +248,8 @@ def write(rows: list[dict[str, Any]], path: Path) -> Path:
         try:
             import pandas as pd
         except ImportError as exc:
-            raise SpecError("Parquet output needs pandas and pyarrow: pip install 'wcdrive[parquet]'") from exc
+            raise SpecError("Parquet output needs pandas and pyarrow: "
+                            "pip install 'wcdrive[parquet]'") from exc
         try:
             pd.DataFrame(rows, columns=columns(rows)).to_parquet(path, index=False)
         except ImportError as exc:
