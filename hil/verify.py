@@ -1,6 +1,7 @@
 """Checks the Python port against a built firmware, trace by trace.
 
     wcdrive verify --traces 200 --seed 1 [--elf PATH] [--duration 5] [--jobs 2]
+                   [--scheduler tcp://HOST:8786]
 
 Runs N random traces (wcdrive.hil.traces) on the firmware in simavr and through the port
 (wcdrive.hil.lockstep), and ends with one line:
@@ -14,8 +15,10 @@ both values in hex) and the trace that produced it.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
-from concurrent.futures import ProcessPoolExecutor
+from collections.abc import Iterator
+from concurrent.futures import Executor, ProcessPoolExecutor
 from pathlib import Path
 
 from wcdrive.boards.simavr.build import firmware_elf
@@ -39,6 +42,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--elf", type=Path, help="firmware ELF (default: build firmware/final_control)")
     parser.add_argument("--duration", type=float, default=5.0, help="simulated seconds per trace")
     parser.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
+    parser.add_argument("--scheduler", help="run the traces on this Dask cluster, tcp://HOST:8786 "
+                                            "(its workers need wcdrive and the ELF's path)")
+
+
+@contextlib.contextmanager
+def _executor(args: argparse.Namespace) -> Iterator[Executor]:
+    """Worker processes here, or the Dask cluster at ``--scheduler``."""
+    if not getattr(args, "scheduler", None):
+        with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
+            yield pool
+        return
+    from dask.distributed import Client
+
+    with Client(args.scheduler, timeout="20s") as client:
+        yield client.get_executor(pure=False)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -50,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
     work = [(args.seed * 1_000_003 + k, args.duration, elf) for k in range(args.traces)]
     ticks = fields = mismatches = 0
     first_failure: tuple[int, list[str], str] | None = None
-    with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
+    with _executor(args) as pool:
         for seed, t, f, m, first, described in pool.map(_check, work):
             ticks += t
             fields += f

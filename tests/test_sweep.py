@@ -79,11 +79,11 @@ def test_ctrl_c_keeps_the_finished_rows(tmp_path: Path) -> None:
     assert [r["run"] for r in sweep.read_csv(out)] == ["0", "1", "2"]
 
 
-@pytest.fixture
-def dask_cluster(tmp_path: Path):
+@pytest.fixture(scope="module")
+def dask_cluster(tmp_path_factory: pytest.TempPathFactory):
     """A ``dask scheduler`` and one ``dask worker`` as processes on localhost."""
     pytest.importorskip("distributed")
-    info = tmp_path / "scheduler.json"
+    info = tmp_path_factory.mktemp("dask") / "scheduler.json"
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(Path(__file__).parents[1]),
                                                                       os.environ.get("PYTHONPATH")]))}
     procs = [subprocess.Popen([sys.executable, "-m", "dask", "scheduler", "--host", "127.0.0.1",
@@ -132,3 +132,13 @@ def test_sweep_on_a_real_dask_scheduler_equals_the_serial_run(tmp_path: Path, da
     assert len({(r["scenario"], r["tracking_rms_rad_s"]) for r in serial}) == 4
     assert len({r["odom_gyro_heading_deg"] for r in serial}) == 8
     assert all(r["error"] == "" for r in serial)
+
+
+@pytest.mark.simavr
+def test_verify_on_a_real_dask_scheduler_equals_the_local_run(dask_cluster: str, elf, capsys) -> None:
+    args = ["verify", "--traces", "3", "--seed", "5", "--duration", "0.6", "--elf", str(elf)]
+    assert wcdrive_main([*args, "--scheduler", dask_cluster]) == 0
+    on_dask = capsys.readouterr().out.strip().splitlines()[-1]
+    assert wcdrive_main([*args, "--jobs", "1"]) == 0
+    local = capsys.readouterr().out.strip().splitlines()[-1]
+    assert on_dask == local and on_dask.startswith("traces=3 ticks=") and on_dask.endswith("mismatches=0")
