@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 import traceback
@@ -221,6 +222,10 @@ def main(argv: list[str] | None = None) -> int:
     console.setup_logging(args.debug)
     try:
         status: int = args.func(args)
+    except BrokenPipeError:
+        # the reader of our output stopped (| head): not an error; say nothing more
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return console.OK
     except (KeyboardInterrupt, Exception) as exc:
         print(console.error_line(args.command, exc), file=sys.stderr)
         if args.debug and not isinstance(exc, KeyboardInterrupt):
