@@ -17,7 +17,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from concurrent.futures import Executor, ProcessPoolExecutor
 from pathlib import Path
 
@@ -47,6 +47,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 @contextlib.contextmanager
+def _progress(total: int) -> Iterator[Callable[[], None]]:
+    """A ``rich`` bar over the traces on stderr, when it is a terminal."""
+    if not sys.stderr.isatty():
+        yield lambda: None
+        return
+    from rich.console import Console
+    from rich.progress import Progress
+
+    with Progress(console=Console(stderr=True), transient=True) as bar:
+        task = bar.add_task("verify", total=total)
+        yield lambda: bar.advance(task)
+
+
+@contextlib.contextmanager
 def _executor(args: argparse.Namespace) -> Iterator[Executor]:
     """Worker processes here, or the Dask cluster at ``--scheduler``."""
     if not getattr(args, "scheduler", None):
@@ -68,8 +82,9 @@ def run(args: argparse.Namespace) -> int:
     work = [(args.seed * 1_000_003 + k, args.duration, elf) for k in range(args.traces)]
     ticks = fields = mismatches = 0
     first_failure: tuple[int, list[str], str] | None = None
-    with _executor(args) as pool:
+    with _executor(args) as pool, _progress(len(work)) as advance:
         for seed, t, f, m, first, described in pool.map(_check, work):
+            advance()
             ticks += t
             fields += f
             mismatches += m
