@@ -22,6 +22,7 @@ from concurrent.futures import Executor, ProcessPoolExecutor
 from pathlib import Path
 
 from wcdrive.boards.simavr.build import firmware_elf
+from wcdrive.errors import WcdriveConnectionError
 from wcdrive.firmware.state import FLOAT_FIELDS, INT_FIELDS
 from wcdrive.hil.lockstep import compare, record
 from wcdrive.hil.traces import RandomDraw, generate_trace
@@ -69,7 +70,11 @@ def _executor(args: argparse.Namespace) -> Iterator[Executor]:
         return
     from dask.distributed import Client
 
-    with Client(args.scheduler, timeout="20s") as client:
+    try:
+        client = Client(args.scheduler, timeout="10s")
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise WcdriveConnectionError(f"cannot reach the Dask scheduler at {args.scheduler}: {exc}") from exc
+    with client:
         yield client.get_executor(pure=False)
 
 

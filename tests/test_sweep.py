@@ -142,3 +142,10 @@ def test_verify_on_a_real_dask_scheduler_equals_the_local_run(dask_cluster: str,
     assert wcdrive_main([*args, "--jobs", "1"]) == 0
     local = capsys.readouterr().out.strip().splitlines()[-1]
     assert on_dask == local and on_dask.startswith("traces=3 ticks=") and on_dask.endswith("mismatches=0")
+
+
+def test_an_unreachable_scheduler_is_a_connection_failure(tmp_path: Path, capsys) -> None:
+    status = wcdrive_main(["sweep", str(_spec(tmp_path)), "--scheduler", "tcp://127.0.0.1:9"])
+    err = capsys.readouterr().err
+    assert status == console.CONNECTION, err
+    assert "cannot reach the Dask scheduler at tcp://127.0.0.1:9" in err and err.count("\n") == 1

@@ -99,3 +99,17 @@ def test_faults_are_valid(fault: Fault) -> None:
 def test_scenarios_run(sc: Scenario) -> None:
     result = runner.run(sc, dt=0.002)
     assert result.ticks >= int(sc.duration / 0.05) - 2
+
+
+def test_simavr_fixture_skips_with_the_install_line_when_the_toolchain_is_missing(monkeypatch) -> None:
+    from wcdrive.boards.simavr import build
+    from wcdrive.testing import plugin
+
+    def missing() -> None:
+        raise build.BuildError("avr-gcc is missing: apt-get install gcc-avr avr-libc")
+
+    monkeypatch.setattr(build, "firmware_elf", missing)
+    reason = plugin.simavr_missing()
+    assert reason is not None and "apt-get install gcc-avr" in reason and reason.startswith("simavr://")
+    with pytest.raises(pytest.skip.Exception, match="apt-get install gcc-avr"):
+        next(plugin.wc_simavr_chair.__wrapped__())  # type: ignore[attr-defined]

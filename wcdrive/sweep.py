@@ -44,6 +44,7 @@ from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
+from wcdrive.errors import WcdriveConnectionError
 from wcdrive.firmware.params import PARAMS
 from wcdrive.plant.params import ChairParams
 from wcdrive.sim import report, runner, scenario
@@ -204,6 +205,19 @@ def run_serial(points: Iterable[dict[str, Any]]) -> Iterator[dict[str, Any]]:
         yield run_one(point)
 
 
+def connect_scheduler(address: str) -> Any:
+    """A Dask ``Client`` of the scheduler at ``address``, or ``WcdriveConnectionError``
+    saying how to start one."""
+    from dask.distributed import Client
+
+    try:
+        return Client(address, timeout="10s")
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise WcdriveConnectionError(
+            f"cannot reach the Dask scheduler at {address}: {exc} (start one with "
+            "`dask scheduler` and workers with `dask worker <address>`)") from exc
+
+
 def run_dask(points: list[dict[str, Any]], scheduler: str | None = None, workers: int | None = None
              ) -> Iterator[dict[str, Any]]:
     """The rows as their runs finish on Dask: the cluster at ``scheduler``
@@ -214,7 +228,7 @@ def run_dask(points: list[dict[str, Any]], scheduler: str | None = None, workers
     cluster = None
     if scheduler:
         log.info("sweep: connecting to the Dask scheduler at %s", scheduler)
-        client = Client(scheduler, timeout="20s")
+        client = connect_scheduler(scheduler)
     else:
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                                dashboard_address=None)
