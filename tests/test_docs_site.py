@@ -58,9 +58,8 @@ def test_every_page_in_the_nav_is_checked() -> None:
 
 @pytest.mark.parametrize("page", PAGES)
 def test_code_blocks_run(page: str, tmp_path: Path) -> None:
-    env = {**os.environ, "PYTHONPATH": str(REPO),
-           "PATH": f"{Path(sys.executable).parent}:{os.environ['PATH']}"}
-    env.pop("PYTEST_ADDOPTS", None)
+    env = {k: v for k, v in os.environ.items() if not k.startswith("PYTEST_")}   # not xdist's
+    env.update(PYTHONPATH=str(REPO), PATH=f"{Path(sys.executable).parent}:{os.environ['PATH']}")
     ran = 0
     for lang, title, code in blocks(page):
         if title:

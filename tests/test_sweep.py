@@ -149,3 +149,20 @@ def test_an_unreachable_scheduler_is_a_connection_failure(tmp_path: Path, capsys
     err = capsys.readouterr().err
     assert status == console.CONNECTION, err
     assert "cannot reach the Dask scheduler at tcp://127.0.0.1:9" in err and err.count("\n") == 1
+
+
+def test_ctrl_c_on_dask_cancels_the_rest_and_keeps_the_finished(tmp_path: Path, dask_cluster: str) -> None:
+    points = sweep.expand(sweep.load_spec(_spec(tmp_path)))
+    seen: list[int] = []
+
+    def interrupted_after_two(row: dict) -> None:
+        seen.append(row["run"])
+        if len(seen) == 2:
+            raise KeyboardInterrupt
+
+    start = time.monotonic()
+    done, interrupted = sweep.collect(sweep.run_dask(points, scheduler=dask_cluster),
+                                      on_row=interrupted_after_two)
+    assert interrupted and len(done) == 2 and [r["run"] for r in done] == seen
+    assert all(r["error"] == "" for r in done)
+    assert time.monotonic() - start < 30
