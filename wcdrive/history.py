@@ -46,16 +46,19 @@ class History(list[T]):
             self.dropped += excess
 
     def append(self, item: T) -> None:
+        """Appends ``item``, dropping the oldest past ``maxlen``."""
         with self._lock:
             super().append(item)
             self._trim()
 
     def extend(self, items: Iterable[T]) -> None:
+        """Appends ``items``, dropping the oldest past ``maxlen``."""
         with self._lock:
             super().extend(items)
             self._trim()
 
     def insert(self, index: SupportsIndex, item: T) -> None:
+        """Inserts ``item``, dropping the oldest past ``maxlen``."""
         with self._lock:
             super().insert(index, item)
             self._trim()

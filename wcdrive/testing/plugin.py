@@ -32,6 +32,7 @@ if TYPE_CHECKING:
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
+    """``--wc-speed``: how fast ``wc_chair``'s simulation runs."""
     group = parser.getgroup("wcdrive", "wcdrive's simulated chair")
     group.addoption("--wc-speed", type=float, default=10.0,
                     help="wc_chair: simulated time per wall time (default 10)")
