@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 
+from wcdrive.history import History
 from wcdrive.plant.params import ChairParams
 from wcdrive.protocol.spec import real
 
@@ -19,9 +20,11 @@ def encoder_counts(angle_left: float, angle_right: float, cpr: int = round(real(
 
 class Gyro:
     """A BMI085-like z-axis gyro: samples at ``gyro_rate_hz`` with white noise and a
-    bias that drifts as a random walk. Deterministic for a given seed."""
+    bias that drifts as a random walk. Deterministic for a given seed. ``times`` and
+    ``rates`` keep every sample, or with ``history`` only the newest ``history`` (for a
+    board that runs for hours)."""
 
-    def __init__(self, params: ChairParams, seed: int = 0) -> None:
+    def __init__(self, params: ChairParams, seed: int = 0, history: int | None = None) -> None:
         self.period = 1.0 / params.gyro_rate_hz
         self._rng = np.random.default_rng(seed)
         dps = math.pi / 180.0
@@ -29,8 +32,8 @@ class Gyro:
         self.bias = float(self._rng.normal(0.0, params.gyro_bias_dps * dps))
         self.walk = params.gyro_bias_walk_dps_per_sqrt_s * dps
         self.next_time = 0.0
-        self.times: list[float] = []
-        self.rates: list[float] = []
+        self.times: list[float] = [] if history is None else History(maxlen=history)
+        self.rates: list[float] = [] if history is None else History(maxlen=history)
 
     def sample(self, time: float, true_rate: float) -> None:
         """Takes every sample due by ``time`` at the current true yaw rate."""
