@@ -58,6 +58,7 @@ def wc_chair(request: pytest.FixtureRequest) -> Iterator[Wheelchair]:
 
     speed = request.config.getoption("--wc-speed")
     with wcdrive.connect(f"sim://?speed={speed:g}") as chair:
+        assert isinstance(chair, wcdrive.Wheelchair)
         yield chair
 
 
@@ -71,6 +72,7 @@ def wc_simavr_chair() -> Iterator[Wheelchair]:
     import wcdrive
 
     with wcdrive.connect("simavr://") as chair:
+        assert isinstance(chair, wcdrive.Wheelchair)
         yield chair
 
 
