@@ -235,7 +235,7 @@ def test_the_port_decoder_masks_at_the_same_edge_as_the_firmware() -> None:
     first = int(storm_window(round(0.2 * F_CPU))) + 1
     start = TIMER0_START_CYCLE + 128 * 64       # the cycle window 0 starts at, per the port
     per_window = [C.STORM_EDGES - 1, C.STORM_EDGES - 1, C.STORM_EDGES + 4]
-    cycles = np.concatenate([start + (first + w) * OVERFLOW_CYCLES + 4300 + 180 * np.arange(n)
+    cycles = np.concatenate([start + (first + w) * OVERFLOW_CYCLES + 4300 + 140 * np.arange(n)
                              for w, n in enumerate(per_window)])
     forward = np.array([0b01, 0b00, 0b10, 0b11])      # counting up from 11
     states = forward[np.arange(cycles.size) % 4]

@@ -65,11 +65,31 @@ def test_fifty_thousand_edges_per_second_are_all_counted(mega: VirtualMega) -> N
     assert mega.read("stormL") == 0
 
 
-def test_sixty_thousand_edges_per_second_trip_the_storm_guard(mega: VirtualMega) -> None:
-    """60,000 edges/s is more than twice the wheel's top speed (28,000 edges/s): the
-    ISR masks the encoder within one 1.024 ms window, after STORM_EDGES edges at most,
-    and the tick latches an implausible-encoder fault."""
-    train = edges_from_trajectory(np.array([0.0, 0.1, 0.6]), np.array([0.5, 0.5, 30000.5]))
+@pytest.mark.parametrize("phase", [0.0, 0.25, 0.5, 0.9])
+def test_seventy_thousand_edges_per_second_on_both_wheels_are_all_counted(mega: VirtualMega,
+                                                                        phase: float) -> None:
+    """Issue 16's goal: 70,000 edges/s on both wheels at once (2.5 times top speed), the
+    right wheel's edges ``phase`` of an edge interval after the left's (0: coincident),
+    for 0.3 s: every edge counted, none illegal, no storm."""
+    rate, seconds = 70_000.0, 0.3
+    left = edges_from_trajectory(np.array([0.0, 0.01, 0.01 + seconds]),
+                                 np.array([0.5, 0.5, 0.5 + rate * seconds]))
+    shift = phase / rate
+    right = edges_from_trajectory(np.array([0.0, 0.01 + shift, 0.01 + shift + seconds]),
+                                  np.array([0.5, 0.5, 0.5 - rate * seconds]))
+    mega.encoder_edges("left", left)
+    mega.encoder_edges("right", right)
+    mega.run_for(0.4)
+    assert mega.read("encoderValueL") == left.end_count and mega.read("encoderValueR") == right.end_count
+    assert mega.read("illegalL") == 0 and mega.read("illegalR") == 0
+    assert mega.read("stormL") == 0 and mega.read("stormR") == 0
+
+
+def test_ninety_thousand_edges_per_second_trip_the_storm_guard(mega: VirtualMega) -> None:
+    """90,000 edges/s is more than three times the wheel's top speed (28,000 edges/s):
+    the ISR masks the encoder within one 1.024 ms window, after STORM_EDGES edges at
+    most, and the tick latches an implausible-encoder fault."""
+    train = edges_from_trajectory(np.array([0.0, 0.1, 0.6]), np.array([0.5, 0.5, 45000.5]))
     mega.encoder_edges("left", train)
     mega.run_for(0.7)
     assert mega.read("stormL") == 1 and mega.read("stormR") == 0

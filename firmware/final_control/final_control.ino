@@ -33,101 +33,154 @@
 
 // ---------------------------------------------------------------------------
 // Encoder state, written by the interrupts.
+//
+// The encoder interrupts are hand-written (ISR_NAKED, below): 54 cycles for the left
+// wheel and 55 for the right, the chip's 5-cycle interrupt entry, the vector's jmp and
+// reti included (firmware/final_control/README.md lists each path; a test reads the
+// disassembly). To be that short, an interrupt only adds the step to an 8-bit
+// accumulator (encAccL/R, illAccL/R); Timer0's compare-A interrupt, once a Timer0 period
+// (1.024 ms), folds them into the 32-bit counts. Fewer than WC_STORM_EDGES (< 128) edges
+// reach an encoder in a period, or the storm guard masks it, so an accumulator never
+// overflows. Readers take count + accumulator with interrupts off.
 // ---------------------------------------------------------------------------
 volatile int32_t encoderValueL = 0;
 volatile int32_t encoderValueR = 0;
 volatile uint32_t illegalL = 0;   // transitions with both channels changed
 volatile uint32_t illegalR = 0;
-volatile uint8_t lastEncodedL = 0;
-volatile uint8_t lastEncodedR = 0;
+volatile int8_t encAccL = 0, encAccR = 0;      // steps since the last fold
+volatile uint8_t illAccL = 0, illAccR = 0;     // illegal transitions since the last fold
 
-// Indexed by (previous AB << 2) | current AB, A the high bit. +1 forward,
-// -1 backward, 0 no change, QUAD_ILLEGAL both channels changed.
-#define QUAD_ILLEGAL 2
-static const int8_t QUAD_TABLE[16] = {
-  0, -1, +1, QUAD_ILLEGAL,
-  +1, 0, QUAD_ILLEGAL, -1,
-  -1, QUAD_ILLEGAL, 0, +1,
-  QUAD_ILLEGAL, +1, -1, 0,
+// Step of a transition, indexed by (previous pins << 2) | pins as the interrupts read
+// them: 1 forward, 0xFF (-1) backward, 0 no change, QUAD_ILLEGAL both channels changed.
+// The left encoder's pins come swapped (A in bit 0: PE4, B in bit 1: PE5); the right
+// one's in order (A in bit 1: PD3, B in bit 0: PD2). Both are QUAD_TABLE of
+// wcdrive/firmware/quadrature.py, the states read A << 1 | B. 16-aligned, in RAM: the
+// interrupt indexes them with one "ori".
+#define QUAD_ILLEGAL 0x80
+__attribute__((used, aligned(16))) static const int8_t QUAD_L[16] = {
+  0, 1, -1, (int8_t)QUAD_ILLEGAL, -1, 0, (int8_t)QUAD_ILLEGAL, 1,
+  1, (int8_t)QUAD_ILLEGAL, 0, -1, (int8_t)QUAD_ILLEGAL, -1, 1, 0,
+};
+__attribute__((used, aligned(16))) static const int8_t QUAD_R[16] = {
+  0, -1, 1, (int8_t)QUAD_ILLEGAL, 1, 0, (int8_t)QUAD_ILLEGAL, -1,
+  -1, (int8_t)QUAD_ILLEGAL, 0, 1, (int8_t)QUAD_ILLEGAL, 1, -1, 0,
 };
 
-// Storm guard: the encoder ISRs count their edges in windows of one Timer0 period
-// (1.024 ms; TIMER0_COMPA clears the counts). WC_STORM_EDGES edges in one window, more
-// than twice the wheel's top speed (a loose connector, EMI), mask that encoder's
-// interrupts and set its storm flag, which the control tick latches as an
+// Storm guard: each encoder may make WC_STORM_EDGES edges in one Timer0 period (the
+// countdown stormEdgesL/R, set again by TIMER0_COMPA); the last one masks its two
+// interrupts and sets its storm flag, which the control tick latches as an
 // implausible-encoder fault. So no edge rate holds loop() for more than WC_STORM_EDGES
-// interrupts per encoder; "reset" unmasks.
+// interrupts per encoder a period; "reset" unmasks.
 volatile uint8_t stormL = 0, stormR = 0;
-volatile uint8_t stormEdgesL = 0, stormEdgesR = 0;
+volatile uint8_t stormEdgesL = WC_STORM_EDGES, stormEdgesR = WC_STORM_EDGES;
 
-ISR(TIMER0_COMPA_vect) {
-  stormEdgesL = 0;
-  stormEdgesR = 0;
+// The pins as the interrupts read them; GPIOR1/GPIOR2 keep the last reading << 2 (GPIOR0
+// holds SREG while an encoder interrupt runs: they do not nest).
+static inline uint8_t readEncoderL() { return (uint8_t)((PINE >> 4) & 0x03); }
+static inline uint8_t readEncoderR() { return (uint8_t)((PIND >> 2) & 0x03); }
+
+// Interruptible (ISR_NOBLOCK): the 32-bit additions take about 150 cycles, which an
+// encoder interrupt must not wait for (at 70,000 edges/s an encoder changes every 228
+// cycles). Only taking the accumulators is done with interrupts off.
+ISR(TIMER0_COMPA_vect, ISR_NOBLOCK) {
+  int8_t stepsL, stepsR;
+  uint8_t illL, illR;
+  cli();
+  stepsL = encAccL;
+  stepsR = encAccR;
+  illL = illAccL;
+  illR = illAccR;
+  encAccL = encAccR = 0;
+  illAccL = illAccR = 0;
+  stormEdgesL = WC_STORM_EDGES;
+  stormEdgesR = WC_STORM_EDGES;
+  sei();
+  encoderValueL += stepsL;
+  encoderValueR += stepsR;
+  illegalL += illL;
+  illegalR += illR;
 }
 
-// Left encoder: A on PE4 (pin 2), B on PE5 (pin 3).
-static inline uint8_t readEncoderL() {
-  uint8_t pins = PINE;
-  return (uint8_t)(((pins >> 3) & 0x02) | ((pins >> 5) & 0x01));
-}
+// One encoder interrupt: cycles in the right column, 5 (entry) + 3 (jmp) before it.
+#define ENCODER_ISR(PINS, LAST, TABLE, EDGES, ACC, ILL, STORM, BIT1, BIT2)          \
+  asm volatile(                                                                          \
+      "push r24               \n\t" /* 2 */                                              \
+      "in   r24, __SREG__     \n\t" /* 1 */                                              \
+      "out  %[save], r24      \n\t" /* 1  SREG kept in GPIOR0 */                         \
+      "push r30               \n\t" /* 2 */                                              \
+      "push r31               \n\t" /* 2 */                                              \
+      PINS                          /* 3 (left) or 4 (right): r24 = pins, 0..3 */        \
+      "in   r30, %[last]      \n\t" /* 1  the last reading << 2 */                       \
+      "or   r30, r24          \n\t" /* 1 */                                              \
+      "lsl  r24               \n\t" /* 1 */                                              \
+      "lsl  r24               \n\t" /* 1 */                                              \
+      "out  %[last], r24      \n\t" /* 1 */                                              \
+      "ori  r30, lo8(%[tab])  \n\t" /* 1 */                                              \
+      "ldi  r31, hi8(%[tab])  \n\t" /* 1 */                                              \
+      "ld   r24, Z            \n\t" /* 2  the step */                                    \
+      "lds  r30, %[edges]     \n\t" /* 2  storm guard */                                 \
+      "dec  r30               \n\t" /* 1 */                                              \
+      "sts  %[edges], r30     \n\t" /* 2 */                                              \
+      "breq 3f                \n\t" /* 1  the period's last edge: mask, below */        \
+      "1: cpi r24, 0x80       \n\t" /* 1 */                                              \
+      "breq 2f                \n\t" /* 1  an illegal transition: below */               \
+      "lds  r30, %[acc]       \n\t" /* 2 */                                              \
+      "add  r30, r24          \n\t" /* 1 */                                              \
+      "sts  %[acc], r30       \n\t" /* 2 */                                              \
+      "4: pop r31             \n\t" /* 2 */                                              \
+      "pop  r30               \n\t" /* 2 */                                              \
+      "in   r24, %[save]      \n\t" /* 1 */                                              \
+      "out  __SREG__, r24     \n\t" /* 1 */                                              \
+      "pop  r24               \n\t" /* 2 */                                              \
+      "reti                   \n\t" /* 5 */                                              \
+      "2: lds r30, %[ill]     \n\t"                                                      \
+      "inc  r30               \n\t"                                                      \
+      "sts  %[ill], r30       \n\t"                                                      \
+      "rjmp 4b                \n\t"                                                      \
+      "3: cbi %[eimsk], %[b1] \n\t" /* the storm guard: this encoder off */              \
+      "cbi  %[eimsk], %[b2]   \n\t"                                                      \
+      "ldi  r30, 1            \n\t"                                                      \
+      "sts  %[storm], r30     \n\t"                                                      \
+      "rjmp 1b                \n\t" /* and this edge counts */                          \
+      ::[save] "I"(_SFR_IO_ADDR(GPIOR0)), [last] "I"(_SFR_IO_ADDR(LAST)), [tab] "i"(TABLE),    \
+      [edges] "i"(&EDGES), [acc] "i"(&ACC), [ill] "i"(&ILL), [storm] "i"(&STORM),         \
+      [eimsk] "I"(_SFR_IO_ADDR(EIMSK)), [b1] "I"(BIT1), [b2] "I"(BIT2), [pine] "I"(_SFR_IO_ADDR(PINE)), \
+      [pind] "I"(_SFR_IO_ADDR(PIND)))
 
-// Right encoder: A on PD3 (pin 18), B on PD2 (pin 19).
-static inline uint8_t readEncoderR() {
-  return (uint8_t)((PIND >> 2) & 0x03);
-}
-
-ISR(INT4_vect) {
-  uint8_t now = readEncoderL();
-  int8_t step = QUAD_TABLE[(lastEncodedL << 2) | now];
-  if (step == QUAD_ILLEGAL) {
-    illegalL++;
-  } else {
-    encoderValueL += step;
-  }
-  lastEncodedL = now;
-  if (++stormEdgesL >= WC_STORM_EDGES) {
-    EIMSK &= (uint8_t)~(_BV(INT4) | _BV(INT5));
-    stormL = 1;
-  }
+// Left encoder: A on PE4 (pin 2), B on PE5 (pin 3); INT4 and INT5.
+ISR(INT4_vect, ISR_NAKED) {
+  ENCODER_ISR("in r24, %[pine] \n\t swap r24 \n\t andi r24, 0x03 \n\t", GPIOR1, QUAD_L, stormEdgesL,
+              encAccL, illAccL, stormL, INT4, INT5);
 }
 ISR(INT5_vect, ISR_ALIASOF(INT4_vect));
 
-ISR(INT3_vect) {
-  uint8_t now = readEncoderR();
-  int8_t step = QUAD_TABLE[(lastEncodedR << 2) | now];
-  if (step == QUAD_ILLEGAL) {
-    illegalR++;
-  } else {
-    encoderValueR += step;
-  }
-  lastEncodedR = now;
-  if (++stormEdgesR >= WC_STORM_EDGES) {
-    EIMSK &= (uint8_t)~(_BV(INT2) | _BV(INT3));
-    stormR = 1;
-  }
+// Right encoder: A on PD3 (pin 18), B on PD2 (pin 19); INT3 and INT2.
+ISR(INT3_vect, ISR_NAKED) {
+  ENCODER_ISR("in r24, %[pind] \n\t lsr r24 \n\t lsr r24 \n\t andi r24, 0x03 \n\t", GPIOR2, QUAD_R,
+              stormEdgesR, encAccR, illAccR, stormR, INT2, INT3);
 }
+ISR(INT2_vect, ISR_ALIASOF(INT3_vect));
 
 // "reset" after an implausible-encoder fault: the pins read afresh, the interrupts on
 // again.
 static void unmaskEncoders() {
   ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
     if (stormL) {
-      lastEncodedL = readEncoderL();
-      stormEdgesL = 0;
+      GPIOR1 = (uint8_t)(readEncoderL() << 2);
+      stormEdgesL = WC_STORM_EDGES;
       stormL = 0;
       EIFR = _BV(INTF4) | _BV(INTF5);
       EIMSK |= _BV(INT4) | _BV(INT5);
     }
     if (stormR) {
-      lastEncodedR = readEncoderR();
-      stormEdgesR = 0;
+      GPIOR2 = (uint8_t)(readEncoderR() << 2);
+      stormEdgesR = WC_STORM_EDGES;
       stormR = 0;
       EIFR = _BV(INTF2) | _BV(INTF3);
       EIMSK |= _BV(INT2) | _BV(INT3);
     }
   }
 }
-ISR(INT2_vect, ISR_ALIASOF(INT3_vect));
 
 // ---------------------------------------------------------------------------
 // Controller state (read by the simulator by name).
@@ -146,7 +199,9 @@ int32_t encTickL = 0, encTickR = 0;         // counts latched at the last tick
 int32_t prevEncL = 0, prevEncR = 0;
 uint32_t illTickL = 0, illTickR = 0;        // illegal-transition counts latched at the last tick
 uint8_t stormTickL = 0, stormTickR = 0;     // the ISRs' storm flags latched at the last tick
-uint32_t lastControlTime = 0;               // millis() of the last tick
+uint32_t lastControlTime = 0;               // millis() the last tick was due at (the 50 ms grid)
+uint32_t lastTickTime = 0;                  // millis() the last tick ran at (the counts' interval)
+uint32_t lateTicks = 0;                     // ticks more than a period late: the grid restarted
 uint32_t tickCount = 0;
 uint16_t freeRam = 0;                       // bytes between the heap and the stack, before a tick
 
@@ -248,6 +303,18 @@ class WcSerial : public HardwareSerial {
     _rx_buffer_head = next;
   }
 
+  // USART0_UDRE: the next byte of the TX ring, as the core's _tx_udr_empty_irq does it,
+  // but inline with the registers themselves: the core's is a call, and the registers it
+  // saves cost 136 cycles an interrupt, which an encoder interrupt may wait for.
+  inline void txInterrupt() {
+    tx_buffer_index_t tail = _tx_buffer_tail;
+    UDR0 = _tx_buffer[tail];
+    tail = (tx_buffer_index_t)((tail + 1) % SERIAL_TX_BUFFER_SIZE);
+    _tx_buffer_tail = tail;
+    UCSR0A = (uint8_t)((UCSR0A & (_BV(U2X0) | _BV(MPCM0))) | _BV(TXC0));
+    if (_tx_buffer_head == tail) UCSR0B &= (uint8_t)~_BV(UDRIE0);
+  }
+
   // The next received byte (-1: none), and the losses counted just before it (0: none;
   // an overrun counts one, however many frames it cost).
   int readMarked(uint8_t& lost) {
@@ -264,7 +331,7 @@ class WcSerial : public HardwareSerial {
 static WcSerial wcSerial(&UBRR0H, &UBRR0L, &UCSR0A, &UCSR0B, &UCSR0C, &UDR0);
 
 ISR(USART0_RX_vect) { wcSerial.rxInterrupt(); }
-ISR(USART0_UDRE_vect) { wcSerial._tx_udr_empty_irq(); }
+ISR(USART0_UDRE_vect) { wcSerial.txInterrupt(); }
 
 // ---------------------------------------------------------------------------
 // Output lines: formatted with Arduino's Print into a fixed buffer and written
@@ -278,6 +345,38 @@ class LineBuffer : public Print {
     return 1;
   }
   using Print::write;
+
+  // Decimal digits without division: Print::print divides by 10 once a digit (about
+  // 600 cycles each, __udivmodsi4); repeated subtraction of powers of ten is about a
+  // tenth of that. The same text as print(n).
+  void printU32(uint32_t n) {
+    static const uint32_t POW10[9] PROGMEM = {
+      1000000000UL, 100000000UL, 10000000UL, 1000000UL, 100000UL, 10000UL, 1000UL, 100UL, 10UL,
+    };
+    bool started = false;
+    for (uint8_t i = 0; i < 9; i++) {
+      uint32_t p = pgm_read_dword(&POW10[i]);
+      uint8_t digit = 0;
+      while (n >= p) {
+        n -= p;
+        digit++;
+      }
+      if (digit != 0 || started) {
+        write((uint8_t)('0' + digit));
+        started = true;
+      }
+    }
+    write((uint8_t)('0' + (uint8_t)n));
+  }
+  void printI32(int32_t n) {
+    if (n < 0) {
+      write('-');
+      printU32((uint32_t)0 - (uint32_t)n);
+    } else {
+      printU32((uint32_t)n);
+    }
+  }
+
   // Queues the line if the output budget allows it: txCredit bytes, refilled at each
   // control tick at WC_TX_CREDIT_PER_MS per elapsed millisecond, less than the UART
   // drains, so the TX ring never fills and which lines go is decided by the budget
@@ -480,43 +579,32 @@ static void sendTelemetry(uint32_t now) {
   uint8_t flags = (watchdogArmed ? 1 : 0) | (emergencyStop ? 2 : 0) | (estopLatched ? 4 : 0) |
                   (ppmLost ? 8 : 0) | (parked ? 16 : 0) | (uint8_t)(pivotPhase << 5) |
                   (faultFlags != 0 ? 128 : 0);
+  const uint32_t fields[] = {
+    now, rxCount, lastSeq, pwmL, pwmR, dirL, dirR, illTickL, illTickR, flags, rejectedCount,
+    crcRejected, freeRam, faultFlags, rxLostTick, lateTicks,
+  };
   line.print(F("TLM:"));
-  line.print(now);
-  line.print(',');
-  line.print(rxCount);
-  line.print(',');
-  line.print(lastSeq);
-  line.print(',');
-  line.print(pwmL);
-  line.print(',');
-  line.print(pwmR);
-  line.print(',');
-  line.print(dirL);
-  line.print(',');
-  line.print(dirR);
-  line.print(',');
-  line.print(illTickL);
-  line.print(',');
-  line.print(illTickR);
-  line.print(',');
-  line.print(flags);
-  line.print(',');
-  line.print(rejectedCount);
-  line.print(',');
-  line.print(crcRejected);
-  line.print(',');
-  line.print(freeRam);
-  line.print(',');
-  line.print(faultFlags);
-  line.print(',');
-  line.println(rxLostTick);
+  for (uint8_t i = 0; i < sizeof(fields) / sizeof(fields[0]); i++) {
+    if (i) line.write(',');
+    line.printU32(fields[i]);
+  }
+  line.println();
   line.send();
 }
 
 extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
-  uint32_t elapsed = now - lastControlTime;
+  uint32_t elapsed = now - lastTickTime;   // since the last tick ran: what the counts span
   float dt = (float)elapsed / 1000.0f;
-  lastControlTime = now;
+  lastTickTime = now;
+  // Ticks on a fixed grid: the next one is due a period after this one was due, so a
+  // late tick does not delay the ones after it. More than a period late (loop() held
+  // up): this tick runs and the grid starts again from now, counted in lateTicks.
+  if (now - lastControlTime >= 2 * WC_CONTROL_PERIOD_MS) {
+    lastControlTime = now;
+    lateTicks++;
+  } else {
+    lastControlTime += WC_CONTROL_PERIOD_MS;
+  }
   // The output budget refills by what the UART surely sent meanwhile.
   if (elapsed >= WC_TX_CREDIT_MAX / WC_TX_CREDIT_PER_MS) {
     txCredit = WC_TX_CREDIT_MAX;
@@ -525,18 +613,33 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
   }
   tickCount++;
 
-  uint32_t illDeltaL, illDeltaR;
+  // What the interrupts wrote, copied with them off (loads only: an encoder interrupt
+  // must not wait more than a few dozen cycles), summed after.
+  int32_t countL, countR;
+  int8_t stepsL, stepsR;
+  uint32_t illL, illR;
+  uint8_t illStepsL, illStepsR;
   ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
-    encTickL = encoderValueL;
-    encTickR = encoderValueR;
-    illDeltaL = illegalL - illTickL;
-    illDeltaR = illegalR - illTickR;
-    illTickL = illegalL;
-    illTickR = illegalR;
+    countL = encoderValueL;
+    stepsL = encAccL;
+    countR = encoderValueR;
+    stepsR = encAccR;
+    illL = illegalL;
+    illStepsL = illAccL;
+    illR = illegalR;
+    illStepsR = illAccR;
     stormTickL = stormL;
     stormTickR = stormR;
     rxLostTick = rxLost;
   }
+  encTickL = countL + stepsL;
+  encTickR = countR + stepsR;
+  uint32_t illNowL = illL + illStepsL;
+  uint32_t illNowR = illR + illStepsR;
+  uint32_t illDeltaL = illNowL - illTickL;
+  uint32_t illDeltaR = illNowR - illTickR;
+  illTickL = illNowL;
+  illTickR = illNowR;
   int32_t deltaL = (int32_t)((uint32_t)encTickL - (uint32_t)prevEncL);
   int32_t deltaR = (int32_t)((uint32_t)encTickR - (uint32_t)prevEncR);
   prevEncL = encTickL;
@@ -631,9 +734,9 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
   }
 
   line.print(F("ENC:"));
-  line.print(encTickL);
-  line.print(',');
-  line.print(encTickR);
+  line.printI32(encTickL);
+  line.write(',');
+  line.printI32(encTickR);
   line.print(F(",VEL:"));
   line.print(rawVelL, 2);
   line.print(',');
@@ -1184,8 +1287,8 @@ void setup() {
 
   wcSerial.begin(WC_BAUD);
 
-  lastEncodedL = readEncoderL();
-  lastEncodedR = readEncoderR();
+  GPIOR1 = (uint8_t)(readEncoderL() << 2);
+  GPIOR2 = (uint8_t)(readEncoderR() << 2);
   // Any edge on INT2..INT5 (both channels of both encoders).
   EICRA = (EICRA & 0x0F) | _BV(ISC20) | _BV(ISC30);
   EICRB = (EICRB & 0xF0) | _BV(ISC40) | _BV(ISC50);
@@ -1204,7 +1307,7 @@ void setup() {
   // The budget starts after the BOOT line: WC_TX_CREDIT_MAX leaves the ring room for it.
   txCredit = WC_TX_CREDIT_MAX;
   wdt_enable(WC_HW_WATCHDOG);   // a loop() pass that hangs resets the board
-  lastControlTime = millis();
+  lastControlTime = lastTickTime = millis();
 }
 
 // Bytes between the top of the heap and the stack pointer, as loop() runs.

@@ -84,7 +84,7 @@
 #define WC_FAULT_EFFORT_SHORTFALL 0.8f // ...while the wheel turns slower than this fraction of its setpoint
 #define WC_FAULT_EFFORT_TICKS 4    // consecutive ticks of that effort without progress: the motor fault
 #define WC_FAULT_ILLEGAL_PER_TICK 4 // illegal transitions in one tick: implausible encoder
-#define WC_STORM_EDGES 58          // edges of one encoder in one Timer0 period (1.024 ms) that mask it: > 2x top speed
+#define WC_STORM_EDGES 80          // edges of one encoder in one Timer0 period (1.024 ms) that mask it: 78,000 edges/s, > 2.5x top speed, above the 70,000 every edge is counted at
 #define WC_STORM_COMPARE 128       // OCR0A: the Timer0 count at which each storm window starts
 #define WC_HW_WATCHDOG 3           // AVR watchdog period (avr/wdt.h WDTO_120MS): a loop() pass that hangs longer resets the board
 #define WC_BRAKE_DONE_SPEED 0.3f   // rad/s: an emergency stop keeps braking until both wheels are slower

@@ -155,9 +155,17 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
     """``controlTick(now)`` with what it latches atomically from the interrupts: the
     encoder counts, the illegal-transition counts, the storm flags and the RX
     interrupt's count of lost bytes (``rxLost``)."""
-    elapsed = (now - s.lastControlTime) & 0xFFFFFFFF
+    last_tick = s.lastControlTime if s.lastTickTime is None else s.lastTickTime
+    elapsed = (now - last_tick) & 0xFFFFFFFF            # since the last tick ran
     dt = div(from_int(elapsed), 1000.0)
-    s.lastControlTime = now & 0xFFFFFFFF
+    s.lastTickTime = now & 0xFFFFFFFF
+    # The fixed grid: due a period after the last was due; more than a period late, the
+    # grid restarts from now (lateTicks).
+    if ((now - s.lastControlTime) & 0xFFFFFFFF) >= 2 * C.CONTROL_PERIOD_MS:
+        s.lastControlTime = now & 0xFFFFFFFF
+        s.lateTicks = (s.lateTicks + 1) & 0xFFFFFFFF
+    else:
+        s.lastControlTime = (s.lastControlTime + C.CONTROL_PERIOD_MS) & 0xFFFFFFFF
     refill_credit(s, elapsed)
     s.tickCount = (s.tickCount + 1) & 0xFFFFFFFF
 

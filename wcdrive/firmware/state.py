@@ -31,6 +31,7 @@ INT_FIELDS = (
     "rxCount", "crcRejected", "stormTickL", "stormTickR", "faultFlags", "stallTicksL",
     "stallTicksR", "reverseTicksL", "reverseTicksR", "effortPwmL", "effortPwmR",
     "effortTicksL", "effortTicksR", "txDropped", "txRingFull", "txCredit", "rxGaps", "rxLostTick",
+    "lastTickTime", "lateTicks",
 )
 
 #: Globals the tick takes as inputs rather than computes (loop() measures them).
@@ -75,7 +76,12 @@ class FirmwareState:
     #: ISR-owned, so not compared event by event; the tick's latched copies are.
     stormL: int = 0
     stormR: int = 0
+    #: millis() the last tick was due at (ticks run on a fixed 50 ms grid) and ran at
+    #: (None: the same as ``lastControlTime``, as ``setup()`` leaves them), and the ticks
+    #: that ran more than a period late, restarting the grid.
     lastControlTime: int = 0
+    lastTickTime: int | None = None
+    lateTicks: int = 0
     tickCount: int = 0
     freeRam: int = 0
     kpL: float = C.KP_L
@@ -138,6 +144,10 @@ class FirmwareState:
     #: ``WC_BUILD_ID`` (in flash, not a global): the build the port stands for, which the
     #: HELLO line names; a replay takes the board's.
     buildId: str = C.BUILD_ID
+
+    def __post_init__(self) -> None:
+        if self.lastTickTime is None:
+            self.lastTickTime = self.lastControlTime
 
     def copy(self) -> FirmwareState:
         """A deep copy."""

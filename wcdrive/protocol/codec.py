@@ -194,6 +194,9 @@ class ExtendedTelemetry:
     #: Bytes the board lost on receive (a full RX ring, one per USART overrun), counted
     #: since boot; each loss also discards the command it hit (``ERR:overrun``).
     rx_lost: int = 0
+    #: Control ticks that ran more than a period late since boot (the 50 ms grid then
+    #: starts again from that tick).
+    late: int = 0
 
     @property
     def fault_latched(self) -> bool:
@@ -287,7 +290,7 @@ def _float(text: bytes) -> float:
     return -value if text.startswith(b"-") else value
 
 
-_TLM = re.compile(rb"TLM:(\d+(?:,\d+){12}(?:,\d+){0,2})")
+_TLM = re.compile(rb"TLM:(\d+(?:,\d+){12}(?:,\d+){0,3})")
 _HELLO = re.compile(rb"HELLO:(\d+),([\w.-]+)(?:,([\w.-]+),([0-9a-f]+))?")
 _PARAM = re.compile(rb"PAR:(\w+),(\d+(?:\.\d+)?)")
 _ACK = re.compile(rb"ACK:(\d+)")
