@@ -137,14 +137,15 @@ ISR(TIMER0_COMPA_vect, ISR_NOBLOCK) {
       "inc  r30               \n\t"                                                      \
       "sts  %[ill], r30       \n\t"                                                      \
       "rjmp 4b                \n\t"                                                      \
-      "3: cbi %[eimsk], %[b1] \n\t" /* the storm guard: this encoder off */              \
-      "cbi  %[eimsk], %[b2]   \n\t"                                                      \
-      "ldi  r30, 1            \n\t"                                                      \
-      "sts  %[storm], r30     \n\t"                                                      \
+      "3: in r30, %[eimsk]    \n\t" /* the storm guard: this encoder off, */           \
+      "andi r30, %[keep]      \n\t"                                                      \
+      "out  %[eimsk], r30     \n\t"                                                      \
+      "sts  %[storm], r31     \n\t" /* its flag set (r31: the table's page, not 0) */   \
       "rjmp 1b                \n\t" /* and this edge counts */                          \
       ::[save] "I"(_SFR_IO_ADDR(GPIOR0)), [last] "I"(_SFR_IO_ADDR(LAST)), [tab] "i"(TABLE),    \
       [edges] "i"(&EDGES), [acc] "i"(&ACC), [ill] "i"(&ILL), [storm] "i"(&STORM),         \
-      [eimsk] "I"(_SFR_IO_ADDR(EIMSK)), [b1] "I"(BIT1), [b2] "I"(BIT2), [pine] "I"(_SFR_IO_ADDR(PINE)), \
+      [eimsk] "I"(_SFR_IO_ADDR(EIMSK)), [keep] "n"(0xFF & ~((1 << BIT1) | (1 << BIT2))),          \
+      [pine] "I"(_SFR_IO_ADDR(PINE)),                                                     \
       [pind] "I"(_SFR_IO_ADDR(PIND)))
 
 // Left encoder: A on PE4 (pin 2), B on PE5 (pin 3); INT4 and INT5.
