@@ -30,7 +30,16 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from wcdrive.avr.timer0 import F_CPU, OVERFLOW_CYCLES, TIMER0_START_CYCLE, Timer0, storm_window
+from wcdrive.avr.timer0 import (
+    F_CPU,
+    FRACT_INC,
+    FRACT_MAX,
+    MILLIS_INC,
+    OVERFLOW_CYCLES,
+    TIMER0_START_CYCLE,
+    Timer0,
+    storm_window,
+)
 from wcdrive.avr.uart import UART_BYTE_CYCLES
 from wcdrive.firmware.final_control import Firmware, boot_line
 from wcdrive.firmware.quadrature import QuadratureDecoder
@@ -111,8 +120,12 @@ class PortLoop:
     are injected as the module docstring says."""
 
     def __init__(self, plant: Plant, gyro: Gyro | None = None, dt: float = 0.001,
-                 firmware: Firmware | None = None, faults: Sequence[Fault] = ()) -> None:
+                 firmware: Firmware | None = None, faults: Sequence[Fault] = (), *,
+                 stepped: bool = False) -> None:
         self.plant = plant
+        #: The reference path: every Timer0 overflow in turn (``run_until``).
+        self.stepped = stepped
+        self._due_hint = 0
         self.gyro = gyro
         self.dt = dt
         self.step_cycles = round(dt * F_CPU)
@@ -150,7 +163,137 @@ class PortLoop:
         return out
 
     def run_until(self, end_cycle: int, on_tick: Callable[[float], None] | None = None) -> None:
-        """Runs to ``end_cycle``; ``on_tick(time)`` after every control tick."""
+        """Runs to ``end_cycle``; ``on_tick(time)`` after every control tick.
+
+        Event-driven (module docstring): from one event to the next (a control tick, the
+        overflow at which received bytes are read, a reset, the end), ``millis()`` in
+        closed form. ``stepped=True`` takes the reference path, every overflow in turn."""
+        if self.stepped:
+            self._run_stepped(end_cycle, on_tick)
+            return
+        while True:
+            overflow = self._overflow
+            resets = self._resets
+            if resets and resets[0] <= min(overflow, end_cycle):
+                cycle = resets.pop(0)
+                self._advance_to(cycle)
+                self.cycle = max(self.cycle, cycle)
+                self.reset()
+                continue
+            if overflow > end_cycle:
+                break
+            # The last overflow this pass may reach: none past the end, none at or past
+            # a reset, and the bytes' overflow (read before its due check) at most.
+            last = overflow + (end_cycle - overflow) // OVERFLOW_CYCLES * OVERFLOW_CYCLES
+            if resets:
+                last = min(last, overflow + (resets[0] - 1 - overflow) // OVERFLOW_CYCLES * OVERFLOW_CYCLES)
+            rx_at: int | None = None
+            if self._rx:
+                arrived = self._rx[0][0]
+                rx_at = overflow if arrived <= overflow else \
+                    overflow + -(-(arrived - overflow) // OVERFLOW_CYCLES) * OVERFLOW_CYCLES
+                if rx_at > last:
+                    rx_at = None
+            fw = self.fw
+            timer = self.timer
+            # Overflows before the bytes' own: the first at which the tick is due.
+            span = ((rx_at if rx_at is not None else last + OVERFLOW_CYCLES) - overflow) // OVERFLOW_CYCLES
+            due_at = self._first_due(fw, span)
+            if due_at is not None:
+                at = overflow + due_at * OVERFLOW_CYCLES
+                self._jump_timer(due_at + 1)
+                self._tick(fw, at, timer.millis, on_tick)
+                self._overflow = at + OVERFLOW_CYCLES
+                continue
+            if rx_at is None:
+                self._jump_timer((last - overflow) // OVERFLOW_CYCLES + 1)
+                self._overflow = last + OVERFLOW_CYCLES
+                continue
+            self._jump_timer((rx_at - overflow) // OVERFLOW_CYCLES + 1)
+            self._receive(fw, rx_at)
+            fw = self.fw
+            millis = timer.millis
+            if fw.due(millis):
+                self._tick(fw, rx_at, millis, on_tick)
+            self._overflow = rx_at + OVERFLOW_CYCLES
+        self._advance_to(end_cycle)
+        self.cycle = max(self.cycle, end_cycle)
+
+    def _jump_timer(self, overflows: int) -> None:
+        """``overflows`` Timer0 overflows at once (``millis_after``), on the same object."""
+        timer = self.timer
+        total = timer.fract + FRACT_INC * overflows
+        timer.millis = (timer.millis + MILLIS_INC * overflows + total // FRACT_MAX) & 0xFFFFFFFF
+        timer.fract = total % FRACT_MAX
+
+    def _first_due(self, fw: Firmware, span: int) -> int | None:
+        """Of the next ``span`` overflows (0: the next), the first at which ``fw.due``
+        holds, or None. ``Firmware.due`` decides, asked at a few overflows only: between
+        two inputs it is monotone in ``millis()`` (``millis() - lastControlTime`` against
+        the period), so the first due overflow is found by bisection, starting from the
+        gap between the last two ticks; ``stepped=True`` asks at every overflow."""
+        if span <= 0:
+            return None
+        timer = self.timer
+        m0, f0 = timer.millis, timer.fract
+
+        def due(j: int) -> bool:          # after overflow j: j + 1 overflows from now
+            total = f0 + FRACT_INC * (j + 1)
+            return fw.due((m0 + MILLIS_INC * (j + 1) + total // FRACT_MAX) & 0xFFFFFFFF)
+
+        hint = self._due_hint
+        if 0 < hint < span and due(hint) and not due(hint - 1):
+            return hint
+        if due(0):
+            return 0
+        lo, hi = 0, span - 1                  # not due at lo; the answer is in (lo, hi]
+        if not due(hi):
+            return None
+        while hi - lo > 1:
+            mid = (lo + hi) // 2
+            if due(mid):
+                hi = mid
+            else:
+                lo = mid
+        return hi
+
+    def _receive(self, fw: Firmware, overflow: int) -> None:
+        """The bytes that have arrived by ``overflow`` go through ``processByte``."""
+        data = bytearray()
+        while self._rx and self._rx[0][0] <= overflow:
+            data.append(self._rx.popleft()[1])
+        masked = any(e.decoder.storm for e in self._encoders.values())
+        if masked:
+            self._advance_to(overflow)
+        out = fw.feed(bytes(data))
+        if out:
+            self.output.append((overflow, out))
+        if masked:
+            self._unmask_cleared(overflow)
+
+    def _tick(self, fw: Firmware, overflow: int, millis: int,
+              on_tick: Callable[[float], None] | None) -> None:
+        """The control tick at ``overflow``: the plant brought to it, the latched counts
+        in, PWM/DIR out to the plant."""
+        self._advance_to(overflow)
+        true = self._true_counts()
+        left, right = self._encoders["left"], self._encoders["right"]
+        out = fw.tick(millis, left.count(true[0]), right.count(true[1]),
+                      left.decoder.illegal, right.decoder.illegal,
+                      storm_l=int(left.decoder.storm), storm_r=int(right.decoder.storm))
+        s = fw.state
+        self.plant.set_drive(s.pwmL, s.dirL, s.pwmR, s.dirR)
+        self.output.append((overflow, out))
+        if self.last_tick_cycle is not None and overflow > self.last_tick_cycle:
+            self._due_hint = (overflow - self.last_tick_cycle) // OVERFLOW_CYCLES - 1
+        self.last_tick_cycle = overflow
+        if on_tick:
+            on_tick(overflow / F_CPU)
+
+    def _run_stepped(self, end_cycle: int, on_tick: Callable[[float], None] | None = None) -> None:
+        """The reference path of ``run_until``: every Timer0 overflow in turn, ``due``
+        asked at each (as before the loop was event-driven; tests/test_sim_speed.py
+        checks that both paths give the same bytes, ticks and states)."""
         plant = self.plant
         while True:
             overflow = self._overflow
