@@ -87,7 +87,11 @@ class WheelOdometry:
         self.p = params or OdometryParams()
         self.method = method
         self.pose = Pose2D()
-        self._cov = np.zeros((3, 3))
+        self._cov_matrix = np.zeros((3, 3))
+        #: Steps whose covariance propagation waits until a covariance is read
+        #: (``_cov``): the same numpy operations in the same order, so the same bits,
+        #: paid only by those who read it.
+        self._pending: list[tuple[float, float, float, float]] = []
         self._last: tuple[float, int, int] | None = None
         self._rad_per_count = 2.0 * math.pi / self.p.counts_per_rev
         self.linear = 0.0
@@ -106,9 +110,15 @@ class WheelOdometry:
     def update(self, time: float, count_left: int, count_right: int) -> OdometryEstimate:
         """One sample (``time`` in s, the counts as the firmware reports them); returns
         the estimate. The first sample only sets the starting counts."""
+        self.integrate(time, count_left, count_right)
+        return self.estimate(time)
+
+    def integrate(self, time: float, count_left: int, count_right: int) -> None:
+        """``update`` without building the estimate: the pose, the speeds and (when
+        next read) the covariance move on exactly as ``update`` moves them."""
         if self._last is None:
             self._last = (time, count_left, count_right)
-            return self.estimate(time)
+            return
         t0, l0, r0 = self._last
         self._last = (time, count_left, count_right)
         dt = time - t0
@@ -130,8 +140,21 @@ class WheelOdometry:
         self.pose.theta = th + dtheta
         if dt > 0:
             self.linear, self.angular = d / dt, dtheta / dt
-        self._propagate(d, heading, d_left, d_right)
-        return self.estimate(time)
+        self._pending.append((d, heading, d_left, d_right))
+        if len(self._pending) >= 4096:
+            self._flush()
+
+    @property
+    def _cov(self) -> np.ndarray:
+        """The 3x3 pose covariance (x, y, theta), every pending step propagated."""
+        if self._pending:
+            self._flush()
+        return self._cov_matrix
+
+    def _flush(self) -> None:
+        pending, self._pending = self._pending, []
+        for step in pending:
+            self._propagate(*step)
 
     def _propagate(self, d: float, heading: float, d_left: float, d_right: float) -> None:
         """First-order propagation of the wheel distance noise into the pose."""
@@ -140,7 +163,7 @@ class WheelOdometry:
         c, s, base = math.cos(heading), math.sin(heading), self.p.wheelbase
         f = np.array([[1.0, 0.0, -d * s], [0.0, 1.0, d * c], [0.0, 0.0, 1.0]])
         g = np.array([[0.5 * c, 0.5 * c], [0.5 * s, 0.5 * s], [-1.0 / base, 1.0 / base]])
-        self._cov = f @ self._cov @ f.T + g @ q @ g.T
+        self._cov_matrix = f @ self._cov_matrix @ f.T + g @ q @ g.T
 
     def estimate(self, time: float) -> OdometryEstimate:
         """The pose, speeds and covariances now, stamped ``time``."""

@@ -432,8 +432,5 @@ def advance(plant: Plant, gyro: Gyro | None, steps: int, dt: float) -> np.ndarra
     assert recorded is not None
     angles, rates = recorded
     if gyro is not None:
-        end = t0 + dt * steps
-        while gyro.next_time <= end + 1e-12:
-            k = min(steps - 1, max(0, int((gyro.next_time - t0) / dt - 1e-9)))
-            gyro.sample(gyro.next_time, float(rates[k]))
+        gyro.sample_steps(t0, dt, rates)
     return angles

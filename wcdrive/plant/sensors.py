@@ -39,3 +39,31 @@ class Gyro:
             self.times.append(self.next_time)
             self.rates.append(true_rate + self.bias + self.noise * float(self._rng.standard_normal()))
             self.next_time += self.period
+
+    def sample_steps(self, t0: float, dt: float, rates: np.ndarray) -> None:
+        """Every sample due by the end of ``len(rates)`` plant steps of ``dt`` from
+        ``t0``, each at the true yaw rate of the step it falls in (``rates``): bit for
+        bit the samples ``sample`` takes one at a time, with the random draws of the
+        whole batch taken at once (``standard_normal(2 n)`` is the same stream)."""
+        steps = len(rates)
+        end = t0 + dt * steps + 1e-12
+        t = self.next_time
+        if steps <= 0 or t > end:
+            return
+        period = self.period
+        due: list[float] = []
+        while t <= end:
+            due.append(t)
+            t += period
+        draws = self._rng.standard_normal(2 * len(due)).tolist()
+        walk = self.walk * math.sqrt(period)
+        noise, bias, last = self.noise, self.bias, steps - 1
+        true = rates.tolist()
+        out = self.rates
+        for i, ts in enumerate(due):
+            bias += walk * draws[2 * i]
+            k = int((ts - t0) / dt - 1e-9)
+            out.append(true[min(last, max(0, k))] + bias + noise * draws[2 * i + 1])
+        self.times.extend(due)
+        self.bias = bias
+        self.next_time = t

@@ -235,13 +235,13 @@ class _Host:
                     for ekf in self.ekfs:
                         ekf.imu(times[self._gyro_index], self.integrator.heading, rates[self._gyro_index])
                     self._gyro_index += 1
-                self.position.update(t, msg.count_left, msg.count_right)
-                self.velocity.update(t, msg.count_left, msg.count_right)
+                self.position.integrate(t, msg.count_left, msg.count_right)
+                self.velocity.integrate(t, msg.count_left, msg.count_right)
                 v = self.velocity
                 for ekf in self.ekfs:
                     ekf.odometry(t, v.pose.x, v.pose.y, v.pose.theta, v.linear, v.angular)
                 self.gyro_odom.use_gyro_heading(self.integrator.heading_at(t))
-                self.gyro_odom.update(t, msg.count_left, msg.count_right)
+                self.gyro_odom.integrate(t, msg.count_left, msg.count_right)
             else:
                 key = type(msg).__name__.lower()
                 self.lines[key if key in self.lines else "other"] += 1
