@@ -85,8 +85,8 @@ def _load_kernel() -> ctypes.CDLL | None:
     if _kernel is None:
         try:
             lib = load(_KERNEL_SOURCE, "chairkernel", ("-lm",), ("-O2", "-ffp-contract=off"))
-            lib.chair_advance.argtypes = [ctypes.POINTER(ChairStruct), ctypes.c_int32, _D,
-                                          ctypes.POINTER(_D), ctypes.POINTER(_D), ctypes.POINTER(_D)]
+            lib.chair_advance.argtypes = [ctypes.POINTER(ChairStruct), ctypes.c_int32, _D, _D,
+                                          _P, _P, _P]
             lib.chair_advance.restype = None
             _kernel = lib
         except BuildError:
@@ -155,6 +155,8 @@ class Plant:
         self._kernel = _load_kernel() if use_kernel else None
         if self._kernel is not None:
             self._bind_chipmunk()
+            self._advance = self._kernel.chair_advance
+            self._ref = ctypes.pointer(self.s)
 
     def _bind_chipmunk(self) -> None:
         from pymunk._chipmunk import ffi, lib
@@ -282,25 +284,31 @@ class Plant:
         step (an ``n x 2`` array, left and right) and the yaw rates (``n``)."""
         if n <= 0:
             return (np.empty((0, 2)), np.empty(0)) if record else None
+        logging = self._motion_log is not None
+        if self._kernel is not None:
+            # One call for the n steps; the arrays passed by address (ctypes' own
+            # conversions cost more than the steps of a tick).
+            angles = _empty((n, 2)) if record else _NONE
+            rates = _empty(n) if record else _NONE
+            motion = _empty((n, 6)) if logging else _NONE
+            self._advance(self._ref, n, dt, self.s.time, _address(angles), _address(rates),
+                          _address(motion))
+            if logging:
+                assert self._motion_log is not None
+                self._motion_log.append(motion)
+            return (angles, rates) if record else None
         angles = np.empty((n if record else 0, 2))
         rates = np.empty(n if record else 0)
-        logging = self._motion_log is not None
         motion = np.empty((n if logging else 0, 6))
         t0 = self.s.time
-        if self._kernel is not None:
-            a_ptr = angles.ctypes.data_as(ctypes.POINTER(_D)) if record else None
-            r_ptr = rates.ctypes.data_as(ctypes.POINTER(_D)) if record else None
-            m_ptr = motion.ctypes.data_as(ctypes.POINTER(_D)) if logging else None
-            self._kernel.chair_advance(ctypes.byref(self.s), n, dt, a_ptr, r_ptr, m_ptr)
-        else:
-            for k in range(n):
-                self._python_step(dt)
-                if record:
-                    angles[k] = self.s.angle[0], self.s.angle[1]
-                    rates[k] = self.body.angular_velocity
-                if logging:
-                    forward, lateral = self.axle_velocity()
-                    motion[k, 1:4] = forward, lateral, self.body.angular_velocity
+        for k in range(n):
+            self._python_step(dt)
+            if record:
+                angles[k] = self.s.angle[0], self.s.angle[1]
+                rates[k] = self.body.angular_velocity
+            if logging:
+                forward, lateral = self.axle_velocity()
+                motion[k, 1:4] = forward, lateral, self.body.angular_velocity
         if logging:
             assert self._motion_log is not None
             motion[:, 0] = t0 + dt * np.arange(1, n + 1)
@@ -418,6 +426,18 @@ class Plant:
         b.torque = torque_axle - xg * fy_b
         self.space.step(dt)
         s.time += dt
+
+
+_NONE = np.empty(0)
+
+
+def _empty(shape: int | tuple[int, int]) -> np.ndarray:
+    return np.empty(shape)
+
+
+def _address(a: np.ndarray) -> int | None:
+    """The address of ``a``'s data for the kernel (None, a NULL, for ``_NONE``)."""
+    return a.__array_interface__["data"][0] if a is not _NONE else None
 
 
 def _side_index(side: str) -> int:

@@ -158,9 +158,10 @@ static void step(chair_t *c, double dt) {
 
 /* n steps; after each, the wheel angles (left, right) and the yaw rate are stored
  * in the output arrays when they are not NULL, and in motion (6 doubles a step) the
- * axle midpoint's forward and lateral speed and the yaw rate, in slots 1 to 3 (Python
- * fills slot 0 with the time and 4, 5 with the voltages: Plant.start_motion_log). */
-void chair_advance(chair_t *c, int32_t n, double dt, double *angles, double *yaw_rates,
+ * time at the step's end (t0 + dt (k + 1), as numpy computes it), the axle midpoint's
+ * forward and lateral speed, the yaw rate and the motor voltages over the step
+ * (Plant.start_motion_log). */
+void chair_advance(chair_t *c, int32_t n, double dt, double t0, double *angles, double *yaw_rates,
                    double *motion) {
     for (int32_t k = 0; k < n; k++) {
         step(c, dt);
@@ -175,9 +176,12 @@ void chair_advance(chair_t *c, int32_t n, double dt, double *angles, double *yaw
             double th = ((get_f_fn)c->get_angle)(c->body);
             double cs = cos(th), sn = sin(th), xg = c->cog_x;
             double ax = v.x + w * xg * sn, ay = v.y - w * xg * cs;
+            motion[6 * k] = t0 + dt * (double)(k + 1);
             motion[6 * k + 1] = ax * cs + ay * sn;
             motion[6 * k + 2] = -ax * sn + ay * cs;
             motion[6 * k + 3] = w;
+            motion[6 * k + 4] = c->volts[0];
+            motion[6 * k + 5] = c->volts[1];
         }
     }
 }
