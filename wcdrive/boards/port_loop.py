@@ -125,7 +125,7 @@ class PortLoop:
         self.plant = plant
         #: The reference path: every Timer0 overflow in turn (``run_until``).
         self.stepped = stepped
-        self._due_hint = 0
+        self._due_hint = 0               # the overflow at which the next tick is expected
         self.gyro = gyro
         self.dt = dt
         self.step_cycles = round(dt * F_CPU)
@@ -231,7 +231,8 @@ class PortLoop:
         holds, or None. ``Firmware.due`` decides, asked at a few overflows only: between
         two inputs it is monotone in ``millis()`` (``millis() - lastControlTime`` against
         the period), so the first due overflow is found by bisection, starting from the
-        gap between the last two ticks; ``stepped=True`` asks at every overflow."""
+        overflow the gap between the last two ticks predicts; ``stepped=True`` asks at every
+        overflow."""
         if span <= 0:
             return None
         timer = self.timer
@@ -241,7 +242,7 @@ class PortLoop:
             total = f0 + FRACT_INC * (j + 1)
             return fw.due((m0 + MILLIS_INC * (j + 1) + total // FRACT_MAX) & 0xFFFFFFFF)
 
-        hint = self._due_hint
+        hint = (self._due_hint - self._overflow) // OVERFLOW_CYCLES
         if 0 < hint < span and due(hint) and not due(hint - 1):
             return hint
         if due(0):
@@ -285,7 +286,7 @@ class PortLoop:
         self.plant.set_drive(s.pwmL, s.dirL, s.pwmR, s.dirR)
         self.output.append((overflow, out))
         if self.last_tick_cycle is not None and overflow > self.last_tick_cycle:
-            self._due_hint = (overflow - self.last_tick_cycle) // OVERFLOW_CYCLES - 1
+            self._due_hint = 2 * overflow - self.last_tick_cycle     # the same gap again
         self.last_tick_cycle = overflow
         if on_tick:
             on_tick(overflow / F_CPU)
