@@ -191,33 +191,59 @@ def test_the_event_loop_asks_due_rarely() -> None:
 
 
 # ---- the gyro and the odometry --------------------------------------------------------
-def _gyro_one_by_one(gyro: Gyro, t0: float, dt: float, rates: np.ndarray) -> None:
-    """How ``port_loop.advance`` sampled the gyro before issue 21: ``sample`` per sample."""
-    steps = len(rates)
-    end = t0 + dt * steps
-    while gyro.next_time <= end + 1e-12:
-        k = min(steps - 1, max(0, int((gyro.next_time - t0) / dt - 1e-9)))
-        gyro.sample(gyro.next_time, float(rates[k]))
+class _GyroBefore:
+    """``Gyro`` as it was before issue 21 (one scalar draw at a time), sampled as
+    ``port_loop.advance`` sampled it: ``sample`` per sample."""
+
+    def __init__(self, params: ChairParams, seed: int) -> None:
+        self.period = 1.0 / params.gyro_rate_hz
+        self._rng = np.random.default_rng(seed)
+        dps = math.pi / 180.0
+        self.noise = params.gyro_noise_dps * dps
+        self.bias = float(self._rng.normal(0.0, params.gyro_bias_dps * dps))
+        self.walk = params.gyro_bias_walk_dps_per_sqrt_s * dps
+        self.next_time = 0.0
+        self.times: list[float] = []
+        self.rates: list[float] = []
+
+    def sample(self, time: float, true_rate: float) -> None:
+        while self.next_time <= time + 1e-12:
+            self.bias += self.walk * math.sqrt(self.period) * float(self._rng.standard_normal())
+            self.times.append(self.next_time)
+            self.rates.append(true_rate + self.bias + self.noise * float(self._rng.standard_normal()))
+            self.next_time += self.period
+
+    def advance(self, t0: float, dt: float, rates: np.ndarray) -> None:
+        steps = len(rates)
+        end = t0 + dt * steps
+        while self.next_time <= end + 1e-12:
+            k = min(steps - 1, max(0, int((self.next_time - t0) / dt - 1e-9)))
+            self.sample(self.next_time, float(rates[k]))
 
 
+@pytest.mark.parametrize("use_kernel", [True, False])
 @settings(max_examples=30, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), rate_hz=st.sampled_from([100.0, 400.0, 1000.0, 1600.0, 733.0]),
-       batches=st.lists(st.integers(1, 120), min_size=1, max_size=40),
-       dt=st.sampled_from([0.001, 0.0005, 0.002, 0.00037]))
-def test_gyro_batches_are_the_samples_one_at_a_time(seed: int, rate_hz: float, batches: list[int],
-                                                    dt: float) -> None:
+       batches=st.lists(st.integers(1, 3000), min_size=1, max_size=12),
+       dt=st.sampled_from([0.001, 0.0005, 0.002, 0.00037]), singles=st.integers(0, 3))
+def test_gyro_batches_are_the_samples_one_at_a_time(use_kernel: bool, seed: int, rate_hz: float,
+                                                    batches: list[int], dt: float, singles: int) -> None:
     params = ChairParams(gyro_rate_hz=rate_hz)
-    one, many = Gyro(params, seed), Gyro(params, seed)
+    before, now = _GyroBefore(params, seed), Gyro(params, seed, use_kernel=use_kernel)
     rng = np.random.default_rng(seed)
     t0 = 0.0
     for n in batches:
         rates = rng.normal(0.0, 1.0, n)
-        _gyro_one_by_one(one, t0, dt, rates)
-        many.sample_steps(t0, dt, rates)
+        before.advance(t0, dt, rates)
+        now.sample_steps(t0, dt, rates)
         t0 = t0 + dt * n
-    assert one.times == many.times and one.rates == many.rates
-    assert one.bias == many.bias and one.next_time == many.next_time
-    assert all(type(v) is float for v in many.rates[:5])
+        for _ in range(singles):               # sample() and sample_steps() share the draws
+            t0 += dt
+            before.sample(t0, 0.25)
+            now.sample(t0, 0.25)
+    assert before.times == now.times and before.rates == now.rates
+    assert before.bias == now.bias and before.next_time == now.next_time
+    assert all(type(v) is float for v in now.rates[:5] + now.times[:5])
 
 
 def test_odometry_integrate_gives_update_s_covariance_bit_for_bit() -> None:

@@ -402,7 +402,7 @@ class PortLoop:
         hi = (self._steps_done + n) * self.step_cycles
         edge_sides = [enc for enc in self._encoders.values() if enc.needs_edges(lo, hi)]
         previous = (self.plant.left.angle, self.plant.right.angle)
-        angles = advance(self.plant, self.gyro, n, self.dt)
+        angles = advance(self.plant, self.gyro, n, self.dt, angles=bool(edge_sides))
         assert angles is not None
         self._steps_done += n
         for enc in edge_sides:
@@ -423,15 +423,18 @@ class PortLoop:
             enc.leave_if_healthy(math.floor(positions[-1]), hi)
 
 
-def advance(plant: Plant, gyro: Gyro | None, steps: int, dt: float) -> np.ndarray | None:
-    """``steps`` plant steps; the gyro samples the yaw rate of the step it falls in.
-    Returns the wheel angles after each step (or None for no steps)."""
+def advance(plant: Plant, gyro: Gyro | None, steps: int, dt: float, *, angles: bool = True
+            ) -> np.ndarray | None:
+    """``steps`` plant steps in one call of the kernel; the gyro samples the yaw rate
+    of the step it falls in, the tick's samples at once (``Gyro.sample_steps``).
+    Returns the wheel angles after each step (``0 x 2`` with ``angles=False``; None for
+    no steps)."""
     if steps <= 0:
         return None
     t0 = plant.time
-    recorded = plant.advance(steps, dt, record=True)
+    recorded = plant.advance(steps, dt, record=True, angles=angles)
     assert recorded is not None
-    angles, rates = recorded
+    wheels, rates = recorded
     if gyro is not None:
         gyro.sample_steps(t0, dt, rates)
-    return angles
+    return wheels

@@ -79,8 +79,9 @@ _KERNEL_SOURCE = Path(__file__).resolve().parent / "csrc" / "chair_kernel.c"
 _kernel: ctypes.CDLL | bool | None = None
 
 
-def _load_kernel() -> ctypes.CDLL | None:
-    """The C kernel, compiled on first use; None when no compiler is there."""
+def load_kernel() -> ctypes.CDLL | None:
+    """The C kernel (``chair_advance``, ``gyro_samples``), compiled on first use; None
+    when no compiler is there."""
     global _kernel
     if _kernel is None:
         try:
@@ -88,6 +89,8 @@ def _load_kernel() -> ctypes.CDLL | None:
             lib.chair_advance.argtypes = [ctypes.POINTER(ChairStruct), ctypes.c_int32, _D, _D,
                                           _P, _P, _P]
             lib.chair_advance.restype = None
+            lib.gyro_samples.argtypes = [ctypes.c_int32, _P, _P, _P, ctypes.c_int32, _P, _P]
+            lib.gyro_samples.restype = ctypes.c_int32
             _kernel = lib
         except BuildError:
             _kernel = False
@@ -152,7 +155,7 @@ class Plant:
         self.left = WheelView(s, 0)
         self.right = WheelView(s, 1)
         self._motion_log: list[np.ndarray] | None = None
-        self._kernel = _load_kernel() if use_kernel else None
+        self._kernel = load_kernel() if use_kernel else None
         if self._kernel is not None:
             self._bind_chipmunk()
             self._advance = self._kernel.chair_advance
@@ -278,33 +281,36 @@ class Plant:
         """One physics step of ``dt`` s."""
         self.advance(1, dt)
 
-    def advance(self, n: int, dt: float = 0.001, *, record: bool = False
+    def advance(self, n: int, dt: float = 0.001, *, record: bool = False, angles: bool = True
                 ) -> tuple[np.ndarray, np.ndarray] | None:
         """``n`` steps of ``dt``. With ``record``, returns the wheel angles after each
-        step (an ``n x 2`` array, left and right) and the yaw rates (``n``)."""
+        step (an ``n x 2`` array, left and right; ``0 x 2`` with ``angles=False``) and
+        the yaw rates (``n``)."""
         if n <= 0:
             return (np.empty((0, 2)), np.empty(0)) if record else None
         logging = self._motion_log is not None
         if self._kernel is not None:
             # One call for the n steps; the arrays passed by address (ctypes' own
             # conversions cost more than the steps of a tick).
-            angles = _empty((n, 2)) if record else _NONE
-            rates = _empty(n) if record else _NONE
-            motion = _empty((n, 6)) if logging else _NONE
-            self._advance(self._ref, n, dt, self.s.time, _address(angles), _address(rates),
+            wheels = np.empty((n, 2)) if record and angles else _NONE
+            rates = np.empty(n) if record else _NONE
+            motion = np.empty((n, 6)) if logging else _NONE
+            self._advance(self._ref, n, dt, self.s.time, _address(wheels), _address(rates),
                           _address(motion))
             if logging:
                 assert self._motion_log is not None
                 self._motion_log.append(motion)
-            return (angles, rates) if record else None
-        angles = np.empty((n if record else 0, 2))
+            if not record:
+                return None
+            return (wheels if angles else np.empty((0, 2))), rates
+        wheel_angles = np.empty((n if record else 0, 2))
         rates = np.empty(n if record else 0)
         motion = np.empty((n if logging else 0, 6))
         t0 = self.s.time
         for k in range(n):
             self._python_step(dt)
             if record:
-                angles[k] = self.s.angle[0], self.s.angle[1]
+                wheel_angles[k] = self.s.angle[0], self.s.angle[1]
                 rates[k] = self.body.angular_velocity
             if logging:
                 forward, lateral = self.axle_velocity()
@@ -314,7 +320,9 @@ class Plant:
             motion[:, 0] = t0 + dt * np.arange(1, n + 1)
             motion[:, 4], motion[:, 5] = self.s.volts[0], self.s.volts[1]
             self._motion_log.append(motion)
-        return (angles, rates) if record else None
+        if not record:
+            return None
+        return (wheel_angles if angles else np.empty((0, 2))), rates
 
     def _wheel(self, i: int, ground: float, dt: float) -> float:
         """Implicit step of one wheel against the ground speed under it; returns the
@@ -429,10 +437,6 @@ class Plant:
 
 
 _NONE = np.empty(0)
-
-
-def _empty(shape: int | tuple[int, int]) -> np.ndarray:
-    return np.empty(shape)
 
 
 def _address(a: np.ndarray) -> int | None:
