@@ -20,6 +20,7 @@ with the unused 3D terms set large so that a 2D filter ignores them.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -188,6 +189,21 @@ class GyroIntegrator:
             t0, r0 = self._last
             self.heading += 0.5 * (rate + r0) * (time - t0)
         self._last = (time, rate)
+
+    def add_many(self, times: Sequence[float], rates: Sequence[float], start: int = 0,
+                 stop: int | None = None) -> None:
+        """The samples ``times[start:stop]``, ``rates[start:stop]``, each as ``add``
+        takes it (the same sums in the same order)."""
+        stop = len(times) if stop is None else stop
+        if start >= stop:
+            return
+        heading, last = self.heading, self._last
+        for i in range(start, stop):
+            time, rate = times[i], rates[i]
+            if last is not None:
+                heading += 0.5 * (rate + last[1]) * (time - last[0])
+            last = (time, rate)
+        self.heading, self._last = heading, last
 
     def heading_at(self, time: float) -> float:
         """The heading at ``time`` (extrapolated from the last sample)."""
