@@ -20,6 +20,7 @@ with the unused 3D terms set large so that a 2D filter ignores them.
 from __future__ import annotations
 
 import math
+from array import array
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -29,6 +30,9 @@ from wcdrive.protocol.spec import real
 
 #: Variance given to the unused 3D terms (z, roll, pitch): "do not use".
 UNUSED = 1e6
+#: ``WheelOdometry.integrate`` keeps at most this many steps (32 bytes each) before it
+#: propagates their covariance, whether or not it is read.
+PENDING_STEPS = 1 << 16
 
 
 @dataclass
@@ -92,7 +96,7 @@ class WheelOdometry:
         #: Steps whose covariance propagation waits until a covariance is read
         #: (``_cov``): the same numpy operations in the same order, so the same bits,
         #: paid only by those who read it.
-        self._pending: list[tuple[float, float, float, float]] = []
+        self._pending = array("d")           # (d, heading, d_left, d_right) per step
         self._last: tuple[float, int, int] | None = None
         self._rad_per_count = 2.0 * math.pi / self.p.counts_per_rev
         self.linear = 0.0
@@ -115,8 +119,11 @@ class WheelOdometry:
         return self.estimate(time)
 
     def integrate(self, time: float, count_left: int, count_right: int) -> None:
-        """``update`` without building the estimate: the pose, the speeds and (when
-        next read) the covariance move on exactly as ``update`` moves them."""
+        """``update`` without building the estimate: the pose and the speeds move on
+        exactly as ``update`` moves them, and so does the covariance, when it is next
+        read (``estimate``) or after ``PENDING_STEPS`` steps. For a caller that reads
+        the covariance seldom or never (``wcdrive sim``'s host); one that reads it at
+        every sample calls ``update``."""
         if self._last is None:
             self._last = (time, count_left, count_right)
             return
@@ -141,8 +148,8 @@ class WheelOdometry:
         self.pose.theta = th + dtheta
         if dt > 0:
             self.linear, self.angular = d / dt, dtheta / dt
-        self._pending.append((d, heading, d_left, d_right))
-        if len(self._pending) >= 4096:
+        self._pending.extend((d, heading, d_left, d_right))
+        if len(self._pending) >= 4 * PENDING_STEPS:
             self._flush()
 
     @property
@@ -153,9 +160,9 @@ class WheelOdometry:
         return self._cov_matrix
 
     def _flush(self) -> None:
-        pending, self._pending = self._pending, []
-        for step in pending:
-            self._propagate(*step)
+        pending, self._pending = self._pending, array("d")
+        for i in range(0, len(pending), 4):
+            self._propagate(pending[i], pending[i + 1], pending[i + 2], pending[i + 3])
 
     def _propagate(self, d: float, heading: float, d_left: float, d_right: float) -> None:
         """First-order propagation of the wheel distance noise into the pose."""

@@ -129,7 +129,7 @@ class TelemetryHub:
                 reset = Reset(now, sample.board, cause, (p.x, p.y, p.theta))
                 self.resets.append(reset)
             self._last_counts = (msg.count_left, msg.count_right)
-            self._odometry.integrate(sample.board, msg.count_left, msg.count_right)
+            self._odometry.update(sample.board, msg.count_left, msg.count_right)
             self._history.append((now, msg.count_left, msg.count_right, msg.vel_left, msg.vel_right))
             subscribers, callbacks = list(self._subscribers), list(self._callbacks)
             reset_callbacks = list(self._reset_callbacks)
