@@ -24,9 +24,9 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from wcdrive.boards.port_loop import PortLoop  # noqa: E402
-from wcdrive.sim import runner  # noqa: E402
-from wcdrive.sim.scenario import bundled, load  # noqa: E402
+from wcdrive.boards.port_loop import PortLoop
+from wcdrive.sim import runner
+from wcdrive.sim.scenario import bundled, load
 
 QUICK = ("square", "fault_reset", "fault_encoder_noise")
 
@@ -35,7 +35,7 @@ def rtf(name: str, *, stepped: bool = False, ekf: bool = False) -> float:
     """One port run of scenario ``name``: its real-time factor."""
     original = runner.PortLoop
     if stepped:
-        runner.PortLoop = functools.partial(PortLoop, stepped=True)  # type: ignore[misc]
+        runner.PortLoop = functools.partial(PortLoop, stepped=True)  # type: ignore[assignment, misc]
     try:
         return runner.run(load(name), ekf=ekf).real_time_factor
     finally:
@@ -53,9 +53,12 @@ def side_by_side(name: str) -> dict[str, float]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--quick", action="store_true", help="3 scenarios, 1 run each, simavr on fault_reset")
-    parser.add_argument("--runs", type=int, default=None, help="runs per scenario (default 5; 1 with --quick)")
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--quick", action="store_true",
+                        help="3 scenarios, 1 run each, simavr on fault_reset")
+    parser.add_argument("--runs", type=int, default=None,
+                        help="runs per scenario (default 5; 1 with --quick)")
     parser.add_argument("--no-simavr", action="store_true")
     parser.add_argument("--ekf", action="store_true", help="a column with the EKFs on, as wcdrive sim runs")
     parser.add_argument("scenarios", nargs="*")

@@ -177,7 +177,7 @@ def test_the_event_loop_asks_due_rarely() -> None:
         fw = Firmware()
         due = fw.due
 
-        def counted(now: int, stepped: bool = stepped) -> bool:
+        def counted(now: int, stepped: bool = stepped, due=due) -> bool:
             calls[stepped] += 1
             return due(now)
 
