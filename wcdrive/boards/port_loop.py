@@ -115,6 +115,47 @@ class _Encoder:
             self.decoder.count = 0
 
 
+class _Wire:
+    """The bytes on their way to the board's RX pin, as runs ``[start, data, taken]``:
+    byte ``i`` of a run has fully arrived at ``start + (i + 1) * UART_BYTE_CYCLES``."""
+
+    def __init__(self) -> None:
+        self._runs: deque[list] = deque()
+
+    def __bool__(self) -> bool:
+        return bool(self._runs)
+
+    def push(self, start: int, data: bytes) -> None:
+        """``data`` sent from cycle ``start`` on, after any bytes already on the wire."""
+        self._runs.append([start, data, 0])
+
+    def next_arrival(self) -> int:
+        """The cycle at which the next byte has arrived (the wire is not empty)."""
+        start, _, taken = self._runs[0]
+        return start + (taken + 1) * UART_BYTE_CYCLES
+
+    def take(self, cycle: int) -> bytes:
+        """The bytes that have arrived by ``cycle``, off the wire."""
+        out = b""
+        runs = self._runs
+        while runs:
+            run = runs[0]
+            start, data, taken = run
+            arrived = min(len(data), (cycle - start) // UART_BYTE_CYCLES)
+            if arrived <= taken:
+                break
+            out += data[taken:arrived]
+            if arrived < len(data):
+                run[2] = arrived
+                break
+            runs.popleft()
+        return out
+
+    def drop_before(self, cycle: int) -> None:
+        """Loses the bytes that arrive before ``cycle``."""
+        self.take(cycle - 1)
+
+
 class PortLoop:
     """The port driving the plant, run in 16 MHz cycles (module docstring); ``faults``
     are injected as the module docstring says."""
@@ -137,7 +178,7 @@ class PortLoop:
         self.last_tick_cycle: int | None = None
         self._overflow = FIRST_OVERFLOW_CYCLE
         self._steps_done = 0
-        self._rx: deque[tuple[int, int]] = deque()
+        self._rx = _Wire()
         self._wire_free = 0
         self.output: list[tuple[int, bytes]] = [(0, self.fw.boot_output())]
         self.faults = tuple(faults)
@@ -153,8 +194,8 @@ class PortLoop:
     def send(self, data: bytes, at: int | None = None) -> None:
         """Bytes onto the RX wire from cycle ``at`` (default: now), one per byte time."""
         start = max(self.cycle if at is None else at, self._wire_free)
-        for i, b in enumerate(data):
-            self._rx.append((start + (i + 1) * UART_BYTE_CYCLES, b))
+        if data:
+            self._rx.push(start, bytes(data))
         self._wire_free = start + len(data) * UART_BYTE_CYCLES
 
     def take_output(self) -> list[tuple[int, bytes]]:
@@ -189,7 +230,7 @@ class PortLoop:
                 last = min(last, overflow + (resets[0] - 1 - overflow) // OVERFLOW_CYCLES * OVERFLOW_CYCLES)
             rx_at: int | None = None
             if self._rx:
-                arrived = self._rx[0][0]
+                arrived = self._rx.next_arrival()
                 rx_at = overflow if arrived <= overflow else \
                     overflow + -(-(arrived - overflow) // OVERFLOW_CYCLES) * OVERFLOW_CYCLES
                 if rx_at > last:
@@ -260,13 +301,11 @@ class PortLoop:
 
     def _receive(self, fw: Firmware, overflow: int) -> None:
         """The bytes that have arrived by ``overflow`` go through ``processByte``."""
-        data = bytearray()
-        while self._rx and self._rx[0][0] <= overflow:
-            data.append(self._rx.popleft()[1])
+        data = self._rx.take(overflow)
         masked = any(e.decoder.storm for e in self._encoders.values())
         if masked:
             self._advance_to(overflow)
-        out = fw.feed(bytes(data))
+        out = fw.feed(data)
         if out:
             self.output.append((overflow, out))
         if masked:
@@ -308,10 +347,8 @@ class PortLoop:
                 break
             fw = self.fw
             self.timer.overflow()
-            if self._rx and self._rx[0][0] <= overflow:
-                data = bytearray()
-                while self._rx and self._rx[0][0] <= overflow:
-                    data.append(self._rx.popleft()[1])
+            if self._rx and self._rx.next_arrival() <= overflow:
+                data = bytearray(self._rx.take(overflow))
                 masked = any(e.decoder.storm for e in self._encoders.values())
                 if masked:
                     self._advance_to(overflow)
@@ -351,8 +388,7 @@ class PortLoop:
         self.timer = Timer0()
         self.boot_cycle = now
         self._overflow = now + FIRST_OVERFLOW_CYCLE
-        while self._rx and self._rx[0][0] < now + SERIAL_READY_CYCLES:
-            self._rx.popleft()
+        self._rx.drop_before(now + SERIAL_READY_CYCLES)
         true = self._true_counts()
         for enc, count in zip(self._encoders.values(), true, strict=True):
             enc.reboot(count)
