@@ -461,16 +461,14 @@ class PortLoop:
 
 def advance(plant: Plant, gyro: Gyro | None, steps: int, dt: float, *, angles: bool = True
             ) -> np.ndarray | None:
-    """``steps`` plant steps in one call of the kernel; the gyro samples the yaw rate
-    of the step it falls in, the tick's samples at once (``Gyro.sample_steps``).
-    Returns the wheel angles after each step (``0 x 2`` with ``angles=False``; None for
-    no steps)."""
+    """``steps`` plant steps in one call of the kernel (``Plant.advance_batch``); the
+    gyro samples the yaw rate of the step it falls in, the tick's samples at once
+    (``Gyro.sample_steps``). Returns the wheel angles after each step (``0 x 2`` with
+    ``angles=False``; None for no steps), valid until the plant's next step."""
     if steps <= 0:
         return None
     t0 = plant.time
-    recorded = plant.advance(steps, dt, record=True, angles=angles)
-    assert recorded is not None
-    wheels, rates = recorded
+    wheels, rates = plant.advance_batch(steps, dt, angles=angles)
     if gyro is not None:
         gyro.sample_steps(t0, dt, rates)
     return wheels

@@ -155,6 +155,12 @@ class Plant:
         self.left = WheelView(s, 0)
         self.right = WheelView(s, 1)
         self._motion_log: list[np.ndarray] | None = None
+        self._log_chunk = np.empty((0, 6))
+        self._log_rows = 0
+        self._log_at = 0
+        self._buf_rates = np.empty(0)
+        self._buf_angles = np.empty((0, 2))
+        self._buf_at: tuple[int, int] = (0, 0)
         self._kernel = load_kernel() if use_kernel else None
         if self._kernel is not None:
             self._bind_chipmunk()
@@ -213,15 +219,51 @@ class Plant:
         left, volts right)``: the axle midpoint's motion after the step (m/s, m/s,
         rad/s) and the motor voltages over it, read back with ``take_motion_log``."""
         self._motion_log = []
+        self._log_rows = 0
 
     def take_motion_log(self) -> np.ndarray:
         """The steps recorded since the last take, an ``n x 6`` array
         (``start_motion_log``); empty when the log is off."""
+        self._close_log_chunk()
         if not self._motion_log:
             return np.zeros((0, 6))
         out = np.concatenate(self._motion_log)
         self._motion_log = []
         return out
+
+    def _close_log_chunk(self) -> None:
+        """The rows ``advance_batch`` wrote into its chunk go to the log."""
+        if self._log_rows and self._motion_log is not None:
+            self._motion_log.append(self._log_chunk[:self._log_rows])
+            self._log_chunk = np.empty((0, 6))
+            self._log_rows = 0
+
+    def advance_batch(self, n: int, dt: float = 0.001, *, angles: bool = False
+                      ) -> tuple[np.ndarray, np.ndarray]:
+        """``advance(n, dt, record=True, angles=angles)`` for a caller that uses the
+        arrays at once (``wcdrive.boards.port_loop``, a control tick's steps): one call
+        of the kernel into buffers the plant keeps (the wheel angles, ``0 x 2`` unless
+        ``angles``, and the yaw rates are views that the next call overwrites), the
+        motion log written in place."""
+        if self._kernel is None or n <= 0:
+            recorded = self.advance(n, dt, record=True, angles=angles)
+            assert recorded is not None
+            return recorded
+        if n > self._buf_rates.size:
+            self._buf_rates = np.empty(max(n, 2 * self._buf_rates.size, 64))
+            self._buf_angles = np.empty((self._buf_rates.size, 2))
+            self._buf_at = (_data(self._buf_angles), _data(self._buf_rates))
+        motion = None
+        if self._motion_log is not None:
+            if self._log_rows + n > self._log_chunk.shape[0]:
+                self._close_log_chunk()
+                self._log_chunk = np.empty((max(n, _LOG_CHUNK), 6))
+                self._log_at = _data(self._log_chunk)
+            motion = self._log_at + 48 * self._log_rows
+            self._log_rows += n
+        self._advance(self._ref, n, dt, self.s.time, self._buf_at[0] if angles else None, self._buf_at[1],
+                      motion)
+        return (self._buf_angles[:n] if angles else _NO_ANGLES), self._buf_rates[:n]
 
     # ---- state -------------------------------------------------------------------
     @property
@@ -299,6 +341,7 @@ class Plant:
                           _address(motion))
             if logging:
                 assert self._motion_log is not None
+                self._close_log_chunk()
                 self._motion_log.append(motion)
             if not record:
                 return None
@@ -317,6 +360,7 @@ class Plant:
                 motion[k, 1:4] = forward, lateral, self.body.angular_velocity
         if logging:
             assert self._motion_log is not None
+            self._close_log_chunk()
             motion[:, 0] = t0 + dt * np.arange(1, n + 1)
             motion[:, 4], motion[:, 5] = self.s.volts[0], self.s.volts[1]
             self._motion_log.append(motion)
@@ -437,11 +481,20 @@ class Plant:
 
 
 _NONE = np.empty(0)
+_NO_ANGLES = np.empty((0, 2))
+_NO_ANGLES.flags.writeable = False
+#: Rows of motion log ``advance_batch`` writes into one array.
+_LOG_CHUNK = 1 << 14
 
 
 def _address(a: np.ndarray) -> int | None:
     """The address of ``a``'s data for the kernel (None, a NULL, for ``_NONE``)."""
     return a.__array_interface__["data"][0] if a is not _NONE else None
+
+
+def _data(a: np.ndarray) -> int:
+    """The address of ``a``'s data."""
+    return int(a.__array_interface__["data"][0])
 
 
 def _side_index(side: str) -> int:
