@@ -5,7 +5,8 @@
   ``wcdrive.sim.runner`` on both, compared byte for byte (every line the board sent with
   its cycle, the firmware's whole state after every tick, the plant's and the gyro's
   outputs, every figure), and random byte streams, faults, resets and chunkings
-  (hypothesis) straight on the loop.
+  (hypothesis) straight on the loop. What both paths share is held to the outputs
+  recorded before issue 21 (``tests/data/sim_digests.json``, nine scenarios).
 * ``Gyro.sample_steps`` against ``Gyro.sample`` one sample at a time.
 * ``WheelOdometry.integrate`` (the covariance propagated when read) against ``update``.
 * ``benchmarks/sim_speed.py --quick`` runs and prints its table.
@@ -18,6 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import json
 import math
 import subprocess
 import sys
@@ -28,6 +30,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from tests.sim_digest import RECORDED, digest
 from wcdrive.avr.timer0 import OVERFLOW_CYCLES
 from wcdrive.boards import port_loop
 from wcdrive.boards.port_loop import F_CPU, PortLoop
@@ -43,7 +46,8 @@ ROOT = Path(__file__).resolve().parent.parent
 SCENARIOS = [p.stem for p in bundled()]
 
 
-def _signature(monkeypatch: pytest.MonkeyPatch, name: str, stepped: bool) -> dict[str, object]:
+def _signature(monkeypatch: pytest.MonkeyPatch, name: str, stepped: bool
+               ) -> tuple[dict[str, object], runner.SimResult]:
     """Everything a port run of scenario ``name`` produces, the firmware's state after
     every tick included, with the loop on one path or the other."""
     states: list[tuple] = []
@@ -66,17 +70,26 @@ def _signature(monkeypatch: pytest.MonkeyPatch, name: str, stepped: bool) -> dic
     metrics = result.metrics()
     metrics.pop("real_time_factor")
     out["metrics"] = repr(metrics)
-    return out
+    return out, result
 
 
 @pytest.mark.parametrize("name", SCENARIOS)
 def test_every_scenario_runs_the_same_on_the_event_loop(monkeypatch: pytest.MonkeyPatch, name: str) -> None:
-    stepped = _signature(monkeypatch, name, stepped=True)
-    event = _signature(monkeypatch, name, stepped=False)
+    stepped, _ = _signature(monkeypatch, name, stepped=True)
+    event, result = _signature(monkeypatch, name, stepped=False)
     assert len(stepped["states"]) == len(event["states"]) > 0          # type: ignore[arg-type]
     assert stepped.keys() == event.keys()
     differing = [key for key in stepped if stepped[key] != event[key]]
     assert not differing, f"{name}: {differing}"
+    if name in RECORDED:
+        # what both paths share (the plant's batches, the gyro, the wire, the odometry),
+        # against the outputs recorded before issue 21 (tests/sim_digest.py)
+        recorded = json.loads((ROOT / "tests" / "data" / "sim_digests.json").read_text())[name]
+        now = digest(result)
+        assert now.keys() == recorded.keys()
+        changed = [key for key in now if now[key] != recorded[key]]
+        assert not changed, (f"{name}: {changed} differ from the recorded outputs; re-record only "
+                             "for a change on purpose (tests/sim_digest.py)")
 
 
 # ---- the loop alone, on random inputs ---------------------------------------------------
@@ -153,6 +166,46 @@ def test_the_event_loop_matches_the_stepped_loop_on_random_inputs(sends, cuts, f
     assert a.output == b.output
     assert a.states == b.states
     assert a.end == b.end
+
+
+@settings(max_examples=60, deadline=None)
+@given(ops=st.lists(st.tuples(st.sampled_from(["send", "take", "drop", "take_exact", "drop_exact"]),
+                              st.integers(0, 40_000),
+                              st.binary(min_size=0, max_size=20)), max_size=60))
+def test_the_wire_keeps_bytes_as_the_byte_queue_did(ops) -> None:
+    """``port_loop._Wire`` (runs of bytes) against the queue of (arrival, byte) that
+    ``PortLoop`` kept before issue 21."""
+    from collections import deque
+
+    from wcdrive.avr.uart import UART_BYTE_CYCLES
+    from wcdrive.boards.port_loop import _Wire
+
+    wire, queue = _Wire(), deque()                  # type: ignore[var-annotated]
+    now = free = 0
+    for op, step, data in ops:
+        now += step
+        if op.endswith("_exact") and queue:          # right at the next byte's arrival
+            now = max(now - step, queue[0][0] + (step % 3) - 1)
+            op = op[:-6]
+        if op == "send":
+            start = max(now, free)
+            if data:
+                wire.push(start, data)
+            for i, b in enumerate(data):
+                queue.append((start + (i + 1) * UART_BYTE_CYCLES, b))
+            free = start + len(data) * UART_BYTE_CYCLES
+        elif op == "take":
+            want = bytearray()
+            while queue and queue[0][0] <= now:
+                want.append(queue.popleft()[1])
+            assert wire.take(now) == bytes(want)
+        else:
+            while queue and queue[0][0] < now:
+                queue.popleft()
+            wire.drop_before(now)
+        assert bool(wire) == bool(queue)
+        if queue:
+            assert wire.next_arrival() == queue[0][0]
 
 
 def test_the_comparison_sees_a_one_overflow_slip(monkeypatch: pytest.MonkeyPatch) -> None:
