@@ -1,10 +1,23 @@
-"""The port of the firmware driving the plant at the Mega's own timing, step by step.
+"""The port of the firmware driving the plant at the Mega's own timing.
 
 Time runs in 16 MHz cycles. ``millis()`` advances at Timer0 overflows (every 16,384
-cycles, the first at cycle 21,250 after a reset, as measured on the ELF in simavr). At
-each overflow the bytes that have arrived on the wire go through ``processByte``; when
-50 ms are due the control tick runs with the plant's encoder counts and its PWM/DIR
-drive the plant from then on. The plant steps at a fixed ``dt`` in between.
+cycles, the first at ``FIRST_OVERFLOW_CYCLE`` after a reset, as measured on the ELF in
+simavr). At each overflow the bytes that have arrived on the wire go through
+``processByte``; when ``Firmware.due`` says so the control tick runs with the plant's
+encoder counts and its PWM/DIR drive the plant from then on. The plant steps at a fixed
+``dt`` in between, a tick's steps in one call of its C kernel (``Plant.advance_batch``),
+the gyro's samples of those steps in one more (``Gyro.sample_steps``).
+
+``run_until`` is event-driven (issue 21): nothing happens at an overflow unless bytes
+are read or the tick runs there, so it jumps from event to event: the overflow at which
+the next bytes have arrived, the first overflow at which ``Firmware.due`` holds (found
+by asking it at a few overflows: the one the last gap between ticks predicts, then by
+bisection, since between two inputs ``due`` is monotone in ``millis()``), a reset, the
+end. ``millis()`` there comes in closed form from Timer0's model (``millis_after``:
+1 ms and 3/125 of one per overflow). The firmware alone decides when it ticks, so a
+change of its timing needs no change here. ``stepped=True`` runs the reference path,
+every overflow in turn with ``due`` asked at each; tests/test_sim_speed.py holds the
+two to the same bytes, ticks and states.
 
 Faults (``wcdrive.plant.faults``, given as ``faults=``): a healthy encoder's count is
 taken from its wheel's angle (``encoder_counts``), the fast path. While an encoder fault
