@@ -32,7 +32,6 @@ from hypothesis import strategies as st
 
 from tests.sim_digest import RECORDED, digest
 from wcdrive.avr.timer0 import OVERFLOW_CYCLES
-from wcdrive.boards import port_loop
 from wcdrive.boards.port_loop import F_CPU, PortLoop
 from wcdrive.firmware.final_control import Firmware
 from wcdrive.odometry import OdometryParams, WheelOdometry
@@ -376,4 +375,3 @@ def test_the_benchmark_short_mode_prints_its_table() -> None:
     row = next(line for line in lines if line.startswith("| square "))
     rtf = float(row.split("|")[2].replace(",", "").rstrip("x "))
     assert math.isfinite(rtf) and rtf > 10
-    assert port_loop.PortLoop is PortLoop
