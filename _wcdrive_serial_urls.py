@@ -7,6 +7,9 @@ pyserial imports ``serial.urlhandler.protocol_<scheme>`` for a URL. The
 ``sys.meta_path`` at interpreter start that answers that import, for wcdrive's
 schemes only, with ``wcdrive.urlhandler.protocol_<scheme>``. Nothing is imported
 until a program opens such a URL.
+
+PYTEST_DONT_REWRITE: the .pth imports this module before pytest can (pytest would
+otherwise warn, when it loads wcdrive's plugin, that it cannot rewrite it).
 """
 
 from __future__ import annotations

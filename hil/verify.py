@@ -1,6 +1,7 @@
 """Checks the Python port against a built firmware, trace by trace.
 
     wcdrive verify --traces 200 --seed 1 [--elf PATH] [--duration 5] [--jobs 2]
+                   [--scheduler tcp://HOST:8786]
 
 Runs N random traces (wcdrive.hil.traces) on the firmware in simavr and through the port
 (wcdrive.hil.lockstep), and ends with one line:
@@ -27,12 +28,15 @@ mismatch. For users who change the toolchain (avr-gcc, avr-libc).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
-from concurrent.futures import ProcessPoolExecutor
+from collections.abc import Callable, Iterator
+from concurrent.futures import Executor, ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
 from wcdrive.boards.simavr.build import firmware_elf
+from wcdrive.errors import WcdriveConnectionError
 from wcdrive.firmware.state import FLOAT_FIELDS, INT_FIELDS
 from wcdrive.hil.fpcheck import AvrMath
 from wcdrive.hil.fpsweep import OPERATIONS, SweepResult, sweep
@@ -71,6 +75,39 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
     parser.add_argument("--fp", type=int, metavar="N",
                         help="instead: the binary32 sweep, N pairs per float operation (see above)")
+    parser.add_argument("--scheduler", help="run the traces on this Dask cluster, tcp://HOST:8786 "
+                                            "(its workers need wcdrive and the ELF's path)")
+
+
+@contextlib.contextmanager
+def _progress(total: int) -> Iterator[Callable[[], None]]:
+    """A ``rich`` bar over the traces on stderr, when it is a terminal."""
+    if not sys.stderr.isatty():
+        yield lambda: None
+        return
+    from rich.console import Console
+    from rich.progress import Progress
+
+    with Progress(console=Console(stderr=True), transient=True) as bar:
+        task = bar.add_task("verify", total=total)
+        yield lambda: bar.advance(task)
+
+
+@contextlib.contextmanager
+def _executor(args: argparse.Namespace) -> Iterator[Executor]:
+    """Worker processes here, or the Dask cluster at ``--scheduler``."""
+    if not getattr(args, "scheduler", None):
+        with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
+            yield pool
+        return
+    from dask.distributed import Client
+
+    try:
+        client = Client(args.scheduler, timeout="10s")
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise WcdriveConnectionError(f"cannot reach the Dask scheduler at {args.scheduler}: {exc}") from exc
+    with client:
+        yield client.get_executor(pure=False)
 
 
 def _sweep(job: tuple[str, int, int]) -> SweepResult:
@@ -112,8 +149,9 @@ def run(args: argparse.Namespace) -> int:
     work = [(args.seed * 1_000_003 + k, args.duration, elf) for k in range(args.traces)]
     ticks = fields = mismatches = lost = stalls = rx_lost = 0
     first_failure: _Result | None = None
-    with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
+    with _executor(args) as pool, _progress(len(work)) as advance:
         for r in pool.map(_check, work):
+            advance()
             ticks += r.ticks
             fields += r.fields
             mismatches += r.mismatches

@@ -12,6 +12,10 @@ from pathlib import Path
 import pytest
 from hypothesis import HealthCheck, settings
 
+#: The example downstream project has its own tests, run by tests/test_downstream.py
+#: in a fresh venv.
+collect_ignore = ["downstream"]
+
 settings.register_profile("default", max_examples=20, deadline=None)
 settings.register_profile(
     "ci", max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow],

@@ -24,7 +24,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 #: (floor, module prefixes). A module belongs to the floor of its longest prefix.
 FLOORS: tuple[tuple[int, str, tuple[str, ...]], ...] = (
-    (0, "utilities", ("wcdrive.errors", "wcdrive.resources", "wcdrive.native")),
+    (0, "utilities", ("wcdrive.errors", "wcdrive.resources", "wcdrive.native", "wcdrive.history")),
     (1, "avr", ("wcdrive.avr",)),
     (2, "protocol", ("wcdrive.protocol",)),
     (3, "firmware (port)", ("wcdrive.firmware", "wcdrive.eddie.firmware")),
@@ -38,7 +38,7 @@ FLOORS: tuple[tuple[int, str, tuple[str, ...]], ...] = (
     (8, "api", ("wcdrive.api", "wcdrive")),
     (9, "hil (harness)", ("wcdrive.hil",)),
     (10, "tools", ("wcdrive.cli", "wcdrive.sim", "wcdrive.bench", "wcdrive.replay", "wcdrive.__main__",
-                    "wcdrive.eddie.runner")),
+                    "wcdrive.eddie.runner", "wcdrive.testing", "wcdrive.sweep", "wcdrive.console")),
 )
 TOOLS_FLOOR = 10
 

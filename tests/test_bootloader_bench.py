@@ -278,7 +278,7 @@ def test_bench_run_asks_about_the_wheels_unless_yes(monkeypatch: pytest.MonkeyPa
     # --yes goes straight on (here to a port that is not there).
     monkeypatch.setattr("builtins.input", no)
     asked.clear()
-    assert wcdrive_main(["bench", "run", "step_response", "--port", "/dev/ttyACM9", "--yes"]) == 2
+    assert wcdrive_main(["bench", "run", "step_response", "--port", "/dev/ttyACM9", "--yes"]) == 3
     assert not asked and "/dev/ttyACM9" in capsys.readouterr().err
 
 

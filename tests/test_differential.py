@@ -13,8 +13,9 @@ from hypothesis import strategies as st
 from tests.conftest import thorough
 from wcdrive.boards.simavr.virtual_mega import F_CPU, VirtualMega
 from wcdrive.hil.lockstep import compare, record
-from wcdrive.hil.traces import MAX_TRACE_EDGE_RATE, HypothesisDraw, RandomDraw, Trace, generate_trace
+from wcdrive.hil.traces import MAX_TRACE_EDGE_RATE, RandomDraw, Trace, generate_trace
 from wcdrive.plant.encoders import edges_from_trajectory
+from wcdrive.testing.strategies import traces
 
 pytestmark = pytest.mark.simavr
 
@@ -33,9 +34,9 @@ def _assert_same(trace: Trace, elf) -> None:
 @settings(max_examples=EXAMPLES, deadline=None,
           suppress_health_check=[HealthCheck.large_base_example, HealthCheck.data_too_large,
                                  HealthCheck.too_slow])
-@given(data=st.data())
-def test_port_matches_firmware(elf, half: str, data) -> None:
-    _assert_same(generate_trace(HypothesisDraw(data), DURATION), elf)
+@given(trace=traces(DURATION))
+def test_port_matches_firmware(elf, half: str, trace: Trace) -> None:
+    _assert_same(trace, elf)
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2, 128, 130])

@@ -1,5 +1,7 @@
 """wcdrive: firmware-in-the-loop hardware abstraction for a Mega-2560 power wheelchair."""
 
+import logging as _logging
+
 import serial as _serial
 
 if "wcdrive.urlhandler" not in _serial.protocol_handler_packages:
@@ -44,3 +46,8 @@ __all__ = [
     "connect",
     "stop_all",
 ]
+
+# The library logs under the "wcdrive" hierarchy (wcdrive.session: connections, resets,
+# faults, NAKs, dropped lines; wcdrive.telemetry; wcdrive.sweep) and leaves output to
+# the application: nothing is printed unless it configures logging.
+_logging.getLogger("wcdrive").addHandler(_logging.NullHandler())

@@ -11,24 +11,34 @@
     wcdrive pty --eddie [--speed S] [--eol tolerant]           a simulated Eddie board on a pty
     wcdrive can-gateway --chair URL_OR_PATH --interface I --channel C
                                                          a chair's serial port on a CAN bus
+    wcdrive sweep SPEC.toml [--scheduler tcp://HOST:8786 | --workers N | --serial] [--out rows.csv]
+                                                         many sim runs on Dask, one row each
 
 Ctrl-C (SIGINT) ends every command cleanly: what it drives is stopped, ports are
 closed, and the exit status is 130 with no traceback (``bench run`` keeps the
-recording made so far).
+recording made so far, ``sweep`` the finished rows).
+
+An error prints one line, ``wcdrive <command>: <what went wrong>``, and no traceback
+unless ``--debug`` is given (which also logs the ``wcdrive`` loggers at DEBUG); the
+exit status tells the kind of failure (``wcdrive.console``: 1 a check failed, 2 bad
+arguments or files, 3 connection, 4 timeout, 5 protocol, 6 command refused, 7 build,
+70 internal error, 130 interrupted).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+import os
 import sys
 import time
+import traceback
 from pathlib import Path
 
 import serial
 
-from wcdrive import __version__, bench
+from wcdrive import __version__, bench, console, sweep
 from wcdrive.boards.sim_board import SimulatedBoard
-from wcdrive.errors import WcdriveError
 from wcdrive.hil import verify
 from wcdrive.protocol.spec import integer
 from wcdrive.sim import report, runner, scenario
@@ -37,26 +47,6 @@ from wcdrive.transports.pty_bridge import PtyBridge
 
 #: The exit status of a command ended by Ctrl-C (128 + SIGINT), as shells report it.
 INTERRUPTED = 130
-
-
-class _Progress:
-    """A one-line progress bar on stderr, drawn only for runs longer than a second."""
-
-    def __init__(self, label: str, enabled: bool) -> None:
-        self.label, self.enabled, self.start, self.drawn = label, enabled, time.monotonic(), False
-
-    def __call__(self, fraction: float) -> None:
-        if not self.enabled or time.monotonic() - self.start < 1.0:
-            return
-        filled = int(30 * min(1.0, fraction))
-        sys.stderr.write(f"\r{self.label} [{'#' * filled}{'.' * (30 - filled)}] {100 * fraction:5.1f}%")
-        sys.stderr.flush()
-        self.drawn = True
-
-    def done(self) -> None:
-        if self.drawn:
-            sys.stderr.write("\r" + " " * 60 + "\r")
-            sys.stderr.flush()
 
 
 def _sim(args: argparse.Namespace) -> int:
@@ -76,9 +66,9 @@ def _sim(args: argparse.Namespace) -> int:
         except scenario.ScenarioError as exc:
             print(f"wcdrive sim: {exc}", file=sys.stderr)
             return 2
-        progress = _Progress(sc.name, sys.stderr.isatty() and not args.json)
-        result = runner.run(sc, backend=args.backend, seed=args.seed, dt=args.dt, progress=progress, ekf=True)
-        progress.done()
+        with console.Bar(sc.name, 1.0, console.progress_enabled(args.json)) as progress:
+            result = runner.run(sc, backend=args.backend, seed=args.seed, dt=args.dt, progress=progress,
+                                ekf=True)
         results.append(result)
         if args.mcap or args.live:
             _ros_out(args, sc, result, several=len(names) > 1)
@@ -206,11 +196,45 @@ def _can_gateway(args: argparse.Namespace) -> int:
     return 0
 
 
+def _sweep(args: argparse.Namespace) -> int:
+    spec = sweep.load_spec(args.spec)
+    points = sweep.expand(spec)
+    out = Path(args.out)
+    if args.serial:
+        rows = sweep.run_serial(points)
+    else:
+        rows = sweep.run_dask(points, scheduler=args.scheduler, workers=args.workers)
+    start = time.monotonic()
+    with console.Bar("sweep", len(points), console.progress_enabled(args.json)) as bar:
+        done, interrupted = sweep.collect(rows, on_row=lambda _: bar.advance())
+    elapsed = time.monotonic() - start
+    if done:
+        sweep.write(done, out)
+    failed = [r for r in done if r.get("error")]
+    summary = {"runs": len(points), "finished": len(done), "failed": len(failed),
+               "seconds": round(elapsed, 3), "runs_per_s": round(sweep.throughput(done, elapsed), 3),
+               "out": str(out) if done else None, "interrupted": interrupted}
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        print(f"{len(done)} of {len(points)} runs in {elapsed:.1f} s "
+              f"({summary['runs_per_s']} runs/s), {len(failed)} failed" + (f" -> {out}" if done else ""))
+        for row in failed[:5]:
+            print(f"  run {row['run']} ({row['scenario']}, seed {row['seed']}): {row['error']}",
+                  file=sys.stderr)
+    if interrupted:
+        print(f"wcdrive sweep: interrupted; kept the {len(done)} finished rows", file=sys.stderr)
+        return console.INTERRUPTED
+    return console.CHECK_FAILED if failed else console.OK
+
+
 def parser() -> argparse.ArgumentParser:
     """The whole command line."""
     top = argparse.ArgumentParser(prog="wcdrive", description="wcdrive: the wheelchair, simulated or real.")
     top.add_argument("--version", action="version",
                      version=f"wcdrive {__version__} (protocol v{integer('PROTOCOL_VERSION')})")
+    top.add_argument("--debug", action="store_true",
+                     help="show tracebacks and log the wcdrive loggers at DEBUG")
     sub = top.add_subparsers(dest="command", required=True)
 
     sim = sub.add_parser("sim", help="drive a simulated chair through a scenario")
@@ -270,19 +294,36 @@ def parser() -> argparse.ArgumentParser:
     gw.add_argument("--channel", default="can0", help="CAN channel (default can0)")
     gw.add_argument("--seconds", type=float, help="stop after this long (default: run until Ctrl-C)")
     gw.set_defaults(func=_can_gateway)
+
+    sw = sub.add_parser("sweep", help="many sim runs (scenarios x parameters x seeds) on Dask",
+                        description=(sweep.__doc__ or "").split("\n\n")[0])
+    sw.add_argument("spec", help="the sweep's TOML spec (see wcdrive.sweep)")
+    sw.add_argument("--scheduler", help="an existing Dask scheduler, tcp://HOST:8786 "
+                                        "(default: a LocalCluster here)")
+    sw.add_argument("--workers", type=int, help="LocalCluster worker processes (default: one per core)")
+    sw.add_argument("--serial", action="store_true", help="run in this process, without Dask")
+    sw.add_argument("--out", default="wcdrive-out/sweep.csv",
+                    help="rows as .csv or .parquet (default wcdrive-out/sweep.csv)")
+    sw.add_argument("--json", action="store_true", help="print the summary as JSON (and no progress bar)")
+    sw.set_defaults(func=_sweep)
     return top
 
 
 def main(argv: list[str] | None = None) -> int:
-    """The ``wcdrive`` command; returns the exit status (130 after Ctrl-C, 2 when the
-    chair cannot be reached: the error says why)."""
+    """The ``wcdrive`` command; returns the exit status (module docstring: one per kind
+    of failure, 130 after Ctrl-C); an error is one line on stderr, with the traceback
+    only under ``--debug``."""
     args = parser().parse_args(argv)
+    console.setup_logging(args.debug)
     try:
         status: int = args.func(args)
-    except KeyboardInterrupt:
-        print(f"wcdrive {args.command}: interrupted", file=sys.stderr)
-        return INTERRUPTED
-    except WcdriveError as exc:
-        print(f"wcdrive {args.command}: {exc}", file=sys.stderr)
-        return 2
+    except BrokenPipeError:
+        # the reader of our output stopped (| head): not an error; say nothing more
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return console.OK
+    except (KeyboardInterrupt, Exception) as exc:
+        print(console.error_line(args.command, exc), file=sys.stderr)
+        if args.debug and not isinstance(exc, KeyboardInterrupt):
+            traceback.print_exc()
+        return console.exit_code(exc)
     return status

@@ -17,6 +17,7 @@ retries. The public API on top of it is ``wcdrive.Wheelchair``.
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
 from collections.abc import Callable
@@ -32,6 +33,7 @@ from wcdrive.errors import (
     WcdriveProtocolError,
     WcdriveTimeoutError,
 )
+from wcdrive.history import History
 from wcdrive.protocol.codec import (
     SEQ_MAX,
     Ack,
@@ -44,6 +46,7 @@ from wcdrive.protocol.codec import (
     LineDecoder,
     Nak,
     Param,
+    Unknown,
     encode_cmdvel,
     frame,
 )
@@ -58,6 +61,8 @@ PROTOCOL_VERSION = integer("PROTOCOL_VERSION")
 
 #: Called from the reader thread with (host time, feedback, the TLM of the same tick).
 FeedbackHandler = Callable[[float, Feedback, ExtendedTelemetry | None], None]
+
+_log = logging.getLogger("wcdrive.session")
 
 
 class _Request:
@@ -163,8 +168,10 @@ class Session:
         # of a write and must still get its stop out.
         self._write_lock = threading.RLock()
         self._writing = False                  # a write is under way (interrupted: a partial line)
-        self.errors: list[str] = []
-        self.events: list[str] = []
+        #: Ring buffers of the newest ``DEFAULT_HISTORY`` items (``History``: a list
+        #: whose ``maxlen`` is settable).
+        self.errors: History[str] = History()
+        self.events: History[str] = History()
         #: The protocol the board speaks: 3 once it answered hello, 1 in legacy mode
         #: once three hellos went unanswered, 0 until then.
         self.protocol_version = 0
@@ -182,7 +189,7 @@ class Session:
         #: a board that reset meanwhile (a reconnect) gets ``estop`` right after hello.
         self.estop_held = False
         #: Faults the board announced (``EVT:FAULT,<name>``) since the last reset.
-        self.faults_announced: list[str] = []
+        self.faults_announced: History[str] = History()
         #: The cause of the board's last reset as its ``BOOT:`` line gave it ("" before one).
         self.reset_cause = ""
         self._handshake_done = threading.Event()
@@ -428,6 +435,7 @@ class Session:
                 self._say_hello(now)
                 return self.HELLO_WAITS[self._hello_tries - 1]
             if self.legacy:
+                _log.info("%s: no answer to hello: driving it as a protocol-v1 board", self.name)
                 self.protocol_version = 1
             else:
                 self.handshake_error = WcdriveProtocolError(
@@ -453,6 +461,8 @@ class Session:
         self.handshake_error = None
         self.firmware, self.firmware_version, self.build_id = (
             msg.firmware, msg.firmware_version, msg.build_id)
+        _log.info("%s: connected, protocol v%d, %s %s", self.name, msg.version, msg.firmware,
+                  msg.firmware_version)
         if self.estop_held and not self._handshake_done.is_set():
             self._relatch_estop()
         self._handshake_done.set()
@@ -484,6 +494,7 @@ class Session:
                 self._link_change(False, time.monotonic(), "vanished")
                 if not self._reconnect():
                     if not self.closed.is_set():
+                        _log.error("%s: link lost; the device did not come back", self.name)
                         self.errors.append("link lost")
                     return
                 continue
@@ -528,6 +539,7 @@ class Session:
                 with self._hello_lock:
                     self._forget_board()
                 self.events.append("BOARD_RESET")   # the cause: reset_cause
+                _log.warning("%s: the board reset (%s)", self.name, msg.cause)
             self._hello_step(now, first=True)
         elif isinstance(msg, Hello):
             self._hello_answered(msg)
@@ -541,8 +553,11 @@ class Session:
                     request.answered = True
                     request.data = self._last_data
                     request.reason = msg.reason if isinstance(msg, Nak) else None
+                    if isinstance(msg, Nak):
+                        _log.info("%s: NAK of frame %d: %s", self.name, msg.seq, msg.reason)
                     self._changed.notify_all()
                 elif isinstance(msg, Nak) and msg.seq in self._motion_seqs:
+                    _log.warning("%s: NAK of motion frame %d: %s", self.name, msg.seq, msg.reason)
                     self.errors.append(msg.reason)
                 elif isinstance(msg, Nak) and msg.seq == self._hello_seq:
                     self._hello_rejected = True
@@ -550,6 +565,7 @@ class Session:
             if self._hello_rejected:
                 self._hello_step(now)
         elif isinstance(msg, Error):
+            _log.warning("%s: the board refused a line: %s", self.name, msg.reason)
             self.errors.append(msg.reason)
             if not self._handshake_done.is_set() and self._hello_tries:
                 self._hello_rejected = True         # a garbled hello: the next goes out now
@@ -557,9 +573,16 @@ class Session:
         elif isinstance(msg, Event):
             self.events.append(msg.name)
             if msg.name == "ESTOP":
+                _log.warning("%s: e-stop latched on the board", self.name)
                 self.estop_announced = True
             elif msg.fault is not None:
+                _log.error("%s: the board latched a fault: %s", self.name, msg.fault)
                 self.faults_announced.append(msg.fault)
+            else:
+                _log.info("%s: board event %s", self.name, msg.name)
+        elif isinstance(msg, Unknown):
+            _log.info("%s: dropped a line that is none of the board's formats: %r",
+                      self.name, msg.line[:80])
 
     def _note_telemetry(self, msg: ExtendedTelemetry) -> None:
         """A TLM line reports the last sequence number the board parsed: the pending
@@ -636,6 +659,7 @@ class Session:
             event: LinkEvent
             if up:
                 event = LinkRestored(now, self.name, now - self._lost_at)
+                _log.warning("%s: link restored after %.3f s", self.name, now - self._lost_at)
                 self.events.append("LINK_RESTORED")
                 if self.estop_held and self._handshake_done.is_set():
                     self._relatch_check = True      # an e-stop sent while it was down: check it
@@ -643,11 +667,13 @@ class Session:
                 self._lost_at = now
                 last = self._last_line_at
                 event = LinkLost(now, self.name, float("inf") if last is None else now - last, reason)
+                _log.warning("%s: link lost (%s)", self.name, reason)
                 self.events.append("LINK_LOST")
             if self._on_link is not None:
                 try:
                     self._on_link(event)
                 except Exception as exc:            # a subscriber's bug must not stop the link
+                    _log.exception("%s: an on_link callback failed", self.name)
                     self.errors.append(f"on_link callback failed: {exc!r}")
 
     def _monitor_loop(self) -> None:
@@ -708,6 +734,7 @@ class Session:
             self._last_line_at = None
             self._forget_board()
             self._link_up.set()
+            _log.warning("%s: reconnected", self.name)
             self.events.append("RECONNECTED")
             return True
         return False
@@ -722,7 +749,7 @@ class Session:
         self._last_data = None
         self.status = None                  # the old board's; the new one reports anew
         self.estop_announced = False        # re-latched after hello when estop_held
-        self.faults_announced = []          # a board that reset has no fault latched
+        self.faults_announced.clear()       # a board that reset has no fault latched
         self._telemetry_seen = False
         self._relatch_check = False
         self.protocol_version = 0

@@ -11,18 +11,23 @@ that asked for them.
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
 import queue
 import threading
 import time
+from collections import deque
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
 
 from wcdrive.boardclock import BoardClock
+from wcdrive.history import DEFAULT_HISTORY
 from wcdrive.odometry import OdometryEstimate, WheelOdometry
 from wcdrive.protocol.codec import ExtendedTelemetry, Feedback
+
+_log = logging.getLogger("wcdrive.telemetry")
 
 __all__ = ["LinkEvent", "LinkLost", "LinkRestored", "Reset", "Telemetry", "TelemetryHub"]
 
@@ -86,17 +91,33 @@ LinkEvent = LinkLost | LinkRestored
 _COUNT_JUMP_RAD_S = 40.0
 
 
+def _offer(q: queue.Queue[Telemetry | LinkEvent], item: Telemetry | LinkEvent) -> None:
+    """Puts ``item`` on a subscriber's bounded queue, dropping its oldest item when a
+    reader that fell behind has filled it."""
+    while True:
+        try:
+            q.put_nowait(item)
+            return
+        except queue.Full:
+            try:
+                q.get_nowait()
+            except queue.Empty:
+                pass
+            _log.debug("telemetry: a reader fell behind; dropped its oldest item")
+
+
 class TelemetryHub:
     """Keeps every tick's feedback, feeds the odometry, and fans out to subscribers."""
 
-    def __init__(self, odometry_method: str = "position") -> None:
+    def __init__(self, odometry_method: str = "position", history: int = DEFAULT_HISTORY) -> None:
         self._lock = threading.Lock()
         self._odometry = WheelOdometry(method=odometry_method)
         self.clock = BoardClock()
         self.resets: list[Reset] = []
         self._reset_callbacks: list[Callable[[Reset], None]] = []
         self._last_counts: tuple[int, int] | None = None
-        self._history: list[tuple[float, int, int, float, float]] = []
+        #: The newest ``history`` ticks (``arrays``); a ring buffer.
+        self._history: deque[tuple[float, int, int, float, float]] = deque(maxlen=history)
         self._subscribers: list[queue.Queue[Telemetry | LinkEvent]] = []
         self._link_subscribers: list[queue.Queue[Telemetry | LinkEvent]] = []
         self._callbacks: list[Callable[[Telemetry], None]] = []
@@ -139,7 +160,7 @@ class TelemetryHub:
         t = Telemetry(now, msg.count_left, msg.count_right, msg.vel_left, msg.vel_right, msg.mode,
                       extended, sample.board, sample.host)
         for q in subscribers:
-            q.put(t)
+            _offer(q, t)
         for cb in callbacks:
             cb(t)
 
@@ -157,7 +178,7 @@ class TelemetryHub:
         with self._lock:
             subscribers, callbacks = list(self._link_subscribers), list(self._link_callbacks)
         for q in subscribers:
-            q.put(event)
+            _offer(q, event)
         for cb in callbacks:
             cb(event)
 
@@ -175,7 +196,7 @@ class TelemetryHub:
 
     def _stream(self, closed: threading.Event, timeout: float | None, link_events: bool
                 ) -> Iterator[Telemetry | LinkEvent]:
-        q: queue.Queue[Telemetry | LinkEvent] = queue.Queue()
+        q: queue.Queue[Telemetry | LinkEvent] = queue.Queue(maxsize=self.history)
         with self._lock:
             self._subscribers.append(q)
             if link_events:
@@ -207,10 +228,23 @@ class TelemetryHub:
         with self._lock:
             self._link_callbacks.append(callback)
 
-    def arrays(self) -> dict[str, np.ndarray]:
-        """Everything received so far as numpy arrays."""
+    @property
+    def history(self) -> int:
+        """How many ticks ``arrays`` keeps (the newest), and how many an iterator that
+        is not read may queue before the oldest are dropped. Settable."""
+        return self._history.maxlen or 0
+
+    @history.setter
+    def history(self, value: int) -> None:
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            raise ValueError(f"a history's bound must be an integer >= 1, not {value!r}")
         with self._lock:
-            rows = np.array(self._history, dtype=float).reshape(-1, 5)
+            self._history = deque(self._history, maxlen=value)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The newest ``history`` ticks received, as numpy arrays."""
+        with self._lock:
+            rows = np.array(list(self._history), dtype=float).reshape(-1, 5)
         return {"time": rows[:, 0], "count_left": rows[:, 1].astype(np.int64),
                 "count_right": rows[:, 2].astype(np.int64), "vel_left": rows[:, 3], "vel_right": rows[:, 4]}
 

@@ -218,6 +218,19 @@ class Wheelchair:
         return self._session.errors
 
     @property
+    def history_limit(self) -> int:
+        """How many items each history keeps, the newest (``errors``, ``events``,
+        ``telemetry_arrays``, and what an unread ``telemetry()`` iterator queues): ring
+        buffers, 10,000 by default. Settable: ``chair.history_limit = 100_000``."""
+        return self._session.errors.maxlen
+
+    @history_limit.setter
+    def history_limit(self, value: int) -> None:
+        self._hub.history = value
+        for history in (self._session.errors, self._session.events, self._session.faults_announced):
+            history.maxlen = value
+
+    @property
     def events(self) -> list[str]:
         """Every ``EVT:`` the board sent, and the link's: LINK_LOST, LINK_RESTORED,
         RECONNECTED (a vanished device was reopened)."""
@@ -360,7 +373,7 @@ class Wheelchair:
                 self._session.request(RESET.rstrip(b"\n"))
                 self._session.estop_held = False
                 self._session.estop_announced = False
-                self._session.faults_announced = []
+                self._session.faults_announced.clear()
                 self._session.status = None          # the last TLM predates the reset
                 return
             except WcdriveCommandError as exc:

@@ -23,6 +23,12 @@ from wcdrive.plant import ChairParams, Gyro, Plant
 STEP_S = 0.002
 
 
+#: The most simulated time one step of the board's thread runs (at speeds up to 250).
+MAX_SLICE_S = 1.0
+#: Gyro samples a live simulated board keeps (10 s at the BMI085's 400 Hz).
+GYRO_HISTORY = 4000
+
+
 class SimulatedBoard(ThreadedBoard):
     """The port and the plant (``PortLoop``) as a live board, paced to the wall clock
     times ``speed``; what ``wcsim://`` opens."""
@@ -33,7 +39,8 @@ class SimulatedBoard(ThreadedBoard):
         super().__init__("wcsim")
         self.params = params or ChairParams()
         self.plant = Plant(self.params)
-        self.loop = PortLoop(self.plant, Gyro(self.params, seed))
+        # a live board runs for hours: its gyro keeps the newest 10 s of samples
+        self.loop = PortLoop(self.plant, Gyro(self.params, seed, history=GYRO_HISTORY))
         self.speed = speed
         self._wall0: float | None = None
 
@@ -59,6 +66,9 @@ class SimulatedBoard(ThreadedBoard):
         target = (time.monotonic() - self._wall0) * self.speed
         if target <= self.time:
             return b""
+        # A board that fell behind (a loaded machine) catches up a slice at a time, so
+        # its output reaches the reader in bounded chunks, not one that grows with the lag.
+        target = min(target, self.time + max(MAX_SLICE_S, 4 * STEP_S * self.speed))
         self.loop.run_until(round(target * F_CPU))
         return b"".join(data for _, data in self.loop.take_output())
 

@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 
+from wcdrive.history import History
 from wcdrive.plant.chair import load_kernel
 from wcdrive.plant.params import ChairParams
 from wcdrive.protocol.spec import real
@@ -20,13 +21,16 @@ def encoder_counts(angle_left: float, angle_right: float, cpr: int = round(real(
 
 class Gyro:
     """A BMI085-like z-axis gyro: samples at ``gyro_rate_hz`` with white noise and a
-    bias that drifts as a random walk. Deterministic for a given seed.
+    bias that drifts as a random walk. Deterministic for a given seed. ``times`` and
+    ``rates`` keep every sample, or with ``history`` only the newest ``history`` (for a
+    board that runs for hours).
 
     Its random draws come from a buffer filled ahead in batches
     (``standard_normal(n)`` is the same stream as n single draws), so ``sample`` and
     ``sample_steps`` give the same samples whichever is called, bit for bit."""
 
-    def __init__(self, params: ChairParams, seed: int = 0, *, use_kernel: bool = True) -> None:
+    def __init__(self, params: ChairParams, seed: int = 0, history: int | None = None, *,
+                 use_kernel: bool = True) -> None:
         self.period = 1.0 / params.gyro_rate_hz
         self._rng = np.random.default_rng(seed)
         dps = math.pi / 180.0
@@ -34,8 +38,8 @@ class Gyro:
         self.bias = float(self._rng.normal(0.0, params.gyro_bias_dps * dps))
         self.walk = params.gyro_bias_walk_dps_per_sqrt_s * dps
         self.next_time = 0.0
-        self.times: list[float] = []
-        self.rates: list[float] = []
+        self.times: list[float] = [] if history is None else History(maxlen=history)
+        self.rates: list[float] = [] if history is None else History(maxlen=history)
         self._draws = np.empty(0)
         self._used = 0
         self._kernel = load_kernel() if use_kernel else None

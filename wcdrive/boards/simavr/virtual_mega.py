@@ -173,6 +173,11 @@ def _load_library() -> ctypes.CDLL:
         "wcsim_mcusr": (ctypes.c_uint8, [p]),
         "wcsim_resets_count": (sz, [p]),
         "wcsim_resets_take": (sz, [p, ctypes.POINTER(u64), u8p, u8p, sz]),
+        "wcsim_charge_irq_entry": (None, [p, i32]),
+        "wcsim_irq_entries": (u64, [p, i32]),
+        "wcsim_prof_set": (i32, [p, i32, ctypes.POINTER(u32), ctypes.POINTER(u32)]),
+        "wcsim_prof_get": (u64, [p, i32]),
+        "wcsim_pc": (u32, [p]),
         "wcsim_rx_index": (u64, [p]),
         "wcsim_rx_held": (i32, [p]),
         "wcsim_rx_lost_count": (sz, [p]),
@@ -472,6 +477,26 @@ class VirtualMega:
     def take_tx_text(self) -> str:
         """The UART bytes sent since the last take, as text."""
         return bytes(b for _, b in self.take_tx()).decode("latin-1")
+
+    def interrupts_taken(self, vector: int) -> int:
+        """How many times the interrupt of this vector number was taken since power-on.
+        Each costs the chip 5 cycles before its vector (the harness charges them; simavr
+        1.6 alone does not)."""
+        return int(self._c.wcsim_irq_entries(self._s, vector))
+
+    def profile(self, ranges: list[tuple[int, int]]) -> None:
+        """Counts, from now on, the cycles spent with the PC in each ``[lo, hi)`` range
+        of flash byte addresses (the first that holds it); ``profiled()`` reads them."""
+        n = len(ranges)
+        lo = (ctypes.c_uint32 * n)(*[a for a, _ in ranges])
+        hi = (ctypes.c_uint32 * n)(*[b for _, b in ranges])
+        if self._c.wcsim_prof_set(self._s, n, lo, hi) != 0:
+            raise ValueError("at most 16 ranges")
+        self._profiled = n
+
+    def profiled(self) -> list[int]:
+        """The cycles counted in each range given to ``profile``."""
+        return [int(self._c.wcsim_prof_get(self._s, r)) for r in range(getattr(self, "_profiled", 0))]
 
     @property
     def rx_sent(self) -> int:

@@ -38,6 +38,8 @@
 #include <simavr/avr_extint.h>
 
 #define WCSIM_MAX_HOOKS 16
+/* The ATmega2560's interrupt response: 5 cycles from the flag to the vector (3-byte PC). */
+#define WCSIM_IRQ_ENTRY_CYCLES 5
 
 typedef struct {
     uint64_t cycle;
@@ -108,6 +110,13 @@ typedef struct {
     uint32_t hook_pc[WCSIM_MAX_HOOKS];
     int n_hooks;
     uint8_t *hook_bits;   /* one bit per flash word: a hook starts there (one test per instruction) */
+    /* interrupt entries: simavr 1.6 charges no cycle for the jump to a vector, the chip 5 */
+    int charge_irq_entry;
+    uint64_t irq_entries[64];     /* by vector number */
+    /* cycle profile: cycles spent with the PC in [lo, hi) (byte addresses), per range */
+    int n_prof;
+    uint32_t prof_lo[16], prof_hi[16];
+    uint64_t prof_cycles[16];
     uint32_t break_mask;  /* run_until stops before the hooks whose bit is set */
     int at_break;         /* stopped at a break: do not log the same entry twice */
     wcsim_hit_t *hits;
@@ -354,6 +363,7 @@ wcsim_t *wcsim_new(const char *elf_path, char *err, int errlen) {
     s->pwm_irq = avr_alloc_irq(&s->avr->irq_pool, 0, 2, pwm_names);
     s->run_fn = s->avr->run;
     s->wdt = find_watchdog(s->avr);
+    s->charge_irq_entry = 1;
     log_reset(s, WCSIM_RESET_POWER_ON);   /* avr_init() reset the core and set PORF */
     return s;
 }
@@ -546,14 +556,52 @@ int wcsim_run_until(wcsim_t *s, uint64_t target) {
             }
         }
         s->at_break = 0;
+        uint64_t c0 = avr->cycle;
         int state = avr_run(avr);
         if (state == cpu_Done || state == cpu_Crashed) {
             s->crashed = 1;
             return -1;
         }
+        uint32_t vectors_end = (uint32_t)avr->vector_size * 64u;
+        if (avr->pc < vectors_end && pc >= vectors_end) {
+            /* an interrupt was taken: the chip spends 5 cycles (PC pushed, I cleared)
+             * before the vector's first instruction; simavr 1.6 none */
+            unsigned v = avr->pc / avr->vector_size;
+            if (v < 64) s->irq_entries[v]++;
+            if (s->charge_irq_entry) avr->cycle += WCSIM_IRQ_ENTRY_CYCLES;
+        }
+        for (int r = 0; r < s->n_prof; r++) {
+            if (pc >= s->prof_lo[r] && pc < s->prof_hi[r]) {
+                s->prof_cycles[r] += avr->cycle - c0;
+                break;
+            }
+        }
     }
     return 0;
 }
+
+/* Whether interrupt entries cost their 5 cycles (the default: as on the chip). */
+void wcsim_charge_irq_entry(wcsim_t *s, int on) { s->charge_irq_entry = on; }
+
+uint64_t wcsim_irq_entries(wcsim_t *s, int vector) {
+    return vector >= 0 && vector < 64 ? s->irq_entries[vector] : 0;
+}
+
+/* The cycle profile: n ranges of byte addresses [lo, hi); an instruction's cycles (and an
+ * interrupt entry's, charged to the instruction it followed) go to the first range that
+ * holds its address. Setting the ranges clears the counts. */
+int wcsim_prof_set(wcsim_t *s, int n, const uint32_t *lo, const uint32_t *hi) {
+    if (n < 0 || n > 16) return -1;
+    s->n_prof = n;
+    for (int r = 0; r < n; r++) {
+        s->prof_lo[r] = lo[r];
+        s->prof_hi[r] = hi[r];
+        s->prof_cycles[r] = 0;
+    }
+    return 0;
+}
+
+uint64_t wcsim_prof_get(wcsim_t *s, int r) { return r >= 0 && r < s->n_prof ? s->prof_cycles[r] : 0; }
 
 size_t wcsim_tx_count(wcsim_t *s) { return s->n_tx; }
 
@@ -698,6 +746,7 @@ wcsim_t *wcsim_new_chip(const char *mmcu, uint32_t frequency, char *err, int err
     s->run_fn = s->avr->run;
     s->wdt = find_watchdog(s->avr);
     s->uart0 = find_uart0(s->avr);
+    s->charge_irq_entry = 1;
     chip_lax_level_trigger(s);
     log_reset(s, WCSIM_RESET_POWER_ON);
     return s;
