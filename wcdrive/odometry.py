@@ -20,6 +20,8 @@ with the unused 3D terms set large so that a 2D filter ignores them.
 from __future__ import annotations
 
 import math
+from array import array
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -28,6 +30,9 @@ from wcdrive.protocol.spec import real
 
 #: Variance given to the unused 3D terms (z, roll, pitch): "do not use".
 UNUSED = 1e6
+#: ``WheelOdometry.integrate`` keeps at most this many steps (32 bytes each) before it
+#: propagates their covariance, whether or not it is read.
+PENDING_STEPS = 1 << 16
 
 
 @dataclass
@@ -87,7 +92,11 @@ class WheelOdometry:
         self.p = params or OdometryParams()
         self.method = method
         self.pose = Pose2D()
-        self._cov = np.zeros((3, 3))
+        self._cov_matrix = np.zeros((3, 3))
+        #: Steps whose covariance propagation waits until a covariance is read
+        #: (``_cov``): the same numpy operations in the same order, so the same bits,
+        #: paid only by those who read it.
+        self._pending = array("d")           # (d, heading, d_left, d_right) per step
         self._last: tuple[float, int, int] | None = None
         self._rad_per_count = 2.0 * math.pi / self.p.counts_per_rev
         self.linear = 0.0
@@ -106,9 +115,18 @@ class WheelOdometry:
     def update(self, time: float, count_left: int, count_right: int) -> OdometryEstimate:
         """One sample (``time`` in s, the counts as the firmware reports them); returns
         the estimate. The first sample only sets the starting counts."""
+        self.integrate(time, count_left, count_right)
+        return self.estimate(time)
+
+    def integrate(self, time: float, count_left: int, count_right: int) -> None:
+        """``update`` without building the estimate: the pose and the speeds move on
+        exactly as ``update`` moves them, and so does the covariance, when it is next
+        read (``estimate``) or after ``PENDING_STEPS`` steps. For a caller that reads
+        the covariance seldom or never (``wcdrive sim``'s host); one that reads it at
+        every sample calls ``update``."""
         if self._last is None:
             self._last = (time, count_left, count_right)
-            return self.estimate(time)
+            return
         t0, l0, r0 = self._last
         self._last = (time, count_left, count_right)
         dt = time - t0
@@ -130,8 +148,21 @@ class WheelOdometry:
         self.pose.theta = th + dtheta
         if dt > 0:
             self.linear, self.angular = d / dt, dtheta / dt
-        self._propagate(d, heading, d_left, d_right)
-        return self.estimate(time)
+        self._pending.extend((d, heading, d_left, d_right))
+        if len(self._pending) >= 4 * PENDING_STEPS:
+            self._flush()
+
+    @property
+    def _cov(self) -> np.ndarray:
+        """The 3x3 pose covariance (x, y, theta), every pending step propagated."""
+        if self._pending:
+            self._flush()
+        return self._cov_matrix
+
+    def _flush(self) -> None:
+        pending, self._pending = self._pending, array("d")
+        for i in range(0, len(pending), 4):
+            self._propagate(pending[i], pending[i + 1], pending[i + 2], pending[i + 3])
 
     def _propagate(self, d: float, heading: float, d_left: float, d_right: float) -> None:
         """First-order propagation of the wheel distance noise into the pose."""
@@ -140,7 +171,7 @@ class WheelOdometry:
         c, s, base = math.cos(heading), math.sin(heading), self.p.wheelbase
         f = np.array([[1.0, 0.0, -d * s], [0.0, 1.0, d * c], [0.0, 0.0, 1.0]])
         g = np.array([[0.5 * c, 0.5 * c], [0.5 * s, 0.5 * s], [-1.0 / base, 1.0 / base]])
-        self._cov = f @ self._cov @ f.T + g @ q @ g.T
+        self._cov_matrix = f @ self._cov_matrix @ f.T + g @ q @ g.T
 
     def estimate(self, time: float) -> OdometryEstimate:
         """The pose, speeds and covariances now, stamped ``time``."""
@@ -165,6 +196,21 @@ class GyroIntegrator:
             t0, r0 = self._last
             self.heading += 0.5 * (rate + r0) * (time - t0)
         self._last = (time, rate)
+
+    def add_many(self, times: Sequence[float], rates: Sequence[float], start: int = 0,
+                 stop: int | None = None) -> None:
+        """The samples ``times[start:stop]``, ``rates[start:stop]``, each as ``add``
+        takes it (the same sums in the same order)."""
+        stop = len(times) if stop is None else stop
+        if start >= stop:
+            return
+        heading, last = self.heading, self._last
+        for i in range(start, stop):
+            time, rate = times[i], rates[i]
+            if last is not None:
+                heading += 0.5 * (rate + last[1]) * (time - last[0])
+            last = (time, rate)
+        self.heading, self._last = heading, last
 
     def heading_at(self, time: float) -> float:
         """The heading at ``time`` (extrapolated from the last sample)."""

@@ -1,10 +1,23 @@
-"""The port of the firmware driving the plant at the Mega's own timing, step by step.
+"""The port of the firmware driving the plant at the Mega's own timing.
 
 Time runs in 16 MHz cycles. ``millis()`` advances at Timer0 overflows (every 16,384
-cycles, the first at cycle 21,250 after a reset, as measured on the ELF in simavr). At
-each overflow the bytes that have arrived on the wire go through ``processByte``; when
-50 ms are due the control tick runs with the plant's encoder counts and its PWM/DIR
-drive the plant from then on. The plant steps at a fixed ``dt`` in between.
+cycles, the first at ``FIRST_OVERFLOW_CYCLE`` after a reset, as measured on the ELF in
+simavr). At each overflow the bytes that have arrived on the wire go through
+``processByte``; when ``Firmware.due`` says so the control tick runs with the plant's
+encoder counts and its PWM/DIR drive the plant from then on. The plant steps at a fixed
+``dt`` in between, a tick's steps in one call of its C kernel (``Plant.advance_batch``),
+the gyro's samples of those steps in one more (``Gyro.sample_steps``).
+
+``run_until`` is event-driven (issue 21): nothing happens at an overflow unless bytes
+are read or the tick runs there, so it jumps from event to event: the overflow at which
+the next bytes have arrived, the first overflow at which ``Firmware.due`` holds (found
+by asking it at a few overflows: the one the last gap between ticks predicts, then by
+bisection, since between two inputs ``due`` is monotone in ``millis()``), a reset, the
+end. ``millis()`` there comes in closed form from Timer0's model (``millis_after``:
+1 ms and 3/125 of one per overflow). The firmware alone decides when it ticks, so a
+change of its timing needs no change here. ``stepped=True`` runs the reference path,
+every overflow in turn with ``due`` asked at each; tests/test_sim_speed.py holds the
+two to the same bytes, ticks and states.
 
 Faults (``wcdrive.plant.faults``, given as ``faults=``): a healthy encoder's count is
 taken from its wheel's angle (``encoder_counts``), the fast path. While an encoder fault
@@ -30,7 +43,16 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from wcdrive.avr.timer0 import F_CPU, OVERFLOW_CYCLES, TIMER0_START_CYCLE, Timer0, storm_window
+from wcdrive.avr.timer0 import (
+    F_CPU,
+    FRACT_INC,
+    FRACT_MAX,
+    MILLIS_INC,
+    OVERFLOW_CYCLES,
+    TIMER0_START_CYCLE,
+    Timer0,
+    storm_window,
+)
 from wcdrive.avr.uart import UART_BYTE_CYCLES
 from wcdrive.firmware.final_control import Firmware, boot_line
 from wcdrive.firmware.quadrature import QuadratureDecoder
@@ -106,13 +128,58 @@ class _Encoder:
             self.decoder.count = 0
 
 
+class _Wire:
+    """The bytes on their way to the board's RX pin, as runs ``[start, data, taken]``:
+    byte ``i`` of a run has fully arrived at ``start + (i + 1) * UART_BYTE_CYCLES``."""
+
+    def __init__(self) -> None:
+        self._runs: deque[list] = deque()
+
+    def __bool__(self) -> bool:
+        return bool(self._runs)
+
+    def push(self, start: int, data: bytes) -> None:
+        """``data`` sent from cycle ``start`` on, after any bytes already on the wire."""
+        self._runs.append([start, data, 0])
+
+    def next_arrival(self) -> int:
+        """The cycle at which the next byte has arrived (the wire is not empty)."""
+        start, _, taken = self._runs[0]
+        return start + (taken + 1) * UART_BYTE_CYCLES
+
+    def take(self, cycle: int) -> bytes:
+        """The bytes that have arrived by ``cycle``, off the wire."""
+        out = b""
+        runs = self._runs
+        while runs:
+            run = runs[0]
+            start, data, taken = run
+            arrived = min(len(data), (cycle - start) // UART_BYTE_CYCLES)
+            if arrived <= taken:
+                break
+            out += data[taken:arrived]
+            if arrived < len(data):
+                run[2] = arrived
+                break
+            runs.popleft()
+        return out
+
+    def drop_before(self, cycle: int) -> None:
+        """Loses the bytes that arrive before ``cycle``."""
+        self.take(cycle - 1)
+
+
 class PortLoop:
     """The port driving the plant, run in 16 MHz cycles (module docstring); ``faults``
     are injected as the module docstring says."""
 
     def __init__(self, plant: Plant, gyro: Gyro | None = None, dt: float = 0.001,
-                 firmware: Firmware | None = None, faults: Sequence[Fault] = ()) -> None:
+                 firmware: Firmware | None = None, faults: Sequence[Fault] = (), *,
+                 stepped: bool = False) -> None:
         self.plant = plant
+        #: The reference path: every Timer0 overflow in turn (``run_until``).
+        self.stepped = stepped
+        self._due_hint = 0               # the overflow at which the next tick is expected
         self.gyro = gyro
         self.dt = dt
         self.step_cycles = round(dt * F_CPU)
@@ -124,7 +191,7 @@ class PortLoop:
         self.last_tick_cycle: int | None = None
         self._overflow = FIRST_OVERFLOW_CYCLE
         self._steps_done = 0
-        self._rx: deque[tuple[int, int]] = deque()
+        self._rx = _Wire()
         self._wire_free = 0
         self.output: list[tuple[int, bytes]] = [(0, self.fw.boot_output())]
         self.faults = tuple(faults)
@@ -140,8 +207,8 @@ class PortLoop:
     def send(self, data: bytes, at: int | None = None) -> None:
         """Bytes onto the RX wire from cycle ``at`` (default: now), one per byte time."""
         start = max(self.cycle if at is None else at, self._wire_free)
-        for i, b in enumerate(data):
-            self._rx.append((start + (i + 1) * UART_BYTE_CYCLES, b))
+        if data:
+            self._rx.push(start, bytes(data))
         self._wire_free = start + len(data) * UART_BYTE_CYCLES
 
     def take_output(self) -> list[tuple[int, bytes]]:
@@ -150,7 +217,136 @@ class PortLoop:
         return out
 
     def run_until(self, end_cycle: int, on_tick: Callable[[float], None] | None = None) -> None:
-        """Runs to ``end_cycle``; ``on_tick(time)`` after every control tick."""
+        """Runs to ``end_cycle``; ``on_tick(time)`` after every control tick.
+
+        Event-driven (module docstring): from one event to the next (a control tick, the
+        overflow at which received bytes are read, a reset, the end), ``millis()`` in
+        closed form. ``stepped=True`` takes the reference path, every overflow in turn."""
+        if self.stepped:
+            self._run_stepped(end_cycle, on_tick)
+            return
+        while True:
+            overflow = self._overflow
+            resets = self._resets
+            if resets and resets[0] <= min(overflow, end_cycle):
+                cycle = resets.pop(0)
+                self._advance_to(cycle)
+                self.cycle = max(self.cycle, cycle)
+                self.reset()
+                continue
+            if overflow > end_cycle:
+                break
+            # The last overflow this pass may reach: none past the end, none at or past
+            # a reset, and the bytes' overflow (read before its due check) at most.
+            last = overflow + (end_cycle - overflow) // OVERFLOW_CYCLES * OVERFLOW_CYCLES
+            if resets:
+                last = min(last, overflow + (resets[0] - 1 - overflow) // OVERFLOW_CYCLES * OVERFLOW_CYCLES)
+            rx_at: int | None = None
+            if self._rx:
+                arrived = self._rx.next_arrival()
+                rx_at = overflow if arrived <= overflow else \
+                    overflow + -(-(arrived - overflow) // OVERFLOW_CYCLES) * OVERFLOW_CYCLES
+                if rx_at > last:
+                    rx_at = None
+            fw = self.fw
+            timer = self.timer
+            # Overflows before the bytes' own: the first at which the tick is due.
+            span = ((rx_at if rx_at is not None else last + OVERFLOW_CYCLES) - overflow) // OVERFLOW_CYCLES
+            due_at = self._first_due(fw, span)
+            if due_at is not None:
+                at = overflow + due_at * OVERFLOW_CYCLES
+                self._jump_timer(due_at + 1)
+                self._tick(fw, at, timer.millis, on_tick)
+                self._overflow = at + OVERFLOW_CYCLES
+                continue
+            if rx_at is None:
+                self._jump_timer((last - overflow) // OVERFLOW_CYCLES + 1)
+                self._overflow = last + OVERFLOW_CYCLES
+                continue
+            self._jump_timer((rx_at - overflow) // OVERFLOW_CYCLES + 1)
+            self._receive(fw, rx_at)
+            fw = self.fw
+            millis = timer.millis
+            if fw.due(millis):
+                self._tick(fw, rx_at, millis, on_tick)
+            self._overflow = rx_at + OVERFLOW_CYCLES
+        self._advance_to(end_cycle)
+        self.cycle = max(self.cycle, end_cycle)
+
+    def _jump_timer(self, overflows: int) -> None:
+        """``overflows`` Timer0 overflows at once (``millis_after``), on the same object."""
+        timer = self.timer
+        total = timer.fract + FRACT_INC * overflows
+        timer.millis = (timer.millis + MILLIS_INC * overflows + total // FRACT_MAX) & 0xFFFFFFFF
+        timer.fract = total % FRACT_MAX
+
+    def _first_due(self, fw: Firmware, span: int) -> int | None:
+        """Of the next ``span`` overflows (0: the next), the first at which ``fw.due``
+        holds, or None. ``Firmware.due`` decides, asked at a few overflows only: between
+        two inputs it is monotone in ``millis()`` (``millis() - lastControlTime`` against
+        the period), so the first due overflow is found by bisection, starting from the
+        overflow the gap between the last two ticks predicts; ``stepped=True`` asks at every
+        overflow."""
+        if span <= 0:
+            return None
+        timer = self.timer
+        m0, f0 = timer.millis, timer.fract
+
+        def due(j: int) -> bool:          # after overflow j: j + 1 overflows from now
+            total = f0 + FRACT_INC * (j + 1)
+            return fw.due((m0 + MILLIS_INC * (j + 1) + total // FRACT_MAX) & 0xFFFFFFFF)
+
+        hint = (self._due_hint - self._overflow) // OVERFLOW_CYCLES
+        if 0 < hint < span and due(hint) and not due(hint - 1):
+            return hint
+        if due(0):
+            return 0
+        lo, hi = 0, span - 1                  # not due at lo; the answer is in (lo, hi]
+        if not due(hi):
+            return None
+        while hi - lo > 1:
+            mid = (lo + hi) // 2
+            if due(mid):
+                hi = mid
+            else:
+                lo = mid
+        return hi
+
+    def _receive(self, fw: Firmware, overflow: int) -> None:
+        """The bytes that have arrived by ``overflow`` go through ``processByte``."""
+        data = self._rx.take(overflow)
+        masked = any(e.decoder.storm for e in self._encoders.values())
+        if masked:
+            self._advance_to(overflow)
+        out = fw.feed(data)
+        if out:
+            self.output.append((overflow, out))
+        if masked:
+            self._unmask_cleared(overflow)
+
+    def _tick(self, fw: Firmware, overflow: int, millis: int,
+              on_tick: Callable[[float], None] | None) -> None:
+        """The control tick at ``overflow``: the plant brought to it, the latched counts
+        in, PWM/DIR out to the plant."""
+        self._advance_to(overflow)
+        true = self._true_counts()
+        left, right = self._encoders["left"], self._encoders["right"]
+        out = fw.tick(millis, left.count(true[0]), right.count(true[1]),
+                      left.decoder.illegal, right.decoder.illegal,
+                      storm_l=int(left.decoder.storm), storm_r=int(right.decoder.storm))
+        s = fw.state
+        self.plant.set_drive(s.pwmL, s.dirL, s.pwmR, s.dirR)
+        self.output.append((overflow, out))
+        if self.last_tick_cycle is not None and overflow > self.last_tick_cycle:
+            self._due_hint = 2 * overflow - self.last_tick_cycle     # the same gap again
+        self.last_tick_cycle = overflow
+        if on_tick:
+            on_tick(overflow / F_CPU)
+
+    def _run_stepped(self, end_cycle: int, on_tick: Callable[[float], None] | None = None) -> None:
+        """The reference path of ``run_until``: every Timer0 overflow in turn, ``due``
+        asked at each (as before the loop was event-driven; tests/test_sim_speed.py
+        checks that both paths give the same bytes, ticks and states)."""
         plant = self.plant
         while True:
             overflow = self._overflow
@@ -164,10 +360,8 @@ class PortLoop:
                 break
             fw = self.fw
             self.timer.overflow()
-            if self._rx and self._rx[0][0] <= overflow:
-                data = bytearray()
-                while self._rx and self._rx[0][0] <= overflow:
-                    data.append(self._rx.popleft()[1])
+            if self._rx and self._rx.next_arrival() <= overflow:
+                data = bytearray(self._rx.take(overflow))
                 masked = any(e.decoder.storm for e in self._encoders.values())
                 if masked:
                     self._advance_to(overflow)
@@ -207,8 +401,7 @@ class PortLoop:
         self.timer = Timer0()
         self.boot_cycle = now
         self._overflow = now + FIRST_OVERFLOW_CYCLE
-        while self._rx and self._rx[0][0] < now + SERIAL_READY_CYCLES:
-            self._rx.popleft()
+        self._rx.drop_before(now + SERIAL_READY_CYCLES)
         true = self._true_counts()
         for enc, count in zip(self._encoders.values(), true, strict=True):
             enc.reboot(count)
@@ -258,7 +451,7 @@ class PortLoop:
         hi = (self._steps_done + n) * self.step_cycles
         edge_sides = [enc for enc in self._encoders.values() if enc.needs_edges(lo, hi)]
         previous = (self.plant.left.angle, self.plant.right.angle)
-        angles = advance(self.plant, self.gyro, n, self.dt)
+        angles = advance(self.plant, self.gyro, n, self.dt, angles=bool(edge_sides))
         assert angles is not None
         self._steps_done += n
         for enc in edge_sides:
@@ -279,18 +472,16 @@ class PortLoop:
             enc.leave_if_healthy(math.floor(positions[-1]), hi)
 
 
-def advance(plant: Plant, gyro: Gyro | None, steps: int, dt: float) -> np.ndarray | None:
-    """``steps`` plant steps; the gyro samples the yaw rate of the step it falls in.
-    Returns the wheel angles after each step (or None for no steps)."""
+def advance(plant: Plant, gyro: Gyro | None, steps: int, dt: float, *, angles: bool = True
+            ) -> np.ndarray | None:
+    """``steps`` plant steps in one call of the kernel (``Plant.advance_batch``); the
+    gyro samples the yaw rate of the step it falls in, the tick's samples at once
+    (``Gyro.sample_steps``). Returns the wheel angles after each step (``0 x 2`` with
+    ``angles=False``; None for no steps), valid until the plant's next step."""
     if steps <= 0:
         return None
     t0 = plant.time
-    recorded = plant.advance(steps, dt, record=True)
-    assert recorded is not None
-    angles, rates = recorded
+    wheels, rates = plant.advance_batch(steps, dt, angles=angles)
     if gyro is not None:
-        end = t0 + dt * steps
-        while gyro.next_time <= end + 1e-12:
-            k = min(steps - 1, max(0, int((gyro.next_time - t0) / dt - 1e-9)))
-            gyro.sample(gyro.next_time, float(rates[k]))
-    return angles
+        gyro.sample_steps(t0, dt, rates)
+    return wheels

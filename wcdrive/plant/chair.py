@@ -79,15 +79,18 @@ _KERNEL_SOURCE = Path(__file__).resolve().parent / "csrc" / "chair_kernel.c"
 _kernel: ctypes.CDLL | bool | None = None
 
 
-def _load_kernel() -> ctypes.CDLL | None:
-    """The C kernel, compiled on first use; None when no compiler is there."""
+def load_kernel() -> ctypes.CDLL | None:
+    """The C kernel (``chair_advance``, ``gyro_samples``), compiled on first use; None
+    when no compiler is there."""
     global _kernel
     if _kernel is None:
         try:
             lib = load(_KERNEL_SOURCE, "chairkernel", ("-lm",), ("-O2", "-ffp-contract=off"))
-            lib.chair_advance.argtypes = [ctypes.POINTER(ChairStruct), ctypes.c_int32, _D,
-                                          ctypes.POINTER(_D), ctypes.POINTER(_D), ctypes.POINTER(_D)]
+            lib.chair_advance.argtypes = [ctypes.POINTER(ChairStruct), ctypes.c_int32, _D, _D,
+                                          _P, _P, _P]
             lib.chair_advance.restype = None
+            lib.gyro_samples.argtypes = [ctypes.c_int32, _P, _P, _P, ctypes.c_int32, _P, _P]
+            lib.gyro_samples.restype = ctypes.c_int32
             _kernel = lib
         except BuildError:
             _kernel = False
@@ -152,9 +155,17 @@ class Plant:
         self.left = WheelView(s, 0)
         self.right = WheelView(s, 1)
         self._motion_log: list[np.ndarray] | None = None
-        self._kernel = _load_kernel() if use_kernel else None
+        self._log_chunk = np.empty((0, 6))
+        self._log_rows = 0
+        self._log_at = 0
+        self._buf_rates = np.empty(0)
+        self._buf_angles = np.empty((0, 2))
+        self._buf_at: tuple[int, int] = (0, 0)
+        self._kernel = load_kernel() if use_kernel else None
         if self._kernel is not None:
             self._bind_chipmunk()
+            self._advance = self._kernel.chair_advance
+            self._ref = ctypes.pointer(self.s)
 
     def _bind_chipmunk(self) -> None:
         from pymunk._chipmunk import ffi, lib
@@ -208,15 +219,51 @@ class Plant:
         left, volts right)``: the axle midpoint's motion after the step (m/s, m/s,
         rad/s) and the motor voltages over it, read back with ``take_motion_log``."""
         self._motion_log = []
+        self._log_rows = 0
 
     def take_motion_log(self) -> np.ndarray:
         """The steps recorded since the last take, an ``n x 6`` array
         (``start_motion_log``); empty when the log is off."""
+        self._close_log_chunk()
         if not self._motion_log:
             return np.zeros((0, 6))
         out = np.concatenate(self._motion_log)
         self._motion_log = []
         return out
+
+    def _close_log_chunk(self) -> None:
+        """The rows ``advance_batch`` wrote into its chunk go to the log."""
+        if self._log_rows and self._motion_log is not None:
+            self._motion_log.append(self._log_chunk[:self._log_rows])
+            self._log_chunk = np.empty((0, 6))
+            self._log_rows = 0
+
+    def advance_batch(self, n: int, dt: float = 0.001, *, angles: bool = False
+                      ) -> tuple[np.ndarray, np.ndarray]:
+        """``advance(n, dt, record=True, angles=angles)`` for a caller that uses the
+        arrays at once (``wcdrive.boards.port_loop``, a control tick's steps): one call
+        of the kernel into buffers the plant keeps (the wheel angles, ``0 x 2`` unless
+        ``angles``, and the yaw rates are views that the next call overwrites), the
+        motion log written in place."""
+        if self._kernel is None or n <= 0:
+            recorded = self.advance(n, dt, record=True, angles=angles)
+            assert recorded is not None
+            return recorded
+        if n > self._buf_rates.size:
+            self._buf_rates = np.empty(max(n, 2 * self._buf_rates.size, 64))
+            self._buf_angles = np.empty((self._buf_rates.size, 2))
+            self._buf_at = (_data(self._buf_angles), _data(self._buf_rates))
+        motion = None
+        if self._motion_log is not None:
+            if self._log_rows + n > self._log_chunk.shape[0]:
+                self._close_log_chunk()
+                self._log_chunk = np.empty((max(n, _LOG_CHUNK), 6))
+                self._log_at = _data(self._log_chunk)
+            motion = self._log_at + 48 * self._log_rows
+            self._log_rows += n
+        self._advance(self._ref, n, dt, self.s.time, self._buf_at[0] if angles else None, self._buf_at[1],
+                      motion)
+        return (self._buf_angles[:n] if angles else _NO_ANGLES), self._buf_rates[:n]
 
     # ---- state -------------------------------------------------------------------
     @property
@@ -276,37 +323,50 @@ class Plant:
         """One physics step of ``dt`` s."""
         self.advance(1, dt)
 
-    def advance(self, n: int, dt: float = 0.001, *, record: bool = False
+    def advance(self, n: int, dt: float = 0.001, *, record: bool = False, angles: bool = True
                 ) -> tuple[np.ndarray, np.ndarray] | None:
         """``n`` steps of ``dt``. With ``record``, returns the wheel angles after each
-        step (an ``n x 2`` array, left and right) and the yaw rates (``n``)."""
+        step (an ``n x 2`` array, left and right; ``0 x 2`` with ``angles=False``) and
+        the yaw rates (``n``)."""
         if n <= 0:
             return (np.empty((0, 2)), np.empty(0)) if record else None
-        angles = np.empty((n if record else 0, 2))
-        rates = np.empty(n if record else 0)
         logging = self._motion_log is not None
+        if self._kernel is not None:
+            # One call for the n steps; the arrays passed by address (ctypes' own
+            # conversions cost more than the steps of a tick).
+            wheels = np.empty((n, 2)) if record and angles else _NONE
+            rates = np.empty(n) if record else _NONE
+            motion = np.empty((n, 6)) if logging else _NONE
+            self._advance(self._ref, n, dt, self.s.time, _address(wheels), _address(rates),
+                          _address(motion))
+            if logging:
+                assert self._motion_log is not None
+                self._close_log_chunk()
+                self._motion_log.append(motion)
+            if not record:
+                return None
+            return (wheels if angles else np.empty((0, 2))), rates
+        wheel_angles = np.empty((n if record else 0, 2))
+        rates = np.empty(n if record else 0)
         motion = np.empty((n if logging else 0, 6))
         t0 = self.s.time
-        if self._kernel is not None:
-            a_ptr = angles.ctypes.data_as(ctypes.POINTER(_D)) if record else None
-            r_ptr = rates.ctypes.data_as(ctypes.POINTER(_D)) if record else None
-            m_ptr = motion.ctypes.data_as(ctypes.POINTER(_D)) if logging else None
-            self._kernel.chair_advance(ctypes.byref(self.s), n, dt, a_ptr, r_ptr, m_ptr)
-        else:
-            for k in range(n):
-                self._python_step(dt)
-                if record:
-                    angles[k] = self.s.angle[0], self.s.angle[1]
-                    rates[k] = self.body.angular_velocity
-                if logging:
-                    forward, lateral = self.axle_velocity()
-                    motion[k, 1:4] = forward, lateral, self.body.angular_velocity
+        for k in range(n):
+            self._python_step(dt)
+            if record:
+                wheel_angles[k] = self.s.angle[0], self.s.angle[1]
+                rates[k] = self.body.angular_velocity
+            if logging:
+                forward, lateral = self.axle_velocity()
+                motion[k, 1:4] = forward, lateral, self.body.angular_velocity
         if logging:
             assert self._motion_log is not None
+            self._close_log_chunk()
             motion[:, 0] = t0 + dt * np.arange(1, n + 1)
             motion[:, 4], motion[:, 5] = self.s.volts[0], self.s.volts[1]
             self._motion_log.append(motion)
-        return (angles, rates) if record else None
+        if not record:
+            return None
+        return (wheel_angles if angles else np.empty((0, 2))), rates
 
     def _wheel(self, i: int, ground: float, dt: float) -> float:
         """Implicit step of one wheel against the ground speed under it; returns the
@@ -418,6 +478,23 @@ class Plant:
         b.torque = torque_axle - xg * fy_b
         self.space.step(dt)
         s.time += dt
+
+
+_NONE = np.empty(0)
+_NO_ANGLES = np.empty((0, 2))
+_NO_ANGLES.flags.writeable = False
+#: Rows of motion log ``advance_batch`` writes into one array.
+_LOG_CHUNK = 1 << 14
+
+
+def _address(a: np.ndarray) -> int | None:
+    """The address of ``a``'s data for the kernel (None, a NULL, for ``_NONE``)."""
+    return a.__array_interface__["data"][0] if a is not _NONE else None
+
+
+def _data(a: np.ndarray) -> int:
+    """The address of ``a``'s data."""
+    return int(a.__array_interface__["data"][0])
 
 
 def _side_index(side: str) -> int:

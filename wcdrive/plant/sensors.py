@@ -7,6 +7,7 @@ import math
 import numpy as np
 
 from wcdrive.history import History
+from wcdrive.plant.chair import load_kernel
 from wcdrive.plant.params import ChairParams
 from wcdrive.protocol.spec import real
 
@@ -22,9 +23,14 @@ class Gyro:
     """A BMI085-like z-axis gyro: samples at ``gyro_rate_hz`` with white noise and a
     bias that drifts as a random walk. Deterministic for a given seed. ``times`` and
     ``rates`` keep every sample, or with ``history`` only the newest ``history`` (for a
-    board that runs for hours)."""
+    board that runs for hours).
 
-    def __init__(self, params: ChairParams, seed: int = 0, history: int | None = None) -> None:
+    Its random draws come from a buffer filled ahead in batches
+    (``standard_normal(n)`` is the same stream as n single draws), so ``sample`` and
+    ``sample_steps`` give the same samples whichever is called, bit for bit."""
+
+    def __init__(self, params: ChairParams, seed: int = 0, history: int | None = None, *,
+                 use_kernel: bool = True) -> None:
         self.period = 1.0 / params.gyro_rate_hz
         self._rng = np.random.default_rng(seed)
         dps = math.pi / 180.0
@@ -34,11 +40,80 @@ class Gyro:
         self.next_time = 0.0
         self.times: list[float] = [] if history is None else History(maxlen=history)
         self.rates: list[float] = [] if history is None else History(maxlen=history)
+        self._draws = np.empty(0)
+        self._used = 0
+        self._kernel = load_kernel() if use_kernel else None
+        #: gyro_samples' arguments: next time, bias, end, t0, dt, period, walk step, noise
+        self._args = np.zeros(8)
+        self._args_at = _address(self._args)
+        self._out = np.empty((2, 0))
+        self._out_at = (0, 0)
+        self._draws_at = 0
+
+    def _reserve(self, count: int) -> None:
+        """At least ``count`` unused draws in the buffer."""
+        if self._used + count > self._draws.size:
+            fresh = self._rng.standard_normal(max(count, _DRAW_BATCH))
+            self._draws = np.concatenate((self._draws[self._used:], fresh))
+            self._draws_at = _address(self._draws)
+            self._used = 0
+
+    def _draw(self) -> float:
+        self._reserve(1)
+        self._used += 1
+        return float(self._draws[self._used - 1])
 
     def sample(self, time: float, true_rate: float) -> None:
         """Takes every sample due by ``time`` at the current true yaw rate."""
         while self.next_time <= time + 1e-12:
-            self.bias += self.walk * math.sqrt(self.period) * float(self._rng.standard_normal())
+            self.bias += self.walk * math.sqrt(self.period) * self._draw()
             self.times.append(self.next_time)
-            self.rates.append(true_rate + self.bias + self.noise * float(self._rng.standard_normal()))
+            self.rates.append(true_rate + self.bias + self.noise * self._draw())
             self.next_time += self.period
+
+    def sample_steps(self, t0: float, dt: float, rates: np.ndarray) -> None:
+        """Every sample due by the end of ``len(rates)`` plant steps of ``dt`` from
+        ``t0``, each at the true yaw rate of the step it falls in (``rates``): bit for
+        bit what ``sample`` takes one sample at a time (the C kernel's
+        ``gyro_samples``, or the same lines here without it)."""
+        steps = len(rates)
+        end = t0 + dt * steps + 1e-12
+        if steps <= 0 or self.next_time > end:
+            return
+        most = int((end - self.next_time) / self.period) + 2
+        self._reserve(2 * most)
+        walk = self.walk * math.sqrt(self.period)
+        if self._kernel is None:
+            true = rates.tolist()
+            t, bias, used, draws = self.next_time, self.bias, self._used, self._draws
+            while t <= end:
+                bias += walk * float(draws[used])
+                k = min(steps - 1, max(0, int((t - t0) / dt - 1e-9)))
+                self.times.append(t)
+                self.rates.append(true[k] + bias + self.noise * float(draws[used + 1]))
+                used += 2
+                t += self.period
+            self.next_time, self.bias, self._used = t, bias, used
+            return
+        if self._out.shape[1] < most:
+            self._out = np.empty((2, max(most, 64)))
+            self._out_at = (_address(self._out), _address(self._out) + 8 * self._out.shape[1])
+        args, out = self._args, self._out
+        args[0], args[1], args[2], args[3], args[4] = self.next_time, self.bias, end, t0, dt
+        args[5], args[6], args[7] = self.period, walk, self.noise
+        if not (rates.flags.c_contiguous and rates.dtype == np.float64):
+            rates = np.ascontiguousarray(rates, dtype=np.float64)
+        n = self._kernel.gyro_samples(steps, self._args_at, _address(rates), self._draws_at + 8 * self._used,
+                                      most, *self._out_at)
+        self._used += 2 * n
+        self.next_time, self.bias = float(args[0]), float(args[1])
+        self.times.extend(out[0, :n].tolist())
+        self.rates.extend(out[1, :n].tolist())
+
+
+#: Random draws the gyro takes from its generator at a time.
+_DRAW_BATCH = 4096
+
+
+def _address(a: np.ndarray) -> int:
+    return int(a.__array_interface__["data"][0])

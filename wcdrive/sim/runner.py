@@ -20,6 +20,7 @@ spot is not "still"), and its travel the longer of their two paths.
 
 from __future__ import annotations
 
+import bisect
 import math
 import re
 import time
@@ -223,6 +224,7 @@ class _Host:
         #: take 9 times as long as the rest of the run.
         self.ekfs: tuple[Ekf2D, ...] = (self.ekf, self.ekf_vel) if ekf else ()
         self._gyro_index = 0
+        self._idle_ekf_poses: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
         self.lines = {"feedback": 0, "error": 0, "event": 0, "other": 0}
 
     def receive(self, t: float, data: bytes) -> None:
@@ -230,26 +232,34 @@ class _Host:
             if isinstance(msg, Feedback):
                 self.lines["feedback"] += 1
                 times, rates = self.gyro.times, self.gyro.rates
-                while self._gyro_index < len(times) and times[self._gyro_index] <= t:
-                    self.integrator.add(times[self._gyro_index], rates[self._gyro_index])
+                upto = bisect.bisect_right(times, t, self._gyro_index)
+                if not self.ekfs:
+                    self.integrator.add_many(times, rates, self._gyro_index, upto)
+                for i in range(self._gyro_index, upto) if self.ekfs else ():
+                    self.integrator.add(times[i], rates[i])
                     for ekf in self.ekfs:
-                        ekf.imu(times[self._gyro_index], self.integrator.heading, rates[self._gyro_index])
-                    self._gyro_index += 1
-                self.position.update(t, msg.count_left, msg.count_right)
-                self.velocity.update(t, msg.count_left, msg.count_right)
+                        ekf.imu(times[i], self.integrator.heading, rates[i])
+                self._gyro_index = upto
+                self.position.integrate(t, msg.count_left, msg.count_right)
+                self.velocity.integrate(t, msg.count_left, msg.count_right)
                 v = self.velocity
                 for ekf in self.ekfs:
                     ekf.odometry(t, v.pose.x, v.pose.y, v.pose.theta, v.linear, v.angular)
                 self.gyro_odom.use_gyro_heading(self.integrator.heading_at(t))
-                self.gyro_odom.update(t, msg.count_left, msg.count_right)
+                self.gyro_odom.integrate(t, msg.count_left, msg.count_right)
             else:
                 key = type(msg).__name__.lower()
                 self.lines[key if key in self.lines else "other"] += 1
 
     def poses(self) -> tuple[tuple[float, float, float], ...]:
-        return (*((o.pose.x, o.pose.y, o.pose.theta)
-                  for o in (self.position, self.velocity, self.gyro_odom)), self.ekf.pose,
-                self.ekf_vel.pose)
+        p, v, g = self.position.pose, self.velocity.pose, self.gyro_odom.pose
+        if self.ekfs:
+            ekf, ekf_vel = self.ekf.pose, self.ekf_vel.pose
+        else:                           # filters that never run: their first pose, kept
+            if self._idle_ekf_poses is None:
+                self._idle_ekf_poses = (self.ekf.pose, self.ekf_vel.pose)
+            ekf, ekf_vel = self._idle_ekf_poses
+        return (p.x, p.y, p.theta), (v.x, v.y, v.theta), (g.x, g.y, g.theta), ekf, ekf_vel
 
 
 class _Pilot:
@@ -297,9 +307,10 @@ class _Log:
 
     def add(self, cycle: int, plant: Plant, host: _Host, setpoint, measured, pwm, counts) -> None:
         wheel, velocity, gyro, ekf, ekf_vel = host.poses()
-        heading = plant.pose[2]
-        caster = tuple(_wrap(c - heading) for c in plant.caster_heading)
-        self.rows.append((cycle / F_CPU, plant.pose, wheel, velocity, gyro, setpoint, measured,
+        pose = plant.pose
+        left, right = plant.caster_heading
+        caster = (_wrap(left - pose[2]), _wrap(right - pose[2]))
+        self.rows.append((cycle / F_CPU, pose, wheel, velocity, gyro, setpoint, measured,
                           (plant.left.speed, plant.right.speed), pwm, caster, counts, ekf, ekf_vel))
         self.tick_cycles.append(cycle)
 

@@ -158,9 +158,10 @@ static void step(chair_t *c, double dt) {
 
 /* n steps; after each, the wheel angles (left, right) and the yaw rate are stored
  * in the output arrays when they are not NULL, and in motion (6 doubles a step) the
- * axle midpoint's forward and lateral speed and the yaw rate, in slots 1 to 3 (Python
- * fills slot 0 with the time and 4, 5 with the voltages: Plant.start_motion_log). */
-void chair_advance(chair_t *c, int32_t n, double dt, double *angles, double *yaw_rates,
+ * time at the step's end (t0 + dt (k + 1), as numpy computes it), the axle midpoint's
+ * forward and lateral speed, the yaw rate and the motor voltages over the step
+ * (Plant.start_motion_log). */
+void chair_advance(chair_t *c, int32_t n, double dt, double t0, double *angles, double *yaw_rates,
                    double *motion) {
     for (int32_t k = 0; k < n; k++) {
         step(c, dt);
@@ -175,9 +176,39 @@ void chair_advance(chair_t *c, int32_t n, double dt, double *angles, double *yaw
             double th = ((get_f_fn)c->get_angle)(c->body);
             double cs = cos(th), sn = sin(th), xg = c->cog_x;
             double ax = v.x + w * xg * sn, ay = v.y - w * xg * cs;
+            motion[6 * k] = t0 + dt * (double)(k + 1);
             motion[6 * k + 1] = ax * cs + ay * sn;
             motion[6 * k + 2] = -ax * sn + ay * cs;
             motion[6 * k + 3] = w;
+            motion[6 * k + 4] = c->volts[0];
+            motion[6 * k + 5] = c->volts[1];
         }
     }
+}
+
+/* The gyro's samples (wcdrive.plant.sensors.Gyro.sample_steps) due by g[2] (t_end)
+ * over n plant steps of g[4] (dt) from g[3] (t0) whose yaw rates are yaw_rates: from
+ * g[0] (the next sample's time) on, every g[5] (period), while the time is <= t_end;
+ * each sample takes two draws (the bias's random-walk step, scaled by g[6], then the
+ * noise, scaled by g[7]) and the yaw rate of the step it falls in. The same operations,
+ * in the same order, as Gyro.sample in Python. g[0] and g[1] (the bias) move on;
+ * returns the number of samples written to times and values (at most max_samples). */
+int32_t gyro_samples(int32_t n, double *g, const double *yaw_rates, const double *draws,
+                     int32_t max_samples, double *times, double *values) {
+    double t = g[0], bias = g[1], t_end = g[2], t0 = g[3], dt = g[4], period = g[5];
+    double walk = g[6], noise = g[7];
+    int32_t m = 0;
+    while (t <= t_end && m < max_samples) {
+        bias += walk * draws[2 * m];
+        int64_t k = (int64_t)((t - t0) / dt - 1e-9);
+        if (k > n - 1) k = n - 1;
+        if (k < 0) k = 0;
+        times[m] = t;
+        values[m] = yaw_rates[k] + bias + noise * draws[2 * m + 1];
+        m++;
+        t += period;
+    }
+    g[0] = t;
+    g[1] = bias;
+    return m;
 }
