@@ -629,8 +629,8 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
     illStepsL = illAccL;
     illR = illegalR;
     illStepsR = illAccR;
-    stormTickL = stormL;
-    stormTickR = stormR;
+    stormTickL = stormL != 0;   // the ISR sets a non-zero byte
+    stormTickR = stormR != 0;
     rxLostTick = rxLost;
   }
   encTickL = countL + stepsL;
