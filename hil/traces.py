@@ -116,14 +116,21 @@ class Trace:
     millis_start: int | None = None
     #: Encoder storms in the trains (``storm``): (side, start s, end s).
     storms: list[tuple[str, float, float]] = field(default_factory=list)
+    #: The EEPROM's contents at power-on (``EEPROM_SIZE`` bytes; None: erased).
+    eeprom: bytes | None = None
+    #: Resets of the board during the trace (``VirtualMega.reset``): (s, cause).
+    resets: list[tuple[float, str]] = field(default_factory=list)
 
     def describe(self) -> str:
         """The trace as text for a failure report, one serial write a line."""
         lines = [f"duration={self.duration}s millis_start={self.millis_start}"]
+        if self.eeprom is not None:
+            lines.append(f"  EEPROM at power-on: {self.eeprom[:48].hex()}...")
         lines += [f"  t={t:.4f}s {data!r}" for t, data in self.serial]
         for side, train in self.encoders.items():
             lines.append(f"  {side}: {train.times.size} edges, count {train.start_count}"
                          f" -> {train.end_count}")
+        lines += [f"  reset ({cause}) at t={t:.4f}s" for t, cause in self.resets]
         lines += [f"  storm on {side} from {a:.4f}s to {b:.4f}s" for side, a, b in self.storms]
         return "\n".join(lines)
 
