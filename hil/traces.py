@@ -59,8 +59,11 @@ class Draw(Protocol):
 class RandomDraw:
     """Choices from ``random.Random(seed)``: one seed, one trace."""
 
-    def __init__(self, seed: int) -> None:
+    def __init__(self, seed: int, *, eeprom_commands: bool = True) -> None:
+        """``eeprom_commands=False``: the generator as it was before ``save`` and
+        ``defaults``, so that a seed found then gives the same trace."""
         self.rng = random.Random(seed)
+        self.eeprom_commands = eeprom_commands
 
     def integer(self, lo: int, hi: int) -> int:
         """An integer in [lo, hi]."""
@@ -251,8 +254,14 @@ def param_command(draw: Draw) -> bytes:
 
 
 def protocol_v2_command(draw: Draw) -> bytes:
-    """``hello``, ``estop``, ``reset``, or a ``get:``/``set:`` (``param_command``)."""
-    kind = draw.integer(0, 9)
+    """``hello``, ``estop``, ``reset``, a ``get:``/``set:`` (``param_command``), ``save``
+    or ``defaults``. (``RandomDraw``'s 0..11 takes 4 bits, as 0..9 did: a seed's trace
+    changes only where it now draws 10 or 11.)"""
+    kind = draw.integer(0, 11 if getattr(draw, "eeprom_commands", True) else 9)
+    if kind == 10:
+        return b"save"
+    if kind == 11:
+        return b"defaults"
     if kind == 0:
         return b"hello"
     if kind == 1:
