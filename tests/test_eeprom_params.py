@@ -11,7 +11,7 @@ import pytest
 
 from wcdrive.boards.simavr.virtual_mega import F_CPU, VirtualMega
 from wcdrive.firmware import constants as C
-from wcdrive.firmware.eeprom import BLOCK_BYTES, DATA_BYTES, block_image, check, crc, pack
+from wcdrive.firmware.eeprom import BLOCK_BYTES, DATA_BYTES, block_image, check, ee_crc, pack
 from wcdrive.firmware.final_control import Firmware
 from wcdrive.firmware.state import FirmwareState
 from wcdrive.hil.lockstep import Recording, compare, record
@@ -94,7 +94,7 @@ def _corrupt(kind: str) -> bytes:
                       "NaN": (1 + 4 * 6, struct.pack("<I", 0x7FC00000)),         # max_wheel
                       "watchdog out of range": (DATA_BYTES - 2, struct.pack("<H", 99))}[kind]
         image[field:field + len(raw)] = raw
-        image[DATA_BYTES:DATA_BYTES + 2] = struct.pack("<H", crc(bytes(image[:DATA_BYTES])))
+        image[DATA_BYTES:DATA_BYTES + 2] = struct.pack("<H", ee_crc(bytes(image[:DATA_BYTES])))
     elif kind == "blank":
         image = bytearray(b"\xff" * C.EEPROM_SIZE)
     elif kind == "zeros":

@@ -53,7 +53,7 @@ FIRST_OVERFLOW_CYCLE = TIMER0_START_CYCLE + OVERFLOW_CYCLES
 RESET_CAUSE = "EXTERNAL"
 #: Cycles from a reset until ``setup()``'s ``Serial.begin`` enables the receiver
 #: (measured on the ELF in simavr): bytes that arrive earlier are lost.
-SERIAL_READY_CYCLES = 10_466
+SERIAL_READY_CYCLES = 10_717
 
 
 class _Encoder:

@@ -33,7 +33,7 @@ _DEFAULT_VALUES: dict[str, float | int] = {p.field: FirmwareState.__dataclass_fi
                                            for p in PARAMS}  # type: ignore[misc]
 
 
-def crc(block: bytes) -> int:
+def ee_crc(block: bytes) -> int:
     """``eeCrc``: CRC-16/XMODEM of the block's data bytes."""
     return binascii.crc_hqx(bytes(block[:DATA_BYTES]), 0)
 
@@ -42,7 +42,7 @@ def pack(s: FirmwareState) -> bytes:
     """The block that ``save`` writes for the parameters in force."""
     data = bytes([C.EEPROM_LAYOUT]) + b"".join(struct.pack("<f", getattr(s, p.field)) for p in _FLOATS)
     data += struct.pack("<H", getattr(s, _WATCHDOG.field))
-    return data + struct.pack("<H", crc(data))
+    return data + struct.pack("<H", ee_crc(data))
 
 
 def block_image(values: dict[str, float | int] | None = None, *, layout: int = C.EEPROM_LAYOUT) -> bytes:
@@ -55,7 +55,7 @@ def block_image(values: dict[str, float | int] | None = None, *, layout: int = C
     block = bytearray(pack(s))
     if layout != C.EEPROM_LAYOUT:
         block[0] = layout
-        block[DATA_BYTES:] = struct.pack("<H", crc(block))
+        block[DATA_BYTES:] = struct.pack("<H", ee_crc(block))
     image = bytearray(b"\xff" * C.EEPROM_SIZE)
     image[C.EEPROM_PARAMS_ADDR:C.EEPROM_PARAMS_ADDR + BLOCK_BYTES] = block
     return bytes(image)
@@ -113,7 +113,7 @@ def check(block: bytes) -> str | None:
         return "blank"
     if block[0] != C.EEPROM_LAYOUT:
         return "version"
-    if struct.unpack_from("<H", block, DATA_BYTES)[0] != crc(block):
+    if struct.unpack_from("<H", block, DATA_BYTES)[0] != ee_crc(block):
         return "crc"
     ms = struct.unpack_from("<H", block, DATA_BYTES - 2)[0]
     if ms < _WATCHDOG.low or ms > _WATCHDOG.high:
