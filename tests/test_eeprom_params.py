@@ -154,9 +154,9 @@ def test_the_port_alone() -> None:
     assert fw.boot_output().endswith(b"EVT:PARAMS_DEFAULT,blank\r\n")
     assert fw.state.txCredit == C.TX_CREDIT_MAX - len(b"EVT:PARAMS_DEFAULT,blank\r\n")
     fw.feed(b"set:kp_l=3.5\nsave\n")
-    assert fw.state.eeprom[0] == C.EEPROM_LAYOUT and fw.state.eeNext == 1
+    assert fw.state.eeprom[0] == C.EEPROM_LAYOUT and fw.state.eeNext == 1 and fw.state.eeBusy
     written = 1
-    while fw.state.eeNext < BLOCK_BYTES:
+    while fw.state.eeBusy:
         fw.eeprom_ready()
         written += 1
     assert bytes(fw.state.eeprom[:BLOCK_BYTES]) == pack(fw.state)
@@ -196,3 +196,38 @@ def test_an_eeprom_write_never_blocks_loop(record_property) -> None:
         print(f"EEPROM-ready interrupt: {min(isr)} to {max(isr)} cycles")
     finally:
         mega.close()
+
+
+# ---- the host: Wheelchair.save_params / restore_defaults / params_at_boot -----------
+@pytest.mark.parametrize("backend", ["sim", "simavr"])
+def test_the_host_saves_and_the_board_boots_with_them(backend: str) -> None:
+    """Through the pty, as a program would: set, save, a DTR reset (reopening the port),
+    the board boots with the saved values and says so; ``restore_defaults`` is RAM only."""
+    import wcdrive
+    from wcdrive.boards.sim_board import SimulatedBoard
+    from wcdrive.boards.simavr.mega_board import MegaBoard
+    from wcdrive.transports.pty_bridge import PtyBridge
+
+    if backend == "sim":
+        sim = SimulatedBoard()
+        bridge = PtyBridge(sim.start(), on_open=sim.dtr).start()
+    else:
+        board = MegaBoard(realtime=True)
+        bridge = PtyBridge(board, on_open=board.dtr).start()
+        board.start()
+    try:
+        with wcdrive.connect(bridge.device) as chair:
+            assert chair.params_at_boot == "PARAMS_DEFAULT,blank"
+            assert chair.set_param("kp_l", 3.25) == 3.25
+            assert chair.set_param("watchdog_ms", 300) == 300
+            chair.save_params()
+            chair.save_params()          # busy while the first is written: retried
+            chair.restore_defaults()
+            assert chair.get_param("kp_l") == pytest.approx(7.2)
+        with wcdrive.connect(bridge.device) as chair:     # the open resets it (DTR)
+            assert chair.reset_cause == "EXTERNAL"
+            assert chair.params_at_boot == "PARAMS_LOADED"
+            assert chair.get_param("kp_l") == 3.25
+            assert chair.get_param("watchdog_ms") == 300
+    finally:
+        bridge.close()

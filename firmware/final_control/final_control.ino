@@ -1000,7 +1000,8 @@ static ParseResult parseSet(uint8_t& data) {
 #define EE_DATA_BYTES (1 + 4 * (PARAM_COUNT - 1) + 2)
 #define EE_BLOCK_BYTES (EE_DATA_BYTES + 2)
 static uint8_t eeBlock[EE_BLOCK_BYTES];   // what save writes
-uint8_t eeNext = EE_BLOCK_BYTES;          // the next byte of eeBlock to write (EE_BLOCK_BYTES: none)
+uint8_t eeNext = EE_BLOCK_BYTES;          // the next byte of eeBlock to compare and write
+uint8_t eeBusy = 0;                       // a save is being written (the interrupt is on)
 
 static uint16_t eeCrc(const uint8_t* b) {
   uint16_t crc = 0;
@@ -1011,7 +1012,8 @@ static uint16_t eeCrc(const uint8_t* b) {
 // Writes the next byte of eeBlock that differs from the EEPROM and arms the EEPROM-ready
 // interrupt, which comes back here when that write is done (3.4 ms on the chip): one
 // byte per interrupt, so neither loop() nor an interrupt ever waits for the EEPROM.
-// Once every byte matches, the interrupt is turned off.
+// Once every byte matches, the interrupt is turned off: the last write is done, so the
+// EEPROM is free for the next save (the chip ignores a write while one is in progress).
 static inline __attribute__((always_inline)) void eeWriteNext() {
   while (eeNext < EE_BLOCK_BYTES &&
          eeprom_read_byte((const uint8_t*)(WC_EEPROM_PARAMS_ADDR + eeNext)) == eeBlock[eeNext]) {
@@ -1019,6 +1021,7 @@ static inline __attribute__((always_inline)) void eeWriteNext() {
   }
   if (eeNext == EE_BLOCK_BYTES) {
     EECR &= (uint8_t)~_BV(EERIE);
+    eeBusy = 0;
     return;
   }
   EEAR = WC_EEPROM_PARAMS_ADDR + eeNext;
@@ -1026,6 +1029,7 @@ static inline __attribute__((always_inline)) void eeWriteNext() {
   EECR |= _BV(EEMPE);     // EEPE within 4 cycles of EEMPE: interrupts are off here
   EECR |= _BV(EEPE);
   eeNext++;
+  eeBusy = 1;
   EECR |= _BV(EERIE);
 }
 
@@ -1036,7 +1040,7 @@ ISR(EE_READY_vect) { eepromReady(); }
 // save: the parameters in force into the EEPROM, written in the background; refused
 // (busy) while the last save is still being written.
 static ParseResult saveParams() {
-  if (eeNext < EE_BLOCK_BYTES) return ERR_BUSY;
+  if (eeBusy) return ERR_BUSY;
   eeBlock[0] = WC_EEPROM_LAYOUT;
   for (uint8_t i = 0; i < PARAM_COUNT - 1; i++) memcpy(eeBlock + 1 + 4 * i, PARAM_VARS[i], 4);
   memcpy(eeBlock + 1 + 4 * (PARAM_COUNT - 1), &watchdogMs, 2);

@@ -29,11 +29,10 @@ DATA_BYTES = BLOCK_BYTES - 2
 _FLOATS = PARAMS[:-1]
 _WATCHDOG = PARAMS[-1]
 #: The parameters' defaults (the globals' initial values).
-_DEFAULT_VALUES: dict[str, float | int] = {p.field: FirmwareState.__dataclass_fields__[p.field].default
-                                           for p in PARAMS}  # type: ignore[misc]
+_DEFAULT_VALUES: dict[str, float | int] = {p.field: getattr(FirmwareState(), p.field) for p in PARAMS}
 
 
-def ee_crc(block: bytes) -> int:
+def ee_crc(block: bytes | bytearray) -> int:
     """``eeCrc``: CRC-16/XMODEM of the block's data bytes."""
     return binascii.crc_hqx(bytes(block[:DATA_BYTES]), 0)
 
@@ -61,6 +60,27 @@ def block_image(values: dict[str, float | int] | None = None, *, layout: int = C
     return bytes(image)
 
 
+def image_for(event: str) -> bytes:
+    """An EEPROM image with which ``setup()`` sends ``event`` (``PARAMS_LOADED``: the
+    defaults saved; ``PARAMS_DEFAULT,<why>``: a block that fails that way): for a replay,
+    which sees the board's event but not its EEPROM."""
+    if event == "PARAMS_LOADED":
+        return block_image()
+    why = event.removeprefix("PARAMS_DEFAULT,")
+    if why == "blank":
+        return b"\xff" * C.EEPROM_SIZE
+    if why == "version":
+        return block_image(layout=C.EEPROM_LAYOUT + 1)
+    image = bytearray(block_image())
+    if why == "crc":
+        image[C.EEPROM_PARAMS_ADDR + DATA_BYTES] ^= 0xFF
+    elif why == "range":
+        image = bytearray(block_image({_WATCHDOG.field: 0}))
+    else:
+        raise ValueError(f"no EEPROM gives {event!r}")
+    return bytes(image)
+
+
 def ee_write_next(s: FirmwareState) -> None:
     """``eeWriteNext``: writes the next byte of ``eeBlock`` that differs from the EEPROM
     (the interrupt then comes back), or, when none does, turns the interrupt off."""
@@ -68,9 +88,11 @@ def ee_write_next(s: FirmwareState) -> None:
     while s.eeNext < BLOCK_BYTES and s.eeprom[base + s.eeNext] == s.eeBlock[s.eeNext]:
         s.eeNext += 1
     if s.eeNext == BLOCK_BYTES:
+        s.eeBusy = 0
         return
     s.eeprom[base + s.eeNext] = s.eeBlock[s.eeNext]
     s.eeNext += 1
+    s.eeBusy = 1
 
 
 def eeprom_ready(s: FirmwareState) -> None:
@@ -79,15 +101,35 @@ def eeprom_ready(s: FirmwareState) -> None:
 
 
 def writing(s: FirmwareState) -> bool:
-    """Whether a save is still being written (the EEPROM-ready interrupt is on)."""
-    return s.eeNext < BLOCK_BYTES
+    """Whether a save is still being written (``eeBusy``: the EEPROM-ready interrupt is
+    on, until it finds every byte written and the last write done)."""
+    return bool(s.eeBusy)
 
 
-def settle(s: FirmwareState) -> None:
-    """Every EEPROM-ready interrupt of the save in progress, at once: the EEPROM as it
-    is once the chip has finished writing (about 3.4 ms a byte)."""
-    while writing(s):
-        eeprom_ready(s)
+#: An EEPROM byte's write time, in cycles at 16 MHz: 3.4 ms, as simavr times it (the
+#: datasheet gives 3.3 ms).
+WRITE_CYCLES = 54_400
+
+
+class ReadyInterrupt:
+    """The EEPROM-ready interrupt in time, for a board that runs the port against a
+    clock (``PortLoop``): ``poll(state, cycle)`` calls ``eeprom_ready`` once
+    ``WRITE_CYCLES`` have passed since the write it first saw in progress (at most one
+    interrupt a poll's worth of time late)."""
+
+    def __init__(self) -> None:
+        self.due: int | None = None
+
+    def poll(self, s: FirmwareState, cycle: int) -> None:
+        """At ``cycle``: the interrupts that are due."""
+        while s.eeBusy:
+            if self.due is None:
+                self.due = cycle + WRITE_CYCLES
+            if cycle < self.due:
+                return
+            eeprom_ready(s)
+            self.due += WRITE_CYCLES
+        self.due = None
 
 
 def save_params(s: FirmwareState) -> str | None:

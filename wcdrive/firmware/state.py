@@ -36,7 +36,7 @@ INT_FIELDS = (
     "rxCount", "crcRejected", "stormTickL", "stormTickR", "faultFlags", "stallTicksL",
     "stallTicksR", "reverseTicksL", "reverseTicksR", "effortPwmL", "effortPwmR",
     "effortTicksL", "effortTicksR", "txDropped", "txRingFull", "txCredit", "rxGaps", "rxLostTick",
-    "eeNext",
+    "eeNext", "eeBusy",
 )
 
 #: Globals the tick takes as inputs rather than computes (loop() measures them).
@@ -138,10 +138,11 @@ class FirmwareState:
     rxGaps: int = 0
     rxLostTick: int = 0
     #: The EEPROM (``EEPROM_SIZE`` bytes, erased: 0xFF), the block a ``save`` writes and
-    #: the next byte of it to write (``eeprom.BLOCK_BYTES``, 41: none; ``wcdrive.firmware.eeprom``).
+    #: the next byte of it to write, and whether a save is being written (``wcdrive.firmware.eeprom``).
     eeprom: bytearray = field(default_factory=lambda: bytearray(b"\xff" * C.EEPROM_SIZE))
     eeBlock: bytearray = field(default_factory=lambda: bytearray(EE_BLOCK_BYTES))
     eeNext: int = EE_BLOCK_BYTES
+    eeBusy: int = 0
     cmdBuf: bytearray = field(default_factory=bytearray)
     cmdLen: int = 0
     cmdCommas: int = 0

@@ -72,7 +72,7 @@ VARIABLE_FORMATS = {
           "cmdCommas", "cmdDiscarding", "errLinesThisTick", "lastEncodedL", "lastEncodedR",
           "timer0_fract", "estopLatched", "tlmEnabled", "unframedLine", "stormTickL", "stormTickR",
           "stallTicksL", "stallTicksR", "reverseTicksL", "reverseTicksR", "stormL", "stormR",
-          "resetCause", "effortPwmL", "effortPwmR", "effortTicksL", "effortTicksR", "eeNext"),
+          "resetCause", "effortPwmL", "effortPwmR", "effortTicksL", "effortTicksR", "eeNext", "eeBusy"),
 }
 _FORMAT_OF = {name: fmt for fmt, names in VARIABLE_FORMATS.items() for name in names}
 
