@@ -33,6 +33,17 @@ BOOT line of the reset's cause (MCUSR); the state the firmware shows right after
 new ``setup()`` is compared with that, the encoder counts are checked from the count
 at the reset on, and the TX stream is compared boot by boot (what sat in the TX ring
 at the reset is lost on the chip, so each boot's bytes only need to start the port's).
+
+The EEPROM is compared too, after every event, and the port's own EEPROM goes through
+each reset (the new boot loads what the port wrote; ``Trace.eeprom`` is the image at
+power-on). A ``save`` writes its block one byte per EEPROM-ready interrupt
+(``eepromReady``, 3.4 ms apart); the harness logs each entry
+(``Recording.eeprom_writes``) and the port takes those that came before the state was
+read, after the event they fell in (they touch only the EEPROM, ``eeNext`` and
+``eeBusy``, which no event but ``save`` reads). A ``save`` whose own parse the last
+interrupt of the previous save interrupts, before it reads ``eeBusy``, is accepted
+by the firmware and refused ``busy`` by the port: a mismatch that is the harness's,
+not seen so far (the window is a few hundred cycles once per save).
 """
 
 from __future__ import annotations
