@@ -1024,10 +1024,12 @@ static inline __attribute__((always_inline)) void eeWriteNext() {
     eeBusy = 0;
     return;
   }
-  EEAR = WC_EEPROM_PARAMS_ADDR + eeNext;
-  EEDR = eeBlock[eeNext];
-  EECR |= _BV(EEMPE);     // EEPE within 4 cycles of EEMPE: interrupts are off here
-  EECR |= _BV(EEPE);
+  ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
+    EEAR = WC_EEPROM_PARAMS_ADDR + eeNext;
+    EEDR = eeBlock[eeNext];
+    EECR |= _BV(EEMPE);     // EEPE within 4 cycles of EEMPE
+    EECR |= _BV(EEPE);
+  }
   eeNext++;
   eeBusy = 1;
   EECR |= _BV(EERIE);
@@ -1035,7 +1037,14 @@ static inline __attribute__((always_inline)) void eeWriteNext() {
 
 // The EEPROM-ready interrupt. Not inlined: the lock-step harness stops at its entry.
 extern "C" __attribute__((noinline)) void eepromReady() { eeWriteNext(); }
-ISR(EE_READY_vect) { eepromReady(); }
+// The interrupt is level-triggered (EEPE clear and EERIE set): off first, then the
+// other interrupts back on, so that the encoders' are never held for the ~150 cycles
+// this one takes (merged edges at top speed otherwise).
+ISR(EE_READY_vect) {
+  EECR &= (uint8_t)~_BV(EERIE);
+  sei();
+  eepromReady();
+}
 
 // save: the parameters in force into the EEPROM, written in the background; refused
 // (busy) while the last save is still being written.
@@ -1046,10 +1055,8 @@ static ParseResult saveParams() {
   memcpy(eeBlock + 1 + 4 * (PARAM_COUNT - 1), &watchdogMs, 2);
   uint16_t crc = eeCrc(eeBlock);
   memcpy(eeBlock + EE_DATA_BYTES, &crc, 2);
-  ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
-    eeNext = 0;
-    eeWriteNext();
-  }
+  eeNext = 0;
+  eeWriteNext();
   return PARSE_OK;
 }
 
