@@ -196,3 +196,25 @@ def test_an_eeprom_write_never_blocks_loop_or_the_encoders(record_property) -> N
               f"{min(held)} to {max(held)}")
     finally:
         mega.close()
+
+
+@pytest.mark.parametrize("seed", [1014, 1024])
+def test_regression_the_eeprom_interrupt_held_the_encoders(seed: int) -> None:
+    """Found by ``wcdrive verify``-style traces with saves at top edge rates: while the
+    EEPROM-ready interrupt held the others off for its whole run, encoder edges merged
+    into illegal transitions the decoder did not see (91 mismatches on seed 1014)."""
+    from wcdrive.hil.traces import RandomDraw, generate_trace
+
+    trace = generate_trace(RandomDraw(seed), 5.0)
+    assert b"save" in b"".join(data for _, data in trace.serial)
+    _same(trace)
+
+
+@pytest.mark.parametrize("event", ["PARAMS_LOADED", "PARAMS_DEFAULT,blank", "PARAMS_DEFAULT,version",
+                                   "PARAMS_DEFAULT,crc", "PARAMS_DEFAULT,range"])
+def test_a_replay_boots_the_port_to_the_boards_event(event: str) -> None:
+    """``bench replay`` sees the board's event, not its EEPROM: ``image_for`` gives one
+    with which the port sends the same line."""
+    from wcdrive.firmware.eeprom import image_for
+
+    assert Firmware(eeprom=image_for(event)).boot_output().endswith(f"EVT:{event}\r\n".encode())
