@@ -218,3 +218,25 @@ def test_a_replay_boots_the_port_to_the_boards_event(event: str) -> None:
     from wcdrive.firmware.eeprom import image_for
 
     assert Firmware(eeprom=image_for(event)).boot_output().endswith(f"EVT:{event}\r\n".encode())
+
+
+def test_the_virtual_megas_eeprom_survives_every_reset() -> None:
+    """``VirtualMega``: erased at power-on, preloadable, kept across resets of every cause
+    (non-volatile, as on the chip), its bounds checked."""
+    image = block_image(TUNED_VALUES)
+    with VirtualMega() as blank:
+        assert blank.eeprom_size == C.EEPROM_SIZE
+        assert blank.read_eeprom() == b"\xff" * C.EEPROM_SIZE
+    with VirtualMega(eeprom=image) as mega:
+        mega.run_for(0.01)
+        for cause in ("external", "brownout", "power_on"):
+            mega.reset(cause)
+            mega.run_for(0.01)
+            assert mega.read_eeprom() == image
+        assert mega.take_tx_text().count("EVT:PARAMS_LOADED") == 4
+        mega.write_eeprom(b"\x00", address=C.EEPROM_SIZE - 1)
+        assert mega.read_eeprom(C.EEPROM_SIZE - 1, 1) == b"\x00"
+        with pytest.raises(ValueError):
+            mega.write_eeprom(b"\x00\x00", address=C.EEPROM_SIZE - 1)
+        with pytest.raises(ValueError):
+            mega.read_eeprom(C.EEPROM_SIZE, 1)
