@@ -33,6 +33,17 @@ BOOT line of the reset's cause (MCUSR); the state the firmware shows right after
 new ``setup()`` is compared with that, the encoder counts are checked from the count
 at the reset on, and the TX stream is compared boot by boot (what sat in the TX ring
 at the reset is lost on the chip, so each boot's bytes only need to start the port's).
+
+The EEPROM is compared too, after every event, and the port's own EEPROM goes through
+each reset (the new boot loads what the port wrote; ``Trace.eeprom`` is the image at
+power-on). A ``save`` writes its block one byte per EEPROM-ready interrupt
+(``eepromReady``, 3.4 ms apart); the harness logs each entry
+(``Recording.eeprom_writes``) and the port takes those that came before the state was
+read, after the event they fell in (they touch only the EEPROM, ``eeNext`` and
+``eeBusy``, which no event but ``save`` reads). A ``save`` whose own parse the last
+interrupt of the previous save interrupts, before it reads ``eeBusy``, is accepted
+by the firmware and refused ``busy`` by the port: a mismatch that is the harness's,
+not seen so far (the window is a few hundred cycles once per save).
 """
 
 from __future__ import annotations
@@ -46,7 +57,7 @@ import numpy as np
 from wcdrive.avr.f32 import bits
 from wcdrive.boards.simavr.virtual_mega import F_CPU, RxLoss, VirtualMega
 from wcdrive.firmware.constants import CONTROL_PERIOD_MS
-from wcdrive.firmware.final_control import Firmware, boot_line, reset_cause_name
+from wcdrive.firmware.final_control import Firmware, reset_cause_name
 from wcdrive.firmware.quadrature import ILLEGAL, QUAD_TABLE
 from wcdrive.firmware.state import FLOAT_FIELDS, INPUT_FIELDS, INT_FIELDS, FirmwareState
 from wcdrive.hil.traces import Trace
@@ -75,6 +86,9 @@ class Event:
     after: dict[str, float | int] = field(default_factory=dict)
     pwm: tuple[int, int] = (0, 0)
     direction: tuple[int, int] = (1, 1)
+    #: The EEPROM's contents it left, and the cycle at which ``after`` was read.
+    eeprom: bytes = b""
+    after_cycle: int = 0
 
 
 @dataclass
@@ -99,6 +113,11 @@ class Recording:
     #: Whether ``rx_wire`` is complete: False for recordings that did not log it (then
     #: the delivery check is skipped).
     rx_logged: bool = False
+    #: The EEPROM's contents after ``setup()`` (b"": not kept), and the cycle of each
+    #: entry to the EEPROM-ready interrupt (``eepromReady``: one byte of a ``save``
+    #: written), which is not an event of its own: it may come in the middle of one.
+    initial_eeprom: bytes = b""
+    eeprom_writes: list[int] = field(default_factory=list)
 
 
 @dataclass
@@ -153,7 +172,10 @@ class Recorder:
         self.resets: list[tuple[int, int, dict[str, float | int]]] = []
         self._reset_pending: tuple[int, int] | None = None
         self._boot_state: dict[str, float | int] = {}
-        mega.break_on("processByte", "controlTick", "rxGap")
+        self.initial_eeprom = b""
+        self.eeprom_writes: list[int] = []
+        self._eeprom = b""
+        mega.break_on("processByte", "controlTick", "rxGap", "eepromReady")
 
     def reset(self, cause: str = "external") -> None:
         """Resets the Mega (``VirtualMega.reset``) after closing the last event with the
@@ -166,6 +188,13 @@ class Recorder:
         m = self.mega
         return (m.snapshot(_WATCHED), (m.pwm("left"), m.pwm("right")),
                 (m.direction("left"), m.direction("right")))
+
+    def _read_eeprom(self) -> bytes:
+        """The EEPROM now (the same object as last time when it has not changed)."""
+        image = self.mega.read_eeprom()
+        if image != self._eeprom:
+            self._eeprom = image
+        return self._eeprom
 
     def _end_reset(self) -> None:
         """A reset is followed by an event (or the end): the state now is the new boot's."""
@@ -184,14 +213,19 @@ class Recorder:
         elif self.events:
             last = self.events[-1]
             last.after, last.pwm, last.direction = state, pwm, direction
+            last.eeprom, last.after_cycle = self._read_eeprom(), self.mega.cycle
         elif self.initial is None and at_event:
             self.initial = state
+            self.initial_eeprom = self._read_eeprom()
 
     def run_until(self, cycle: int) -> None:
         """Runs the Mega to ``cycle``, logging every event on the way."""
         mega = self.mega
         while mega.run_to_break(cycle):
             hit = mega.hit_log[-1]
+            if hit.function == "eepromReady":
+                self.eeprom_writes.append(hit.cycle)     # not an event: see Recording
+                continue
             self._close_last()
             self._end_reset()
             kind = {"processByte": "byte", "controlTick": "tick"}.get(hit.function, "gap")
@@ -218,18 +252,23 @@ class Recorder:
         tx_cycles = [c for c, _ in self.mega.tx_log]
         mega = self.mega
         return Recording(trace, self.initial, self.events, tx, end, resets, tx_cycles,
-                         list(mega.rx_wire), [x for x in mega.rx_lost if x.cycle < end], rx_logged=True)
+                         list(mega.rx_wire), [x for x in mega.rx_lost if x.cycle < end], rx_logged=True,
+                         initial_eeprom=self.initial_eeprom or self._read_eeprom(),
+                         eeprom_writes=list(self.eeprom_writes))
 
 
 def record(trace: Trace, elf: str | Path | None = None) -> Recording:
     """Runs ``trace`` on the firmware ``elf`` (default: the bundled one, built if
     needed) in simavr and logs every event."""
-    mega = VirtualMega(elf, millis_start=trace.millis_start)
+    mega = VirtualMega(elf, millis_start=trace.millis_start, eeprom=trace.eeprom)
     for t, data in trace.serial:
         mega.send(data, at=round(t * F_CPU))
     for side, train in trace.encoders.items():
         mega.encoder_edges(side, train)
     recorder = Recorder(mega)
+    for t, cause in sorted(trace.resets):
+        recorder.run_until(round(t * F_CPU))
+        recorder.reset(cause)
     recorder.run_until(round(trace.duration * F_CPU))
     recording = recorder.recording(trace)
     mega.close()
@@ -237,8 +276,10 @@ def record(trace: Trace, elf: str | Path | None = None) -> Recording:
 
 
 def initial_state(recording: Recording) -> FirmwareState:
-    """The port's state after setup(): the default state with the boot millis()."""
-    return FirmwareState(lastControlTime=int(recording.initial["lastControlTime"]))
+    """The port's state after setup(): the default state with the boot millis() and the
+    parameters ``setup()`` loaded from the trace's EEPROM."""
+    return Firmware(boot_millis=int(recording.initial["lastControlTime"]),
+                    eeprom=recording.trace.eeprom).state
 
 
 def _decoded_counts(trace: Trace, side: str) -> tuple[tuple[np.ndarray, np.ndarray],
@@ -261,12 +302,15 @@ def _decoded_counts(trace: Trace, side: str) -> tuple[tuple[np.ndarray, np.ndarr
 def compare(recording: Recording) -> Report:
     """Replays the recording's events on the port and lists every difference (the
     module docstring says what is compared)."""
-    fw = Firmware(initial_state(recording))
+    fw = Firmware(boot_millis=int(recording.initial["lastControlTime"]), eeprom=recording.trace.eeprom)
     mismatches: list[Mismatch] = []
     fields_compared = 0
     # The state right after setup() must be the port's boot state.
     for name, port_value, fw_value in _differences(fw.state, recording.initial):
         mismatches.append(Mismatch(-1, 0, name, port_value, fw_value))
+    mismatches.extend(_eeprom_differences(-1, 0, fw.state.eeprom, recording.initial_eeprom))
+    writes = list(recording.eeprom_writes)
+    w = 0
     boots = [bytearray(fw.boot_output())]           # the port's TX, boot by boot
     decoded = {side: _decoded_counts(recording.trace, side) for side in ("left", "right")}
     # What the decoder had counted when the firmware's counts started from 0 (at
@@ -325,10 +369,18 @@ def compare(recording: Recording) -> Report:
                           latched["illTickR"], free_ram=int(before["freeRam"]),
                           storm_l=latched["stormTickL"], storm_r=latched["stormTickR"],
                           rx_lost=int(ev.after["rxLostTick"]))
+        # The EEPROM-ready interrupts that came before the state was read: their writes
+        # touch nothing the event does, so their order within it does not matter.
+        while w < len(writes) and writes[w] < ev.after_cycle:
+            fw.eeprom_ready()
+            w += 1
         diffs = _differences(fw.state, ev.after)
         fields_compared += len(FLOAT_FIELDS) + len(INT_FIELDS) + 4
         for name, port_value, fw_value in diffs:
             mismatches.append(Mismatch(i, ticks, name, port_value, fw_value))
+        if ev.eeprom:
+            fields_compared += 1
+            mismatches.extend(_eeprom_differences(i, ticks, fw.state.eeprom, ev.eeprom))
         port_io = ((fw.state.pwmL, fw.state.pwmR), (fw.state.dirL, fw.state.dirR))
         if port_io != (ev.pwm, ev.direction):
             mismatches.append(Mismatch(i, ticks, "pins (pwm, dir)", str(port_io),
@@ -339,8 +391,10 @@ def compare(recording: Recording) -> Report:
             # and must match the new boot's state.
             cycle, mcusr, booted = resets.pop(0)
             masked.clear()                  # the new boot counts from 0, unmasked
-            fw = Firmware(FirmwareState(lastControlTime=int(booted["lastControlTime"])))
-            boots.append(bytearray(boot_line(reset_cause_name(mcusr))))
+            # The EEPROM survives: the new boot loads what the port itself wrote.
+            fw = Firmware(boot_millis=int(booted["lastControlTime"]), eeprom=fw.state.eeprom,
+                          cause=reset_cause_name(mcusr))
+            boots.append(bytearray(fw.boot_output()))
             for side in ("left", "right"):
                 for k in (0, 1):
                     counts, cycles = decoded[side][k]
@@ -533,6 +587,14 @@ def _count_possible(decoded: tuple[np.ndarray, np.ndarray], count: int, start: i
     candidates = {int(counts[lo - 1]) if lo > 0 else 0}
     candidates.update(int(c) for c in counts[lo:hi])
     return count in candidates
+
+
+def _eeprom_differences(i: int, tick: int, port: bytes | bytearray, fw: bytes) -> list[Mismatch]:
+    """The first EEPROM byte where the port's image and the firmware's differ, if any."""
+    if not fw or bytes(port) == fw:
+        return []
+    at = next((j for j, (a, b) in enumerate(zip(port, fw, strict=False)) if a != b), min(len(port), len(fw)))
+    return [Mismatch(i, tick, f"EEPROM byte {at}", bytes(port[at:at + 8]).hex(), fw[at:at + 8].hex())]
 
 
 def _differences(state: FirmwareState, fw: dict[str, float | int]) -> list[tuple[str, str, str]]:

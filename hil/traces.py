@@ -58,8 +58,11 @@ class Draw(Protocol):
 class RandomDraw:
     """Choices from ``random.Random(seed)``: one seed, one trace."""
 
-    def __init__(self, seed: int) -> None:
+    def __init__(self, seed: int, *, eeprom_commands: bool = True) -> None:
+        """``eeprom_commands=False``: the generator as it was before ``save`` and
+        ``defaults``, so that a seed found then gives the same trace."""
         self.rng = random.Random(seed)
+        self.eeprom_commands = eeprom_commands
 
     def integer(self, lo: int, hi: int) -> int:
         """An integer in [lo, hi]."""
@@ -115,14 +118,21 @@ class Trace:
     millis_start: int | None = None
     #: Encoder storms in the trains (``storm``): (side, start s, end s).
     storms: list[tuple[str, float, float]] = field(default_factory=list)
+    #: The EEPROM's contents at power-on (``EEPROM_SIZE`` bytes; None: erased).
+    eeprom: bytes | None = None
+    #: Resets of the board during the trace (``VirtualMega.reset``): (s, cause).
+    resets: list[tuple[float, str]] = field(default_factory=list)
 
     def describe(self) -> str:
         """The trace as text for a failure report, one serial write a line."""
         lines = [f"duration={self.duration}s millis_start={self.millis_start}"]
+        if self.eeprom is not None:
+            lines.append(f"  EEPROM at power-on: {self.eeprom[:48].hex()}...")
         lines += [f"  t={t:.4f}s {data!r}" for t, data in self.serial]
         for side, train in self.encoders.items():
             lines.append(f"  {side}: {train.times.size} edges, count {train.start_count}"
                          f" -> {train.end_count}")
+        lines += [f"  reset ({cause}) at t={t:.4f}s" for t, cause in self.resets]
         lines += [f"  storm on {side} from {a:.4f}s to {b:.4f}s" for side, a, b in self.storms]
         return "\n".join(lines)
 
@@ -243,8 +253,14 @@ def param_command(draw: Draw) -> bytes:
 
 
 def protocol_v2_command(draw: Draw) -> bytes:
-    """``hello``, ``estop``, ``reset``, or a ``get:``/``set:`` (``param_command``)."""
-    kind = draw.integer(0, 9)
+    """``hello``, ``estop``, ``reset``, a ``get:``/``set:`` (``param_command``), ``save``
+    or ``defaults``. (``RandomDraw``'s 0..11 takes 4 bits, as 0..9 did: a seed's trace
+    changes only where it now draws 10 or 11.)"""
+    kind = draw.integer(0, 11 if getattr(draw, "eeprom_commands", True) else 9)
+    if kind == 10:
+        return b"save"
+    if kind == 11:
+        return b"defaults"
     if kind == 0:
         return b"hello"
     if kind == 1:

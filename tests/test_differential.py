@@ -49,7 +49,8 @@ def test_port_matches_firmware_on_fixed_seeds(elf, seed: int) -> None:
     21000079,   # the trace ends 1,455 cycles into processByte(','): its state read only once it is done
 ])
 def test_regression_found_by_the_wider_generator(elf, seed: int) -> None:
-    _assert_same(generate_trace(RandomDraw(seed), 5.0), elf)
+    # Found before the generator sent save/defaults: the same trace as then.
+    _assert_same(generate_trace(RandomDraw(seed, eeprom_commands=False), 5.0), elf)
 
 
 def test_millis_wrap_inside_a_trace(elf) -> None:

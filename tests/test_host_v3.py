@@ -346,7 +346,7 @@ def _reset_board(board: SimulatedBoard) -> None:
     with board._lock:
         loop = board.loop
         loop.fw = Firmware(boot_millis=loop.timer.millis)
-        loop.output.append((loop.cycle, Firmware.boot_output()))
+        loop.output.append((loop.cycle, loop.fw.boot_output()))
 
 
 def test_a_board_that_resets_mid_session_is_handshaken_again(rig) -> None:
@@ -385,7 +385,7 @@ def test_a_reset_that_cuts_a_line_is_still_seen(rig) -> None:
         with board._lock:
             loop = board.loop
             loop.fw = Firmware(boot_millis=loop.timer.millis)
-            loop.output.append((loop.cycle, b"ENC:-7585,7424,VEL:2.68,2.63" + Firmware.boot_output()))
+            loop.output.append((loop.cycle, b"ENC:-7585,7424,VEL:2.68,2.63" + loop.fw.boot_output()))
         state = board.loop.fw.state
         _wait(lambda: "BOARD_RESET" in chair.events, "the host to notice the reset", timeout=2.0)
         _wait(lambda: state.tlmEnabled, "hello again", timeout=3.0)

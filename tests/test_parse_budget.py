@@ -234,6 +234,8 @@ KNOWN = [
     (frame(b"x:-0.000000000001e-99,t:-0.00000000001e-99,", 65535), b"ACK:65535"),
     (frame(b"rp0.0000000000001e-99,lp0.000000000001e-99,", 65535), b"ACK:65535"),
     (frame(b"set:kp_l=9.999999999999999999999e+00", 65535), b"PAR:kp_l,10.0000"),
+    (frame(b"save", 65535), b"ACK:65535"),         # packs the block, writes its first byte
+    (frame(b"defaults", 65535), b"ACK:65535"),
 ]
 
 

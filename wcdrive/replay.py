@@ -21,7 +21,9 @@ from pathlib import Path
 
 from wcdrive.avr.timer0 import millis_after
 from wcdrive.firmware.constants import CONTROL_PERIOD_MS
+from wcdrive.firmware.eeprom import image_for
 from wcdrive.firmware.final_control import Firmware
+from wcdrive.firmware.state import FirmwareState
 from wcdrive.protocol.codec import ExtendedTelemetry, Feedback, parse_line
 from wcdrive.transports.recording import Recording
 
@@ -183,15 +185,26 @@ def _replay_boot(segment: bytes, sent: bytes) -> ReplayReport:
     if pre:
         report.notes.append(f"{pre} ticks before hello, millis() from the Timer0 model")
 
-    fw = Firmware()
+    # setup()'s line about the parameters in EEPROM: the port boots from an EEPROM that
+    # gives the same (a board that loaded saved values: the recording does not hold them,
+    # so the port runs the defaults). A board without the line: the port skips it.
+    event = lines[0].rstrip(b"\r\n")[4:].decode() if lines and lines[0].startswith(b"EVT:PARAMS_") else ""
+    if event:
+        fw = Firmware(eeprom=image_for(event))
+        produced = bytearray(fw.boot_output().partition(b"\r\n")[2])
+        if event == "PARAMS_LOADED":
+            report.notes.append("the board loaded parameters saved in its EEPROM, which the "
+                                "recording does not show: the port runs the defaults")
+    else:
+        fw = Firmware(FirmwareState())
+        produced = bytearray()
     fw.state.lastControlTime = candidates[0]
-    produced = bytearray()
     recorded = b"".join(lines[:tick_starts[-1] + (2 if tick_starts[-1] in tlm_of else 1)])
     pos = 0
     event_lines = (b"EVT:WATCHDOG\r\n",)
     for k, i in enumerate(tick_starts):
         # Replies recorded before this tick's lines (the watchdog event belongs to the tick).
-        start = tick_starts[k - 1] + (2 if tick_starts[k - 1] in tlm_of else 1) if k else 0
+        start = tick_starts[k - 1] + (2 if tick_starts[k - 1] in tlm_of else 1) if k else int(bool(event))
         end = i - 1 if i > 0 and lines[i - 1] in event_lines else i
         between = b"".join(lines[start:end])
         if i in tlm_of:

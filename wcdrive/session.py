@@ -192,6 +192,9 @@ class Session:
         self.faults_announced: History[str] = History()
         #: The cause of the board's last reset as its ``BOOT:`` line gave it ("" before one).
         self.reset_cause = ""
+        #: What the board said of its parameters at its last boot: ``PARAMS_LOADED`` or
+        #: ``PARAMS_DEFAULT,<why>`` ("" before such a line; a board without parameters in EEPROM sends none).
+        self.params_at_boot = ""
         self._handshake_done = threading.Event()
         self._hello_tries = 0                   # hellos sent since the port was opened
         self._hello_sent_at = 0.0
@@ -572,6 +575,8 @@ class Session:
                 self._hello_step(now)
         elif isinstance(msg, Event):
             self.events.append(msg.name)
+            if msg.name.startswith("PARAMS_"):
+                self.params_at_boot = msg.name
             if msg.name == "ESTOP":
                 _log.warning("%s: e-stop latched on the board", self.name)
                 self.estop_announced = True

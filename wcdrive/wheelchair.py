@@ -46,11 +46,13 @@ from wcdrive.errors import (
 )
 from wcdrive.odometry import OdometryEstimate
 from wcdrive.protocol.codec import (
+    DEFAULTS,
     ESTOP,
     MAX_ANGULAR,
     MAX_LINEAR,
     MAX_WHEEL,
     RESET,
+    SAVE,
     ExtendedTelemetry,
     Param,
     encode_cmdvel,
@@ -414,6 +416,42 @@ class Wheelchair:
     def set_param(self, name: str, value: float) -> float:
         """Sets a parameter; returns the value now in force (as the board rounded it)."""
         return self._param(encode_set(name, value))
+
+    def save_params(self, timeout: float = 1.0) -> None:
+        """Stores the parameters in force in the board's EEPROM (protocol/PROTOCOL.md,
+        "Parameters in EEPROM"): it loads them at every boot from then on
+        (``params_at_boot``). The board writes them in the background, one byte per
+        3.4 ms (about 140 ms); a save sent meanwhile is refused ``busy``, and this
+        retries it until ``timeout``."""
+        self._eeprom_command(SAVE, timeout)
+
+    def restore_defaults(self) -> None:
+        """Puts every parameter back to the firmware's default. The EEPROM keeps what was
+        saved (the next boot loads it again) until ``save_params()``."""
+        self._eeprom_command(DEFAULTS, 0.0)
+
+    @property
+    def params_at_boot(self) -> str:
+        """What the board said of its parameters when it last booted: ``PARAMS_LOADED``
+        (those saved in its EEPROM) or ``PARAMS_DEFAULT,<why>`` (``blank``, ``version``,
+        ``crc``, ``range``); "" when no such line was seen (a board without parameters
+        in EEPROM sends none)."""
+        return self._session.params_at_boot
+
+    def _eeprom_command(self, command: bytes, timeout: float) -> None:
+        if self.protocol_version == 1:
+            raise WcdriveProtocolError(f"{self.url} speaks protocol v1 (legacy): it has no "
+                                       "parameters")
+        self._require_link(repr(command.decode().strip()))
+        deadline = time.monotonic() + timeout
+        while True:
+            try:
+                self._session.request(command.rstrip(b"\n"))
+                return
+            except WcdriveCommandError as exc:
+                if exc.reason != "busy" or time.monotonic() > deadline:
+                    raise
+            time.sleep(0.05)
 
     def _param(self, command: bytes) -> float:
         if self.protocol_version == 1:

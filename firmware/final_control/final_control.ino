@@ -23,6 +23,7 @@
 #include <util/atomic.h>
 #include <util/crc16.h>
 #include <avr/wdt.h>
+#include <avr/eeprom.h>
 
 #include "wc_config.h"
 #include "HardwareSerial_private.h"   // the core's HardwareSerial constructor and TX interrupt
@@ -1094,6 +1095,127 @@ static ParseResult parseSet(uint8_t& data) {
   return PARSE_OK;
 }
 
+// ---------------------------------------------------------------------------
+// Parameters in EEPROM (protocol/PROTOCOL.md, "Parameters in EEPROM"). The block at
+// WC_EEPROM_PARAMS_ADDR: the layout version (WC_EEPROM_LAYOUT), the 9 float parameters in
+// table order (binary32, little-endian), watchdog_ms (uint16), then the CRC-16/XMODEM of
+// those 39 bytes (uint16, little-endian): 41 bytes.
+// ---------------------------------------------------------------------------
+#define EE_DATA_BYTES (1 + 4 * (PARAM_COUNT - 1) + 2)
+#define EE_BLOCK_BYTES (EE_DATA_BYTES + 2)
+static uint8_t eeBlock[EE_BLOCK_BYTES];   // what save writes
+uint8_t eeNext = EE_BLOCK_BYTES;          // the next byte of eeBlock to compare and write
+uint8_t eeBusy = 0;                       // a save is being written (the interrupt is on)
+
+static uint16_t eeCrc(const uint8_t* b) {
+  uint16_t crc = 0;
+  for (uint8_t i = 0; i < EE_DATA_BYTES; i++) crc = _crc_xmodem_update(crc, b[i]);
+  return crc;
+}
+
+// Writes the next byte of eeBlock that differs from the EEPROM and arms the EEPROM-ready
+// interrupt, which comes back here when that write is done (3.4 ms on the chip): one
+// byte per interrupt, so neither loop() nor an interrupt ever waits for the EEPROM.
+// Once every byte matches, the interrupt is turned off: the last write is done, so the
+// EEPROM is free for the next save (the chip ignores a write while one is in progress).
+static inline __attribute__((always_inline)) void eeWriteNext() {
+  while (eeNext < EE_BLOCK_BYTES &&
+         eeprom_read_byte((const uint8_t*)(WC_EEPROM_PARAMS_ADDR + eeNext)) == eeBlock[eeNext]) {
+    eeNext++;
+  }
+  if (eeNext == EE_BLOCK_BYTES) {
+    EECR &= (uint8_t)~_BV(EERIE);
+    eeBusy = 0;
+    return;
+  }
+  ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
+    EEAR = WC_EEPROM_PARAMS_ADDR + eeNext;
+    EEDR = eeBlock[eeNext];
+    EECR |= _BV(EEMPE);     // EEPE within 4 cycles of EEMPE
+    EECR |= _BV(EEPE);
+  }
+  eeNext++;
+  eeBusy = 1;
+  EECR |= _BV(EERIE);
+}
+
+// The EEPROM-ready interrupt. Not inlined: the lock-step harness stops at its entry.
+extern "C" __attribute__((noinline)) void eepromReady() { eeWriteNext(); }
+// The interrupt is level-triggered (EEPE clear and EERIE set): off first, then the
+// other interrupts back on, so that the encoders' are never held for the ~150 cycles
+// this one takes (merged edges at top speed otherwise).
+ISR(EE_READY_vect) {
+  EECR &= (uint8_t)~_BV(EERIE);
+  sei();
+  eepromReady();
+}
+
+// save: the parameters in force into the EEPROM, written in the background; refused
+// (busy) while the last save is still being written.
+static ParseResult saveParams() {
+  if (eeBusy) return ERR_BUSY;
+  eeBlock[0] = WC_EEPROM_LAYOUT;
+  for (uint8_t i = 0; i < PARAM_COUNT - 1; i++) memcpy(eeBlock + 1 + 4 * i, PARAM_VARS[i], 4);
+  memcpy(eeBlock + 1 + 4 * (PARAM_COUNT - 1), &watchdogMs, 2);
+  uint16_t crc = eeCrc(eeBlock);
+  memcpy(eeBlock + EE_DATA_BYTES, &crc, 2);
+  eeNext = 0;
+  eeWriteNext();
+  return PARSE_OK;
+}
+
+// defaults: the parameters back to the firmware's defaults (the EEPROM is not written:
+// a save after it stores them).
+static ParseResult restoreDefaults() {
+  kpL = WC_KP_L; kiL = WC_KI_L; kdL = WC_KD_L;
+  kpR = WC_KP_R; kiR = WC_KI_R; kdR = WC_KD_R;
+  maxWheel = WC_MAX_WHEEL_SPEED;
+  maxAccel = WC_MAX_ACCEL;
+  estopDecel = WC_EMERGENCY_DECEL;
+  watchdogMs = WC_WATCHDOG_MS;
+  return PARSE_OK;
+}
+
+// At boot: the saved parameters if the block is whole (version, CRC, every value in its
+// range; EVT:PARAMS_LOADED), else the defaults stay (EVT:PARAMS_DEFAULT,<why>).
+static void loadParams() {
+  uint8_t b[EE_BLOCK_BYTES];
+  eeprom_read_block(b, (const void*)WC_EEPROM_PARAMS_ADDR, EE_BLOCK_BYTES);
+  const __FlashStringHelper* why = NULL;
+  bool blank = true;
+  for (uint8_t i = 0; i < EE_BLOCK_BYTES; i++) {
+    if (b[i] != 0xFF) blank = false;
+  }
+  uint16_t crc;
+  memcpy(&crc, b + EE_DATA_BYTES, 2);
+  uint16_t ms;
+  memcpy(&ms, b + 1 + 4 * (PARAM_COUNT - 1), 2);
+  if (blank) {
+    why = F("blank");
+  } else if (b[0] != WC_EEPROM_LAYOUT) {
+    why = F("version");
+  } else if (crc != eeCrc(b)) {
+    why = F("crc");
+  } else if (ms < WC_WATCHDOG_MIN_MS || ms > WC_WATCHDOG_MAX_MS) {
+    why = F("range");
+  } else {
+    for (uint8_t i = 0; i < PARAM_COUNT - 1; i++) {
+      float v;
+      memcpy(&v, b + 1 + 4 * i, 4);
+      if (!(v >= PARAM_MIN[i] && v <= PARAM_MAX[i])) why = F("range");   // NaN too
+    }
+  }
+  if (why == NULL) {
+    for (uint8_t i = 0; i < PARAM_COUNT - 1; i++) memcpy(PARAM_VARS[i], b + 1 + 4 * i, 4);
+    watchdogMs = ms;
+    sendEvent(F("PARAMS_LOADED"));
+  } else {
+    line.print(F("EVT:PARAMS_DEFAULT,"));
+    line.println(why);
+    line.send();
+  }
+}
+
 // Which command the buffer holds, by its first bytes: the number of fields it
 // takes, or 0 when no command starts that way.
 static uint8_t fieldsExpected() {
@@ -1167,6 +1289,8 @@ static ParseResult dispatch(uint8_t& data) {
   if (strcmp_P(cmdBuf, PSTR("reset")) == 0) return resetEstop();
   if (strncmp_P(cmdBuf, PSTR("get:"), 4) == 0) return parseGet(data);
   if (strncmp_P(cmdBuf, PSTR("set:"), 4) == 0) return parseSet(data);
+  if (strcmp_P(cmdBuf, PSTR("save")) == 0) return saveParams();
+  if (strcmp_P(cmdBuf, PSTR("defaults")) == 0) return restoreDefaults();
   if (cmdBuf[0] == 'r') return parseWheel();
   return ERR_SYNTAX;
 }
@@ -1307,6 +1431,7 @@ void setup() {
   line.send();
   // The budget starts after the BOOT line: WC_TX_CREDIT_MAX leaves the ring room for it.
   txCredit = WC_TX_CREDIT_MAX;
+  loadParams();                 // and its EVT line, within the budget
   wdt_enable(WC_HW_WATCHDOG);   // a loop() pass that hangs resets the board
   lastControlTime = lastTickTime = millis();
 }

@@ -94,6 +94,11 @@
 #define WC_MODE_CMDVEL 1
 #define WC_MODE_PPM 2
 
+// ---- Parameters in EEPROM (save / defaults; protocol/PROTOCOL.md) ----------
+#define WC_EEPROM_SIZE 4096        // bytes of the ATmega2560's EEPROM, erased to 0xFF
+#define WC_EEPROM_PARAMS_ADDR 0    // EEPROM address of the parameter block
+#define WC_EEPROM_LAYOUT 1         // the block's first byte: its layout version (a blank EEPROM holds 0xFF)
+
 // ---- Ranges of the runtime parameters (get:/set:; the defaults are the constants above) ---
 #define WC_GAIN_P_MIN 1.0f         // kp_l, kp_r in [GAIN_P_MIN, GAIN_P_MAX] (tests/test_gain_safety.py: pure integral control oscillates)
 #define WC_GAIN_P_MAX 10.0f

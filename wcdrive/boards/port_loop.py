@@ -54,7 +54,8 @@ from wcdrive.avr.timer0 import (
     storm_window,
 )
 from wcdrive.avr.uart import UART_BYTE_CYCLES
-from wcdrive.firmware.final_control import Firmware, boot_line
+from wcdrive.firmware.eeprom import ReadyInterrupt
+from wcdrive.firmware.final_control import Firmware
 from wcdrive.firmware.quadrature import QuadratureDecoder
 from wcdrive.plant import Gyro, Plant
 from wcdrive.plant.encoders import edges_from_trajectory, state_for_count
@@ -75,7 +76,7 @@ FIRST_OVERFLOW_CYCLE = TIMER0_START_CYCLE + OVERFLOW_CYCLES
 RESET_CAUSE = "EXTERNAL"
 #: Cycles from a reset until ``setup()``'s ``Serial.begin`` enables the receiver
 #: (measured on the ELF in simavr): bytes that arrive earlier are lost.
-SERIAL_READY_CYCLES = 10_928
+SERIAL_READY_CYCLES = 10_987
 
 
 class _Encoder:
@@ -190,6 +191,7 @@ class PortLoop:
         #: The cycle of the last control tick (None: none yet).
         self.last_tick_cycle: int | None = None
         self._overflow = FIRST_OVERFLOW_CYCLE
+        self._eeprom_ready = ReadyInterrupt()
         self._steps_done = 0
         self._rx = _Wire()
         self._wire_free = 0
@@ -370,6 +372,7 @@ class PortLoop:
                     self.output.append((overflow, out))
                 if masked:
                     self._unmask_cleared(overflow)
+            self._eeprom_ready.poll(fw.state, overflow)
             millis = self.timer.millis
             if fw.due(millis):
                 self._advance_to(overflow)
@@ -397,7 +400,9 @@ class PortLoop:
         are lost; later ones reach the new firmware."""
         now = self.cycle
         self._advance_to(now)
-        self.fw = Firmware(boot_millis=0)
+        # The EEPROM survives, as far as a save had written it.
+        self.fw = Firmware(boot_millis=0, eeprom=self.fw.state.eeprom, cause=RESET_CAUSE)
+        self._eeprom_ready = ReadyInterrupt()
         self.timer = Timer0()
         self.boot_cycle = now
         self._overflow = now + FIRST_OVERFLOW_CYCLE
@@ -407,7 +412,7 @@ class PortLoop:
             enc.reboot(count)
         s = self.fw.state
         self.plant.set_drive(s.pwmL, s.dirL, s.pwmR, s.dirR)
-        self.output.append((now, boot_line(RESET_CAUSE)))
+        self.output.append((now, self.fw.boot_output()))
 
     def encoder_counts(self) -> tuple[int, int]:
         """The counts the ISRs hold at the plant's present step (left, right)."""

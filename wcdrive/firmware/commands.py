@@ -19,6 +19,7 @@ import re
 from wcdrive.avr.avrlibc import strtod
 from wcdrive.avr.f32 import add, constrain, div, from_int, mul, sub
 from wcdrive.firmware import constants as C
+from wcdrive.firmware.eeprom import restore_defaults, save_params
 from wcdrive.firmware.motion import accept_command, emergency_halt
 from wcdrive.firmware.output import DATA_HELLO, DATA_NONE, DATA_PARAM, answer, reject, send, send_event
 from wcdrive.firmware.params import BY_NAME, PARAMS
@@ -392,6 +393,11 @@ def dispatch(s: FirmwareState, body: bytes, out: bytearray) -> tuple[str | None,
     if body[:4] == b"set:":
         reason, i = parse_set(s, body)
         return reason, DATA_PARAM, i
+    if body == b"save":
+        return save_params(s), DATA_NONE, 0
+    if body == b"defaults":
+        restore_defaults(s)
+        return None, DATA_NONE, 0
     return move_to(s, body, out), DATA_NONE, 0
 
 

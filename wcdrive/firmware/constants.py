@@ -98,6 +98,11 @@ MODE_CMDVEL = integer("MODE_CMDVEL")
 MODE_PPM = integer("MODE_PPM")
 
 # Ranges of the runtime parameters (get:/set:; the defaults are the constants above)
+# Parameters in EEPROM
+EEPROM_SIZE = integer("EEPROM_SIZE")
+EEPROM_PARAMS_ADDR = integer("EEPROM_PARAMS_ADDR")
+EEPROM_LAYOUT = integer("EEPROM_LAYOUT")
+
 GAIN_P_MIN = f32(real("GAIN_P_MIN"))
 GAIN_P_MAX = f32(real("GAIN_P_MAX"))
 GAIN_I_MIN = f32(real("GAIN_I_MIN"))

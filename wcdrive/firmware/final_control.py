@@ -21,6 +21,7 @@ from __future__ import annotations
 from wcdrive.firmware.commands import process_bytes, rx_gap
 from wcdrive.firmware.constants import CONTROL_PERIOD_MS
 from wcdrive.firmware.control import control_tick
+from wcdrive.firmware.eeprom import eeprom_ready, load_params
 from wcdrive.firmware.state import FirmwareState
 
 #: ``BOOT:final_control,<cause>``: what setup() sends, the cause from MCUSR.
@@ -47,22 +48,41 @@ def boot_line(cause: str = "POWER_ON") -> bytes:
 #: What ``measureFreeRam()`` reports on the Mega build (bytes between the heap and the
 #: stack in loop()); the simulated board reports it too. tests/test_protocol_v2.py checks
 #: it against the ELF running in simavr, so a firmware change that moves it fails there.
-FREE_RAM = 6793
+FREE_RAM = 6729
 
 
 class Firmware:
     """The sketch's globals (``state``) and its ``loop()``, one call per input."""
 
-    def __init__(self, state: FirmwareState | None = None, *, boot_millis: int = 0) -> None:
-        """A board just out of ``setup()`` (which ends with ``lastControlTime =
-        millis()``), or one in any given ``state``."""
-        self.state = state if state is not None else FirmwareState(lastControlTime=boot_millis)
+    def __init__(self, state: FirmwareState | None = None, *, boot_millis: int = 0,
+                 eeprom: bytes | bytearray | None = None, cause: str = "POWER_ON") -> None:
+        """A board just out of ``setup()`` (which sends the BOOT line of ``cause``, loads
+        the parameters from ``eeprom``, the EEPROM's contents, erased when None, and ends
+        with ``lastControlTime = millis()``), or one in any given ``state`` (then setup()
+        does not run, and the boot output is the BOOT line alone)."""
+        if state is None:
+            state = FirmwareState(lastControlTime=boot_millis)
+            if eeprom is not None:
+                if len(eeprom) != len(state.eeprom):
+                    raise ValueError(f"an EEPROM image is {len(state.eeprom)} bytes, not {len(eeprom)}")
+                state.eeprom[:] = eeprom
+            out = bytearray(boot_line(cause))
+            load_params(state, out)
+            self._boot = bytes(out)
+        else:
+            if eeprom is not None:
+                raise ValueError("eeprom= is for a board that boots (no state given)")
+            self._boot = boot_line(cause)
+        self.state = state
         self.free_ram = FREE_RAM
 
-    @staticmethod
-    def boot_output() -> bytes:
-        """What ``setup()`` sent."""
-        return BOOT_LINE
+    def boot_output(self) -> bytes:
+        """What ``setup()`` sent: the BOOT line and the EEPROM's ``EVT:PARAMS_*`` line."""
+        return self._boot
+
+    def eeprom_ready(self) -> None:
+        """``eepromReady``: the EEPROM-ready interrupt (a byte of a ``save`` is written)."""
+        eeprom_ready(self.state)
 
     def loop(self, now: int, data: bytes, count_l: int, count_r: int, illegal_l: int = 0,
              illegal_r: int = 0) -> bytes:
@@ -102,7 +122,8 @@ class Firmware:
         return bytes(out)
 
 
-def setup(boot_millis: int = 0) -> Firmware:
-    """The sketch's ``setup()``: a board that has just sent ``BOOT_LINE`` and whose
+def setup(boot_millis: int = 0, eeprom: bytes | bytearray | None = None) -> Firmware:
+    """The sketch's ``setup()``: a board that has just sent ``BOOT_LINE`` and its
+    parameters' event (``eeprom``: the EEPROM's contents; erased when None), and whose
     ``lastControlTime`` is ``millis()`` at the end of ``setup()``."""
-    return Firmware(boot_millis=boot_millis)
+    return Firmware(boot_millis=boot_millis, eeprom=eeprom)

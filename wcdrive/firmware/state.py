@@ -12,6 +12,11 @@ from dataclasses import dataclass, field, fields
 
 from wcdrive.firmware import constants as C
 from wcdrive.firmware.constants import HIGH, MODE_CMDVEL
+from wcdrive.firmware.params import PARAMS
+
+#: The EEPROM parameter block (``EE_BLOCK_BYTES``): the layout version, the float
+#: parameters, ``watchdog_ms`` (2 bytes) and a CRC-16 (2 bytes).
+EE_BLOCK_BYTES = 1 + 4 * (len(PARAMS) - 1) + 2 + 2
 
 #: The controller floats compared bit for bit against the firmware's SRAM.
 FLOAT_FIELDS = (
@@ -32,6 +37,7 @@ INT_FIELDS = (
     "stallTicksR", "reverseTicksL", "reverseTicksR", "effortPwmL", "effortPwmR",
     "effortTicksL", "effortTicksR", "txDropped", "txRingFull", "txCredit", "rxGaps", "rxLostTick",
     "lastTickTime", "lateTicks",
+    "eeNext", "eeBusy",
 )
 
 #: Globals the tick takes as inputs rather than computes (loop() measures them).
@@ -137,6 +143,12 @@ class FirmwareState:
     #: count of lost bytes latched at the last tick (an input, like the encoder counts).
     rxGaps: int = 0
     rxLostTick: int = 0
+    #: The EEPROM (``EEPROM_SIZE`` bytes, erased: 0xFF), the block a ``save`` writes and
+    #: the next byte of it to write, and whether a save is being written (``wcdrive.firmware.eeprom``).
+    eeprom: bytearray = field(default_factory=lambda: bytearray(b"\xff" * C.EEPROM_SIZE))
+    eeBlock: bytearray = field(default_factory=lambda: bytearray(EE_BLOCK_BYTES))
+    eeNext: int = EE_BLOCK_BYTES
+    eeBusy: int = 0
     cmdBuf: bytearray = field(default_factory=bytearray)
     cmdLen: int = 0
     cmdCommas: int = 0

@@ -54,6 +54,9 @@ def frame(command: bytes, seq: int) -> bytes:
 HELLO = b"hello\n"
 ESTOP = b"estop\n"
 RESET = b"reset\n"
+#: Parameters in EEPROM: store those in force; the defaults back (PROTOCOL.md).
+SAVE = b"save\n"
+DEFAULTS = b"defaults\n"
 #: The runtime parameters and their ranges (protocol/PROTOCOL.md, "Parameters").
 PARAM_RANGES: dict[str, tuple[float, float]] = {p.name: (p.low, p.high) for p in PARAMETERS}
 
@@ -130,8 +133,9 @@ class Error:
 
 @dataclass(frozen=True)
 class Event:
-    """``EVT:<name>``: ``WATCHDOG``, ``PPM_LOST``, ``ESTOP`` or ``FAULT,<fault>`` (a latched
-    fault: ``ENC_STALL_L``, ``ENC_REVERSED_R``, ``DRIVER_DEAD``, ...; PROTOCOL.md)."""
+    """``EVT:<name>``: ``WATCHDOG``, ``PPM_LOST``, ``ESTOP``, ``FAULT,<fault>`` (a latched
+    fault: ``ENC_STALL_L``, ``ENC_REVERSED_R``, ``DRIVER_DEAD``, ...; PROTOCOL.md), or at
+    boot ``PARAMS_LOADED`` / ``PARAMS_DEFAULT,<why>`` (the parameters saved in EEPROM)."""
 
     name: str
 
@@ -139,6 +143,13 @@ class Event:
     def fault(self) -> str | None:
         """The fault's name for ``EVT:FAULT,<fault>``, else None."""
         return self.name[6:] if self.name.startswith("FAULT,") else None
+
+    @property
+    def params_default(self) -> str | None:
+        """Why the board booted with the default parameters, for
+        ``EVT:PARAMS_DEFAULT,<why>`` (``blank``, ``version``, ``crc``, ``range``: its
+        EEPROM held no good saved block), else None."""
+        return self.name[15:] if self.name.startswith("PARAMS_DEFAULT,") else None
 
 
 @dataclass(frozen=True)

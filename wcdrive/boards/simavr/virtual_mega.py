@@ -73,12 +73,12 @@ VARIABLE_FORMATS = {
           "cmdCommas", "cmdDiscarding", "errLinesThisTick", "lastEncodedL", "lastEncodedR",
           "timer0_fract", "estopLatched", "tlmEnabled", "unframedLine", "stormTickL", "stormTickR",
           "stallTicksL", "stallTicksR", "reverseTicksL", "reverseTicksR", "stormL", "stormR",
-          "resetCause", "effortPwmL", "effortPwmR", "effortTicksL", "effortTicksR"),
+          "resetCause", "effortPwmL", "effortPwmR", "effortTicksL", "effortTicksR", "eeNext", "eeBusy"),
 }
 _FORMAT_OF = {name: fmt for fmt, names in VARIABLE_FORMATS.items() for name in names}
 
 #: Functions whose entries are logged: (name, what the harness records).
-HOOKS = ("processByte", "controlTick", "rxGap", "main", "doneOp")
+HOOKS = ("processByte", "controlTick", "rxGap", "main", "doneOp", "eepromReady")
 
 
 #: Reset causes by the harness's code (wcsim.c, ``WCSIM_RESET_*``).
@@ -183,6 +183,9 @@ def _load_library() -> ctypes.CDLL:
         "wcsim_rx_held": (i32, [p]),
         "wcsim_rx_lost_count": (sz, [p]),
         "wcsim_rx_lost_take": (sz, [p, ctypes.POINTER(u64), ctypes.POINTER(u64), u8p, u8p, sz]),
+        "wcsim_eeprom_size": (u32, [p]),
+        "wcsim_eeprom_read": (i32, [p, u32, u8p, u32]),
+        "wcsim_eeprom_write": (i32, [p, u32, u8p, u32]),
     }
     for name, (restype, argtypes) in sig.items():
         fn = getattr(lib, name)
@@ -205,9 +208,11 @@ class VirtualMega:
     """The firmware ELF running in simavr, advanced only by this object's calls."""
 
     def __init__(self, elf: str | Path | None = None, *, millis_start: int | None = None,
-                 vcd: str | Path | None = None, hooks: tuple[str, ...] = ()) -> None:
+                 vcd: str | Path | None = None, hooks: tuple[str, ...] = (),
+                 eeprom: bytes | None = None) -> None:
         """``hooks``: the ELF symbols of further functions whose entries are logged (and
-        may be broken on) besides ``HOOKS``, e.g. to time a stretch of code."""
+        may be broken on) besides ``HOOKS``, e.g. to time a stretch of code. ``eeprom``:
+        the EEPROM's contents from address 0 at power-on (default: erased, 0xFF)."""
         self.elf = Path(elf) if elf is not None else firmware_elf()
         self.variables, self.functions = read_symbols(self.elf)
         missing = [name for name in hooks if name not in self.functions]
@@ -250,6 +255,8 @@ class VirtualMega:
             self._vcd = True
         else:
             self._vcd = False
+        if eeprom is not None:
+            self.write_eeprom(eeprom)
         if millis_start is not None:
             self._start_millis_at(millis_start)
 
@@ -527,6 +534,28 @@ class VirtualMega:
         buf = (ctypes.c_uint8 * len(data))(*data)
         if self._c.wcsim_write(self._s, address, buf, len(data)) != 0:
             raise ValueError(f"address {address:#x}+{len(data)} is outside the data space")
+
+    # ---- EEPROM --------------------------------------------------------------------
+    @property
+    def eeprom_size(self) -> int:
+        """Bytes of EEPROM (4096 on the Mega 2560)."""
+        return int(self._c.wcsim_eeprom_size(self._s))
+
+    def read_eeprom(self, address: int = 0, size: int | None = None) -> bytes:
+        """The EEPROM's contents from ``address`` (all of it by default). simavr makes it
+        erased (0xFF) and keeps it across ``reset`` of any cause, as the chip does."""
+        size = self.eeprom_size - address if size is None else size
+        buf = (ctypes.c_uint8 * size)()
+        if self._c.wcsim_eeprom_read(self._s, address, buf, size) != 0:
+            raise ValueError(f"EEPROM address {address:#x}+{size} is outside the EEPROM")
+        return bytes(buf)
+
+    def write_eeprom(self, data: bytes, address: int = 0) -> None:
+        """Writes ``data`` into the EEPROM at ``address`` at once (as a programmer would,
+        no write cycle): to preload an image before the firmware boots, or corrupt one."""
+        buf = (ctypes.c_uint8 * len(data))(*data)
+        if self._c.wcsim_eeprom_write(self._s, address, buf, len(data)) != 0:
+            raise ValueError(f"EEPROM address {address:#x}+{len(data)} is outside the EEPROM")
 
     def address_of(self, name: str) -> tuple[int, int]:
         """Data-space address and size of a firmware global, from the ELF's symbols."""

@@ -36,6 +36,7 @@
 #include <simavr/avr_uart.h>
 #include <simavr/avr_watchdog.h>
 #include <simavr/avr_extint.h>
+#include <simavr/avr_eeprom.h>
 
 #define WCSIM_MAX_HOOKS 16
 /* The ATmega2560's interrupt response: 5 cycles from the flag to the vector (3-byte PC). */
@@ -665,6 +666,32 @@ int wcsim_write(wcsim_t *s, uint32_t addr, const uint8_t *buf, uint32_t n) {
 }
 
 uint32_t wcsim_ramend(wcsim_t *s) { return s->avr->ramend; }
+
+/* The EEPROM (simavr's avr_eeprom: erased to 0xFF when the core is made; avr_reset()
+ * leaves it as it is, as a reset leaves the chip's). AVR_IOCTL_EEPROM_GET with no buffer
+ * gives simavr's own array; its SET/GET refuse a range that ends at the last byte and
+ * print, so the harness copies itself. Returns the size, or 0 when the core has none. */
+static uint8_t *eeprom_array(wcsim_t *s) {
+    avr_eeprom_desc_t d = { .ee = NULL, .offset = 0, .size = 0 };
+    if (avr_ioctl(s->avr, AVR_IOCTL_EEPROM_GET, &d) < -1) return NULL;
+    return d.ee;
+}
+
+uint32_t wcsim_eeprom_size(wcsim_t *s) { return eeprom_array(s) ? s->avr->e2end + 1 : 0; }
+
+int wcsim_eeprom_read(wcsim_t *s, uint32_t addr, uint8_t *buf, uint32_t n) {
+    uint8_t *ee = eeprom_array(s);
+    if (!ee || (uint64_t)addr + n > (uint64_t)s->avr->e2end + 1) return -1;
+    memcpy(buf, ee + addr, n);
+    return 0;
+}
+
+int wcsim_eeprom_write(wcsim_t *s, uint32_t addr, const uint8_t *buf, uint32_t n) {
+    uint8_t *ee = eeprom_array(s);
+    if (!ee || (uint64_t)addr + n > (uint64_t)s->avr->e2end + 1) return -1;
+    memcpy(ee + addr, buf, n);
+    return 0;
+}
 
 /* Stack pointer, for free-RAM measurements. */
 uint32_t wcsim_sp(wcsim_t *s) { return (uint32_t)s->avr->data[0x5d] | ((uint32_t)s->avr->data[0x5e] << 8); }
