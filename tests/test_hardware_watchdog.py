@@ -84,7 +84,7 @@ def test_an_edge_storm_never_needs_the_watchdog(elf) -> None:
         mega.encoder_edges(side, EdgeTrain(times, chatter, 0, 0))
     mega.run_for(0.6)
     assert [r.cause for r in mega.resets] == ["power_on"]
-    assert mega.read("stormL") == 1 and mega.read("stormR") == 1
+    assert mega.read("stormL") != 0 and mega.read("stormR") != 0
     assert mega.read("faultFlags") == 0x30
     ticks = [h.cycle for h in mega.hit_log if h.function == "controlTick"]
     assert ticks and max(np.diff(ticks)) / F_CPU <= 0.0515

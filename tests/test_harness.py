@@ -92,7 +92,7 @@ def test_ninety_thousand_edges_per_second_trip_the_storm_guard(mega: VirtualMega
     train = edges_from_trajectory(np.array([0.0, 0.1, 0.6]), np.array([0.5, 0.5, 45000.5]))
     mega.encoder_edges("left", train)
     mega.run_for(0.7)
-    assert mega.read("stormL") == 1 and mega.read("stormR") == 0
+    assert mega.read("stormL") != 0 and mega.read("stormR") == 0
     counted = mega.read("encoderValueL")
     assert 0 < counted <= 2 * C.STORM_EDGES
     assert mega.read("faultFlags") == 0x10               # ENC_IMPLAUSIBLE_L

@@ -125,7 +125,7 @@ def _drive(stepped: bool, sends: list[tuple[int, bytes]], chunks: list[int], fau
             loop.reset()
         if replace_fw is not None and replace_fw <= cycle:
             loop.fw = Firmware(boot_millis=loop.timer.millis)
-            loop.output.append((loop.cycle, Firmware.boot_output()))
+            loop.output.append((loop.cycle, loop.fw.boot_output()))
             replace_fw = None
         loop.run_until(end, on_tick)
         cycle = end
