@@ -22,11 +22,12 @@ Which state each source fuses is the seed's configuration (``EkfConfig``):
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
-from filterpy.kalman import ExtendedKalmanFilter
 
 #: The state's names, in order.
 STATES = ("x", "y", "yaw", "vx", "vy", "vyaw", "ax", "ay")
@@ -78,18 +79,24 @@ class EkfConfig:
                                  False, False, False))
 
 
-class _OmniEkf(ExtendedKalmanFilter):
+@functools.cache
+def _omni_ekf() -> Any:
     """filterpy's EKF with the nonlinear state transition: ``predict`` propagates the
-    covariance with ``F`` (the Jacobian) and ``Q``, and the state with ``f``."""
+    covariance with ``F`` (the Jacobian) and ``Q``, and the state with ``f``. Made on
+    first use: filterpy imports scipy, half a second that every CLI start would pay."""
+    from filterpy.kalman import ExtendedKalmanFilter
 
-    f: np.ndarray | None = None
-    x: np.ndarray
+    class _OmniEkf(ExtendedKalmanFilter):
+        f: np.ndarray | None = None
+        x: np.ndarray
 
-    def predict_x(self, u: object = 0) -> None:
-        assert self.f is not None
-        state: np.ndarray = self.f @ self.x
-        state[YAW, 0] = _wrap(float(state[YAW, 0]))
-        self.x = state
+        def predict_x(self, u: object = 0) -> None:
+            assert self.f is not None
+            state: np.ndarray = self.f @ self.x
+            state[YAW, 0] = _wrap(float(state[YAW, 0]))
+            self.x = state
+
+    return _OmniEkf
 
 
 class Ekf2D:
@@ -99,7 +106,7 @@ class Ekf2D:
 
     def __init__(self, config: EkfConfig | None = None) -> None:
         self.config = config or EkfConfig()
-        self.kf = _OmniEkf(dim_x=8, dim_z=1)
+        self.kf = _omni_ekf()(dim_x=8, dim_z=1)
         self.kf.x = np.zeros((8, 1))
         self.kf.P = np.eye(8) * self.config.initial_variance
         self._q = np.diag(self.config.process_noise)
