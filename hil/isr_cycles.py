@@ -32,6 +32,8 @@ _LINE = re.compile(r"^\s*([0-9a-f]+):\t((?:[0-9a-f]{2} )+)\s*\t(\S+)\s*([^;]*)")
 
 @dataclass(frozen=True)
 class Instruction:
+    """One instruction: its byte address, size in 16-bit words, mnemonic and operands."""
+
     address: int
     words: int
     mnemonic: str

@@ -46,7 +46,9 @@ def _run(trace: Trace) -> tuple[Recording, bytes]:
 
 
 def _events(tx: bytes) -> list[bytes]:
-    return [line for line in tx.split(b"\r\n") if line.startswith(b"EVT:")]
+    """The EVT lines, but the boot's EVT:PARAMS_* (issue 17's EEPROM parameters)."""
+    lines = tx.split(b"\r\n")
+    return [line for line in lines if line.startswith(b"EVT:") and not line.startswith(b"EVT:PARAMS")]
 
 
 def _fault_tick(recording: Recording) -> tuple[int, float]:

@@ -254,7 +254,9 @@ def test_port_reset_restarts_the_board() -> None:
     loop.take_output()
     loop.reset()
     assert loop.plant.s.volts[0] == 0.0 and loop.plant.s.volts[1] == 0.0   # unpowered at once
-    assert loop.take_output() == [(round(1.0 * F_CPU), b"BOOT:final_control,EXTERNAL\r\n")]
+    # the BOOT line, then the EEPROM parameters' boot event (blank: nothing was saved)
+    assert loop.take_output() == [(round(1.0 * F_CPU),
+                                   b"BOOT:final_control,EXTERNAL\r\nEVT:PARAMS_DEFAULT,blank\r\n")]
     assert loop.encoder_counts() == (0, 0) and loop.fw.state.tickCount == 0
     ticks: list[int] = []
     loop.run_until(round(1.2 * F_CPU), lambda t: ticks.append(loop.last_tick_cycle or 0))
@@ -402,7 +404,8 @@ def test_sim_json_reports_the_fault_figures(tmp_path: Path) -> None:
     [m] = json.loads(out.getvalue())
     assert m["fault_at_s"] is None and m["standstill_after_fault_s"] is None
     assert m["pwm_zero_after_fault_s"] is None
-    assert [line for _, line in m["events"]] == ["EVT:WATCHDOG"]     # the silence after the last stop
+    # the boot's EEPROM event, then the silence after the last stop
+    assert [line for _, line in m["events"]] == ["EVT:PARAMS_DEFAULT,blank", "EVT:WATCHDOG"]
 
 
 def test_sim_table_names_the_fault(tmp_path: Path) -> None:

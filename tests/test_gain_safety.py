@@ -283,7 +283,8 @@ def step_response(values: dict[str, float], speed: float, *, window_s: float = W
                    reversals=(reversals[0], reversals[1]), peak_error=(peak[0], peak[1]),
                    final_error=(final[0], final[1]), yaw=yaw,
                    fault=int(getattr(s, "faultFlags", 0)),
-                   bad_lines=[line for line in lines if line.startswith(("EVT:", "ERR:", "NAK:"))],
+                   bad_lines=[line for line in lines if line.startswith(("EVT:", "ERR:", "NAK:"))
+                              and not line.startswith("EVT:PARAMS")],   # the boot's EEPROM event
                    unacked=[name for q, name in set_seqs.items() if q not in acked])
 
 
