@@ -19,7 +19,7 @@ REPO = Path(__file__).resolve().parents[1]
 #: The pages whose blocks run (README.md's are tests/test_docs.py's; architecture,
 #: safety and benchmarks have no fenced blocks; PROTOCOL.md's are wire transcripts).
 PAGES = ["docs/getting-started.md", "docs/testing.md", "docs/sweeps.md", "docs/logging.md",
-         "docs/bench.md", "docs/ros2.md", "protocol/CAN.md"]
+         "docs/bench.md", "docs/ros2.md", "protocol/CAN.md", "docs/eddie.md"]
 FENCE = re.compile(r"^```(\w+)([^\n]*)\n(.*?)^```\s*$", re.S | re.M)
 
 
