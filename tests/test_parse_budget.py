@@ -60,7 +60,10 @@ from wcdrive.protocol.codec import (
 PARSE_BUDGET = 16_000                 # cycles: 1 ms at 16 MHz
 WHOLE_BUDGET = 32_000                 # cycles: 2 ms, the answer included
 RX_RING_FILL = 63 * UART_BYTE_CYCLES  # cycles until a 64-byte ring (63 usable) overflows
-AVAILABLE = "_ZN14HardwareSerial9availableEv"
+#: Where a byte's work ends: loop() back for the next byte (the next processByte or
+#: rxGap), the tick after the bytes (controlTick), or the end of the pass (serialEventRun,
+#: called once a loop() pass).
+PASS_END = "_Z14serialEventRunv"
 #: Lines apart by this much, so that no window of 50 ms has more than 3 to answer.
 SPACING_S = 0.020
 
@@ -99,8 +102,11 @@ def line_costs(lines: list[bytes], elf: Path, answer_symbol: str) -> list[tuple[
     cycles: the most any of its bytes took (the module docstring says from where to
     where)."""
     times = [FIRST_COMMAND_S + SPACING_S * k for k in range(len(lines))]
-    trace = Trace(duration=times[-1] + SPACING_S, serial=list(zip(times, lines, strict=True)))
-    mega = VirtualMega(elf, hooks=(AVAILABLE, answer_symbol))
+    # the last line's bytes all on the wire before the end (a byte reaches the USART one
+    # byte time after it starts)
+    tail = (len(lines[-1]) + 1) * UART_BYTE_CYCLES / F_CPU
+    trace = Trace(duration=times[-1] + SPACING_S + tail, serial=list(zip(times, lines, strict=True)))
+    mega = VirtualMega(elf, hooks=(PASS_END, answer_symbol))
     try:
         for t, data in trace.serial:
             mega.send(data, at=round(t * F_CPU))
@@ -120,17 +126,18 @@ def line_costs(lines: list[bytes], elf: Path, answer_symbol: str) -> list[tuple[
     start: int | None = None
     parse_done = False
     for hit in hits:
-        if hit.function == "processByte":
-            byte += 1
-            start, parse_done = hit.cycle, False
-        elif start is not None and hit.function in (answer_symbol, AVAILABLE):
+        if start is not None and hit.function in ("processByte", "controlTick", "rxGap", answer_symbol,
+                                                  PASS_END):
             cost = costs[owner[byte]]
             if not parse_done:
                 cost[0] = max(cost[0], hit.cycle - start)
                 parse_done = True
-            if hit.function == AVAILABLE:
+            if hit.function != answer_symbol:
                 cost[1] = max(cost[1], hit.cycle - start)
                 start = None
+        if hit.function == "processByte":
+            byte += 1
+            start, parse_done = hit.cycle, False
     assert byte + 1 == len(owner), "not every byte reached processByte"
     for (parse, whole), line in zip(costs, lines, strict=True):
         for kind, cycles in (("parse", parse), ("whole", whole)):
