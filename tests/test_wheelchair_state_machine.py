@@ -663,7 +663,9 @@ class WheelchairMachine(RuleBasedStateMachine):
         with self.link._lock:
             self.link.frozen = True
         try:
-            _wait(lambda: not chair.link_ok, "the link to be marked lost")
+            # the flag flips first, then the LinkLost callback runs (another thread)
+            _wait(lambda: not chair.link_ok and len(self.link_events) > events,
+                  "the link to be marked lost and the LinkLost delivered")
             assert [type(e) for e in self.link_events[events:]] == [LinkLost]
             lost = self.link_events[events]
             assert isinstance(lost, LinkLost) and lost.silent_for >= chair.link_timeout
@@ -679,7 +681,8 @@ class WheelchairMachine(RuleBasedStateMachine):
         finally:
             with self.link._lock:
                 self.link.frozen = False
-        _wait(lambda: chair.link_ok, "the link to recover")
+        _wait(lambda: chair.link_ok and len(self.link_events) > events + 1,
+              "the link to recover and the LinkRestored delivered")
         chair.link_timeout = 1.0
         assert [type(e) for e in self.link_events[events:]] == [LinkLost, LinkRestored]
         _note(f"the board's output froze (the link was lost and restored; {call} refused)")
