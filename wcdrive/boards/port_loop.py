@@ -349,7 +349,6 @@ class PortLoop:
         """The reference path of ``run_until``: every Timer0 overflow in turn, ``due``
         asked at each (as before the loop was event-driven; tests/test_sim_speed.py
         checks that both paths give the same bytes, ticks and states)."""
-        plant = self.plant
         while True:
             overflow = self._overflow
             if self._resets and self._resets[0] <= min(overflow, end_cycle):
@@ -375,18 +374,7 @@ class PortLoop:
             self._eeprom_ready.poll(fw.state, overflow)
             millis = self.timer.millis
             if fw.due(millis):
-                self._advance_to(overflow)
-                true = self._true_counts()
-                left, right = self._encoders["left"], self._encoders["right"]
-                out = fw.tick(millis, left.count(true[0]), right.count(true[1]),
-                              left.decoder.illegal, right.decoder.illegal,
-                              storm_l=int(left.decoder.storm), storm_r=int(right.decoder.storm))
-                s = fw.state
-                plant.set_drive(s.pwmL, s.dirL, s.pwmR, s.dirR)
-                self.output.append((overflow, out))
-                self.last_tick_cycle = overflow
-                if on_tick:
-                    on_tick(overflow / F_CPU)
+                self._tick(fw, overflow, millis, on_tick)
             self._overflow += OVERFLOW_CYCLES
         self._advance_to(end_cycle)
         self.cycle = max(self.cycle, end_cycle)
