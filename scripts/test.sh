@@ -7,6 +7,10 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 DEBIAN_PACKAGES=(gcc-avr avr-libc arduino-core-avr simavr libsimavr-dev libelf-dev make gcc avrdude)
+# Python's headers, for the port's C fast path (wcdrive/avr/csrc/f32_fast.c), when the
+# interpreter does not bring its own (Debian's python3 keeps them in python3-dev).
+python3 -c 'import os, sysconfig, sys; sys.exit(not os.path.exists(os.path.join(sysconfig.get_paths()["include"], "Python.h")))' \
+  || DEBIAN_PACKAGES+=(python3-dev)
 missing=()
 for pkg in "${DEBIAN_PACKAGES[@]}"; do
   dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")

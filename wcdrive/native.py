@@ -1,4 +1,5 @@
-"""Compiles small C helpers from source on first use and loads them with ctypes.
+"""Compiles small C helpers from source on first use and loads them: shared libraries
+with ctypes (``load``), CPython extension modules with importlib (``load_extension``).
 
 The library is built with the system C compiler into a cache directory keyed by the
 source's hash (``wcdrive.resources.cache_dir()``); nothing prebuilt ships.
@@ -8,9 +9,14 @@ from __future__ import annotations
 
 import ctypes
 import hashlib
+import importlib.machinery
+import importlib.util
 import os
 import subprocess
+import sys
+import sysconfig
 from pathlib import Path
+from types import ModuleType
 
 from wcdrive.resources import cache_dir
 
@@ -44,3 +50,25 @@ def load(source: Path, name: str, libs: tuple[str, ...] = (),
          flags: tuple[str, ...] = ("-O2",)) -> ctypes.CDLL:
     """``compile_shared`` then load the library with ctypes."""
     return ctypes.CDLL(str(compile_shared(source, name, libs, flags)))
+
+
+def load_extension(source: Path, name: str, flags: tuple[str, ...] = ("-O2",)) -> ModuleType:
+    """A CPython extension module ``name`` (its ``PyInit_<name>``) built from ``source``
+    against this interpreter's headers (``sysconfig``), imported from the cache; the
+    interpreter's ABI tag is part of the build's hash. Raises ``BuildError`` when it
+    cannot be built (no compiler, no ``Python.h``) or loaded."""
+    include = sysconfig.get_paths()["include"]
+    if not (Path(include) / "Python.h").exists():
+        raise BuildError(f"no Python.h in {include}: apt-get install python3-dev")
+    abi = str(sysconfig.get_config_var("EXT_SUFFIX") or sys.implementation.cache_tag)
+    path = compile_shared(source, name, (), (*flags, f"-I{include}", f"-DWCDRIVE_ABI=\"{abi}\""))
+    loader = importlib.machinery.ExtensionFileLoader(name, str(path))
+    spec = importlib.util.spec_from_file_location(name, path, loader=loader)
+    if spec is None:
+        raise BuildError(f"cannot load {path}")
+    module = importlib.util.module_from_spec(spec)
+    try:
+        loader.exec_module(module)
+    except ImportError as exc:
+        raise BuildError(f"cannot load {path}: {exc}") from exc
+    return module

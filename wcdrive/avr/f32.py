@@ -22,8 +22,14 @@ this on the AVR.
 
 from __future__ import annotations
 
+import logging
 import math
+import os
 import struct
+from pathlib import Path
+from types import ModuleType
+
+from wcdrive import native
 
 _F32 = struct.Struct("<f")
 _U32 = struct.Struct("<I")
@@ -204,3 +210,34 @@ def to_u32(x: float) -> int:
 def constrain(x: float, lo: float, hi: float) -> float:
     """Arduino's macro: ``((x)<(lo)?(lo):((x)>(hi)?(hi):(x)))`` (NaN passes through)."""
     return lo if x < lo else (hi if x > hi else x)
+
+
+# ---- the C fast path ----------------------------------------------------------------
+#: The functions with a C fast path (csrc/f32_fast.c), in ``_bind``'s order.
+FAST_NAMES = ("f32", "add", "sub", "mul", "div", "from_int")
+#: The Python definitions above: the reference, and where the fast path sends every
+#: case it does not compute itself (a non-float operand, NaN, subnormal results).
+reference = {name: globals()[name] for name in FAST_NAMES}
+_FAST_SOURCE = Path(__file__).resolve().parent / "csrc" / "f32_fast.c"
+
+
+def load_fast() -> ModuleType | None:
+    """The C fast path, built on first use (``wcdrive.native``), bound to ``reference``;
+    None without a compiler or Python's headers, or with ``WCDRIVE_PURE_F32=1`` in the
+    environment (the Python functions only)."""
+    if os.environ.get("WCDRIVE_PURE_F32", "") not in ("", "0"):
+        return None
+    try:
+        module = native.load_extension(_FAST_SOURCE, "_f32_fast", ("-O2", "-ffp-contract=off"))
+    except native.BuildError as exc:
+        logging.getLogger(__name__).warning("binary32 in pure Python (slower): %s", exc)
+        return None
+    module._bind(*(reference[name] for name in FAST_NAMES))
+    return module
+
+
+#: The loaded fast path, or None (``load_fast``). Its functions replace the module's
+#: names, so ``from wcdrive.avr.f32 import mul`` gets the C one when there is one.
+fast = load_fast()
+if fast is not None:
+    globals().update({name: getattr(fast, name) for name in FAST_NAMES})
