@@ -1,7 +1,7 @@
 """``wcdrive``: the one command line.
 
     wcdrive --version                                    package and protocol versions
-    wcdrive sim [SCENARIO ...] [--backend port|simavr] [--json] [--out DIR] [--no-plots]
+    wcdrive sim [SCENARIO ...] [--backend port|simavr] [--json] [--out DIR] [--no-plots] [--ekf]
     wcdrive sim --list
     wcdrive verify --traces N --seed S [--elf PATH]      the port against the firmware in simavr
     wcdrive verify --fp N [--seed S]                     binary32 on the AVR against the port, N pairs/op
@@ -68,7 +68,7 @@ def _sim(args: argparse.Namespace) -> int:
             return 2
         with console.Bar(sc.name, 1.0, console.progress_enabled(args.json)) as progress:
             result = runner.run(sc, backend=args.backend, seed=args.seed, dt=args.dt, progress=progress,
-                                ekf=True)
+                                ekf=args.ekf or bool(args.mcap or args.live))
         results.append(result)
         if args.mcap or args.live:
             _ros_out(args, sc, result, several=len(names) > 1)
@@ -250,6 +250,9 @@ def parser() -> argparse.ArgumentParser:
     sim.add_argument("--no-plots", action="store_true", help="write no PNG plots")
     sim.add_argument("--seed", type=int, default=0, help="gyro noise seed")
     sim.add_argument("--dt", type=float, default=0.001, help="physics step in s (default 0.001)")
+    sim.add_argument("--ekf", action="store_true",
+                     help="also run the host's two EKFs (docs/odometry.md) on the 400 Hz gyro and "
+                          "report odom_ekf_*: about 25 times slower (--mcap and --live imply it)")
     sim.add_argument("--mcap", metavar="FILE",
                      help="write the run as ROS 2 messages into an MCAP file (with several "
                           "scenarios: FILE-<name>.mcap)")
