@@ -33,25 +33,25 @@ def _rounding(digits: int) -> float:
 
 def print_float(number: float, digits: int = 2) -> bytes:
     """``Print::printFloat(number, digits)`` with binary32 arithmetic throughout."""
-    if math.isnan(number):
+    if number != number:
         return b"nan"
-    if math.isinf(number):
+    if number == math.inf or number == -math.inf:
         return b"inf"
     if number > _OVF or number < -_OVF:
         return b"ovf"
-    out = bytearray()
+    sign = b""
     if number < 0.0:
-        out += b"-"
+        sign = b"-"
         number = -number
     number = f32(number + _rounding(digits))
     int_part = int(number) & 0xFFFFFFFF
     remainder = f32(number - f32(float(int_part)))
-    out += str(int_part).encode()
-    if digits > 0:
-        out += b"."
+    if digits <= 0:
+        return b"%s%d" % (sign, int_part)
+    fraction = []
     for _ in range(digits):
         remainder = mul(remainder, 10.0)
         to_print = int(remainder) & 0xFFFF
-        out += str(to_print).encode()
+        fraction.append(b"%d" % to_print)
         remainder = f32(remainder - float(to_print))
-    return bytes(out)
+    return b"%s%d.%s" % (sign, int_part, b"".join(fraction))

@@ -476,5 +476,5 @@ def advance(plant: Plant, gyro: Gyro | None, steps: int, dt: float, *, angles: b
     t0 = plant.time
     wheels, rates = plant.advance_batch(steps, dt, angles=angles)
     if gyro is not None:
-        gyro.sample_steps(t0, dt, rates)
+        gyro.sample_steps(t0, dt, rates, plant.rates_address)
     return wheels

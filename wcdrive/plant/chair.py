@@ -161,6 +161,10 @@ class Plant:
         self._buf_rates = np.empty(0)
         self._buf_angles = np.empty((0, 2))
         self._buf_at: tuple[int, int] = (0, 0)
+        #: The address of the yaw rates ``advance_batch`` returned last, when they are
+        #: the kernel's buffer (a C-contiguous float64 array; None otherwise), for
+        #: ``Gyro.sample_steps``.
+        self.rates_address: int | None = None
         self._kernel = load_kernel() if use_kernel else None
         if self._kernel is not None:
             self._bind_chipmunk()
@@ -246,6 +250,7 @@ class Plant:
         ``angles``, and the yaw rates are views that the next call overwrites), the
         motion log written in place."""
         if self._kernel is None or n <= 0:
+            self.rates_address = None
             recorded = self.advance(n, dt, record=True, angles=angles)
             assert recorded is not None
             return recorded
@@ -263,6 +268,7 @@ class Plant:
             self._log_rows += n
         self._advance(self._ref, n, dt, self.s.time, self._buf_at[0] if angles else None, self._buf_at[1],
                       motion)
+        self.rates_address = self._buf_at[1]
         return (self._buf_angles[:n] if angles else _NO_ANGLES), self._buf_rates[:n]
 
     # ---- state -------------------------------------------------------------------
@@ -275,7 +281,8 @@ class Plant:
     def pose(self) -> tuple[float, float, float]:
         """(x, y, heading) of the axle midpoint, ground truth."""
         b = self.body
-        return b.position.x, b.position.y, b.angle
+        x, y = b.position
+        return x, y, b.angle
 
     @property
     def yaw_rate(self) -> float:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ctypes
 import math
 
 import numpy as np
@@ -44,9 +45,9 @@ class Gyro:
         self._used = 0
         self._kernel = load_kernel() if use_kernel else None
         #: gyro_samples' arguments: next time, bias, end, t0, dt, period, walk step, noise
-        self._args = np.zeros(8)
-        self._args_at = _address(self._args)
-        self._out = np.empty((2, 0))
+        self._args = (ctypes.c_double * 8)()
+        self._args_at = ctypes.addressof(self._args)
+        self._out_times = self._out_rates = np.empty(0)
         self._out_at = (0, 0)
         self._draws_at = 0
 
@@ -71,11 +72,13 @@ class Gyro:
             self.rates.append(true_rate + self.bias + self.noise * self._draw())
             self.next_time += self.period
 
-    def sample_steps(self, t0: float, dt: float, rates: np.ndarray) -> None:
+    def sample_steps(self, t0: float, dt: float, rates: np.ndarray, rates_at: int | None = None) -> None:
         """Every sample due by the end of ``len(rates)`` plant steps of ``dt`` from
         ``t0``, each at the true yaw rate of the step it falls in (``rates``): bit for
         bit what ``sample`` takes one sample at a time (the C kernel's
-        ``gyro_samples``, or the same lines here without it)."""
+        ``gyro_samples``, or the same lines here without it). ``rates_at``: the address
+        of ``rates``'s data, when the caller knows it is a C-contiguous float64 array
+        (``Plant.rates_address``)."""
         steps = len(rates)
         end = t0 + dt * steps + 1e-12
         if steps <= 0 or self.next_time > end:
@@ -95,20 +98,22 @@ class Gyro:
                 t += self.period
             self.next_time, self.bias, self._used = t, bias, used
             return
-        if self._out.shape[1] < most:
-            self._out = np.empty((2, max(most, 64)))
-            self._out_at = (_address(self._out), _address(self._out) + 8 * self._out.shape[1])
-        args, out = self._args, self._out
+        if self._out_times.size < most:
+            self._out_times, self._out_rates = np.empty(max(most, 64)), np.empty(max(most, 64))
+            self._out_at = (_address(self._out_times), _address(self._out_rates))
+        if rates_at is None:
+            if not (rates.flags.c_contiguous and rates.dtype == np.float64):
+                rates = np.ascontiguousarray(rates, dtype=np.float64)
+            rates_at = _address(rates)
+        args = self._args
         args[0], args[1], args[2], args[3], args[4] = self.next_time, self.bias, end, t0, dt
         args[5], args[6], args[7] = self.period, walk, self.noise
-        if not (rates.flags.c_contiguous and rates.dtype == np.float64):
-            rates = np.ascontiguousarray(rates, dtype=np.float64)
-        n = self._kernel.gyro_samples(steps, self._args_at, _address(rates), self._draws_at + 8 * self._used,
+        n = self._kernel.gyro_samples(steps, self._args_at, rates_at, self._draws_at + 8 * self._used,
                                       most, *self._out_at)
         self._used += 2 * n
-        self.next_time, self.bias = float(args[0]), float(args[1])
-        self.times.extend(out[0, :n].tolist())
-        self.rates.extend(out[1, :n].tolist())
+        self.next_time, self.bias = args[0], args[1]
+        self.times.extend(self._out_times[:n].tolist())
+        self.rates.extend(self._out_rates[:n].tolist())
 
 
 #: Random draws the gyro takes from its generator at a time.

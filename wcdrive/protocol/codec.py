@@ -113,7 +113,7 @@ def encode_ppm(channels: list[int] | tuple[int, ...]) -> bytes:
     return ("ppm:" + ",".join(str(c) for c in channels) + ",").encode()
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Feedback:
     """``ENC:l,r,VEL:l,r,MODE:m``: raw counts (left mirrored) and rad/s (2 decimals)."""
 
@@ -124,14 +124,14 @@ class Feedback:
     mode: str
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Error:
     """``ERR:<reason>``: a command the board rejected (protocol/PROTOCOL.md)."""
 
     reason: str
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Event:
     """``EVT:<name>``: ``WATCHDOG``, ``PPM_LOST``, ``ESTOP``, ``FAULT,<fault>`` (a latched
     fault: ``ENC_STALL_L``, ``ENC_REVERSED_R``, ``DRIVER_DEAD``, ...; PROTOCOL.md), or at
@@ -152,7 +152,7 @@ class Event:
         return self.name[15:] if self.name.startswith("PARAMS_DEFAULT,") else None
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Boot:
     """``BOOT:<text>``: the board has reset; ``text`` is the firmware's name and, since
     firmware 3.1, the reset cause after a comma (``final_control,WATCHDOG``)."""
@@ -166,7 +166,7 @@ class Boot:
         return self.text.partition(",")[2]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Unknown:
     """A line that matches none of the board's formats (or an overlong one), as received."""
 
@@ -184,7 +184,7 @@ def fault_names(faults: int) -> tuple[str, ...]:
     return tuple(name for i, name in enumerate(FAULT_NAMES) if faults & (1 << i))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class ExtendedTelemetry:
     """``TLM:`` (v2): the tick's inputs and outputs beyond the feedback line."""
 
@@ -250,7 +250,7 @@ class ExtendedTelemetry:
         return (self.flags >> 5) & 3
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Hello:
     """``HELLO:<version>,<firmware>[,<firmware version>,<build id>]``: the answer to
     ``hello`` (v2 boards name the firmware only; v3 add its version and build id)."""
@@ -261,7 +261,7 @@ class Hello:
     build_id: str = ""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Param:
     """``PAR:<name>,<value>``: the value in force, the answer to ``get:`` and ``set:``."""
 
@@ -269,14 +269,14 @@ class Param:
     value: float
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Ack:
     """``ACK:<seq>``: the framed line with this sequence number was carried out."""
 
     seq: int
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Nak:
     """``NAK:<seq>,<reason>``: the framed line with this sequence number was refused."""
 
