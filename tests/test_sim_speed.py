@@ -375,3 +375,31 @@ def test_the_benchmark_short_mode_prints_its_table() -> None:
     row = next(line for line in lines if line.startswith("| square "))
     rtf = float(row.split("|")[2].replace(",", "").rstrip("x "))
     assert math.isfinite(rtf) and rtf > 10
+
+
+@settings(max_examples=20, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), rate_hz=st.sampled_from([400.0, 1000.0, 733.0]),
+       batches=st.lists(st.integers(1, 200), min_size=1, max_size=30),
+       dt=st.sampled_from([0.001, 0.00037]))
+def test_the_gyro_in_the_plant_s_kernel_call_is_sample_steps(seed: int, rate_hz: float, batches: list[int],
+                                                             dt: float) -> None:
+    """``Plant.advance_batch(sampler=gyro)`` (the samples taken in the plant's kernel
+    call, as ``wcdrive sim`` does) against the plant's batch and then the Python
+    ``Gyro.sample_steps`` (no kernel): the same samples, bias and next time, bit for bit."""
+    params = ChairParams(gyro_rate_hz=rate_hz)
+    fused_plant, plant = Plant(params), Plant(params)
+    if not fused_plant.uses_kernel:
+        pytest.skip("no C compiler")
+    fused, alone = Gyro(params, seed), Gyro(params, seed, use_kernel=False)
+    rng = np.random.default_rng(seed)
+    for n in batches:
+        left, right = (int(v) for v in rng.integers(0, 256, 2))
+        for p in (fused_plant, plant):
+            p.set_drive(left, 1, right, 0)
+        fused_plant.advance_batch(n, dt, sampler=fused)
+        t0 = plant.time
+        _, rates = plant.advance_batch(n, dt)
+        alone.sample_steps(t0, dt, rates)
+    assert fused.times == alone.times and fused.rates == alone.rates
+    assert fused.bias == alone.bias and fused.next_time == alone.next_time
+    assert len(fused.times) >= sum(batches) * dt * rate_hz - 2

@@ -199,6 +199,7 @@ class PortLoop:
         self.faults = tuple(faults)
         self._scale = plant.p.counts_per_rev / (2.0 * math.pi)
         self._encoders = {side: _Encoder(side, self._wire(side)) for side in SIDES}
+        self._left, self._right = self._encoders["left"], self._encoders["right"]
         self._plant_steps = sorted({-(-c // self.step_cycles) for c in plant_fault_ticks(self.faults, F_CPU)})
         self._resets = sorted(f.cycles(F_CPU)[0] for f in self.faults if f.kind == "reset")
 
@@ -299,8 +300,13 @@ class PortLoop:
             return fw.due((m0 + MILLIS_INC * (j + 1) + total // FRACT_MAX) & 0xFFFFFFFF)
 
         hint = (self._due_hint - self._overflow) // OVERFLOW_CYCLES
-        if 0 < hint < span and due(hint) and not due(hint - 1):
-            return hint
+        if 0 < hint < span:
+            # due(hint) and not due(hint - 1), as ``due`` computes them
+            total = f0 + FRACT_INC * (hint + 1)
+            if fw.due((m0 + MILLIS_INC * (hint + 1) + total // FRACT_MAX) & 0xFFFFFFFF):
+                total -= FRACT_INC
+                if not fw.due((m0 + MILLIS_INC * hint + total // FRACT_MAX) & 0xFFFFFFFF):
+                    return hint
         if due(0):
             return 0
         lo, hi = 0, span - 1                  # not due at lo; the answer is in (lo, hi]
@@ -317,7 +323,7 @@ class PortLoop:
     def _receive(self, fw: Firmware, overflow: int) -> None:
         """The bytes that have arrived by ``overflow`` go through ``processByte``."""
         data = self._rx.take(overflow)
-        masked = any(e.decoder.storm for e in self._encoders.values())
+        masked = self._masked()
         if masked:
             self._advance_to(overflow)
         out = fw.feed(data)
@@ -326,16 +332,20 @@ class PortLoop:
         if masked:
             self._unmask_cleared(overflow)
 
+    def _masked(self) -> bool:
+        """Whether the storm guard masks an encoder now."""
+        return bool(self._left.decoder.storm or self._right.decoder.storm)
+
     def _tick(self, fw: Firmware, overflow: int, millis: int,
               on_tick: Callable[[float], None] | None) -> None:
         """The control tick at ``overflow``: the plant brought to it, the latched counts
         in, PWM/DIR out to the plant."""
         self._advance_to(overflow)
-        true = self._true_counts()
-        left, right = self._encoders["left"], self._encoders["right"]
-        out = fw.tick(millis, left.count(true[0]), right.count(true[1]),
-                      left.decoder.illegal, right.decoder.illegal,
-                      storm_l=int(left.decoder.storm), storm_r=int(right.decoder.storm))
+        true_l, true_r = self._true_counts()
+        left, right = self._left, self._right
+        dl, dr = left.decoder, right.decoder
+        out = fw.tick(millis, left.count(true_l), right.count(true_r), dl.illegal, dr.illegal, None,
+                      int(dl.storm), int(dr.storm))
         s = fw.state
         self.plant.set_drive(s.pwmL, s.dirL, s.pwmR, s.dirR)
         self.output.append((overflow, out))
@@ -473,8 +483,5 @@ def advance(plant: Plant, gyro: Gyro | None, steps: int, dt: float, *, angles: b
     ``angles=False``; None for no steps), valid until the plant's next step."""
     if steps <= 0:
         return None
-    t0 = plant.time
-    wheels, rates = plant.advance_batch(steps, dt, angles=angles)
-    if gyro is not None:
-        gyro.sample_steps(t0, dt, rates, plant.rates_address)
+    wheels, _ = plant.advance_batch(steps, dt, angles=angles, sampler=gyro)
     return wheels

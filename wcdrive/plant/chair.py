@@ -42,6 +42,7 @@ from __future__ import annotations
 import ctypes
 import math
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 import pymunk
@@ -91,10 +92,33 @@ def load_kernel() -> ctypes.CDLL | None:
             lib.chair_advance.restype = None
             lib.gyro_samples.argtypes = [ctypes.c_int32, _P, _P, _P, ctypes.c_int32, _P, _P]
             lib.gyro_samples.restype = ctypes.c_int32
+            lib.chair_advance_sampled.argtypes = [ctypes.POINTER(ChairStruct), ctypes.c_int32, _D, _P, _P, _P,
+                                                  _P, _P, ctypes.c_int32, _P, _P]
+            lib.chair_advance_sampled.restype = ctypes.c_int32
             _kernel = lib
         except BuildError:
             _kernel = False
     return _kernel if isinstance(_kernel, ctypes.CDLL) else None
+
+
+class KernelSampler(Protocol):
+    """What ``Plant.advance_batch`` needs of a sensor that samples the plant's steps in
+    the kernel's call (``wcdrive.plant.sensors.Gyro``)."""
+
+    @property
+    def kernel_ready(self) -> bool:
+        """Whether it can take its samples in the kernel (else ``sample_steps`` is called)."""
+
+    def sample_steps(self, t0: float, dt: float, rates: np.ndarray, rates_at: int | None = None) -> None:
+        """Its samples of ``len(rates)`` steps of ``dt`` from ``t0`` with these yaw rates."""
+
+    def kernel_arguments(self, t0: float, steps: int, dt: float) -> tuple[int, int, int, int, int]:
+        """``chair_advance_sampled``'s sampler arguments for ``steps`` steps of ``dt``
+        from ``t0``: the addresses of its 8 parameters and of its next random draw, the
+        most samples, the addresses of the times and values buffers."""
+
+    def kernel_took(self, count: int) -> None:
+        """The kernel wrote ``count`` samples (and moved the next time and the bias on)."""
 
 
 class WheelView:
@@ -161,10 +185,6 @@ class Plant:
         self._buf_rates = np.empty(0)
         self._buf_angles = np.empty((0, 2))
         self._buf_at: tuple[int, int] = (0, 0)
-        #: The address of the yaw rates ``advance_batch`` returned last, when they are
-        #: the kernel's buffer (a C-contiguous float64 array; None otherwise), for
-        #: ``Gyro.sample_steps``.
-        self.rates_address: int | None = None
         self._kernel = load_kernel() if use_kernel else None
         if self._kernel is not None:
             self._bind_chipmunk()
@@ -242,17 +262,20 @@ class Plant:
             self._log_chunk = np.empty((0, 6))
             self._log_rows = 0
 
-    def advance_batch(self, n: int, dt: float = 0.001, *, angles: bool = False
-                      ) -> tuple[np.ndarray, np.ndarray]:
+    def advance_batch(self, n: int, dt: float = 0.001, *, angles: bool = False,
+                      sampler: KernelSampler | None = None) -> tuple[np.ndarray, np.ndarray]:
         """``advance(n, dt, record=True, angles=angles)`` for a caller that uses the
         arrays at once (``wcdrive.boards.port_loop``, a control tick's steps): one call
         of the kernel into buffers the plant keeps (the wheel angles, ``0 x 2`` unless
         ``angles``, and the yaw rates are views that the next call overwrites), the
-        motion log written in place."""
+        motion log written in place. A ``sampler`` (the gyro, ``Gyro.sample_steps``)
+        takes its samples of these steps in the same call of the kernel."""
         if self._kernel is None or n <= 0:
-            self.rates_address = None
+            t0 = self.s.time
             recorded = self.advance(n, dt, record=True, angles=angles)
             assert recorded is not None
+            if sampler is not None:
+                sampler.sample_steps(t0, dt, recorded[1])
             return recorded
         if n > self._buf_rates.size:
             self._buf_rates = np.empty(max(n, 2 * self._buf_rates.size, 64))
@@ -266,9 +289,17 @@ class Plant:
                 self._log_at = _data(self._log_chunk)
             motion = self._log_at + 48 * self._log_rows
             self._log_rows += n
-        self._advance(self._ref, n, dt, self.s.time, self._buf_at[0] if angles else None, self._buf_at[1],
-                      motion)
-        self.rates_address = self._buf_at[1]
+        if sampler is None or not sampler.kernel_ready:
+            t0 = self.s.time
+            self._advance(self._ref, n, dt, t0, self._buf_at[0] if angles else None, self._buf_at[1], motion)
+            if sampler is not None:
+                sampler.sample_steps(t0, dt, self._buf_rates[:n], self._buf_at[1])
+        else:
+            args_at, draws_at, most, times_at, values_at = sampler.kernel_arguments(self.s.time, n, dt)
+            taken = self._kernel.chair_advance_sampled(self._ref, n, dt, self._buf_at[0] if angles else None,
+                                                       self._buf_at[1], motion, args_at, draws_at, most,
+                                                       times_at, values_at)
+            sampler.kernel_took(taken)
         return (self._buf_angles[:n] if angles else _NO_ANGLES), self._buf_rates[:n]
 
     # ---- state -------------------------------------------------------------------

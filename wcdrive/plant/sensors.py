@@ -78,42 +78,65 @@ class Gyro:
         bit what ``sample`` takes one sample at a time (the C kernel's
         ``gyro_samples``, or the same lines here without it). ``rates_at``: the address
         of ``rates``'s data, when the caller knows it is a C-contiguous float64 array
-        (``Plant.rates_address``)."""
+        (the plant's own buffer)."""
         steps = len(rates)
         end = t0 + dt * steps + 1e-12
         if steps <= 0 or self.next_time > end:
             return
+        if self._kernel is not None:
+            if rates_at is None:
+                if not (rates.flags.c_contiguous and rates.dtype == np.float64):
+                    rates = np.ascontiguousarray(rates, dtype=np.float64)
+                rates_at = _address(rates)
+            args_at, draws_at, most, times_at, values_at = self.kernel_arguments(t0, steps, dt)
+            self._args[2], self._args[3], self._args[4] = end, t0, dt
+            self.kernel_took(self._kernel.gyro_samples(steps, args_at, rates_at, draws_at, most, times_at,
+                                                       values_at))
+            return
         most = int((end - self.next_time) / self.period) + 2
         self._reserve(2 * most)
         walk = self.walk * math.sqrt(self.period)
-        if self._kernel is None:
-            true = rates.tolist()
-            t, bias, used, draws = self.next_time, self.bias, self._used, self._draws
-            while t <= end:
-                bias += walk * float(draws[used])
-                k = min(steps - 1, max(0, int((t - t0) / dt - 1e-9)))
-                self.times.append(t)
-                self.rates.append(true[k] + bias + self.noise * float(draws[used + 1]))
-                used += 2
-                t += self.period
-            self.next_time, self.bias, self._used = t, bias, used
-            return
+        true = rates.tolist()
+        t, bias, used, draws = self.next_time, self.bias, self._used, self._draws
+        while t <= end:
+            bias += walk * float(draws[used])
+            k = min(steps - 1, max(0, int((t - t0) / dt - 1e-9)))
+            self.times.append(t)
+            self.rates.append(true[k] + bias + self.noise * float(draws[used + 1]))
+            used += 2
+            t += self.period
+        self.next_time, self.bias, self._used = t, bias, used
+
+    # ---- the plant's kernel call (wcdrive.plant.chair.KernelSampler) -------------------
+    @property
+    def kernel_ready(self) -> bool:
+        """Whether the C kernel takes the samples (``Plant.advance_batch``)."""
+        return self._kernel is not None
+
+    def kernel_arguments(self, t0: float, steps: int, dt: float) -> tuple[int, int, int, int, int]:
+        """The kernel's arguments for the samples of ``steps`` steps of ``dt`` from
+        ``t0`` (``KernelSampler``): the parameters' address (next time, bias, then the
+        end, t0 and dt the caller or the kernel fills in, period, walk step, noise), the
+        next draw's, the most samples, the output buffers'."""
+        end = t0 + dt * steps + 1e-12
+        most = max(0, int((end - self.next_time) / self.period) + 2)
+        self._reserve(2 * most)
         if self._out_times.size < most:
             self._out_times, self._out_rates = np.empty(max(most, 64)), np.empty(max(most, 64))
             self._out_at = (_address(self._out_times), _address(self._out_rates))
-        if rates_at is None:
-            if not (rates.flags.c_contiguous and rates.dtype == np.float64):
-                rates = np.ascontiguousarray(rates, dtype=np.float64)
-            rates_at = _address(rates)
         args = self._args
-        args[0], args[1], args[2], args[3], args[4] = self.next_time, self.bias, end, t0, dt
-        args[5], args[6], args[7] = self.period, walk, self.noise
-        n = self._kernel.gyro_samples(steps, self._args_at, rates_at, self._draws_at + 8 * self._used,
-                                      most, *self._out_at)
-        self._used += 2 * n
+        args[0], args[1] = self.next_time, self.bias
+        args[5], args[6], args[7] = self.period, self.walk * math.sqrt(self.period), self.noise
+        return self._args_at, self._draws_at + 8 * self._used, most, self._out_at[0], self._out_at[1]
+
+    def kernel_took(self, count: int) -> None:
+        """The kernel took ``count`` samples: they join ``times`` and ``rates``."""
+        args = self._args
+        self._used += 2 * count
         self.next_time, self.bias = args[0], args[1]
-        self.times.extend(self._out_times[:n].tolist())
-        self.rates.extend(self._out_rates[:n].tolist())
+        if count:
+            self.times.extend(self._out_times[:count].tolist())
+            self.rates.extend(self._out_rates[:count].tolist())
 
 
 #: Random draws the gyro takes from its generator at a time.

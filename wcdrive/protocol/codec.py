@@ -293,12 +293,10 @@ _FEEDBACK = re.compile(
 
 
 def _float(text: bytes) -> float:
-    t = text.lstrip(b"-")
-    if t == b"ovf":
-        value = math.inf
-    else:
-        value = float(t)
-    return -value if text.startswith(b"-") else value
+    """A number as ``_NUMBER`` matched it: ``float`` reads the rest, signs included."""
+    if text.endswith(b"ovf"):
+        return -math.inf if text.startswith(b"-") else math.inf
+    return float(text)
 
 
 _TLM = re.compile(rb"TLM:(\d+(?:,\d+){12}(?:,\d+){0,3})")

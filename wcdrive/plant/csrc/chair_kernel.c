@@ -212,3 +212,20 @@ int32_t gyro_samples(int32_t n, double *g, const double *yaw_rates, const double
     g[1] = bias;
     return m;
 }
+
+/* chair_advance for n steps from the plant's own time, then gyro_samples over them
+ * with the yaw rates (which must not be NULL): one call for a control tick's steps and
+ * the gyro's samples (wcdrive.plant.Plant.advance_batch with a sampler). g[2] (t_end),
+ * g[3] (t0) and g[4] (dt) are set here, as Gyro.sample_steps sets them: no sample is
+ * taken when the next one is due after t_end. Returns the number of samples. */
+int32_t chair_advance_sampled(chair_t *c, int32_t n, double dt, double *angles, double *yaw_rates,
+                              double *motion, double *g, const double *draws, int32_t max_samples,
+                              double *times, double *values) {
+    double t0 = c->time;
+    chair_advance(c, n, dt, t0, angles, yaw_rates, motion);
+    g[2] = t0 + dt * (double)n + 1e-12;
+    g[3] = t0;
+    g[4] = dt;
+    if (n <= 0 || g[0] > g[2]) return 0;
+    return gyro_samples(n, g, yaw_rates, draws, max_samples, times, values);
+}
