@@ -118,3 +118,16 @@ def test_cmdvel_beyond_the_wheel_limit_keeps_the_curvature() -> None:
     right, left = fw.state.targetR, fw.state.targetL
     assert max(abs(right), abs(left)) <= C.MAX_WHEEL_SPEED * (1 + 1e-6)
     assert right / left == pytest.approx((2.6 + 0.285) / (2.6 - 0.285), rel=1e-5)
+
+
+@given(last=st.integers(0, 2**32 - 1), waited=st.integers(0, 2**32 - 1), later=st.integers(0, 200))
+def test_due_after_is_due_solved_for_the_time(last: int, waited: int, later: int) -> None:
+    """``Firmware.due_after(now)`` ms after ``now`` the tick is due, and not before
+    (the event-driven port loop jumps there), across the 49-day wrap."""
+    fw = Firmware(FirmwareState(lastControlTime=last))
+    now = (last + waited) & 0xFFFFFFFF
+    wait = fw.due_after(now)
+    assert fw.due((now + wait) & 0xFFFFFFFF)
+    assert wait == 0 or not fw.due((now + wait - 1) & 0xFFFFFFFF)
+    if waited < 2**32 - 300:
+        assert fw.due((now + wait + later) & 0xFFFFFFFF)

@@ -10,14 +10,13 @@ the gyro's samples of those steps in one more (``Gyro.sample_steps``).
 
 ``run_until`` is event-driven (issue 21): nothing happens at an overflow unless bytes
 are read or the tick runs there, so it jumps from event to event: the overflow at which
-the next bytes have arrived, the first overflow at which ``Firmware.due`` holds (found
-by asking it at a few overflows: the one the last gap between ticks predicts, then by
-bisection, since between two inputs ``due`` is monotone in ``millis()``), a reset, the
-end. ``millis()`` there comes in closed form from Timer0's model (``millis_after``:
-1 ms and 3/125 of one per overflow). The firmware alone decides when it ticks, so a
-change of its timing needs no change here. ``stepped=True`` runs the reference path,
-every overflow in turn with ``due`` asked at each; tests/test_sim_speed.py holds the
-two to the same bytes, ticks and states.
+the next bytes have arrived, the first overflow at which ``Firmware.due`` holds (from
+``Firmware.due_after``, the same condition solved for the time), a reset, the end.
+``millis()`` there comes in closed form from Timer0's model (``millis_after``: 1 ms and
+3/125 of one per overflow). The firmware alone decides when it ticks (``due`` and
+``due_after`` side by side), so a change of its timing needs no change here.
+``stepped=True`` runs the reference path, every overflow in turn with ``due`` asked at
+each; tests/test_sim_speed.py holds the two to the same bytes, ticks and states.
 
 Faults (``wcdrive.plant.faults``, given as ``faults=``): a healthy encoder's count is
 taken from its wheel's angle (``encoder_counts``), the fast path. While an encoder fault
@@ -180,7 +179,6 @@ class PortLoop:
         self.plant = plant
         #: The reference path: every Timer0 overflow in turn (``run_until``).
         self.stepped = stepped
-        self._due_hint = 0               # the overflow at which the next tick is expected
         self.gyro = gyro
         self.dt = dt
         self.step_cycles = round(dt * F_CPU)
@@ -285,40 +283,24 @@ class PortLoop:
 
     def _first_due(self, fw: Firmware, span: int) -> int | None:
         """Of the next ``span`` overflows (0: the next), the first at which ``fw.due``
-        holds, or None. ``Firmware.due`` decides, asked at a few overflows only: between
-        two inputs it is monotone in ``millis()`` (``millis() - lastControlTime`` against
-        the period), so the first due overflow is found by bisection, starting from the
-        overflow the gap between the last two ticks predicts; ``stepped=True`` asks at every
-        overflow."""
+        holds, or None: ``Firmware.due_after`` says how many ms from now the tick falls
+        due, and Timer0's model (``millis_after``) the overflow at which ``millis()``
+        has moved that far (``stepped=True`` asks ``due`` at every overflow instead;
+        tests/test_sim_speed.py holds the two paths to the same runs)."""
         if span <= 0:
             return None
-        timer = self.timer
-        m0, f0 = timer.millis, timer.fract
+        need = fw.due_after(self.timer.millis)
+        f0 = self.timer.fract
 
-        def due(j: int) -> bool:          # after overflow j: j + 1 overflows from now
-            total = f0 + FRACT_INC * (j + 1)
-            return fw.due((m0 + MILLIS_INC * (j + 1) + total // FRACT_MAX) & 0xFFFFFFFF)
+        def moved(k: int) -> int:          # ms millis() moves in the next k overflows
+            return MILLIS_INC * k + (f0 + FRACT_INC * k) // FRACT_MAX
 
-        hint = (self._due_hint - self._overflow) // OVERFLOW_CYCLES
-        if 0 < hint < span:
-            # due(hint) and not due(hint - 1), as ``due`` computes them
-            total = f0 + FRACT_INC * (hint + 1)
-            if fw.due((m0 + MILLIS_INC * (hint + 1) + total // FRACT_MAX) & 0xFFFFFFFF):
-                total -= FRACT_INC
-                if not fw.due((m0 + MILLIS_INC * hint + total // FRACT_MAX) & 0xFFFFFFFF):
-                    return hint
-        if due(0):
-            return 0
-        lo, hi = 0, span - 1                  # not due at lo; the answer is in (lo, hi]
-        if not due(hi):
-            return None
-        while hi - lo > 1:
-            mid = (lo + hi) // 2
-            if due(mid):
-                hi = mid
-            else:
-                lo = mid
-        return hi
+        k = max(1, need * FRACT_MAX // (MILLIS_INC * FRACT_MAX + FRACT_INC))
+        while moved(k) < need:
+            k += 1
+        while k > 1 and moved(k - 1) >= need:
+            k -= 1
+        return k - 1 if k <= span else None
 
     def _receive(self, fw: Firmware, overflow: int) -> None:
         """The bytes that have arrived by ``overflow`` go through ``processByte``."""
@@ -349,8 +331,6 @@ class PortLoop:
         s = fw.state
         self.plant.set_drive(s.pwmL, s.dirL, s.pwmR, s.dirR)
         self.output.append((overflow, out))
-        if self.last_tick_cycle is not None and overflow > self.last_tick_cycle:
-            self._due_hint = 2 * overflow - self.last_tick_cycle     # the same gap again
         self.last_tick_cycle = overflow
         if on_tick:
             on_tick(overflow / F_CPU)

@@ -108,6 +108,12 @@ class Firmware:
         """Whether a ``loop()`` pass at ``millis() == now`` runs the control tick."""
         return ((now - self.state.lastControlTime) & 0xFFFFFFFF) >= CONTROL_PERIOD_MS
 
+    def due_after(self, now: int) -> int:
+        """``due`` solved for the time: how many ms after ``millis() == now`` the control
+        tick falls due, until an input changes the state (0: due now). ``due(now + m)``
+        holds from ``m == due_after(now)`` on (``millis()`` wraps after 49 days)."""
+        return max(0, CONTROL_PERIOD_MS - ((now - self.state.lastControlTime) & 0xFFFFFFFF))
+
     def tick(self, now: int, count_l: int, count_r: int, illegal_l: int = 0, illegal_r: int = 0,
              free_ram: int | None = None, storm_l: int = 0, storm_r: int = 0,
              rx_lost: int = 0) -> bytes:
