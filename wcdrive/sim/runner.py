@@ -307,11 +307,10 @@ class _Log:
 
     def add(self, cycle: int, plant: Plant, host: _Host, setpoint, measured, pwm, counts) -> None:
         wheel, velocity, gyro, ekf, ekf_vel = host.poses()
-        pose = plant.pose
-        left, right = plant.caster_heading
-        caster = (_wrap(left - pose[2]), _wrap(right - pose[2]))
-        self.rows.append((cycle / F_CPU, pose, wheel, velocity, gyro, setpoint, measured,
-                          (plant.left.speed, plant.right.speed), pwm, caster, counts, ekf, ekf_vel))
+        speed = plant.s.speed
+        # the casters' world headings; ``arrays`` makes them relative to the chassis
+        self.rows.append((cycle / F_CPU, plant.pose, wheel, velocity, gyro, setpoint, measured,
+                          (speed[0], speed[1]), pwm, plant.caster_heading, counts, ekf, ekf_vel))
         self.tick_cycles.append(cycle)
 
     def arrays(self) -> dict[str, np.ndarray]:
@@ -326,6 +325,9 @@ class _Log:
         else:
             cols = list(zip(*self.rows, strict=True))
             out = {n: np.array(c, dtype=float) for n, c in zip(names, cols, strict=True)}
+            # _wrap(heading - chassis heading), the same operations element by element
+            relative = out["caster"] - out["truth"][:, 2:3]
+            out["caster"] = (relative + math.pi) % (2 * math.pi) - math.pi
         out["tick_cycles"] = np.array(self.tick_cycles, dtype=np.int64)
         return out
 
@@ -342,17 +344,18 @@ class _Lines:
 
     def feed(self, cycle: int, data: bytes) -> None:
         self._partial += data
-        while True:
-            end = self._partial.find(b"\n")
-            if end < 0:
-                return
-            line = bytes(self._partial[:end]).rstrip(b"\r").decode("latin-1")
-            del self._partial[:end + 1]
-            self.all.append((cycle / F_CPU, line))
+        if b"\n" not in data:
+            return
+        *lines, rest = self._partial.split(b"\n")
+        self._partial = rest
+        t = cycle / F_CPU
+        for raw in lines:
+            line = raw.rstrip(b"\r").decode("latin-1")
+            self.all.append((t, line))
             if line.startswith("EVT:"):
-                self.events.append((round(cycle / F_CPU, 6), line))
+                self.events.append((round(t, 6), line))
             elif line.startswith("BOOT:"):
-                self.boots.append((round(cycle / F_CPU, 6), line))
+                self.boots.append((round(t, 6), line))
 
     def feed_stamped(self, stamped: list[tuple[int, int]]) -> None:
         """(cycle, byte) pairs, as the simulated Mega logs its TX."""
