@@ -35,7 +35,7 @@ UNUSED = 1e6
 PENDING_STEPS = 1 << 16
 
 
-@dataclass
+@dataclass(slots=True)
 class Pose2D:
     """x, y (m) and heading ``theta`` (rad, counter-clockwise) in the odometry frame."""
 
