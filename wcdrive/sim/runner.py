@@ -21,10 +21,12 @@ spot is not "still"), and its travel the longer of their two paths.
 from __future__ import annotations
 
 import bisect
+import gc
 import math
 import re
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -436,6 +438,25 @@ def fault_time(scenario: Scenario, wire: WireSchedule) -> float | None:
     return float(wire.received[before[-1]]) / F_CPU if before.size else 0.0
 
 
+@contextmanager
+def cyclic_gc_paused() -> Iterator[None]:
+    """Python's cyclic garbage collector off for a run, back on (if it was) after.
+
+    A run allocates some containers a tick that live on (the tick log's rows, the
+    gyro's samples), so the collector's generational passes keep re-scanning a growing
+    heap: a quarter of ``corridor_100m``'s time in a process that has imported
+    ``wcdrive.cli``. A run makes no cyclic garbage a tick (reference counting frees
+    what it drops; the few objects a run leaves in cycles are the same whatever its
+    length: tests/test_sim_speed.py), so nothing piles up while the collector waits."""
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if enabled:
+            gc.enable()
+
+
 def run(scenario: Scenario, *, backend: str = "port", seed: int = 0, dt: float = 0.001,
         progress: Callable[[float], None] | None = None, elf=None, ekf: bool = False) -> SimResult:
     """Runs ``scenario`` in closed loop: ``backend`` "port" (the Python port) or "simavr"
@@ -462,12 +483,13 @@ def run(scenario: Scenario, *, backend: str = "port", seed: int = 0, dt: float =
                 if t < scenario.duration and not (closed and t >= 0.02)]   # closed: params only
     wire = wire_schedule(commands, scenario.faults)
     wall0 = time.perf_counter()
-    if backend == "port":
-        extra = _run_port(plant, gyro, host, log, lines, wire, scenario.faults, end_cycle, dt, progress,
-                          pilot)
-    else:
-        extra = _run_simavr(plant, gyro, host, log, lines, wire, scenario.faults, step_cycles, end_cycle,
-                            dt, progress, elf, pilot)
+    with cyclic_gc_paused():
+        if backend == "port":
+            extra = _run_port(plant, gyro, host, log, lines, wire, scenario.faults, end_cycle, dt, progress,
+                              pilot)
+        else:
+            extra = _run_simavr(plant, gyro, host, log, lines, wire, scenario.faults, step_cycles, end_cycle,
+                                dt, progress, elf, pilot)
     wall = time.perf_counter() - wall0
     duration = extra.pop("end_cycle", end_cycle) / F_CPU
     goal: dict[str, object] = {}
