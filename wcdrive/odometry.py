@@ -130,26 +130,25 @@ class WheelOdometry:
         t0, l0, r0 = self._last
         self._last = (time, count_left, count_right)
         dt = time - t0
-        r, base = self.p.wheel_radius, self.p.wheelbase
-        d_left = -(count_left - l0) * self._rad_per_count * r     # mirrored
-        d_right = (count_right - r0) * self._rad_per_count * r
+        p, pose, per_count = self.p, self.pose, self._rad_per_count
+        d_left = -(count_left - l0) * per_count * p.wheel_radius     # mirrored
+        d_right = (count_right - r0) * per_count * p.wheel_radius
         d = 0.5 * (d_left + d_right)
-        dtheta = (d_right - d_left) / base
+        th = pose.theta
         if self._gyro_heading is not None:
-            dtheta = self._gyro_heading - self.pose.theta
+            dtheta = self._gyro_heading - th
             self._gyro_heading = None
-        th = self.pose.theta
-        if self.method == "position":
-            heading = th + 0.5 * dtheta
         else:
-            heading = th
-        self.pose.x += d * math.cos(heading)
-        self.pose.y += d * math.sin(heading)
-        self.pose.theta = th + dtheta
+            dtheta = (d_right - d_left) / p.wheelbase
+        heading = th + 0.5 * dtheta if self.method == "position" else th
+        pose.x += d * math.cos(heading)
+        pose.y += d * math.sin(heading)
+        pose.theta = th + dtheta
         if dt > 0:
             self.linear, self.angular = d / dt, dtheta / dt
-        self._pending.extend((d, heading, d_left, d_right))
-        if len(self._pending) >= 4 * PENDING_STEPS:
+        pending = self._pending
+        pending.extend((d, heading, d_left, d_right))
+        if len(pending) >= 4 * PENDING_STEPS:
             self._flush()
 
     @property
@@ -204,13 +203,15 @@ class GyroIntegrator:
         stop = len(times) if stop is None else stop
         if start >= stop:
             return
-        heading, last = self.heading, self._last
-        for i in range(start, stop):
-            time, rate = times[i], rates[i]
-            if last is not None:
-                heading += 0.5 * (rate + last[1]) * (time - last[0])
-            last = (time, rate)
-        self.heading, self._last = heading, last
+        heading = self.heading
+        if self._last is None:             # the first sample only starts the sums
+            self._last = (times[start], rates[start])
+            start += 1
+        t0, r0 = self._last
+        for time, rate in zip(times[start:stop], rates[start:stop]):
+            heading += 0.5 * (rate + r0) * (time - t0)
+            t0, r0 = time, rate
+        self.heading, self._last = heading, (t0, r0)
 
     def heading_at(self, time: float) -> float:
         """The heading at ``time`` (extrapolated from the last sample)."""

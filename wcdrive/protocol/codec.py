@@ -292,6 +292,9 @@ _FEEDBACK = re.compile(
     rb"ENC:(-?\d+),(-?\d+),VEL:(" + _NUMBER + rb"),(" + _NUMBER + rb"),MODE:(WHEEL|CMDVEL|PPM)")
 
 
+_MODES = {b"WHEEL": "WHEEL", b"CMDVEL": "CMDVEL", b"PPM": "PPM"}
+
+
 def _float(text: bytes) -> float:
     """A number as ``_NUMBER`` matched it: ``float`` reads the rest, signs included."""
     if text.endswith(b"ovf"):
@@ -310,7 +313,8 @@ def parse_line(line: bytes) -> Message:
     """One line without its ``\\r\\n``."""
     m = _FEEDBACK.fullmatch(line)
     if m:
-        return Feedback(int(m[1]), int(m[2]), _float(m[3]), _float(m[4]), m[5].decode())
+        left, right, vel_left, vel_right, mode = m.groups()
+        return Feedback(int(left), int(right), _float(vel_left), _float(vel_right), _MODES[mode])
     m = _TLM.fullmatch(line)
     if m:
         return ExtendedTelemetry(*(int(v) for v in m[1].split(b",")))
