@@ -4,21 +4,26 @@ speed" table, in one run so that the machine's load weighs on all of them alike:
 * every bundled scenario's real-time factor on the port backend (the median of
   ``--runs`` runs; ``wcdrive.sim.runner.run`` without the EKFs, whose filterpy updates at
   the gyro's 400 Hz cost more than the rest of the run: ``--ekf`` adds a column with
-  them, as ``wcdrive sim`` runs them), and beside it one run on the loop's reference
-  path (``PortLoop(stepped=True)``, every Timer0 overflow in turn: the loop as it was);
+  them, as ``wcdrive sim --ekf`` runs them), and beside it one run on the loop's
+  reference path (``PortLoop(stepped=True)``, every Timer0 overflow in turn: the loop as
+  it was);
+* the command itself: ``wcdrive sim corridor_100m --no-plots --json`` in ``--cli`` fresh
+  processes, the median of the ``real_time_factor`` each reports;
 * port + plant against simavr + plant on one scenario, measured side by side (port,
   simavr, port: the ratio of the port's median to simavr's run), with the firmware
   differences the simavr run found (0 expected).
 
-    python benchmarks/sim_speed.py            # 5 runs a scenario, simavr on step_response
-    python benchmarks/sim_speed.py --quick    # 3 scenarios, 1 run, simavr on fault_reset
+    python benchmarks/sim_speed.py            # 5 runs a scenario, 5 CLI runs, simavr on step_response
+    python benchmarks/sim_speed.py --quick    # 3 scenarios, 1 run, no CLI runs, simavr on fault_reset
 """
 
 from __future__ import annotations
 
 import argparse
 import functools
+import json
 import statistics
+import subprocess
 import sys
 from pathlib import Path
 
@@ -52,6 +57,14 @@ def side_by_side(name: str) -> dict[str, float]:
             "differences": float(sim.firmware_differences or 0), "simulated": sim.duration}
 
 
+def cli_rtf(name: str = "corridor_100m") -> float:
+    """``wcdrive sim NAME --no-plots --json`` in a fresh process: the real-time factor it
+    reports."""
+    out = subprocess.run([sys.executable, "-m", "wcdrive", "sim", name, "--no-plots", "--json"],
+                         capture_output=True, text=True, check=True).stdout
+    return float(json.loads(out)[0]["real_time_factor"])
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -60,7 +73,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--runs", type=int, default=None,
                         help="runs per scenario (default 5; 1 with --quick)")
     parser.add_argument("--no-simavr", action="store_true")
-    parser.add_argument("--ekf", action="store_true", help="a column with the EKFs on, as wcdrive sim runs")
+    parser.add_argument("--ekf", action="store_true", help="a column with the EKFs on (wcdrive sim --ekf)")
+    parser.add_argument("--cli", type=int, default=None,
+                        help="fresh-process runs of wcdrive sim corridor_100m --no-plots --json (default 5; "
+                             "0 with --quick)")
     parser.add_argument("scenarios", nargs="*")
     args = parser.parse_args(argv)
     runs = args.runs or (1 if args.quick else 5)
@@ -70,7 +86,7 @@ def main(argv: list[str] | None = None) -> int:
     head = f"| scenario | real-time factor (median of {runs}) | reference loop (stepped) | simulated s |"
     rule = "|---|---:|---:|---:|"
     if args.ekf:
-        head += " with the EKFs (wcdrive sim) |"
+        head += " with the EKFs (wcdrive sim --ekf) |"
         rule += "---:|"
     print(head)
     print(rule)
@@ -81,6 +97,11 @@ def main(argv: list[str] | None = None) -> int:
         if args.ekf:
             row += f" {rtf(name, ekf=True):,.0f}x |"
         print(row, flush=True)
+    cli_runs = (0 if args.quick else 5) if args.cli is None else args.cli
+    if cli_runs:
+        figures = [cli_rtf() for _ in range(cli_runs)]
+        print(f"\nwcdrive sim corridor_100m --no-plots --json, {cli_runs} fresh processes: real_time_factor "
+              f"median {statistics.median(figures):,.0f}x (" + ", ".join(f"{f:,.0f}" for f in figures) + ")")
     if not args.no_simavr:
         name = "fault_reset" if args.quick else "step_response"
         s = side_by_side(name)
