@@ -11,15 +11,15 @@ from __future__ import annotations
 import threading
 import time
 
-from wcdrive.boards.receive_buffer import ReceiveBuffer
+from wcdrive.boards.receive_buffer import DEFAULT_CAPACITY, ReceiveBuffer
 
 
 class ThreadedBoard:
     """A board stepped by a background thread, with serial-like ``read``/``write``."""
 
-    def __init__(self, name: str) -> None:
+    def __init__(self, name: str, rx_capacity: int = DEFAULT_CAPACITY) -> None:
         self._lock = threading.Lock()
-        self._rx = ReceiveBuffer()
+        self._rx = ReceiveBuffer(rx_capacity)
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
 
@@ -79,6 +79,17 @@ class ThreadedBoard:
     def in_waiting(self) -> int:
         """Bytes the board sent that were not read yet."""
         return len(self._rx)
+
+    @property
+    def rx_capacity(self) -> int:
+        """The most bytes the board's output buffer holds unread (``ReceiveBuffer``)."""
+        return self._rx.capacity
+
+    @property
+    def rx_dropped(self) -> int:
+        """Bytes the board sent that were dropped because nobody read the buffer and it
+        was full, since the board was opened."""
+        return self._rx.dropped
 
     def reset_input(self) -> None:
         """Drops what the board sent and was not read yet."""
