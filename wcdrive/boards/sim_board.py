@@ -70,6 +70,9 @@ class SimulatedBoard(ThreadedBoard):
     def _dtr_reset(self) -> None:
         self.loop.reset()
 
+    def _clock(self) -> float:
+        return self.time
+
     def _send(self, data: bytes) -> None:
         self.loop.send(data)
 
