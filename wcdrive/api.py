@@ -43,7 +43,9 @@ check still works on the feedback lines.
 The firmware stops the chair when no valid command arrives for 500 ms: hold a
 velocity by sending it again at 2 Hz or faster (as a ROS ``cmd_vel`` stream does).
 The host watches the board in turn: no line for ``link_timeout`` s (default 0.15 s,
-three feedback periods) and ``chair.link_ok`` turns False, ``chair.on_link``
+three feedback periods; on ``sim://`` and ``simavr://`` seconds of the board's own
+clock, so that a board run faster than real time, or left behind the wall clock by a
+loaded machine, is not taken for a silent one) and ``chair.link_ok`` turns False, ``chair.on_link``
 callbacks get a ``LinkLost``, and motion calls raise ``WcdriveConnectionError``; lines
 flowing again restore it (``LinkRestored``). A device path that disappears (unplugged)
 is reopened until ``reconnect_timeout``, and the new board is greeted again.
@@ -58,6 +60,7 @@ rate).
 from __future__ import annotations
 
 import errno
+from collections.abc import Callable
 from typing import Any
 
 import serial
@@ -122,9 +125,22 @@ def _open_url(url: str) -> Port:
     return port
 
 
+def _board_clock(port: Port) -> Callable[[], float | None] | None:
+    """A simulated board's own clock (``ThreadedBoard.reported_time``: how far its
+    output has come), for the link monitor; None for a device, a pty or a CAN link."""
+    board = getattr(port, "board", None)
+    if board is None or not hasattr(board, "reported_time"):
+        return None
+    return lambda: board.reported_time
+
+
 def _default_link_timeout(port: Port) -> float:
-    """``LINK_TIMEOUT``, stretched for a simulated board slower than the wall clock
-    (``sim://?speed=0.1`` sends a line every 0.5 s)."""
+    """``LINK_TIMEOUT``: on a simulated board's own clock when it has one (the session
+    counts the silence there, ``_board_clock``), so at any ``speed`` and however far
+    behind the wall clock a loaded machine leaves it; else on the host's, stretched
+    for a board slower than the wall clock."""
+    if _board_clock(port) is not None:
+        return LINK_TIMEOUT
     speed = getattr(getattr(port, "board", None), "speed", None)
     if isinstance(speed, int | float) and 0 < speed < 1:
         return LINK_TIMEOUT / speed
@@ -199,7 +215,7 @@ def connect(url: str = "sim://", *, boot_timeout: float = 10.0, record: bool | s
         options.setdefault("reopen", reopen)
     chair = Wheelchair(first, legacy=legacy,
                        link_timeout=_default_link_timeout(port) if link_timeout is None else link_timeout,
-                       **options)
+                       board_clock=_board_clock(port), **options)
     if publisher is not None:
         publisher.attach(chair, getattr(port, "board", None))
     try:

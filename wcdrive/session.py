@@ -132,7 +132,12 @@ class Session:
     paths), tried for ``reconnect_timeout`` s. ``legacy``: when the board never answers
     hello, speak protocol v1 (unframed seed lines) instead of failing.
     ``link_timeout``: seconds without a line from the board before the link counts as
-    lost; ``on_link`` gets each ``LinkLost``/``LinkRestored``."""
+    lost; ``on_link`` gets each ``LinkLost``/``LinkRestored``. ``board_clock``: for a
+    simulated board, how far its output has come on its own clock (s; None when it
+    cannot say: ``ThreadedBoard.reported_time``): the silence is then counted on that
+    clock, so a board that runs faster or slower than the wall clock, or falls behind
+    it on a loaded machine and hands its output over late, is silent only once its own
+    time has run ``link_timeout`` past its last line."""
 
     REQUEST_TIMEOUT = 0.3
     REQUEST_TRIES = 4
@@ -151,8 +156,10 @@ class Session:
                  reopen: Callable[[], Port] | None = None, reconnect_timeout: float = 60.0,
                  legacy: bool = False, link_timeout: float = 0.15,
                  on_link: Callable[[LinkEvent], None] | None = None,
-                 on_board_reset: Callable[[], None] | None = None) -> None:
+                 on_board_reset: Callable[[], None] | None = None,
+                 board_clock: Callable[[], float | None] | None = None) -> None:
         self.port = port
+        self._board_clock = board_clock
         self._on_board_reset = on_board_reset
         self.name = name or _port_name(port)
         self._on_feedback = on_feedback
@@ -213,6 +220,7 @@ class Session:
         # liveness
         self._link_lock = threading.RLock()
         self._last_line_at: float | None = None     # host time of the board's last line
+        self._last_line_board_at: float | None = None   # the board's clock then (board_clock)
         self._link_state: bool | None = None        # None: no line yet since construction
         self._lost_at = 0.0
         self._link_up = threading.Event()           # the port is there (cleared while reopening)
@@ -506,6 +514,8 @@ class Session:
             now = time.monotonic()
             messages = self._decoder.feed(data)
             if messages:
+                if self._board_clock is not None:
+                    self._last_line_board_at = self._board_clock()
                 self._last_line_at = now
                 if self._link_state is not True:
                     self._link_change(True, now)
@@ -649,7 +659,8 @@ class Session:
         last = self._last_line_at
         return float("inf") if last is None else time.monotonic() - last
 
-    def _link_change(self, up: bool, now: float, reason: str = "silent") -> None:
+    def _link_change(self, up: bool, now: float, reason: str = "silent",
+                     silent_for: float | None = None) -> None:
         """The link came up or went down: note it (``events``) and tell ``on_link``,
         once per change. The first line after construction only sets ``link_ok``."""
         with self._link_lock:
@@ -671,7 +682,9 @@ class Session:
             else:
                 self._lost_at = now
                 last = self._last_line_at
-                event = LinkLost(now, self.name, float("inf") if last is None else now - last, reason)
+                if silent_for is None:
+                    silent_for = float("inf") if last is None else now - last
+                event = LinkLost(now, self.name, silent_for, reason)
                 _log.warning("%s: link lost (%s)", self.name, reason)
                 self.events.append("LINK_LOST")
             if self._on_link is not None:
@@ -686,7 +699,7 @@ class Session:
         line, and paces the hello's retries. The host's own stall is not the board's
         silence: when this thread wakes late (the process stood still) or the board's
         bytes wait unread in the port (the reader is behind), it looks again shortly
-        instead."""
+        instead. With a ``board_clock`` the silence is counted on the board's clock."""
         delay, planned = 0.0, time.monotonic()
         while not self.closed.wait(delay):
             now = time.monotonic()
@@ -694,15 +707,34 @@ class Session:
             delay = self._hello_step(now)
             last = self._last_line_at
             if self._link_state is True and last is not None:
-                due = last + self.link_timeout
-                if now < due:
-                    delay = min(delay, due - now)
+                silent = self._board_silence()
+                if silent is None:                      # the host's clock
+                    silent = now - last
+                    left = self.link_timeout - silent
+                else:                                   # the board's: it runs at its own pace
+                    left = max(0.005, self.link_timeout - silent)
+                if silent < self.link_timeout:
+                    delay = min(delay, left)
                 elif stalled or self._bytes_waiting():
                     delay = 0.01
                 else:
-                    self._link_change(False, now)
+                    self._link_change(False, now, silent_for=silent)
             delay = max(0.001, min(delay, 0.05))
             planned = time.monotonic() + delay
+
+    def _board_silence(self) -> float | None:
+        """Seconds of the board's clock since its last line (``board_clock``); None when
+        there is no such clock, or it cannot say now (the board's thread stopped: the
+        host's clock decides). A clock that went back (the board reset) counts from the
+        reset."""
+        clock = self._board_clock
+        last = self._last_line_board_at
+        if clock is None or last is None:
+            return None
+        now = clock()
+        if now is None:
+            return None
+        return now - last if now >= last else now
 
     def _bytes_waiting(self) -> bool:
         """Whether the board's bytes wait unread in the port."""
@@ -737,6 +769,7 @@ class Session:
                 return False
             self._decoder = LineDecoder()
             self._last_line_at = None
+            self._board_clock = self._last_line_board_at = None   # the old board's clock
             self._forget_board()
             self._link_up.set()
             _log.warning("%s: reconnected", self.name)

@@ -157,6 +157,10 @@ class Wheelchair:
       50 ms) before the link counts as lost (``link_ok`` False, a ``LinkLost``
       event, motion calls raise ``WcdriveConnectionError``); lines flowing again
       restore it (``LinkRestored``).
+    - ``board_clock``: a simulated board's own clock (``ThreadedBoard.reported_time``,
+      which ``connect`` passes for ``sim://`` and ``simavr://``): ``link_timeout`` is
+      then seconds of the board's time, whatever its speed and however far behind the
+      wall clock a loaded machine leaves it.
     - ``stop_on_signals``: install the ``SIGTERM``/``SIGHUP`` handler that stops every
       chair before the process dies (module docstring).
     - ``on_close`` runs after the port is closed.
@@ -166,12 +170,13 @@ class Wheelchair:
                  on_close: Callable[[], None] | None = None,
                  reopen: Callable[[], Port] | None = None, reconnect_timeout: float = 60.0,
                  legacy: bool = False, link_timeout: float = LINK_TIMEOUT,
-                 stop_on_signals: bool = True) -> None:
+                 stop_on_signals: bool = True,
+                 board_clock: Callable[[], float | None] | None = None) -> None:
         self._hub = TelemetryHub(odometry_method)
         self._session = session = Session(
             port, self._hub.deliver, name=name, reopen=reopen, reconnect_timeout=reconnect_timeout,
             legacy=legacy, link_timeout=link_timeout, on_link=self._hub.deliver_link,
-            on_board_reset=self._hub.board_reset)
+            on_board_reset=self._hub.board_reset, board_clock=board_clock)
         self._finalizer = weakref.finalize(self, _shutdown, session, on_close)
         for key, finalizer in tuple(_OPEN.items()):
             if not finalizer.alive:

@@ -489,6 +489,10 @@ static void emergencyHalt() {
 // against the setpoint: the PID must not push harder on it this tick); or a fault:
 // stalled or cut, reversed, implausible (storm or illegal transitions). Braking (a duty
 // against the setpoint, or toward a zero setpoint) ends with no count: not a stall.
+// Measured against the setpoint does not count while the wheel came
+// WC_FAULT_REVERSE_APPROACH closer to it since prevMeasured (what the PID last ran on):
+// a healthy wheel lagging a reversal of its setpoint slows toward it; a reversed encoder
+// shows the wheel moving away, or no closer.
 #define WHEEL_OK 0
 #define WHEEL_SUSPECT 1
 #define WHEEL_STALLED 2
@@ -521,15 +525,16 @@ static bool noEffect(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, flo
 static uint8_t checkWheel(int32_t delta, uint32_t illegal, uint8_t storm, uint8_t appliedPwm,
                           uint8_t appliedDir, float setpoint, float measured, uint8_t& stallTicks,
                           uint8_t& reverseTicks, uint8_t& effortPwm, float& effortSpeed,
-                          float& effortSetpoint, uint8_t& effortTicks) {
+                          float& effortSetpoint, uint8_t& effortTicks, float prevMeasured) {
   if (storm || illegal >= WC_FAULT_ILLEGAL_PER_TICK) return WHEEL_IMPLAUSIBLE;
   bool driven = appliedPwm >= WC_FAULT_STALL_PWM && setpoint != 0.0f &&
                 (appliedDir == HIGH) == (setpoint > 0.0f);
   bool stalled = driven && delta == 0;
   stallTicks = stalled ? stallTicks + 1 : 0;
   if (stallTicks >= WC_FAULT_STALL_TICKS) return WHEEL_STALLED;
+  float approach = setpoint > 0.0f ? measured - prevMeasured : prevMeasured - measured;
   bool against = fabs(setpoint) >= WC_FAULT_REVERSE_SPEED && fabs(measured) >= WC_FAULT_REVERSE_SPEED &&
-                 (setpoint > 0.0f) != (measured > 0.0f);
+                 (setpoint > 0.0f) != (measured > 0.0f) && approach < WC_FAULT_REVERSE_APPROACH;
   reverseTicks = against ? reverseTicks + 1 : 0;
   if (reverseTicks >= WC_FAULT_REVERSE_TICKS) return WHEEL_REVERSED;
   if (noEffect(appliedPwm, appliedDir, setpoint, measured, effortPwm, effortSpeed, effortSetpoint,
@@ -657,9 +662,9 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
   uint8_t checkL = WHEEL_OK, checkR = WHEEL_OK;
   if (faultFlags == 0) {
     checkL = checkWheel(deltaL, illDeltaL, stormTickL, pwmL, dirL, setpointL, filtVelL, stallTicksL,
-                        reverseTicksL, effortPwmL, effortSpeedL, effortSetpointL, effortTicksL);
+                        reverseTicksL, effortPwmL, effortSpeedL, effortSetpointL, effortTicksL, prevMeasL);
     checkR = checkWheel(deltaR, illDeltaR, stormTickR, pwmR, dirR, setpointR, filtVelR, stallTicksR,
-                        reverseTicksR, effortPwmR, effortSpeedR, effortSetpointR, effortTicksR);
+                        reverseTicksR, effortPwmR, effortSpeedR, effortSetpointR, effortTicksR, prevMeasR);
     uint16_t faults;
     if (checkL == WHEEL_STALLED && checkR == WHEEL_STALLED) {
       faults = FAULT_DRIVER;   // both wheels driven, neither turns: the driver or its supply

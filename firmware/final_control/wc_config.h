@@ -80,6 +80,7 @@
 #define WC_FAULT_STALL_TICKS 2     // ticks driven at FAULT_STALL_PWM without a count: stalled or cut encoder
 #define WC_FAULT_REVERSE_SPEED 1.0f // rad/s: setpoint and measured speed both beyond it, opposite signs
 #define WC_FAULT_REVERSE_TICKS 3   // ticks of measured speed against the setpoint: reversed encoder
+#define WC_FAULT_REVERSE_APPROACH 0.1f // rad/s: a wheel against its setpoint that came this much closer to it since the PID last ran is slowing toward it (lagging a reversal of its setpoint): not counted
 #define WC_FAULT_EFFORT_PWM 20     // duty rise (8 %) toward a steady setpoint without any gain in speed: the motor does not respond
 #define WC_FAULT_EFFORT_SHORTFALL 0.8f // ...while the wheel turns slower than this fraction of its setpoint
 #define WC_FAULT_EFFORT_TICKS 4    // consecutive ticks of that effort without progress: the motor fault

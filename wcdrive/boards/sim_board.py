@@ -13,9 +13,12 @@ The same object sits behind ``serial.serial_for_url("wcsim://")`` and the pty br
 
 from __future__ import annotations
 
+import math
 import time
 
+from wcdrive.avr.uart import UART_BYTE_CYCLES
 from wcdrive.boards.port_loop import F_CPU, PortLoop
+from wcdrive.boards.receive_buffer import DEFAULT_CAPACITY
 from wcdrive.boards.threaded import ThreadedBoard
 from wcdrive.plant import ChairParams, Gyro, Plant
 
@@ -29,6 +32,16 @@ MAX_SLICE_S = 1.0
 GYRO_HISTORY = 4000
 
 
+def rx_capacity(speed: float) -> int:
+    """The output buffer of a board at ``speed``: a Linux tty's 4096 bytes, plus the
+    most one step of the board's thread can hand over at once (the UART's 10,695
+    bytes/s over the longest slice). A real board's bytes come one byte time apart
+    and a reader drains them as they come; the simulated board's come a step at a
+    time, and a whole step must fit, or a reader that keeps up would lose bytes."""
+    slice_s = max(MAX_SLICE_S, 4 * STEP_S * speed)
+    return DEFAULT_CAPACITY + math.ceil(slice_s * F_CPU / UART_BYTE_CYCLES)
+
+
 class SimulatedBoard(ThreadedBoard):
     """The port and the plant (``PortLoop``) as a live board, paced to the wall clock
     times ``speed``; what ``wcsim://`` opens."""
@@ -36,7 +49,7 @@ class SimulatedBoard(ThreadedBoard):
     def __init__(self, params: ChairParams | None = None, *, speed: float = 1.0, seed: int = 0) -> None:
         if not 0.01 <= speed <= 1000.0:
             raise ValueError("speed must be within 0.01 .. 1000")
-        super().__init__("wcsim")
+        super().__init__("wcsim", rx_capacity(speed))
         self.params = params or ChairParams()
         self.plant = Plant(self.params)
         # a live board runs for hours: its gyro keeps the newest 10 s of samples
@@ -56,6 +69,9 @@ class SimulatedBoard(ThreadedBoard):
 
     def _dtr_reset(self) -> None:
         self.loop.reset()
+
+    def _clock(self) -> float:
+        return self.time
 
     def _send(self, data: bytes) -> None:
         self.loop.send(data)

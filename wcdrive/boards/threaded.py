@@ -11,17 +11,18 @@ from __future__ import annotations
 import threading
 import time
 
-from wcdrive.boards.receive_buffer import ReceiveBuffer
+from wcdrive.boards.receive_buffer import DEFAULT_CAPACITY, ReceiveBuffer
 
 
 class ThreadedBoard:
     """A board stepped by a background thread, with serial-like ``read``/``write``."""
 
-    def __init__(self, name: str) -> None:
+    def __init__(self, name: str, rx_capacity: int = DEFAULT_CAPACITY) -> None:
         self._lock = threading.Lock()
-        self._rx = ReceiveBuffer()
+        self._rx = ReceiveBuffer(rx_capacity)
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
+        self._reported: float | None = None
 
     # ---- for subclasses -----------------------------------------------------------
     def _send(self, data: bytes) -> None:
@@ -38,6 +39,11 @@ class ThreadedBoard:
 
     def _dtr_reset(self) -> None:
         raise NotImplementedError(f"{type(self).__name__} has no reset")
+
+    def _clock(self) -> float | None:
+        """The board's own clock: simulated seconds since it booted (None: it keeps
+        none)."""
+        return None
 
     # ---- lifecycle ---------------------------------------------------------------
     def start(self):
@@ -80,6 +86,28 @@ class ThreadedBoard:
         """Bytes the board sent that were not read yet."""
         return len(self._rx)
 
+    @property
+    def rx_capacity(self) -> int:
+        """The most bytes the board's output buffer holds unread (``ReceiveBuffer``)."""
+        return self._rx.capacity
+
+    @property
+    def rx_dropped(self) -> int:
+        """Bytes the board sent that were dropped because nobody read the buffer and it
+        was full, since the board was opened."""
+        return self._rx.dropped
+
+    @property
+    def reported_time(self) -> float | None:
+        """How far the board's output has come, on the board's own clock: its time at
+        the end of the last step whose output is in the receive buffer. None when the
+        board keeps no clock, or its thread does not run (closed, or died). A board
+        behind the wall clock (a loaded machine) hands its output over a step at a
+        time: this does not move between two steps, however long one takes."""
+        if self._stop.is_set() or not self._thread.is_alive():
+            return None
+        return self._reported
+
     def reset_input(self) -> None:
         """Drops what the board sent and was not read yet."""
         self._rx.clear()
@@ -91,6 +119,7 @@ class ThreadedBoard:
         with self._lock:
             self._dtr_reset()
             self._rx.clear()
+            self._reported = self._clock()
 
     def _run(self) -> None:
         while not self._stop.is_set():
@@ -98,5 +127,6 @@ class ThreadedBoard:
                 out = self._advance()
                 if out:
                     self._rx.put(out)            # under the lock: a reset sees whole steps
+                self._reported = self._clock()
             pause = self._pause()
             time.sleep(pause if pause > 0 else 0)

@@ -78,11 +78,14 @@ def no_effect(applied_pwm: int, applied_dir: int, setpoint: float, measured: flo
 
 def check_wheel(delta: int, illegal: int, storm: int, applied_pwm: int, applied_dir: int,
                 setpoint: float, measured: float, stall_ticks: int, reverse_ticks: int,
-                effort: Effort) -> tuple[int, int, int, Effort]:
+                effort: Effort, prev_measured: float) -> tuple[int, int, int, Effort]:
     """``checkWheel``: ``(verdict, stall ticks, reverse ticks, effort reference)`` for
     one wheel over the interval that ended: WHEEL_OK, WHEEL_SUSPECT (hold the output),
     or a fault. A stall is a duty toward a non-zero setpoint without a count (braking
-    ends with none)."""
+    ends with none). A measured speed against the setpoint counts toward a reversed
+    encoder unless the wheel came FAULT_REVERSE_APPROACH closer to the setpoint since
+    ``prev_measured`` (the speed the PID last ran on): a healthy wheel lagging a
+    reversal of its setpoint slows toward it, a reversed encoder shows it moving away."""
     if storm or illegal >= C.FAULT_ILLEGAL_PER_TICK:
         return WHEEL_IMPLAUSIBLE, stall_ticks, reverse_ticks, effort
     driven = (applied_pwm >= C.FAULT_STALL_PWM and setpoint != 0.0
@@ -91,8 +94,9 @@ def check_wheel(delta: int, illegal: int, storm: int, applied_pwm: int, applied_
     stall_ticks = (stall_ticks + 1) & 0xFF if stalled else 0
     if stall_ticks >= C.FAULT_STALL_TICKS:
         return WHEEL_STALLED, stall_ticks, reverse_ticks, effort
+    approach = sub(measured, prev_measured) if setpoint > 0.0 else sub(prev_measured, measured)
     against = (abs(setpoint) >= C.FAULT_REVERSE_SPEED and abs(measured) >= C.FAULT_REVERSE_SPEED
-               and (setpoint > 0.0) != (measured > 0.0))
+               and (setpoint > 0.0) != (measured > 0.0) and approach < C.FAULT_REVERSE_APPROACH)
     reverse_ticks = (reverse_ticks + 1) & 0xFF if against else 0
     if reverse_ticks >= C.FAULT_REVERSE_TICKS:
         return WHEEL_REVERSED, stall_ticks, reverse_ticks, effort
@@ -123,11 +127,11 @@ def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_
         return WHEEL_OK, WHEEL_OK
     check_l, s.stallTicksL, s.reverseTicksL, effort_l = check_wheel(
         delta_l, ill_l, s.stormTickL, s.pwmL, s.dirL, s.setpointL, s.filtVelL, s.stallTicksL,
-        s.reverseTicksL, (s.effortPwmL, s.effortSpeedL, s.effortSetpointL, s.effortTicksL))
+        s.reverseTicksL, (s.effortPwmL, s.effortSpeedL, s.effortSetpointL, s.effortTicksL), s.prevMeasL)
     s.effortPwmL, s.effortSpeedL, s.effortSetpointL, s.effortTicksL = effort_l
     check_r, s.stallTicksR, s.reverseTicksR, effort_r = check_wheel(
         delta_r, ill_r, s.stormTickR, s.pwmR, s.dirR, s.setpointR, s.filtVelR, s.stallTicksR,
-        s.reverseTicksR, (s.effortPwmR, s.effortSpeedR, s.effortSetpointR, s.effortTicksR))
+        s.reverseTicksR, (s.effortPwmR, s.effortSpeedR, s.effortSetpointR, s.effortTicksR), s.prevMeasR)
     s.effortPwmR, s.effortSpeedR, s.effortSetpointR, s.effortTicksR = effort_r
     if check_l == WHEEL_STALLED and check_r == WHEEL_STALLED:
         faults = FAULT_DRIVER

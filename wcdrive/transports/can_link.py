@@ -64,6 +64,11 @@ class CanLink:
         """True once ``close`` was called."""
         return self._stop.is_set()
 
+    @property
+    def rx_dropped(self) -> int:
+        """Bytes received and dropped because nobody read them and the buffer was full."""
+        return self._rx.dropped
+
     def reset_input(self) -> None:
         """Drops what was received and not yet read."""
         self._rx.clear()

@@ -39,6 +39,10 @@ class BoardLike(Protocol):
     def reset_input(self) -> None:
         """Drops what was received and not yet read."""
 
+    @property
+    def rx_dropped(self) -> int:
+        """Bytes received and dropped because the receive buffer was full."""
+
 
 class BoardSerial(SerialBase):
     """pyserial's ``SerialBase`` over a ``BoardLike``; ``read`` honours ``timeout``."""
@@ -85,6 +89,14 @@ class BoardSerial(SerialBase):
     def in_waiting(self) -> int:
         """Bytes received and not yet read."""
         return self._board().in_waiting
+
+    @property
+    def rx_dropped(self) -> int:
+        """Bytes the board sent that were dropped since the port was opened, because
+        its receive buffer was full: like a serial driver's, it holds a bounded amount
+        (4096 bytes on ``wcavr://``, a Linux tty's; more on ``wcsim://``, see
+        ``sim_board.rx_capacity``) for a program that does not read."""
+        return self._board().rx_dropped
 
     def read(self, size: int = 1) -> bytes:
         """Up to ``size`` bytes within ``timeout`` (``None``: until ``size`` came). A read

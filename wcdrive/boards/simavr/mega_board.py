@@ -84,6 +84,9 @@ class MegaBoard(ThreadedBoard):
     def _dtr_reset(self) -> None:
         self.mega.reset("external")
 
+    def _clock(self) -> float:
+        return self.mega.time
+
     def _send(self, data: bytes) -> None:
         self.mega.send(data)
 
