@@ -208,7 +208,7 @@ class GyroIntegrator:
             self._last = (times[start], rates[start])
             start += 1
         t0, r0 = self._last
-        for time, rate in zip(times[start:stop], rates[start:stop]):
+        for time, rate in zip(times[start:stop], rates[start:stop], strict=True):
             heading += 0.5 * (rate + r0) * (time - t0)
             t0, r0 = time, rate
         self.heading, self._last = heading, (t0, r0)
