@@ -16,31 +16,16 @@ import sys
 import venv
 from pathlib import Path
 
-import pytest
+from tests.checkout import checkout_copy
 
 REPO = Path(__file__).resolve().parents[1]
-
-
-def _checkout_copy(dest: Path) -> Path:
-    """The checkout's files (tracked and new, not ignored) in ``dest``, so the build
-    writes nothing into the checkout."""
-    listed = subprocess.run(["git", "ls-files", "--cached", "--others", "--exclude-standard"],
-                            cwd=REPO, capture_output=True, text=True)
-    if listed.returncode != 0:
-        pytest.skip("not a git checkout")
-    for name in listed.stdout.splitlines():
-        src = REPO / name
-        if src.is_file():
-            (dest / name).parent.mkdir(parents=True, exist_ok=True)
-            shutil.copy2(src, dest / name)
-    return dest
 
 
 def test_downstream_project_passes_in_a_fresh_venv(tmp_path: Path) -> None:
     env_dir = tmp_path / "venv"
     venv.create(env_dir, system_site_packages=True, with_pip=False)
     python = env_dir / "bin" / "python"
-    source = _checkout_copy(tmp_path / "wcdrive-src")
+    source = checkout_copy(tmp_path / "wcdrive-src")
     # the outer run's settings (xdist's PYTEST_XDIST_WORKER, PYTEST_ADDOPTS ...) stay out
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH" and not k.startswith("PYTEST_")}
     install = subprocess.run(

@@ -14,6 +14,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.checkout import checkout_copy
+
 REPO = Path(__file__).resolve().parents[1]
 
 pytestmark = pytest.mark.simavr
@@ -22,7 +24,8 @@ pytestmark = pytest.mark.simavr
 @pytest.fixture(scope="module")
 def installed(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     root = tmp_path_factory.mktemp("wheel")
-    subprocess.run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "-w", str(root), str(REPO)],
+    source = checkout_copy(root / "wcdrive-src")      # the build writes nothing into the checkout
+    subprocess.run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "-w", str(root), str(source)],
                    check=True, capture_output=True)
     wheel = next(root.glob("wcdrive-*.whl"))
     venv = root / "venv"
