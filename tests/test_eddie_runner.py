@@ -42,3 +42,14 @@ def test_cli_sim_robot_eddie_json(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["sim", "--robot", "eddie", "spin_360", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out[0]["name"] == "spin_360" and out[0]["final_error_m"] < 0.02
+
+
+def test_the_list_shows_eddie_s_own_scenarios_for_eddie(capsys: pytest.CaptureFixture[str]) -> None:
+    """``wcdrive sim --robot eddie --list`` adds Eddie's own scenarios (the wall);
+    the Mega's list does not have them."""
+    assert main(["sim", "--robot", "eddie", "--list"]) == 0
+    eddie = [line.split()[0] for line in capsys.readouterr().out.splitlines()]
+    assert main(["sim", "--list"]) == 0
+    mega = [line.split()[0] for line in capsys.readouterr().out.splitlines()]
+    assert "wall_ahead" in eddie and "wall_ahead" not in mega
+    assert set(mega) < set(eddie)

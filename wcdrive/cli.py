@@ -51,7 +51,12 @@ INTERRUPTED = 130
 
 def _sim(args: argparse.Namespace) -> int:
     if args.list:
-        for path in scenario.bundled():
+        paths = list(scenario.bundled())
+        if args.robot == "eddie":                      # and Eddie's own (walls)
+            from wcdrive.eddie import runner as eddie_runner
+
+            paths += sorted(eddie_runner.SCENARIOS.glob("*.toml"))
+        for path in paths:
             sc = scenario.load(str(path))
             loop = "closed loop" if sc.closed_loop else "open loop  "   # open: timed commands
             print(f"{sc.name:28s} {sc.duration:7.1f} s  {loop}  {sc.description}")
