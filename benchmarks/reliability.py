@@ -34,8 +34,8 @@ to one that did not (legacy, version 1).
   an exception; a hang a line that takes more than 50 ms (one control period).
 * On the firmware the lines go in chunks, each on a freshly booted board in simavr, at
   wire speed (with a pause after 1 line in 20), through ``wcdrive.hil.lockstep``:
-  ``record`` stops at every ``processByte`` and ``controlTick`` (here ``_record``,
-  which never ends a run inside a tick), ``compare`` feeds
+  ``record`` stops at every ``processByte`` and ``controlTick`` (and finishes the
+  event under way when the trace ends), ``compare`` feeds
   the same events to the port and compares every global after every event, PWM and
   DIR, and the whole TX stream (port = firmware). The motion check runs on the
   firmware's own SRAM after each byte. A crash is the AVR core stopping or a second
@@ -99,7 +99,6 @@ if TYPE_CHECKING:
     from wcdrive.boards.simavr.mega_board import MegaBoard
     from wcdrive.boards.simavr.virtual_mega import VirtualMega
     from wcdrive.hil.lockstep import Recording
-    from wcdrive.hil.traces import Trace
 
 ElfPath = str | Path | None
 Sram = dict[str, float | int]
@@ -645,47 +644,19 @@ def _wire(chunks: list[tuple[float, bytes]]) -> tuple[list[tuple[float, bytes]],
     return writes, cycles, free
 
 
-#: How long a controlTick may still run after its entry (it takes about 1 ms; a byte
-#: never waited more than 6 ms in these runs); far less than the 50 ms to the next one.
-SETTLE_S = 0.020
-
-
-def _record(trace: Trace, elf: ElfPath) -> Recording:
-    """``wcdrive.hil.lockstep.record``, except that the run does not stop inside the last
-    ``controlTick``: ``record`` reads the last event's state when the trace ends, and a
-    trace that ends a fraction of a millisecond after a tick began leaves a half-done
-    tick that ``compare`` reports as mismatches (a harness artefact, not a difference)."""
-    from wcdrive.boards.simavr.virtual_mega import F_CPU, VirtualMega
-    from wcdrive.hil.lockstep import Recorder
-
-    mega = VirtualMega(elf, millis_start=trace.millis_start)
-    try:
-        for t, data in trace.serial:
-            mega.send(data, at=round(t * F_CPU))
-        recorder = Recorder(mega)
-        end = round(trace.duration * F_CPU)
-        recorder.run_until(end)
-        last = recorder.events[-1] if recorder.events else None
-        if last is not None and last.kind == "tick" and end - last.cycle < SETTLE_S * F_CPU:
-            recorder.run_until(last.cycle + round(SETTLE_S * F_CPU))
-        return recorder.recording(trace)
-    finally:
-        mega.close()
-
-
 def _lockstep_run(chunks: list[tuple[float, bytes]], elf: ElfPath,
                   totals: Lockstep) -> tuple[Recording | None, list[int]]:
     """Runs the bytes on the firmware and compares with the port; returns the recording
     (None when the AVR core crashed) and each byte's cycle on the wire."""
     from wcdrive.boards.simavr.virtual_mega import F_CPU, HarnessError
-    from wcdrive.hil.lockstep import compare
+    from wcdrive.hil.lockstep import compare, record
     from wcdrive.hil.traces import Trace
 
     writes, cycles, free = _wire(chunks)
     # Two ticks past the last byte: every byte is processed and answered.
     trace = Trace(duration=free / F_CPU + 0.12, serial=writes, encoders={})
     try:
-        rec = _record(trace, elf)
+        rec = record(trace, elf)
     except HarnessError:
         return None, cycles
     report = compare(rec)

@@ -261,18 +261,19 @@ def record(trace: Trace, elf: str | Path | None = None) -> Recording:
     """Runs ``trace`` on the firmware ``elf`` (default: the bundled one, built if
     needed) in simavr and logs every event."""
     mega = VirtualMega(elf, millis_start=trace.millis_start, eeprom=trace.eeprom)
-    for t, data in trace.serial:
-        mega.send(data, at=round(t * F_CPU))
-    for side, train in trace.encoders.items():
-        mega.encoder_edges(side, train)
-    recorder = Recorder(mega)
-    for t, cause in sorted(trace.resets):
-        recorder.run_until(round(t * F_CPU))
-        recorder.reset(cause)
-    recorder.run_until(round(trace.duration * F_CPU))
-    recording = recorder.recording(trace)
-    mega.close()
-    return recording
+    try:
+        for t, data in trace.serial:
+            mega.send(data, at=round(t * F_CPU))
+        for side, train in trace.encoders.items():
+            mega.encoder_edges(side, train)
+        recorder = Recorder(mega)
+        for t, cause in sorted(trace.resets):
+            recorder.run_until(round(t * F_CPU))
+            recorder.reset(cause)
+        recorder.run_until(round(trace.duration * F_CPU))
+        return recorder.recording(trace)
+    finally:
+        mega.close()
 
 
 def initial_state(recording: Recording) -> FirmwareState:
