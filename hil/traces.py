@@ -11,9 +11,10 @@ v3: frames with sequence numbers and good, bad or missing CRCs (one or more flip
 bits, lower-case hex, no sequence number, the ``$`` flipped to ``,``), hello (which
 turns the TLM lines on and from then on refuses unframed lines, but for stops and
 estop), get/set of every parameter in and out of range, estop and reset; bursts of
-20 to 150 commands back to back (loop() falls behind: received bytes are lost and
-accounted for, the output budget is spent) and encoder storms of 60,000 to 500,000
-edges/s (the storm guard, the implausible-encoder fault).
+20 to 150 commands back to back (the output budget is spent), floods of long ``set:``
+frames at top speed (``flood``: loop() falls behind, received bytes are lost and
+accounted for) and encoder storms of 60,000 to 500,000 edges/s (the storm guard, the
+implausible-encoder fault).
 """
 
 from __future__ import annotations
@@ -58,11 +59,13 @@ class Draw(Protocol):
 class RandomDraw:
     """Choices from ``random.Random(seed)``: one seed, one trace."""
 
-    def __init__(self, seed: int, *, eeprom_commands: bool = True) -> None:
+    def __init__(self, seed: int, *, eeprom_commands: bool = True, floods: bool = True) -> None:
         """``eeprom_commands=False``: the generator as it was before ``save`` and
-        ``defaults``, so that a seed found then gives the same trace."""
+        ``defaults``; ``floods=False``: as it was before ``flood``; so that a seed found
+        then gives the same trace."""
         self.rng = random.Random(seed)
         self.eeprom_commands = eeprom_commands
+        self.floods = floods
 
     def integer(self, lo: int, hi: int) -> int:
         """An integer in [lo, hi]."""
@@ -447,5 +450,36 @@ def generate_trace(draw: Draw, duration: float) -> Trace:
     if draw.boolean(0.12):
         encoders, where = storm(draw, encoders, duration)
         storms.append(where)
+    # The last draw: a seed's trace without a flood is the trace it was before floods.
+    if getattr(draw, "floods", True) and duration >= 1.5 and draw.boolean(0.1):
+        serial, encoders = flood(draw, serial, duration)
+        storms = []
     return Trace(duration=duration, serial=serial, encoders=encoders, millis_start=millis_start,
                  storms=storms)
+
+
+def flood(draw: Draw, serial: list[tuple[float, bytes]], duration: float
+          ) -> tuple[list[tuple[float, bytes]], dict[str, EdgeTrain]]:
+    """The trace's last second or so a flood: ``hello``, then 100 to 250 long ``set:``
+    and ``get:`` frames back to back on the wire, while both wheels turn at 25,000 edges/s
+    or more from the start. loop() falls behind now and then (a tick formats its lines
+    while a ``set:`` is parsed and answered) and the RX ring overflows: bytes lost,
+    marked, counted and answered ``ERR:overrun``. Bursts alone no longer lose a byte since
+    the interrupts got faster (issue 16). Returns the serial writes before the flood and
+    the flood, and the encoders' motion."""
+    start = duration - draw.real(0.9, 1.4)
+    frames = [frame(b"hello", draw.integer(0, SEQ_MAX))]
+    floats = [p for p in PARAMS if not p.integer]
+    for _ in range(draw.integer(100, 250)):
+        p = draw.choice(floats)
+        body = (f"get:{p.name}" if draw.boolean(0.3) else
+                f"set:{p.name}={draw.integer(0, 20)}.{_digits(draw, 15, 25)}")
+        frames.append(frame(body.encode(), draw.integer(0, SEQ_MAX)))
+    writes = [(t, data) for t, data in serial if t < start] + [(start, b"".join(frames))]
+    encoders = {}
+    for side in ("left", "right"):
+        rate = draw.choice([-1.0, 1.0]) * draw.real(25000.0, MAX_TRACE_EDGE_RATE)
+        travel = rate * (duration - FIRST_COMMAND_S)
+        encoders[side] = edges_from_trajectory(np.array([0.0, FIRST_COMMAND_S, duration]),
+                                               np.array([0.5, 0.5, 0.5 + travel]))
+    return writes, encoders
