@@ -3,6 +3,7 @@ simavr: the harness charges each interrupt entry its 5 cycles, as the chip does.
 
     python benchmarks/firmware_timing.py            # the full run; --write puts the
     python benchmarks/firmware_timing.py --short    # table into docs/benchmarks.md
+    python benchmarks/firmware_timing.py --minutes 10   # 10 minutes at top speed: the drift
 
 It prints:
 
@@ -214,6 +215,58 @@ def report(short: bool, elf: Path | None = None) -> tuple[str, dict[str, float]]
     return "\n".join(lines), figures
 
 
+def _due_overflow(due: int) -> int:
+    """The first Timer0 overflow after which ``millis()`` has reached ``due``."""
+    lo, hi = 0, (due + 2) * 2
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if millis_after(mid) >= due:
+            hi = mid
+        else:
+            lo = mid + 1
+    return lo
+
+
+def long_run(elf: Path, minutes: float, rate: float = 28_000.0, chunk_s: float = 10.0) -> str:
+    """``minutes`` simulated minutes at ``rate`` edges/s per wheel with v3 frames back to
+    back after hello, fed to simavr ``chunk_s`` at a time (edges and bytes for the whole
+    run at once would not fit in memory): the tick grid's drift over the run (the last
+    tick's ``millis()`` against the first's + 50 ms x ticks), the ticks' lateness, late
+    ticks, bytes lost, lines dropped."""
+    byte_s = 1496 * 20 / F_CPU
+    ticks = []
+    with VirtualMega(elf) as mega:
+        mega.send(frame(b"hello", 1), at=round(0.02 * F_CPU))
+        total, t, seq, wire_free = minutes * 60, 0.0, 2, 0.06
+        while t < total:
+            end = min(total, t + chunk_s)
+            for side, sign in (("left", 1), ("right", -1)):
+                def at(x: float, sign: float = sign) -> float:    # the count at x s (from 10 ms)
+                    return 0.5 + sign * rate * (x - 0.01)
+                if t == 0.0:
+                    times, counts = [0.0, 0.01, end], [0.5, 0.5, at(end)]
+                else:
+                    times, counts = [t, end], [at(t), at(end)]
+                mega.encoder_edges(side, edges_from_trajectory(np.array(times), np.array(counts)))
+            n = int((end - wire_free) / byte_s)
+            if n > 0:
+                mega.send(b"".join(frame(b"x:0.5,t:0.1", 2 + (seq + k) % 60000) for k in range(n)),
+                          at=round(wire_free * F_CPU))
+                seq, wire_free = seq + n, wire_free + n * byte_s
+            mega.run_for(end - t)
+            ticks += [h for h in mega.take_hits() if h.function == "controlTick"]
+            t = end
+        late_ticks, rx_lost, tx_dropped = (int(mega.read(v)) for v in ("lateTicks", "rxLost", "txDropped"))
+    ms = np.array([int(h.arg) for h in ticks], dtype=np.int64)
+    due_cycles = [TIMER0_START_CYCLE + _due_overflow(int(due)) * OVERFLOW_CYCLES for due in ms]
+    late_us = np.array([(h.cycle - c) / F_CPU * 1e6 for h, c in zip(ticks, due_cycles, strict=True)])
+    p50, p99 = np.percentile(late_us, 50), np.percentile(late_us, 99)
+    return (f"{minutes:g} min at {rate:,.0f} edges/s per wheel, frames back to back: {len(ticks)} ticks, "
+            f"grid drift {int(ms[-1] - ms[0] - 50 * (len(ms) - 1))} ms, lateness p50 / p99 / max "
+            f"{p50:.0f} / {p99:.0f} / {late_us.max():.0f} µs, "
+            f"late ticks {late_ticks}, bytes lost {rx_lost}, lines dropped {tx_dropped}")
+
+
 def write(table: str) -> None:
     path = ROOT / "docs" / "benchmarks.md"
     text = path.read_text()
@@ -232,7 +285,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--short", action="store_true", help="short runs (the test suite's)")
     parser.add_argument("--write", action="store_true", help="put the table into docs/benchmarks.md")
     parser.add_argument("--elf", type=Path, help="another build of final_control (default: this one)")
+    parser.add_argument("--minutes", type=float, metavar="M",
+                        help="instead: M simulated minutes at top speed, the grid's drift (long_run)")
     args = parser.parse_args(argv)
+    if args.minutes:
+        print(long_run(args.elf or firmware_elf(), args.minutes))
+        return 0
     table, figures = report(args.short, args.elf)
     print(table)
     print("figures:", {k: round(v, 4) if isinstance(v, float) else v for k, v in figures.items()})
