@@ -141,6 +141,7 @@ def _drive(stepped: bool, sends: list[tuple[int, bytes]], chunks: list[int], fau
 _COMMANDS = st.sampled_from([
     encode_cmdvel(0.5, 0.0), encode_cmdvel(0.3, 0.4), encode_cmdvel(-0.4, 0.0), encode_cmdvel(0.0, 0.0),
     encode_wheel(3.0, 2.0), b"reset\n", b"stop\n", b"x:0.5,t:", b"garbage,", b"\n",
+    b"save\n", b"defaults\n", b"set:kp_l=1.5\n",
 ])
 _FAULTS = st.sampled_from([
     [], [Fault("reset", 0.37)], [Fault("encoder_cut", 0.3, "left", 0.4)],
@@ -424,3 +425,29 @@ def test_a_run_leaves_no_cyclic_garbage_a_tick() -> None:
     with runner.cyclic_gc_paused():
         assert not gc.isenabled()
     assert gc.isenabled()
+
+
+def test_an_eeprom_save_completes_on_the_event_loop() -> None:
+    """``save`` writes its block byte by byte from the EEPROM-ready interrupt: the event
+    loop polls it as the stepped loop does at every overflow, so the write ends and a
+    second ``save`` a second later is taken (it answered ``ERR:busy`` before)."""
+    sends = [(round(0.01 * F_CPU), b"save\n"), (round(1.0 * F_CPU), b"save\n")]
+    chunks = [round(0.5 * F_CPU), round(1.5 * F_CPU)]
+    a, b = _drive(True, sends, chunks, [], [], None), _drive(False, sends, chunks, [], [], None)
+    assert a.output == b.output and a.states == b.states and a.end == b.end
+    out = b"".join(data for _, data in b.output)
+    assert b"ERR:busy" not in out
+    last = dict(zip([f.name for f in dataclasses.fields(Firmware().state)], b.states[-1], strict=True))
+    assert last["eeBusy"] == 0 and last["eeNext"] == 41
+
+
+@pytest.mark.parametrize("ahead", [1, 2, 3])
+def test_a_grid_a_ms_ahead_of_millis(ahead: int) -> None:
+    """A firmware whose lastControlTime is a ms or two ahead of millis() (not due now,
+    nor for 50 ms): the event loop ticks where the stepped loop does."""
+    runs = []
+    for stepped in (True, False):
+        loop = PortLoop(Plant(), firmware=Firmware(boot_millis=ahead), stepped=stepped)
+        loop.run_until(round(0.3 * F_CPU))
+        runs.append([data for _, data in loop.take_output()])
+    assert runs[0] == runs[1] and sum(data.startswith(b"ENC:") for data in runs[1]) >= 5

@@ -10,8 +10,9 @@ the gyro's samples of those steps in one more (``Gyro.sample_steps``).
 
 ``run_until`` is event-driven (issue 21): nothing happens at an overflow unless bytes
 are read or the tick runs there, so it jumps from event to event: the overflow at which
-the next bytes have arrived, the first overflow at which ``Firmware.due`` holds (from
-``Firmware.due_after``, the same condition solved for the time), a reset, the end.
+the next bytes have arrived or a ``save``'s EEPROM-ready interrupt is due, the first
+overflow at which ``Firmware.due`` holds (from ``Firmware.due_after``, the same
+condition solved for the time), a reset, the end.
 ``millis()`` there comes in closed form from Timer0's model (``millis_after``: 1 ms and
 3/125 of one per overflow). The firmware alone decides when it ticks (``due`` and
 ``due_after`` side by side), so a change of its timing needs no change here.
@@ -221,8 +222,9 @@ class PortLoop:
         """Runs to ``end_cycle``; ``on_tick(time)`` after every control tick.
 
         Event-driven (module docstring): from one event to the next (a control tick, the
-        overflow at which received bytes are read, a reset, the end), ``millis()`` in
-        closed form. ``stepped=True`` takes the reference path, every overflow in turn."""
+        overflow at which received bytes are read or an EEPROM write's ready interrupt is
+        due, a reset, the end), ``millis()`` in closed form. ``stepped=True`` takes the
+        reference path, every overflow in turn."""
         if self.stepped:
             self._run_stepped(end_cycle, on_tick)
             return
@@ -242,17 +244,22 @@ class PortLoop:
             last = overflow + (end_cycle - overflow) // OVERFLOW_CYCLES * OVERFLOW_CYCLES
             if resets:
                 last = min(last, overflow + (resets[0] - 1 - overflow) // OVERFLOW_CYCLES * OVERFLOW_CYCLES)
-            rx_at: int | None = None
+            # The overflow at which loop() has something to do besides the tick: bytes
+            # that have arrived (read before its due check), or an EEPROM-ready interrupt
+            # of a save in progress (polled at every overflow on the stepped path).
+            io_at: int | None = None
             if self._rx:
-                arrived = self._rx.next_arrival()
-                rx_at = overflow if arrived <= overflow else \
-                    overflow + -(-(arrived - overflow) // OVERFLOW_CYCLES) * OVERFLOW_CYCLES
-                if rx_at > last:
-                    rx_at = None
+                io_at = _overflow_at(self._rx.next_arrival(), overflow)
+            if self.fw.state.eeBusy:
+                ready = self._eeprom_ready.due
+                ee_at = overflow if ready is None else _overflow_at(ready, overflow)
+                io_at = ee_at if io_at is None else min(io_at, ee_at)
+            if io_at is not None and io_at > last:
+                io_at = None
             fw = self.fw
             timer = self.timer
-            # Overflows before the bytes' own: the first at which the tick is due.
-            span = ((rx_at if rx_at is not None else last + OVERFLOW_CYCLES) - overflow) // OVERFLOW_CYCLES
+            # Overflows before that one: the first at which the tick is due.
+            span = ((io_at if io_at is not None else last + OVERFLOW_CYCLES) - overflow) // OVERFLOW_CYCLES
             due_at = self._first_due(fw, span)
             if due_at is not None:
                 at = overflow + due_at * OVERFLOW_CYCLES
@@ -260,17 +267,19 @@ class PortLoop:
                 self._tick(fw, at, timer.millis, on_tick)
                 self._overflow = at + OVERFLOW_CYCLES
                 continue
-            if rx_at is None:
+            if io_at is None:
                 self._jump_timer((last - overflow) // OVERFLOW_CYCLES + 1)
                 self._overflow = last + OVERFLOW_CYCLES
                 continue
-            self._jump_timer((rx_at - overflow) // OVERFLOW_CYCLES + 1)
-            self._receive(fw, rx_at)
+            self._jump_timer((io_at - overflow) // OVERFLOW_CYCLES + 1)
+            if self._rx and self._rx.next_arrival() <= io_at:
+                self._receive(fw, io_at)
             fw = self.fw
+            self._eeprom_ready.poll(fw.state, io_at)
             millis = timer.millis
             if fw.due(millis):
-                self._tick(fw, rx_at, millis, on_tick)
-            self._overflow = rx_at + OVERFLOW_CYCLES
+                self._tick(fw, io_at, millis, on_tick)
+            self._overflow = io_at + OVERFLOW_CYCLES
         self._advance_to(end_cycle)
         self.cycle = max(self.cycle, end_cycle)
 
@@ -289,18 +298,23 @@ class PortLoop:
         tests/test_sim_speed.py holds the two paths to the same runs)."""
         if span <= 0:
             return None
-        need = fw.due_after(self.timer.millis)
         f0 = self.timer.fract
 
         def moved(k: int) -> int:          # ms millis() moves in the next k overflows
             return MILLIS_INC * k + (f0 + FRACT_INC * k) // FRACT_MAX
 
+        # Asked first after the next overflow (``due`` is not monotone across the
+        # millis() just before it: a lastControlTime a ms ahead of now is not due now).
+        first = moved(1)
+        need = fw.due_after((self.timer.millis + first) & 0xFFFFFFFF)
+        if need == 0:
+            return 0
         k = max(1, need * FRACT_MAX // (MILLIS_INC * FRACT_MAX + FRACT_INC))
-        while moved(k) < need:
+        while moved(k + 1) - first < need:
             k += 1
-        while k > 1 and moved(k - 1) >= need:
+        while k > 1 and moved(k) - first >= need:
             k -= 1
-        return k - 1 if k <= span else None
+        return k if k < span else None
 
     def _receive(self, fw: Firmware, overflow: int) -> None:
         """The bytes that have arrived by ``overflow`` go through ``processByte``."""
@@ -457,6 +471,13 @@ class PortLoop:
                 if enc.decoder.storm:
                     setattr(self.fw.state, "stormL" if enc.side == "left" else "stormR", 1)
             enc.leave_if_healthy(math.floor(positions[-1]), hi)
+
+
+def _overflow_at(cycle: int, overflow: int) -> int:
+    """The first Timer0 overflow at or after ``cycle``, counting from ``overflow`` on."""
+    if cycle <= overflow:
+        return overflow
+    return overflow + -(-(cycle - overflow) // OVERFLOW_CYCLES) * OVERFLOW_CYCLES
 
 
 def advance(plant: Plant, gyro: Gyro | None, steps: int, dt: float, *, angles: bool = True
