@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 import os
+import struct
 import subprocess
 import sys
 from pathlib import Path
@@ -32,8 +33,9 @@ SPECIAL = [0.0, -0.0, math.inf, -math.inf, F.MIN_NORMAL, -F.MIN_NORMAL, F.SUBNOR
 
 
 def same(x: float, y: float) -> bool:
-    """Equal bit for bit as binary32 (a NaN's payload too)."""
-    return isinstance(x, float) and isinstance(y, float) and F.bits(x) == F.bits(y)
+    """The same Python float bit for bit (a NaN's payload too), compared as the double
+    it is: a result the fast path forgot to round to binary32 differs."""
+    return isinstance(x, float) and isinstance(y, float) and struct.pack("<d", x) == struct.pack("<d", y)
 
 
 def fast(name: str):
@@ -70,11 +72,9 @@ def test_a_million_random_pairs_agree() -> None:
         xs = pairs[0].view(np.float32).astype(np.float64).tolist()
         ys = pairs[1].view(np.float32).astype(np.float64).tolist()
     for name in BINARY:
-        got = np.array(list(map(fast(name), xs, ys)), dtype=np.float64)
-        want = np.array(list(map(F.reference[name], xs, ys)), dtype=np.float64)
-        with np.errstate(invalid="ignore", over="ignore"):
-            g, w = got.astype(np.float32).view(np.uint32), want.astype(np.float32).view(np.uint32)
-        bad = np.flatnonzero(g != w)
+        got = np.array(list(map(fast(name), xs, ys)), dtype=np.float64).view(np.uint64)
+        want = np.array(list(map(F.reference[name], xs, ys)), dtype=np.float64).view(np.uint64)
+        bad = np.flatnonzero(got != want)            # the doubles, bit for bit
         assert not bad.size, (name, hex(int(pairs[0][bad[0]])), hex(int(pairs[1][bad[0]])))
 
 
@@ -132,3 +132,26 @@ def test_the_python_path_gives_the_same_run() -> None:
         outs.append(run.stdout.split())
     assert outs[0][0] == "True" and outs[1][0] == "False"
     assert outs[0][1] == outs[1][1]
+
+
+def test_the_reference_is_pure_python() -> None:
+    """The Python functions round through their own ``f32`` (``_round``), not the C one
+    that replaced the module's name: with the fast path loaded they are still the
+    independent reference."""
+    assert F._round is F.reference["f32"] and F.f32 is F.fast.f32
+    assert F.reference["mul"].__globals__["_round"] is F.reference["f32"]
+
+
+def test_an_unwritable_cache_falls_back_to_python(tmp_path: Path) -> None:
+    """The library imports, and a simulated chair runs, where nothing can be built: the
+    binary32 operations and the plant in pure Python (a warning says why)."""
+    not_a_dir = tmp_path / "file"
+    not_a_dir.write_text("")
+    code = ("import wcdrive.wheelchair; from wcdrive.avr import f32; from wcdrive.plant import Plant; "
+            "p = Plant(); p.advance(5); print(f32.fast is None, p.uses_kernel, f32.mul(0.1, 3.0))")
+    env = {**os.environ, "WCDRIVE_CACHE": str(not_a_dir / "cache")}
+    run = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=env, capture_output=True, text=True,
+                         timeout=120)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.split() == ["True", "False", repr(F.mul(0.1, 3.0))]
+    assert "pure Python" in run.stderr

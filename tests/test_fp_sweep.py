@@ -72,6 +72,18 @@ def test_the_sweep_reaches_avr_libc_s_rounding_quirks(avr: AvrMath, op: str) -> 
     assert result.not_ieee >= 10, result.describe()
 
 
+@pytest.mark.parametrize("op", ["add", "sub", "mul", "div", "floatsisf"])
+def test_the_python_reference_against_the_avr(avr: AvrMath, op: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """With the C fast path loaded (``wcdrive.avr.csrc.f32_fast``) the sweep runs it;
+    the pure Python functions it hands the uncommon cases to, and that run alone with
+    ``WCDRIVE_PURE_F32=1`` or without a compiler, are swept here on the same slice."""
+    for name in ("add", "sub", "mul", "div"):
+        monkeypatch.setitem(fpsweep._BINARY, name, F.reference[name])
+    monkeypatch.setattr(F, "from_int", F.reference["from_int"])
+    result = fpsweep.sweep(avr, op, SLICE_PAIRS, seed=5)
+    assert result.mismatches == 0, result.describe()
+
+
 def test_an_ieee_multiplication_fails_the_sweep(avr: AvrMath, monkeypatch: pytest.MonkeyPatch) -> None:
     """The sweep can fail: with f32.mul correctly rounded (the old port) it finds the
     subnormal products avr-libc rounds as ties."""

@@ -48,6 +48,11 @@ def f32(x: float) -> float:
         return math.copysign(math.inf, x)
 
 
+#: ``f32`` as defined here, for the functions below: they stay pure Python (the
+#: reference) when the C fast path replaces the module's names.
+_round = f32
+
+
 def bits(x: float) -> int:
     """The binary32 encoding of ``x`` (which must already be a binary32 value)."""
     return _U32.unpack(_pack(x))[0]
@@ -66,13 +71,13 @@ def _nan(a: float) -> float:
 def add(a: float, b: float) -> float:
     """``a + b`` as ``__addsf3``: correctly rounded; NaN as ``_nan``."""
     r = a + b
-    return _nan(a) if r != r else f32(r)
+    return _nan(a) if r != r else _round(r)
 
 
 def sub(a: float, b: float) -> float:
     """``a - b`` as ``__subsf3``: correctly rounded; NaN as ``_nan``."""
     r = a - b
-    return _nan(a) if r != r else f32(r)
+    return _nan(a) if r != r else _round(r)
 
 
 def mul(a: float, b: float) -> float:
@@ -82,7 +87,7 @@ def mul(a: float, b: float) -> float:
     if p != p:
         return _nan(a)
     if p == 0.0 or abs(p) >= MIN_NORMAL:   # zero operand, normal, overflow
-        return f32(p)
+        return _round(p)
     return _mul_small(a, b)
 
 
@@ -136,7 +141,7 @@ def div(a: float, b: float) -> float:
     if q != q:
         return _nan(a)
     if abs(q) >= _TWO_MIN_NORMAL or q == 0.0:   # normal, inf or zero
-        return f32(q)
+        return _round(q)
     return _div_subnormal(a, b)
 
 
@@ -167,7 +172,7 @@ def _div_subnormal(a: float, b: float) -> float:
     q, r = divmod(n, d)
     extra = 0x00 if 2 * r < d else 0x80 if 2 * r == d else 0xFF
     if e >= 0:
-        return f32(a / b)  # normal: the rounding below is exact rounding
+        return _round(a / b)  # normal: the rounding below is exact rounding
     shift = -e
     if shift > 24:
         return -0.0 if negative else 0.0
@@ -188,7 +193,7 @@ def neg(a: float) -> float:
 
 def from_int(n: int) -> float:
     """``(float)`` of a 32-bit integer (round to nearest even)."""
-    return f32(float(n))
+    return _round(float(n))
 
 
 def to_int_trunc(x: float) -> int:
@@ -223,13 +228,13 @@ _FAST_SOURCE = Path(__file__).resolve().parent / "csrc" / "f32_fast.c"
 
 def load_fast() -> ModuleType | None:
     """The C fast path, built on first use (``wcdrive.native``), bound to ``reference``;
-    None without a compiler or Python's headers, or with ``WCDRIVE_PURE_F32=1`` in the
-    environment (the Python functions only)."""
+    None without a compiler, Python's headers or a writable cache (``WCDRIVE_CACHE``), or
+    with ``WCDRIVE_PURE_F32=1`` in the environment (the Python functions only)."""
     if os.environ.get("WCDRIVE_PURE_F32", "") not in ("", "0"):
         return None
     try:
         module = native.load_extension(_FAST_SOURCE, "_f32_fast", ("-O2", "-ffp-contract=off"))
-    except native.BuildError as exc:
+    except (native.BuildError, OSError) as exc:     # OSError: no writable cache, for one
         logging.getLogger(__name__).warning("binary32 in pure Python (slower): %s", exc)
         return None
     module._bind(*(reference[name] for name in FAST_NAMES))

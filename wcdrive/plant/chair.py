@@ -96,7 +96,7 @@ def load_kernel() -> ctypes.CDLL | None:
                                                   _P, _P, ctypes.c_int32, _P, _P]
             lib.chair_advance_sampled.restype = ctypes.c_int32
             _kernel = lib
-        except BuildError:
+        except (BuildError, OSError):                   # OSError: no writable cache
             _kernel = False
     return _kernel if isinstance(_kernel, ctypes.CDLL) else None
 
