@@ -427,6 +427,41 @@ def test_a_run_leaves_no_cyclic_garbage_a_tick() -> None:
     assert gc.isenabled()
 
 
+def test_runs_in_threads_share_the_collector_s_pause() -> None:
+    """Two runs that overlap in two threads: the collector stays off until the last one
+    ends, then comes back; a process that had it off keeps it off."""
+    import threading
+
+    first_in, second_in, first_out = threading.Event(), threading.Event(), threading.Event()
+    seen = []
+
+    def first() -> None:
+        with runner.cyclic_gc_paused():
+            first_in.set()
+            second_in.wait(5)
+        first_out.set()
+
+    def second() -> None:
+        first_in.wait(5)
+        with runner.cyclic_gc_paused():
+            second_in.set()
+            first_out.wait(5)
+            seen.append(gc.isenabled())          # the first run has ended, this one not
+    threads = [threading.Thread(target=first), threading.Thread(target=second)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(10)
+    assert seen == [False] and gc.isenabled()
+    gc.disable()
+    try:
+        with runner.cyclic_gc_paused():
+            pass
+        assert not gc.isenabled()
+    finally:
+        gc.enable()
+
+
 def test_an_eeprom_save_completes_on_the_event_loop() -> None:
     """``save`` writes its block byte by byte from the EEPROM-ready interrupt: the event
     loop polls it as the stepped loop does at every overflow, so the write ends and a

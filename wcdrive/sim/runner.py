@@ -24,6 +24,7 @@ import bisect
 import gc
 import math
 import re
+import threading
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -447,14 +448,28 @@ def cyclic_gc_paused() -> Iterator[None]:
     heap: a quarter of ``corridor_100m``'s time in a process that has imported
     ``wcdrive.cli``. A run makes no cyclic garbage a tick (reference counting frees
     what it drops; the few objects a run leaves in cycles are the same whatever its
-    length: tests/test_sim_speed.py), so nothing piles up while the collector waits."""
-    enabled = gc.isenabled()
-    gc.disable()
+    length: tests/test_sim_speed.py), so nothing piles up while the collector waits.
+
+    Runs in several threads at once (a Dask worker's) share the pause: the collector
+    comes back when the last of them ends, if it was on when the first began."""
+    global _paused_runs, _gc_was_enabled
+    with _gc_pause_lock:
+        if _paused_runs == 0:
+            _gc_was_enabled = gc.isenabled()
+            gc.disable()
+        _paused_runs += 1
     try:
         yield
     finally:
-        if enabled:
-            gc.enable()
+        with _gc_pause_lock:
+            _paused_runs -= 1
+            if _paused_runs == 0 and _gc_was_enabled:
+                gc.enable()
+
+
+_gc_pause_lock = threading.Lock()
+_paused_runs = 0
+_gc_was_enabled = False
 
 
 def run(scenario: Scenario, *, backend: str = "port", seed: int = 0, dt: float = 0.001,
