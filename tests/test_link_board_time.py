@@ -12,6 +12,7 @@ after ``link_timeout`` of its own time, at any speed."""
 
 from __future__ import annotations
 
+import threading
 import time
 
 import pytest
@@ -102,3 +103,36 @@ def test_a_board_whose_output_stops_is_noticed_on_its_clock(muted, speed: float)
         while not chair.link_ok and time.monotonic() < deadline:
             time.sleep(0.002)
         assert chair.link_ok and chair.events.count("LINK_LOST") == 1
+
+
+def test_a_hung_board_thread_is_a_silent_link(monkeypatch) -> None:
+    """The board's thread stuck inside a step (alive, its clock stopped): the board's
+    clock does not move, so counted on it the silence would stay 0 for ever. After
+    ``STEP_STALL_S`` of wall time without a step, ``reported_time`` is None and the host
+    counts on its own clock: LinkLost within that bound plus ``link_timeout``."""
+    from wcdrive.boards.threaded import STEP_STALL_S
+
+    hang, release = [False], threading.Event()
+    advance = SimulatedBoard._advance
+
+    def maybe_hang(self: SimulatedBoard) -> bytes:
+        if hang[0]:
+            release.wait(30)                 # stuck, holding the board's lock
+        return advance(self)
+
+    monkeypatch.setattr(SimulatedBoard, "_advance", maybe_hang)
+    with wcdrive.connect("sim://") as chair:
+        try:
+            _drive(chair, 0.3)
+            board = chair._session.port.board
+            hang[0] = True
+            hung_at = time.monotonic()
+            while chair.link_ok and time.monotonic() - hung_at < STEP_STALL_S + 3.0:
+                time.sleep(0.01)
+            noticed = time.monotonic() - hung_at
+            assert not chair.link_ok and board.reported_time is None
+            assert noticed < STEP_STALL_S + chair.link_timeout + 0.5, noticed
+            assert chair.events.count("LINK_LOST") == 1
+        finally:
+            hang[0] = False
+            release.set()                    # the thread goes on; the chair closes

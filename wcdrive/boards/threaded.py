@@ -13,6 +13,12 @@ import time
 
 from wcdrive.boards.receive_buffer import DEFAULT_CAPACITY, ReceiveBuffer
 
+#: A board's thread that ends no step for this long (wall time) is taken as hung:
+#: ``reported_time`` is None, and a host falls back to its own clock for the link.
+#: Above the longest step a loaded machine makes (a step is at most 1 s of the board's
+#: time, which a board behind the wall clock may take most of a second to simulate).
+STEP_STALL_S = 2.0
+
 
 class ThreadedBoard:
     """A board stepped by a background thread, with serial-like ``read``/``write``."""
@@ -23,6 +29,7 @@ class ThreadedBoard:
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
         self._reported: float | None = None
+        self._reported_at = time.monotonic()      # the wall time of the last step's end
 
     # ---- for subclasses -----------------------------------------------------------
     def _send(self, data: bytes) -> None:
@@ -101,10 +108,13 @@ class ThreadedBoard:
     def reported_time(self) -> float | None:
         """How far the board's output has come, on the board's own clock: its time at
         the end of the last step whose output is in the receive buffer. None when the
-        board keeps no clock, or its thread does not run (closed, or died). A board
-        behind the wall clock (a loaded machine) hands its output over a step at a
-        time: this does not move between two steps, however long one takes."""
+        board keeps no clock, or its thread does not run (closed, died, or hung: no step
+        ended for ``STEP_STALL_S`` of wall time), so that a host counting silence on it
+        falls back to its own clock. A board behind the wall clock (a loaded machine)
+        hands its output over a step at a time: this does not move between two steps."""
         if self._stop.is_set() or not self._thread.is_alive():
+            return None
+        if time.monotonic() - self._reported_at > STEP_STALL_S:
             return None
         return self._reported
 
@@ -120,6 +130,7 @@ class ThreadedBoard:
             self._dtr_reset()
             self._rx.clear()
             self._reported = self._clock()
+            self._reported_at = time.monotonic()
 
     def _run(self) -> None:
         while not self._stop.is_set():
@@ -128,5 +139,6 @@ class ThreadedBoard:
                 if out:
                     self._rx.put(out)            # under the lock: a reset sees whole steps
                 self._reported = self._clock()
+                self._reported_at = time.monotonic()
             pause = self._pause()
             time.sleep(pause if pause > 0 else 0)
