@@ -248,9 +248,12 @@ class PortLoop:
             # that have arrived (read before its due check), or an EEPROM-ready interrupt
             # of a save in progress (polled at every overflow on the stepped path).
             io_at: int | None = None
-            if self._rx:
-                io_at = _overflow_at(self._rx.next_arrival(), overflow)
-            if self.fw.state.eeBusy:
+            arrived = self._rx.next_arrival() if self._rx else None
+            if arrived is not None:
+                io_at = overflow if arrived <= overflow else \
+                    overflow + -(-(arrived - overflow) // OVERFLOW_CYCLES) * OVERFLOW_CYCLES
+            writing = self.fw.state.eeBusy
+            if writing:
                 ready = self._eeprom_ready.due
                 ee_at = overflow if ready is None else _overflow_at(ready, overflow)
                 io_at = ee_at if io_at is None else min(io_at, ee_at)
@@ -272,10 +275,11 @@ class PortLoop:
                 self._overflow = last + OVERFLOW_CYCLES
                 continue
             self._jump_timer((io_at - overflow) // OVERFLOW_CYCLES + 1)
-            if self._rx and self._rx.next_arrival() <= io_at:
+            if arrived is not None and arrived <= io_at:
                 self._receive(fw, io_at)
             fw = self.fw
-            self._eeprom_ready.poll(fw.state, io_at)
+            if writing or fw.state.eeBusy:
+                self._eeprom_ready.poll(fw.state, io_at)
             millis = timer.millis
             if fw.due(millis):
                 self._tick(fw, io_at, millis, on_tick)
