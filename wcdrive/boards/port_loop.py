@@ -231,11 +231,7 @@ class PortLoop:
         while True:
             overflow = self._overflow
             resets = self._resets
-            if resets and resets[0] <= min(overflow, end_cycle):
-                cycle = resets.pop(0)
-                self._advance_to(cycle)
-                self.cycle = max(self.cycle, cycle)
-                self.reset()
+            if self._reset_due(end_cycle):
                 continue
             if overflow > end_cycle:
                 break
@@ -250,8 +246,7 @@ class PortLoop:
             io_at: int | None = None
             arrived = self._rx.next_arrival() if self._rx else None
             if arrived is not None:
-                io_at = overflow if arrived <= overflow else \
-                    overflow + -(-(arrived - overflow) // OVERFLOW_CYCLES) * OVERFLOW_CYCLES
+                io_at = _overflow_at(arrived, overflow)
             writing = self.fw.state.eeBusy
             if writing:
                 ready = self._eeprom_ready.due
@@ -286,6 +281,18 @@ class PortLoop:
             self._overflow = io_at + OVERFLOW_CYCLES
         self._advance_to(end_cycle)
         self.cycle = max(self.cycle, end_cycle)
+
+    def _reset_due(self, end_cycle: int) -> bool:
+        """A ``reset`` fault due by the next overflow (and by ``end_cycle``): the plant
+        brought to its cycle and the board reset there. Whether one was."""
+        resets = self._resets
+        if not resets or resets[0] > min(self._overflow, end_cycle):
+            return False
+        cycle = resets.pop(0)
+        self._advance_to(cycle)
+        self.cycle = max(self.cycle, cycle)
+        self.reset()
+        return True
 
     def _jump_timer(self, overflows: int) -> None:
         """``overflows`` Timer0 overflows at once (``millis_after``), on the same object."""
@@ -359,26 +366,14 @@ class PortLoop:
         checks that both paths give the same bytes, ticks and states)."""
         while True:
             overflow = self._overflow
-            if self._resets and self._resets[0] <= min(overflow, end_cycle):
-                cycle = self._resets.pop(0)
-                self._advance_to(cycle)
-                self.cycle = max(self.cycle, cycle)
-                self.reset()
+            if self._reset_due(end_cycle):
                 continue
             if overflow > end_cycle:
                 break
             fw = self.fw
             self.timer.overflow()
             if self._rx and self._rx.next_arrival() <= overflow:
-                data = bytearray(self._rx.take(overflow))
-                masked = any(e.decoder.storm for e in self._encoders.values())
-                if masked:
-                    self._advance_to(overflow)
-                out = fw.feed(bytes(data))
-                if out:
-                    self.output.append((overflow, out))
-                if masked:
-                    self._unmask_cleared(overflow)
+                self._receive(fw, overflow)
             self._eeprom_ready.poll(fw.state, overflow)
             millis = self.timer.millis
             if fw.due(millis):
