@@ -160,16 +160,8 @@ def run_loaded(elf: Path, rate: float, seconds: float, flood: bool = False) -> L
     due = boot
     for k, hit in enumerate(ticks):
         due = boot + 50 * (k + 1)
-        n = 0
-        lo, hi = 0, (due + 2) * 2
-        while lo < hi:                               # the first overflow with millis() >= due
-            mid = (lo + hi) // 2
-            if millis_after(mid) >= due:
-                hi = mid
-            else:
-                lo = mid + 1
-        n = lo
-        lateness.append((hit.cycle - (TIMER0_START_CYCLE + n * OVERFLOW_CYCLES)) / F_CPU * 1e6)
+        due_cycle = TIMER0_START_CYCLE + _due_overflow(due) * OVERFLOW_CYCLES
+        lateness.append((hit.cycle - due_cycle) / F_CPU * 1e6)
     drift = int(ticks[-1].arg) - due if ticks else 0
     del first
     arr = np.array(lateness) if lateness else np.zeros(1)
