@@ -72,7 +72,7 @@ setup(
               *DATA],
     package_dir={"wcdrive": "wcdrive", "wcdrive.hil": "hil", **DATA},
     package_data={"wcdrive": ["py.typed", "sim/scenarios/*.toml", "eddie/scenarios/*.toml", "plant/csrc/*.c",
-                              "avr/csrc/*.c", "boards/simavr/csrc/*.c"],
+                              "avr/csrc/*.c", "firmware/csrc/*.c", "boards/simavr/csrc/*.c"],
                   **{name: DATA_FILES for name in DATA}},
     py_modules=["_wcdrive_serial_urls"],
     cmdclass={"build_py": BuildPyWithPth, "editable_wheel": EditableWheelWithPth},

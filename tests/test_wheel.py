@@ -53,7 +53,8 @@ def test_the_wheel_installs_only_wcdrive_and_the_url_hook(installed: dict[str, P
                    "wcdrive/_data/protocol/vectors.toml", "wcdrive/_data/protocol/wcdrive.dbc",
                    "wcdrive/_data/firmware/final_control/final_control.ino",
                    "wcdrive/_data/firmware/final_control/Makefile",
-                   "wcdrive/boards/simavr/csrc/wcsim.c", "wcdrive/plant/csrc/chair_kernel.c"):
+                   "wcdrive/boards/simavr/csrc/wcsim.c", "wcdrive/plant/csrc/chair_kernel.c",
+                   "wcdrive/avr/csrc/f32_fast.c", "wcdrive/firmware/csrc/tick_fast.c"):
         assert needed in names, needed
     assert not [n for n in names if "/build/" in n or n.endswith((".o", ".elf", ".so"))]
 
@@ -65,6 +66,8 @@ def test_imports_outside_the_checkout(installed: dict[str, Path]) -> None:
             "p = pathlib.Path(wcdrive.__file__).parent; "
             "assert 'site-packages' in str(p), p; assert (p / 'py.typed').exists(); "
             "assert r.files('wcdrive._data.protocol').joinpath('spec.toml').is_file(); "
+            "from wcdrive.avr import f32; from wcdrive.firmware import tick_fast; "
+            "assert f32.fast is not None and tick_fast.fast is not None; "
             "import serial; s = serial.serial_for_url('wcsim://?speed=4', timeout=1); "
             "assert b'ENC:' in s.read(200); s.close(); print('ok')")
     result = _run(installed, python, "-c", code)
