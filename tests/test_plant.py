@@ -154,3 +154,80 @@ def test_simavr_backend_gives_the_same_firmware_outputs(elf) -> None:
     port = runner.run(sc)
     # Not identical (the simavr tick latches counts mid-step), but the same motion.
     assert np.abs(r.truth[-1, :2] - port.truth[-1, :2]).max() < 0.02
+
+
+def _drive_bits(plant: Plant, seed: int = 5, ticks: int = 80) -> list[bytes]:
+    """A random drive, 50 steps a tick through ``advance_batch``; the chassis's state
+    and the wheels' after every tick, as raw bytes (bit for bit)."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(ticks):
+        plant.set_drive(int(rng.integers(0, 256)), int(rng.integers(0, 2)), int(rng.integers(0, 256)),
+                        int(rng.integers(0, 2)))
+        plant.advance_batch(50, 0.001)
+        b = plant.body
+        out.append(np.array([*b.position, b.angle, *b.velocity, b.angular_velocity, plant.left.angle,
+                             plant.right.angle, *plant.caster_heading]).tobytes())
+    return out
+
+
+def test_a_lone_chassis_steps_as_cpSpaceStep_steps_it() -> None:
+    """The kernel calls Chipmunk's two body updates itself when the chassis is alone in
+    its space (chair_kernel.c's lone_body); a space with anything else in it goes through
+    cpSpaceStep. Both give the same motion bit for bit: here against a space whose second
+    body (no shape, far away) makes the kernel take cpSpaceStep."""
+    import pymunk
+
+    lone, crowded = Plant(), Plant()
+    crowded.space.add(pymunk.Body(1.0, 1.0))
+    assert lone.uses_kernel and _drive_bits(lone) == _drive_bits(crowded)
+
+
+def test_anything_else_in_the_space_takes_cpSpaceStep() -> None:
+    """What cpSpaceStep would act on (a shape on the chassis that hits a wall, a
+    constraint, a velocity function of the body's own) is not skipped: the kernel's
+    motion is the Python reference's (which always steps the space)."""
+    import pymunk
+
+    def setups(plant: Plant) -> None:
+        plant.body.velocity_func = lambda body, gravity, damping, dt: pymunk.Body.update_velocity(
+            body, gravity, 0.5, dt)
+
+    def walls(plant: Plant) -> None:
+        plant.space.add(pymunk.Circle(plant.body, 0.4))
+        plant.space.add(pymunk.Segment(plant.space.static_body, (0.6, -5.0), (0.6, 5.0), 0.01))
+
+    for change in (setups, walls):
+        fast, ref = Plant(), Plant(use_kernel=False)
+        for p in (fast, ref):
+            change(p)
+            p.set_drive(200, 1, 200, 1)
+            p.advance(2000)
+        assert fast.pose == pytest.approx(ref.pose, abs=1e-9), change.__name__
+    # a shape on the chassis and nothing to hit: cpSpaceStep still moves its bounding box
+    boxes = []
+    for p in (Plant(), Plant(use_kernel=False)):
+        circle = pymunk.Circle(p.body, 0.4)
+        p.space.add(circle)
+        start = circle.cache_bb().right
+        p.set_drive(200, 1, 180, 1)
+        p.advance(1500)
+        boxes.append(tuple(circle.bb))
+    assert boxes[0] == pytest.approx(boxes[1], abs=1e-9) and boxes[0][2] > start + 0.3
+    # sleeping on: cpSpaceStep puts a chassis idle for longer than the threshold to
+    # sleep (every step's cpBodySetForce wakes it, so only a threshold under a step does)
+    asleep = []
+    for p in (Plant(), Plant(use_kernel=False)):
+        p.space.sleep_time_threshold = 0.0005
+        p.space.idle_speed_threshold = 10.0
+        p.advance(100)
+        asleep.append(p.body.is_sleeping)
+    assert asleep == [True, True]
+    slowed = Plant()
+    setups(slowed)
+    slowed.set_drive(200, 1, 200, 1)
+    slowed.advance(2000)
+    plain = Plant()
+    plain.set_drive(200, 1, 200, 1)
+    plain.advance(2000)
+    assert slowed.pose[0] < 0.9 * plain.pose[0]        # the damping of its own took effect

@@ -15,6 +15,7 @@ import os
 import subprocess
 import sys
 import sysconfig
+import threading
 from pathlib import Path
 from types import ModuleType
 
@@ -34,7 +35,9 @@ def compile_shared(source: Path, name: str, libs: tuple[str, ...] = (),
     if target.exists():
         return target
     cc = os.environ.get("CC", "gcc")
-    tmp = target.with_suffix(f".{os.getpid()}.tmp")
+    # a name of its own per process and thread: two builds of one source at once (Dask
+    # workers in threads, pytest-xdist processes) must not write the same file
+    tmp = target.with_suffix(f".{os.getpid()}.{threading.get_ident()}.tmp")
     cmd = [cc, "-shared", "-fPIC", "-Wall", *flags, "-o", str(tmp), str(source), *libs]
     try:
         result = subprocess.run(cmd, capture_output=True, text=True)

@@ -310,20 +310,18 @@ class PortLoop:
         if span <= 0:
             return None
         f0 = self.timer.fract
-
-        def moved(k: int) -> int:          # ms millis() moves in the next k overflows
-            return MILLIS_INC * k + (f0 + FRACT_INC * k) // FRACT_MAX
-
+        # ms millis() moves in the next k overflows: MILLIS_INC * k + (f0 + FRACT_INC * k) // FRACT_MAX
         # Asked first after the next overflow (``due`` is not monotone across the
         # millis() just before it: a lastControlTime a ms ahead of now is not due now).
-        first = moved(1)
+        first = MILLIS_INC + (f0 + FRACT_INC) // FRACT_MAX
         need = fw.due_after((self.timer.millis + first) & 0xFFFFFFFF)
         if need == 0:
             return 0
         k = max(1, need * FRACT_MAX // (MILLIS_INC * FRACT_MAX + FRACT_INC))
-        while moved(k + 1) - first < need:
+        need += first
+        while MILLIS_INC * (k + 1) + (f0 + FRACT_INC * (k + 1)) // FRACT_MAX < need:
             k += 1
-        while k > 1 and moved(k) - first >= need:
+        while k > 1 and MILLIS_INC * k + (f0 + FRACT_INC * k) // FRACT_MAX >= need:
             k -= 1
         return k if k < span else None
 

@@ -23,6 +23,9 @@ from wcdrive.firmware.constants import CONTROL_PERIOD_MS
 from wcdrive.firmware.control import control_tick
 from wcdrive.firmware.eeprom import eeprom_ready, load_params
 from wcdrive.firmware.state import FirmwareState
+from wcdrive.firmware.tick_fast import fast as _fast
+
+_fast_tick = None if _fast is None else _fast.tick
 
 #: ``BOOT:final_control,<cause>``: what setup() sends, the cause from MCUSR.
 BOOT_LINE = b"BOOT:final_control,POWER_ON\r\n"
@@ -122,6 +125,11 @@ class Firmware:
         so is ``free_ram`` (what loop() measured before the tick; None: ``self.free_ram``,
         which starts at the figure of the Mega build, ``FREE_RAM``)."""
         self.state.freeRam = self.free_ram if free_ram is None else free_ram
+        if _fast_tick is not None:          # the common case in C (``tick_fast``), or None
+            sent = _fast_tick(self.state, now, count_l, count_r, illegal_l, illegal_r, storm_l, storm_r,
+                              rx_lost)
+            if sent is not None:
+                return sent
         out = bytearray()
         control_tick(self.state, now, count_l, count_r, out, illegal_l, illegal_r, storm_l, storm_r,
                      rx_lost)

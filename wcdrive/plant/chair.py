@@ -64,11 +64,14 @@ class ChairStruct(ctypes.Structure):
                                   "c_caster", "j", "b", "k1", "k2", "ke_g", "tau_max", "i_max_r",
                                   "res")]
     _fields_ += [(n, _P) for n in ("space", "body", "get_velocity", "get_angle",
-                                  "get_angular_velocity", "set_force", "set_torque", "space_step")]
+                                  "get_angular_velocity", "set_force", "set_torque", "space_step",
+                                  "update_position", "update_velocity", "get_damping", "get_gravity",
+                                  "get_sleep_threshold", "each_body", "each_constraint", "body_each_shape")]
     _fields_ += [(n, _D * 2) for n in ("volts", "angle", "speed", "current", "slip", "force",
                                       "caster_heading")]
     _fields_ += [(n, _D) for n in ("scrub_energy", "scrub_time", "swivel_work", "side_impulse", "time")]
     _fields_ += [(n, ctypes.c_int32 * 2) for n in ("locked", "dead")]
+    _fields_ += [("custom_funcs", ctypes.c_int32)]
 
 
 #: rad/s: the swivel friction torque is regularised as ``T tanh(rate / scale)``.
@@ -206,6 +209,20 @@ class Plant:
         s.set_force = address("cpBodySetForce")
         s.set_torque = address("cpBodySetTorque")
         s.space_step = address("cpSpaceStep")
+        s.update_position = address("cpBodyUpdatePosition")
+        s.update_velocity = address("cpBodyUpdateVelocity")
+        s.get_damping = address("cpSpaceGetDamping")
+        s.get_gravity = address("cpSpaceGetGravity")
+        s.get_sleep_threshold = address("cpSpaceGetSleepTimeThreshold")
+        s.each_body = address("cpSpaceEachBody")
+        s.each_constraint = address("cpSpaceEachConstraint")
+        s.body_each_shape = address("cpBodyEachShape")
+
+    def _custom_funcs(self) -> None:
+        """Tells the kernel whether the body has update functions of its own (then it
+        steps the whole space, cpSpaceStep, whatever else is in it)."""
+        body = self.body
+        self.s.custom_funcs = body._velocity_func is not None or body._position_func is not None
 
     @property
     def uses_kernel(self) -> bool:
@@ -289,6 +306,7 @@ class Plant:
                 self._log_at = _data(self._log_chunk)
             motion = self._log_at + 48 * self._log_rows
             self._log_rows += n
+        self._custom_funcs()
         if sampler is None or not sampler.kernel_ready:
             t0 = self.s.time
             self._advance(self._ref, n, dt, t0, self._buf_at[0] if angles else None, self._buf_at[1], motion)
@@ -375,6 +393,7 @@ class Plant:
             wheels = np.empty((n, 2)) if record and angles else _NONE
             rates = np.empty(n) if record else _NONE
             motion = np.empty((n, 6)) if logging else _NONE
+            self._custom_funcs()
             self._advance(self._ref, n, dt, self.s.time, _address(wheels), _address(rates),
                           _address(motion))
             if logging:

@@ -351,6 +351,10 @@ class LineDecoder:
     def feed(self, data: bytes) -> list[Message]:
         """Appends ``data``; returns the messages of the lines it completed (each ends
         at ``\\n``; trailing ``\\r`` are dropped)."""
+        if (not self._buf and type(data) is bytes and data and data.find(b"\n") == len(data) - 1
+                and data.find(b"BOOT:", 1) < 0):
+            # one whole line, nothing held: what the loop below makes of it, without the copies
+            return [parse_line(data[:-1].rstrip(b"\r"))]
         self._buf += data
         out: list[Message] = []
         while True:

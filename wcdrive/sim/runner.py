@@ -26,6 +26,7 @@ import math
 import re
 import threading
 import time
+from array import array
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -303,31 +304,50 @@ class _Pilot:
         return self.done_at is not None and self.next >= self.done_at + self.settle
 
 
+#: The tick log's columns and their widths, in the order ``_Log.add`` writes them.
+_LOG_COLUMNS = (("tick_time", 1), ("truth", 3), ("odom_wheel", 3), ("odom_velocity", 3), ("odom_gyro", 3),
+                ("setpoint", 2), ("measured", 2), ("wheel_speed", 2), ("pwm", 2), ("caster", 2),
+                ("counts", 2), ("odom_ekf", 3), ("odom_ekf_vel", 3))
+_LOG_WIDTH = sum(width for _, width in _LOG_COLUMNS)
+
+
 class _Log:
+    """A row of numbers per control tick, kept flat in one ``array('d')``: no object
+    per row outlives the tick, so the run leaves the garbage collector (paused for
+    the run, ``cyclic_gc_paused``) nothing to scan when it comes back on."""
+
     def __init__(self) -> None:
-        self.rows: list[tuple] = []
+        self._flat = array("d")
         self.tick_cycles: list[int] = []
+
+    @property
+    def ticks(self) -> int:
+        return len(self.tick_cycles)
 
     def add(self, cycle: int, plant: Plant, host: _Host, setpoint, measured, pwm, counts) -> None:
         wheel, velocity, gyro, ekf, ekf_vel = host.poses()
         speed = plant.s.speed
         # the casters' world headings; ``arrays`` makes them relative to the chassis
-        self.rows.append((cycle / F_CPU, plant.pose, wheel, velocity, gyro, setpoint, measured,
-                          (speed[0], speed[1]), pwm, plant.caster_heading, counts, ekf, ekf_vel))
+        caster = plant.caster_heading
+        self._flat.extend((cycle / F_CPU, *plant.pose, *wheel, *velocity, *gyro, setpoint[0], setpoint[1],
+                           measured[0], measured[1], speed[0], speed[1], pwm[0], pwm[1], caster[0], caster[1],
+                           counts[0], counts[1], *ekf, *ekf_vel))
         self.tick_cycles.append(cycle)
 
     def arrays(self) -> dict[str, np.ndarray]:
-        names = ("tick_time", "truth", "odom_wheel", "odom_velocity", "odom_gyro", "setpoint",
-                 "measured", "wheel_speed", "pwm", "caster", "counts", "odom_ekf", "odom_ekf_vel")
+        names = [name for name, _ in _LOG_COLUMNS]
         out: dict[str, np.ndarray]
-        if not self.rows:
+        if not self.tick_cycles:
             z3, z2 = np.zeros((1, 3)), np.zeros((1, 2))
             out = {n: z2 for n in names}
             out.update(tick_time=np.zeros(1), truth=z3, odom_wheel=z3, odom_velocity=z3, odom_gyro=z3,
                        odom_ekf=z3, odom_ekf_vel=z3)
         else:
-            cols = list(zip(*self.rows, strict=True))
-            out = {n: np.array(c, dtype=float) for n, c in zip(names, cols, strict=True)}
+            table = np.frombuffer(self._flat, dtype=np.float64).reshape(len(self.tick_cycles), _LOG_WIDTH)
+            out, at = {}, 0
+            for name, width in _LOG_COLUMNS:
+                out[name] = np.array(table[:, at] if width == 1 else table[:, at:at + width])
+                at += width
             # _wrap(heading - chassis heading), the same operations element by element
             relative = out["caster"] - out["truth"][:, 2:3]
             out["caster"] = (relative + math.pi) % (2 * math.pi) - math.pi
@@ -343,7 +363,14 @@ class _Lines:
         self._partial = bytearray()
         self.events: list[tuple[float, str]] = []
         self.boots: list[tuple[float, str]] = []
-        self.all: list[tuple[float, str]] = []
+        # every line's time and text, apart: no object per line for the collector (``_Log``)
+        self._times = array("d")
+        self._texts: list[str] = []
+
+    @property
+    def all(self) -> list[tuple[float, str]]:
+        """Every line as (s, text)."""
+        return list(zip(self._times, self._texts, strict=True))
 
     def feed(self, cycle: int, data: bytes) -> None:
         self._partial += data
@@ -354,7 +381,8 @@ class _Lines:
         t = cycle / F_CPU
         for raw in lines:
             line = raw.rstrip(b"\r").decode("latin-1")
-            self.all.append((t, line))
+            self._times.append(t)
+            self._texts.append(line)
             if line.startswith("EVT:"):
                 self.events.append((round(t, 6), line))
             elif line.startswith("BOOT:"):
@@ -518,7 +546,7 @@ def run(scenario: Scenario, *, backend: str = "port", seed: int = 0, dt: float =
     contact = np.stack((np.hypot(motion[:, 1] - motion[:, 3] * half, motion[:, 2]),
                         np.hypot(motion[:, 1] + motion[:, 3] * half, motion[:, 2])), axis=1)
     return SimResult(scenario=scenario.name, backend=backend, duration=duration, wall_time=wall,
-                     ticks=len(log.rows), caster_scrub_energy=plant.caster_scrub_energy,
+                     ticks=log.ticks, caster_scrub_energy=plant.caster_scrub_energy,
                      caster_scrub_time=plant.caster_scrub_time, caster_swivel_work=plant.caster_swivel_work,
                      caster_side_impulse=plant.caster_side_impulse, lines=dict(host.lines),
                      step_time=motion[:, 0], step_speed=contact.max(axis=1) if contact.size else np.zeros(0),

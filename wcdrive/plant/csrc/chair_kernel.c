@@ -5,6 +5,14 @@
  * (wcdrive/plant/chair.py, the reference; tests/test_plant.py checks the two agree),
  * then Chipmunk's cpSpaceStep through function pointers that pymunk's own library
  * provides, so pymunk still integrates the chassis (and any walls in its space).
+ *
+ * When the chassis is alone in its space (lone_body(): the one body, no constraints, no
+ * shape on it, sleeping off, pymunk's default update functions), cpSpaceStep has nothing
+ * to do but what it does for each body: cpBodyUpdatePosition, then
+ * cpBodyUpdateVelocity with the space's gravity and cpfpow(damping, dt). Those two
+ * Chipmunk functions are called directly then (space_step()): the same code on the same
+ * numbers, without the collision and solver passes (about 30% of a step).
+ * tests/test_plant.py holds the two paths to the same motion bit for bit.
  * Built on first use by wcdrive.native (gcc -O2 -ffp-contract=off).
  */
 #include <math.h>
@@ -19,6 +27,8 @@ typedef double (*get_f_fn)(const void *);
 typedef void (*set_vec_fn)(void *, vec_t);
 typedef void (*set_f_fn)(void *, double);
 typedef void (*step_fn)(void *, double);
+typedef void (*update_velocity_fn)(void *, vec_t, double, double);
+typedef void (*each_fn)(void *, void *, void *);
 
 typedef struct {
     /* parameters */
@@ -28,6 +38,8 @@ typedef struct {
     /* chipmunk */
     void *space, *body;
     void *get_velocity, *get_angle, *get_angular_velocity, *set_force, *set_torque, *space_step;
+    void *update_position, *update_velocity, *get_damping, *get_gravity, *get_sleep_threshold;
+    void *each_body, *each_constraint, *body_each_shape;
     /* state */
     double volts[2];
     double angle[2], speed[2], current[2], slip[2], force[2];
@@ -35,7 +47,42 @@ typedef struct {
     double scrub_energy, scrub_time, swivel_work, side_impulse, time;
     /* faults (Plant.set_wheel_locked, Plant.set_motor_dead) */
     int32_t locked[2], dead[2];
+    /* the body has update functions of its own (pymunk's velocity_func/position_func) */
+    int32_t custom_funcs;
 } chair_t;
+
+static void count_one(void *item, void *data) { (void)item; ++*(int *)data; }
+static void count_shape(void *body, void *shape, void *data) { (void)body; (void)shape; ++*(int *)data; }
+
+/* Whether cpSpaceStep would do nothing for this space but integrate the chassis. */
+static int lone_body(const chair_t *c) {
+    int n = 0;
+    if (c->custom_funcs || !isinf(((get_f_fn)c->get_sleep_threshold)(c->space)))
+        return 0;
+    ((each_fn)c->each_body)(c->space, (void *)count_one, &n);
+    if (n != 1)
+        return 0;
+    n = 0;
+    ((each_fn)c->each_constraint)(c->space, (void *)count_one, &n);
+    if (n != 0)
+        return 0;
+    ((each_fn)c->body_each_shape)(c->body, (void *)count_shape, &n);
+    return n == 0;
+}
+
+/* cpSpaceStep(space, dt), or for a lone body what it does for that body. */
+static void space_step(chair_t *c, int lone, double dt) {
+    if (!lone) {
+        ((step_fn)c->space_step)(c->space, dt);
+        return;
+    }
+    if (dt == 0.0)
+        return;
+    ((set_f_fn)c->update_position)(c->body, dt);
+    double damping = pow(((get_f_fn)c->get_damping)(c->space), dt);
+    vec_t gravity = ((get_vec_fn)c->get_gravity)(c->space);
+    ((update_velocity_fn)c->update_velocity)(c->body, gravity, damping, dt);
+}
 
 static double clampd(double v, double lo, double hi) { return v > hi ? hi : (v < lo ? lo : v); }
 
@@ -99,7 +146,7 @@ static double wheel(chair_t *c, int i, double ground, double dt) {
     return force - rr;
 }
 
-static void step(chair_t *c, double dt) {
+static void step(chair_t *c, int lone, double dt) {
     vec_t v = ((get_vec_fn)c->get_velocity)(c->body);
     double th = ((get_f_fn)c->get_angle)(c->body);
     double w = ((get_f_fn)c->get_angular_velocity)(c->body);
@@ -152,7 +199,7 @@ static void step(chair_t *c, double dt) {
     vec_t f = {fx_b * cs - fy_b * sn, fx_b * sn + fy_b * cs};
     ((set_vec_fn)c->set_force)(c->body, f);
     ((set_f_fn)c->set_torque)(c->body, torque_cog);
-    ((step_fn)c->space_step)(c->space, dt);
+    space_step(c, lone, dt);
     c->time += dt;
 }
 
@@ -163,8 +210,9 @@ static void step(chair_t *c, double dt) {
  * (Plant.start_motion_log). */
 void chair_advance(chair_t *c, int32_t n, double dt, double t0, double *angles, double *yaw_rates,
                    double *motion) {
+    int lone = n > 0 && lone_body(c);
     for (int32_t k = 0; k < n; k++) {
-        step(c, dt);
+        step(c, lone, dt);
         if (angles) {
             angles[2 * k] = c->angle[0];
             angles[2 * k + 1] = c->angle[1];

@@ -1,0 +1,654 @@
+/*
+ * tick_fast: the common case of the port's control tick (wcdrive.firmware.control's
+ * control_tick) as a CPython extension, for speed: the simulation runs the tick 20
+ * times a simulated second, and in Python it is about a fifth of a run's time.
+ *
+ * tick(state, now, count_l, count_r, illegal_l, illegal_r, storm_l, storm_r, rx_lost)
+ * computes what control_tick(state, now, ..., out, ...) computes and returns the bytes
+ * it would append to ``out``, or returns None having changed nothing. It returns None
+ * (and the Python tick, the reference, runs instead) for everything but the common
+ * case:
+ *   - a state that is not exactly a FirmwareState, or a field that is not exactly a
+ *     float or an int (or an int beyond +-2**62);
+ *   - any binary32 operation whose result is not an ordinary one (NaN, an infinity, a
+ *     product below 2**-126, a quotient below 2**-125, a division by zero): the cases
+ *     wcdrive.avr.f32 computes with avr-libc's own bit-level rules;
+ *   - a tick in which a fault latches or the watchdog fires (they send events and
+ *     halt);
+ *   - a mode that MODE_NAMES does not name.
+ * Each binary32 operation is one IEEE double operation rounded once to binary32, as
+ * f32.py (and f32_fast.c) computes the ordinary case. The whole tick is computed into
+ * locals first and the state written only at the end, so declining is always clean.
+ *
+ * The constants, the mode names and FirmwareState's slot offsets come from Python at
+ * _bind() (wcdrive.firmware.tick_fast), so nothing here restates the spec.
+ * tests/test_tick_fast.py holds this to the Python tick on random states and on whole
+ * runs; the differential suite holds the port (this path by default) to the firmware.
+ * Built by wcdrive.native (gcc -O2 -ffp-contract=off).
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <structmember.h>
+#include <math.h>
+#include <float.h>
+#include <stdint.h>
+#include <string.h>
+
+/* ---- binary32 operations: the ordinary case, or "not ordinary" (ok = 0) ---------- */
+
+static int ok;          /* cleared by an operation whose result is not ordinary */
+
+static double rnd(double r) {
+    float f = (float)r;
+    if (!isfinite(f))
+        ok = 0;
+    return (double)f;
+}
+static double f_add(double a, double b) { return rnd(a + b); }
+static double f_sub(double a, double b) { return rnd(a - b); }
+static double f_mul(double a, double b) {
+    double p = a * b;
+    if (isnan(p) || (p != 0.0 && fabs(p) < (double)FLT_MIN)) {
+        ok = 0;
+        return 0.0;
+    }
+    return rnd(p);
+}
+static double f_div(double a, double b) {
+    if (b == 0.0) {
+        ok = 0;
+        return 0.0;
+    }
+    double q = a / b;
+    if (isnan(q) || (q != 0.0 && fabs(q) < 2.0 * (double)FLT_MIN)) {
+        ok = 0;
+        return 0.0;
+    }
+    return rnd(q);
+}
+static double f_from_int(int64_t n) { return rnd((double)n); }   /* |n| < 2**53 here */
+
+/* ---- FirmwareState's slots -------------------------------------------------------- */
+
+#define FIELDS(X) \
+    X(lastControlTime) X(lastTickTime) X(lateTicks) X(txCredit) X(tickCount) \
+    X(encTickL) X(encTickR) X(illTickL) X(illTickR) X(stormTickL) X(stormTickR) \
+    X(rxLostTick) X(prevEncL) X(prevEncR) X(rawVelL) X(rawVelR) X(filtVelL) X(filtVelR) \
+    X(faultFlags) X(stallTicksL) X(stallTicksR) X(reverseTicksL) X(reverseTicksR) \
+    X(effortPwmL) X(effortSpeedL) X(effortSetpointL) X(effortTicksL) \
+    X(effortPwmR) X(effortSpeedR) X(effortSetpointR) X(effortTicksR) \
+    X(pwmL) X(pwmR) X(dirL) X(dirR) X(setpointL) X(setpointR) X(targetL) X(targetR) \
+    X(prevMeasL) X(prevMeasR) X(cmdSinceTick) X(lastCmdTime) X(watchdogArmed) \
+    X(watchdogMs) X(emergencyStop) X(estopDecel) X(maxAccel) X(stillTicks) X(parked) \
+    X(integralL) X(integralR) X(outputL) X(outputR) X(kpL) X(kiL) X(kdL) X(kpR) X(kiR) \
+    X(kdR) X(pivotPhase) X(pivotTicksLeft) X(pendingL) X(pendingR) X(mode) X(txDropped) \
+    X(tlmEnabled) X(errLinesThisTick) X(rxCount) X(lastSeq) X(estopLatched) X(ppmLost) \
+    X(rejectedCount) X(crcRejected) X(freeRam)
+
+#define ENUM(name) F_##name,
+enum { FIELDS(ENUM) N_FIELDS };
+#define NAME(name) #name,
+static const char *field_names[N_FIELDS] = { FIELDS(NAME) };
+
+static PyTypeObject *state_type;
+static Py_ssize_t offset[N_FIELDS];
+
+static PyObject **slot(PyObject *s, int f) { return (PyObject **)((char *)s + offset[f]); }
+
+/* What the tick reads: each field as a double or an int64, and whether it was read. */
+typedef struct {
+    double d[N_FIELDS];
+    int64_t i[N_FIELDS];
+    unsigned char written[N_FIELDS], is_float[N_FIELDS];
+} Vals;
+
+#define INT_LIMIT ((int64_t)1 << 62)
+
+static int read_int(PyObject *s, int f, Vals *v) {
+    PyObject *o = *slot(s, f);
+    if (o == NULL || !PyLong_CheckExact(o))
+        return 0;
+    int overflow = 0;
+    long long n = PyLong_AsLongLongAndOverflow(o, &overflow);
+    if (overflow || n >= INT_LIMIT || n <= -INT_LIMIT)
+        return 0;
+    v->i[f] = n;
+    v->is_float[f] = 0;
+    return 1;
+}
+
+static int read_float(PyObject *s, int f, Vals *v) {
+    PyObject *o = *slot(s, f);
+    if (o == NULL || !PyFloat_CheckExact(o))
+        return 0;
+    v->d[f] = PyFloat_AS_DOUBLE(o);
+    v->is_float[f] = 1;
+    return 1;
+}
+
+static int arg_int(PyObject *o, int64_t *out) {
+    if (!PyLong_CheckExact(o))
+        return 0;
+    int overflow = 0;
+    long long n = PyLong_AsLongLongAndOverflow(o, &overflow);
+    if (overflow || n >= INT_LIMIT || n <= -INT_LIMIT)
+        return 0;
+    *out = n;
+    return 1;
+}
+
+/* ---- constants (from _bind) ------------------------------------------------------- */
+
+static struct {
+    double alpha, one_minus_alpha, cpr, two_pi, pid_out_max, pwm_scale, still_speed,
+        brake_done_speed, reverse_speed, reverse_approach, effort_shortfall, pivot_start_speed,
+        pivot_speed, rounding2;
+    int64_t control_period_ms, tx_credit_max, tx_credit_per_ms, stall_pwm, stall_ticks,
+        reverse_ticks, effort_pwm, effort_ticks, illegal_per_tick, still_ticks, pivot_ticks,
+        high, low, pivot_none, pivot_stopping, pivot_rotating;
+} K;
+static PyObject *mode_names;      /* dict: mode -> bytes */
+static int bound;
+
+#define M32 0xFFFFFFFFLL
+static int64_t i32(int64_t x) { return (int64_t)(int32_t)(uint32_t)(uint64_t)x; }
+
+/* ---- text ------------------------------------------------------------------------- */
+
+typedef struct { char b[512]; int n; } Buf;
+
+static void put(Buf *o, const char *t, int n) {
+    if (o->n + n <= (int)sizeof o->b) {
+        memcpy(o->b + o->n, t, (size_t)n);
+        o->n += n;
+    } else {
+        ok = 0;                     /* cannot happen for the lines below */
+    }
+}
+static void puts_(Buf *o, const char *t) { put(o, t, (int)strlen(t)); }
+static void put_ll(Buf *o, long long n) {
+    char t[32];
+    put(o, t, snprintf(t, sizeof t, "%lld", n));
+}
+
+/* Print::print(long) of a 32-bit value */
+static void print_long(Buf *o, int64_t n) {
+    if (n < 0) {
+        puts_(o, "-");
+        put_ll(o, (long long)((uint64_t)(-n) & M32));
+    } else {
+        put_ll(o, (long long)n);
+    }
+}
+
+/* Print::printFloat(number, 2) (wcdrive.avr.arduino_print.print_float) */
+static void print_float2(Buf *o, double number) {
+    if (number != number) { puts_(o, "nan"); return; }
+    if (isinf(number)) { puts_(o, "inf"); return; }
+    if (number > 4294967040.0 || number < -4294967040.0) { puts_(o, "ovf"); return; }
+    if (number < 0.0) {
+        puts_(o, "-");
+        number = -number;
+    }
+    number = rnd(number + K.rounding2);
+    uint64_t int_part = (uint64_t)(int64_t)number & M32;
+    double remainder = rnd(number - rnd((double)int_part));
+    put_ll(o, (long long)int_part);
+    puts_(o, ".");
+    for (int k = 0; k < 2; k++) {
+        remainder = f_mul(remainder, 10.0);
+        int64_t to_print = (int64_t)remainder & 0xFFFF;
+        put_ll(o, (long long)to_print);
+        remainder = rnd(remainder - (double)to_print);
+    }
+}
+
+/* ---- the tick's parts (the names of wcdrive.firmware.control) ---------------------- */
+
+enum { WHEEL_OK, WHEEL_SUSPECT, WHEEL_FAULT };
+
+typedef struct {
+    int64_t pwm, ticks;
+    double speed, setpoint;
+} Effort;
+
+/* no_effect: whether it tripped; *e the new reference */
+static int no_effect(int64_t pwm, int64_t dir, double setpoint, double measured, Effort *e) {
+    double progress = setpoint > 0.0 ? measured : -measured;
+    int toward = setpoint != 0.0 && ((dir == K.high) == (setpoint > 0.0));
+    if (!toward || setpoint != e->setpoint || progress > e->speed) {
+        e->pwm = pwm;
+        e->speed = progress;
+        e->setpoint = setpoint;
+        e->ticks = 0;
+        return 0;
+    }
+    if (pwm < e->pwm)
+        e->pwm = pwm;
+    int shortfall = fabs(measured) < f_mul(K.effort_shortfall, fabs(setpoint));
+    e->ticks = (shortfall && pwm >= e->pwm + K.effort_pwm) ? ((e->ticks + 1) & 0xFF) : 0;
+    return e->ticks >= K.effort_ticks;
+}
+
+/* check_wheel: WHEEL_OK, WHEEL_SUSPECT or WHEEL_FAULT (any fault: the Python tick
+ * latches it) */
+static int check_wheel(int64_t delta, int64_t illegal, int64_t storm, int64_t pwm, int64_t dir,
+                       double setpoint, double measured, int64_t *stall, int64_t *reverse,
+                       Effort *e, double prev_measured) {
+    if (storm || illegal >= K.illegal_per_tick)
+        return WHEEL_FAULT;
+    int driven = pwm >= K.stall_pwm && setpoint != 0.0 && ((dir == K.high) == (setpoint > 0.0));
+    int stalled = driven && delta == 0;
+    *stall = stalled ? ((*stall + 1) & 0xFF) : 0;
+    if (*stall >= K.stall_ticks)
+        return WHEEL_FAULT;
+    double approach = setpoint > 0.0 ? f_sub(measured, prev_measured) : f_sub(prev_measured, measured);
+    int against = fabs(setpoint) >= K.reverse_speed && fabs(measured) >= K.reverse_speed
+                  && (setpoint > 0.0) != (measured > 0.0) && approach < K.reverse_approach;
+    *reverse = against ? ((*reverse + 1) & 0xFF) : 0;
+    if (*reverse >= K.reverse_ticks)
+        return WHEEL_FAULT;
+    if (no_effect(pwm, dir, setpoint, measured, e))
+        return WHEEL_FAULT;
+    return (stalled || against) ? WHEEL_SUSPECT : WHEEL_OK;
+}
+
+static double ramp_toward(double current, double target, double max_change) {
+    double diff = f_sub(target, current);
+    if (fabs(diff) <= max_change)
+        return target;
+    return f_add(current, diff > 0.0 ? max_change : -max_change);
+}
+
+/* compute_pid: the clamped output; *integral the new integral */
+static double compute_pid(double setpoint, double measurement, double *integral, double prev_meas,
+                          double kp, double ki, double kd, double dt) {
+    double error = f_sub(setpoint, measurement);
+    double in = f_add(*integral, f_mul(error, dt));
+    double limit = f_div(K.pid_out_max, ki);
+    in = in < -limit ? -limit : (in > limit ? limit : in);
+    double derivative = f_div(-f_sub(measurement, prev_meas), dt);
+    double p_term = f_mul(kp, error);
+    double d_term = f_mul(kd, derivative);
+    double output = f_add(f_add(p_term, f_mul(ki, in)), d_term);
+    double m = K.pid_out_max;
+    double clamped = output < -m ? -m : (output > m ? m : output);
+    if (output != clamped)
+        in = f_div(f_sub(f_sub(clamped, p_term), d_term), ki);
+    *integral = in;
+    return clamped;
+}
+
+static void set_motor(double output, int64_t *pwm, int64_t *dir) {
+    *dir = output >= 0.0 ? K.high : K.low;
+    double p = f_mul(fabs(output), K.pwm_scale);
+    *pwm = (p != p || fabs(p) >= 2147483648.0) ? ((int64_t)INT32_MIN & 0xFF) : ((int64_t)p & 0xFF);
+}
+
+static void send(Vals *v, Buf *out, const Buf *line) {
+    if (line->n > v->i[F_txCredit]) {
+        v->i[F_txDropped] = (v->i[F_txDropped] + 1) & M32;
+    } else {
+        v->i[F_txCredit] -= line->n;
+        put(out, line->b, line->n);
+    }
+}
+
+#define SETI(f, x) (v.i[F_##f] = (x), v.written[F_##f] = 1)
+#define SETF(f, x) (v.d[F_##f] = (x), v.written[F_##f] = 1)
+#define I(f) (v.i[F_##f])
+#define D(f) (v.d[F_##f])
+
+static const int float_fields[] = {
+    F_rawVelL, F_rawVelR, F_filtVelL, F_filtVelR, F_effortSpeedL, F_effortSetpointL,
+    F_effortSpeedR, F_effortSetpointR, F_setpointL, F_setpointR, F_targetL, F_targetR,
+    F_prevMeasL, F_prevMeasR, F_estopDecel, F_maxAccel, F_integralL, F_integralR, F_outputL,
+    F_outputR, F_kpL, F_kiL, F_kdL, F_kpR, F_kiR, F_kdR, F_pendingL, F_pendingR,
+};
+
+static unsigned char field_is_float[N_FIELDS];     /* set by _bind from float_fields */
+
+static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    (void)self;
+    if (!bound) {
+        PyErr_SetString(PyExc_RuntimeError, "tick_fast: _bind() was not called");
+        return NULL;
+    }
+    if (nargs != 9) {
+        PyErr_SetString(PyExc_TypeError, "tick() takes 9 arguments");
+        return NULL;
+    }
+    PyObject *s = args[0];
+    if (Py_TYPE(s) != state_type)
+        Py_RETURN_NONE;
+    int64_t now, count_l, count_r, illegal_l, illegal_r, storm_l, storm_r, rx_lost;
+    if (!arg_int(args[1], &now) || !arg_int(args[2], &count_l) || !arg_int(args[3], &count_r)
+        || !arg_int(args[4], &illegal_l) || !arg_int(args[5], &illegal_r)
+        || !arg_int(args[6], &storm_l) || !arg_int(args[7], &storm_r) || !arg_int(args[8], &rx_lost))
+        Py_RETURN_NONE;
+
+    Vals v;
+    memset(v.written, 0, sizeof v.written);
+    for (size_t k = 0; k < sizeof float_fields / sizeof float_fields[0]; k++)
+        if (!read_float(s, float_fields[k], &v))
+            Py_RETURN_NONE;
+    for (int f = 0; f < N_FIELDS; f++) {
+        if (field_is_float[f])
+            continue;
+        if (f == F_lastTickTime && *slot(s, f) == Py_None) {
+            v.is_float[f] = 0;
+            v.i[f] = -1;            /* None: lastControlTime, below */
+            continue;
+        }
+        if (!read_int(s, f, &v))
+            Py_RETURN_NONE;
+    }
+    PyObject *mode_name = PyDict_GetItemWithError(mode_names, *slot(s, F_mode));
+    if (mode_name == NULL) {
+        if (PyErr_Occurred())
+            return NULL;
+        Py_RETURN_NONE;
+    }
+    ok = 1;
+    Buf out = { .n = 0 };
+
+    int64_t last_tick = *slot(s, F_lastTickTime) == Py_None ? I(lastControlTime) : I(lastTickTime);
+    int64_t elapsed = (now - last_tick) & M32;
+    double dt = f_div(f_from_int(elapsed), 1000.0);
+    SETI(lastTickTime, now & M32);
+    if (((now - I(lastControlTime)) & M32) >= 2 * K.control_period_ms) {
+        SETI(lastControlTime, now & M32);
+        SETI(lateTicks, (I(lateTicks) + 1) & M32);
+    } else {
+        SETI(lastControlTime, (I(lastControlTime) + K.control_period_ms) & M32);
+    }
+    /* refill_credit */
+    if (elapsed >= K.tx_credit_max / K.tx_credit_per_ms) {
+        SETI(txCredit, K.tx_credit_max);
+    } else {
+        int64_t c = I(txCredit) + elapsed * K.tx_credit_per_ms;
+        SETI(txCredit, c < K.tx_credit_max ? c : K.tx_credit_max);
+    }
+    SETI(tickCount, (I(tickCount) + 1) & M32);
+
+    SETI(encTickL, i32(count_l));
+    SETI(encTickR, i32(count_r));
+    int64_t ill_l = (illegal_l - I(illTickL)) & M32;
+    int64_t ill_r = (illegal_r - I(illTickR)) & M32;
+    SETI(illTickL, illegal_l & M32);
+    SETI(illTickR, illegal_r & M32);
+    SETI(stormTickL, storm_l != 0);
+    SETI(stormTickR, storm_r != 0);
+    SETI(rxLostTick, rx_lost & M32);
+    int64_t delta_l = i32(I(encTickL) - I(prevEncL));
+    int64_t delta_r = i32(I(encTickR) - I(prevEncR));
+    SETI(prevEncL, I(encTickL));
+    SETI(prevEncR, I(encTickR));
+
+    double per_second = f_div(K.two_pi, dt);
+    SETF(rawVelL, f_mul(-f_div(f_from_int(delta_l), K.cpr), per_second));
+    SETF(rawVelR, f_mul(f_div(f_from_int(delta_r), K.cpr), per_second));
+    SETF(filtVelL, f_add(f_mul(K.alpha, D(rawVelL)), f_mul(K.one_minus_alpha, D(filtVelL))));
+    SETF(filtVelR, f_add(f_mul(K.alpha, D(rawVelR)), f_mul(K.one_minus_alpha, D(filtVelR))));
+
+    /* _check_faults: a fault that latches goes to the Python tick */
+    int check_l = WHEEL_OK, check_r = WHEEL_OK;
+    if (I(faultFlags) == 0) {
+        int64_t stall_l = I(stallTicksL), rev_l = I(reverseTicksL);
+        int64_t stall_r = I(stallTicksR), rev_r = I(reverseTicksR);
+        Effort el = { I(effortPwmL), I(effortTicksL), D(effortSpeedL), D(effortSetpointL) };
+        Effort er = { I(effortPwmR), I(effortTicksR), D(effortSpeedR), D(effortSetpointR) };
+        check_l = check_wheel(delta_l, ill_l, I(stormTickL), I(pwmL), I(dirL), D(setpointL),
+                              D(filtVelL), &stall_l, &rev_l, &el, D(prevMeasL));
+        check_r = check_wheel(delta_r, ill_r, I(stormTickR), I(pwmR), I(dirR), D(setpointR),
+                              D(filtVelR), &stall_r, &rev_r, &er, D(prevMeasR));
+        if (check_l == WHEEL_FAULT || check_r == WHEEL_FAULT)
+            Py_RETURN_NONE;
+        SETI(stallTicksL, stall_l); SETI(reverseTicksL, rev_l);
+        SETI(stallTicksR, stall_r); SETI(reverseTicksR, rev_r);
+        SETI(effortPwmL, el.pwm); SETF(effortSpeedL, el.speed);
+        SETF(effortSetpointL, el.setpoint); SETI(effortTicksL, el.ticks);
+        SETI(effortPwmR, er.pwm); SETF(effortSpeedR, er.speed);
+        SETF(effortSetpointR, er.setpoint); SETI(effortTicksR, er.ticks);
+    }
+
+    if (I(cmdSinceTick)) {
+        SETI(cmdSinceTick, 0);
+        SETI(lastCmdTime, now & M32);
+        SETI(watchdogArmed, 1);
+    }
+    if (I(watchdogArmed) && ((now - I(lastCmdTime)) & M32) >= I(watchdogMs))
+        Py_RETURN_NONE;           /* the watchdog fires: the Python tick */
+
+    double max_change = f_mul(I(emergencyStop) ? D(estopDecel) : D(maxAccel), dt);
+    SETF(setpointL, ramp_toward(D(setpointL), D(targetL), max_change));
+    SETF(setpointR, ramp_toward(D(setpointR), D(targetR), max_change));
+
+    int still = fabs(D(filtVelL)) < K.still_speed && fabs(D(filtVelR)) < K.still_speed;
+    if (!still)
+        SETI(stillTicks, 0);
+    else if (I(stillTicks) < 255)
+        SETI(stillTicks, I(stillTicks) + 1);
+    int at_rest = D(targetL) == 0.0 && D(targetR) == 0.0 && D(setpointL) == 0.0 && D(setpointR) == 0.0;
+    int braked = fabs(D(filtVelL)) < K.brake_done_speed && fabs(D(filtVelR)) < K.brake_done_speed;
+    if (I(faultFlags) || (at_rest && (I(stillTicks) >= K.still_ticks || (I(emergencyStop) && braked)))) {
+        SETI(parked, 1);
+        SETF(integralL, 0.0);
+        SETF(integralR, 0.0);
+        SETF(prevMeasL, D(filtVelL));
+        SETF(prevMeasR, D(filtVelR));
+        SETF(outputL, 0.0);
+        SETF(outputR, 0.0);
+    } else {
+        SETI(parked, 0);
+        if (check_l != WHEEL_SUSPECT) {
+            double in = D(integralL);
+            SETF(outputL, compute_pid(D(setpointL), D(filtVelL), &in, D(prevMeasL), D(kpL), D(kiL),
+                                      D(kdL), dt));
+            SETF(integralL, in);
+            SETF(prevMeasL, D(filtVelL));
+        }
+        if (check_r != WHEEL_SUSPECT) {
+            double in = D(integralR);
+            SETF(outputR, compute_pid(D(setpointR), D(filtVelR), &in, D(prevMeasR), D(kpR), D(kiR),
+                                      D(kdR), dt));
+            SETF(integralR, in);
+            SETF(prevMeasR, D(filtVelR));
+        }
+    }
+    int64_t pwm, dir;
+    set_motor(D(outputL), &pwm, &dir);
+    SETI(pwmL, pwm); SETI(dirL, dir);
+    set_motor(D(outputR), &pwm, &dir);
+    SETI(pwmR, pwm); SETI(dirR, dir);
+
+    /* pivot_step */
+    int slow = fabs(D(filtVelL)) < K.pivot_start_speed && fabs(D(filtVelR)) < K.pivot_start_speed;
+    if (I(pivotPhase) == K.pivot_stopping && D(setpointL) == 0.0 && D(setpointR) == 0.0 && slow) {
+        SETI(pivotPhase, K.pivot_rotating);
+        SETI(pivotTicksLeft, K.pivot_ticks);
+        SETF(targetR, K.pivot_speed);
+        SETF(targetL, -K.pivot_speed);
+    } else if (I(pivotPhase) == K.pivot_rotating) {
+        SETI(pivotTicksLeft, I(pivotTicksLeft) - 1);
+        if (I(pivotTicksLeft) == 0) {
+            SETI(pivotPhase, K.pivot_none);
+            SETF(targetL, D(pendingL));
+            SETF(targetR, D(pendingR));
+        }
+    }
+
+    /* feedback_line, then TLM */
+    Buf line = { .n = 0 };
+    puts_(&line, "ENC:");
+    print_long(&line, I(encTickL));
+    puts_(&line, ",");
+    print_long(&line, I(encTickR));
+    puts_(&line, ",VEL:");
+    print_float2(&line, D(rawVelL));
+    puts_(&line, ",");
+    print_float2(&line, D(rawVelR));
+    puts_(&line, ",MODE:");
+    put(&line, PyBytes_AS_STRING(mode_name), (int)PyBytes_GET_SIZE(mode_name));
+    puts_(&line, "\r\n");
+    send(&v, &out, &line);
+    v.written[F_txCredit] = v.written[F_txDropped] = 1;
+    if (I(tlmEnabled)) {
+        int64_t flags = (I(watchdogArmed) ? 1 : 0) | (I(emergencyStop) ? 2 : 0)
+                        | (I(estopLatched) ? 4 : 0) | (I(ppmLost) ? 8 : 0) | (I(parked) ? 16 : 0)
+                        | ((I(pivotPhase) << 5) & 0xFF) | (I(faultFlags) ? 128 : 0);
+        int64_t tlm[16] = { now & M32, I(rxCount), I(lastSeq), I(pwmL), I(pwmR), I(dirL), I(dirR),
+                            I(illTickL), I(illTickR), flags, I(rejectedCount), I(crcRejected),
+                            I(freeRam), I(faultFlags), I(rxLostTick), I(lateTicks) };
+        Buf t = { .n = 0 };
+        puts_(&t, "TLM:");
+        for (int k = 0; k < 16; k++) {
+            if (k)
+                puts_(&t, ",");
+            put_ll(&t, (long long)tlm[k]);
+        }
+        puts_(&t, "\r\n");
+        send(&v, &out, &t);
+    }
+    SETI(errLinesThisTick, 0);
+    if (!ok)
+        Py_RETURN_NONE;
+
+    /* commit: every new value made first, then swapped in */
+    PyObject *made[N_FIELDS];
+    int n_made = 0, which[N_FIELDS];
+    for (int f = 0; f < N_FIELDS; f++) {
+        if (!v.written[f])
+            continue;
+        PyObject *o = v.is_float[f] ? PyFloat_FromDouble(v.d[f]) : PyLong_FromLongLong(v.i[f]);
+        if (o == NULL) {
+            for (int k = 0; k < n_made; k++)
+                Py_DECREF(made[k]);
+            return NULL;
+        }
+        made[n_made] = o;
+        which[n_made++] = f;
+    }
+    PyObject *result = PyBytes_FromStringAndSize(out.b, out.n);
+    if (result == NULL) {
+        for (int k = 0; k < n_made; k++)
+            Py_DECREF(made[k]);
+        return NULL;
+    }
+    for (int k = 0; k < n_made; k++) {
+        PyObject **p = slot(s, which[k]);
+        PyObject *old = *p;
+        *p = made[k];
+        Py_XDECREF(old);
+    }
+    return result;
+}
+
+/* ---- binding ---------------------------------------------------------------------- */
+
+static int const_double(PyObject *d, const char *name, double *out) {
+    PyObject *o = PyDict_GetItemString(d, name);
+    if (o == NULL || !PyFloat_CheckExact(o)) {
+        PyErr_Format(PyExc_ValueError, "_bind: constant %s must be a float", name);
+        return 0;
+    }
+    *out = PyFloat_AS_DOUBLE(o);
+    return 1;
+}
+
+static int const_int(PyObject *d, const char *name, int64_t *out) {
+    PyObject *o = PyDict_GetItemString(d, name);
+    if (o == NULL || !PyLong_CheckExact(o)) {
+        PyErr_Format(PyExc_ValueError, "_bind: constant %s must be an int", name);
+        return 0;
+    }
+    *out = PyLong_AsLongLong(o);
+    return !PyErr_Occurred();
+}
+
+static PyObject *bind(PyObject *self, PyObject *args) {
+    (void)self;
+    PyObject *type, *consts, *names;
+    if (!PyArg_ParseTuple(args, "O!O!O!:_bind", &PyType_Type, &type, &PyDict_Type, &consts,
+                          &PyDict_Type, &names))
+        return NULL;
+    Py_ssize_t offs[N_FIELDS];
+    for (int f = 0; f < N_FIELDS; f++) {
+        PyObject *descr = PyDict_GetItemString(((PyTypeObject *)type)->tp_dict, field_names[f]);
+        if (descr == NULL || !Py_IS_TYPE(descr, &PyMemberDescr_Type)
+            || ((PyMemberDescrObject *)descr)->d_member->type != T_OBJECT_EX) {
+            PyErr_Format(PyExc_TypeError, "_bind: %s is not a slot of the state type", field_names[f]);
+            return NULL;
+        }
+        offs[f] = ((PyMemberDescrObject *)descr)->d_member->offset;
+    }
+    PyObject *key, *value;
+    Py_ssize_t pos = 0;
+    while (PyDict_Next(names, &pos, &key, &value)) {
+        if (!PyBytes_CheckExact(value) || PyBytes_GET_SIZE(value) > 32) {
+            PyErr_SetString(PyExc_TypeError, "_bind: mode names must be short bytes");
+            return NULL;
+        }
+    }
+    typeof(K) k;
+    if (!(const_double(consts, "ALPHA", &k.alpha) && const_double(consts, "ONE_MINUS_ALPHA", &k.one_minus_alpha)
+          && const_double(consts, "CPR", &k.cpr) && const_double(consts, "TWO_PI", &k.two_pi)
+          && const_double(consts, "PID_OUT_MAX", &k.pid_out_max) && const_double(consts, "PWM_SCALE", &k.pwm_scale)
+          && const_double(consts, "STILL_SPEED", &k.still_speed)
+          && const_double(consts, "BRAKE_DONE_SPEED", &k.brake_done_speed)
+          && const_double(consts, "FAULT_REVERSE_SPEED", &k.reverse_speed)
+          && const_double(consts, "FAULT_REVERSE_APPROACH", &k.reverse_approach)
+          && const_double(consts, "FAULT_EFFORT_SHORTFALL", &k.effort_shortfall)
+          && const_double(consts, "PIVOT_START_SPEED", &k.pivot_start_speed)
+          && const_double(consts, "PIVOT_SPEED", &k.pivot_speed)
+          && const_double(consts, "ROUNDING_2", &k.rounding2)
+          && const_int(consts, "CONTROL_PERIOD_MS", &k.control_period_ms)
+          && const_int(consts, "TX_CREDIT_MAX", &k.tx_credit_max)
+          && const_int(consts, "TX_CREDIT_PER_MS", &k.tx_credit_per_ms)
+          && const_int(consts, "FAULT_STALL_PWM", &k.stall_pwm)
+          && const_int(consts, "FAULT_STALL_TICKS", &k.stall_ticks)
+          && const_int(consts, "FAULT_REVERSE_TICKS", &k.reverse_ticks)
+          && const_int(consts, "FAULT_EFFORT_PWM", &k.effort_pwm)
+          && const_int(consts, "FAULT_EFFORT_TICKS", &k.effort_ticks)
+          && const_int(consts, "FAULT_ILLEGAL_PER_TICK", &k.illegal_per_tick)
+          && const_int(consts, "STILL_TICKS", &k.still_ticks)
+          && const_int(consts, "PIVOT_TICKS", &k.pivot_ticks)
+          && const_int(consts, "HIGH", &k.high) && const_int(consts, "LOW", &k.low)
+          && const_int(consts, "PIVOT_NONE", &k.pivot_none)
+          && const_int(consts, "PIVOT_STOPPING", &k.pivot_stopping)
+          && const_int(consts, "PIVOT_ROTATING", &k.pivot_rotating)))
+        return NULL;
+    if (k.tx_credit_per_ms <= 0) {
+        PyErr_SetString(PyExc_ValueError, "_bind: TX_CREDIT_PER_MS must be positive");
+        return NULL;
+    }
+    K = k;
+    memcpy(offset, offs, sizeof offset);
+    memset(field_is_float, 0, sizeof field_is_float);
+    for (size_t k = 0; k < sizeof float_fields / sizeof float_fields[0]; k++)
+        field_is_float[float_fields[k]] = 1;
+    Py_INCREF(type);
+    Py_XSETREF(state_type, (PyTypeObject *)type);
+    Py_INCREF(names);
+    Py_XSETREF(mode_names, names);
+    bound = 1;
+    Py_RETURN_NONE;
+}
+
+static PyMethodDef methods[] = {
+    {"tick", (PyCFunction)(void (*)(void))tick, METH_FASTCALL,
+     "tick(state, now, count_l, count_r, illegal_l, illegal_r, storm_l, storm_r, rx_lost): "
+     "control_tick's bytes, or None (nothing changed: the Python tick runs)."},
+    {"_bind", bind, METH_VARARGS, "_bind(FirmwareState, constants, mode names)."},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module = {
+    PyModuleDef_HEAD_INIT, "_tick_fast",
+    "The common case of the port's control tick in C (see tick_fast.c).", -1, methods,
+    NULL, NULL, NULL, NULL,
+};
+
+PyMODINIT_FUNC PyInit__tick_fast(void) {
+    return PyModule_Create(&module);
+}

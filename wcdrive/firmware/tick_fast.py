@@ -1,0 +1,68 @@
+"""The control tick's common case in C (``csrc/tick_fast.c``), for speed.
+
+``tick(state, now, count_l, count_r, illegal_l, illegal_r, storm_l, storm_r, rx_lost)``
+returns the bytes ``control.control_tick`` would send, having changed ``state`` as it
+would, or None having changed nothing: then the Python tick, the reference, runs
+(``Firmware.tick`` does that). The C path declines everything but the common case: a
+fault that latches, the watchdog firing, any binary32 result that is not an ordinary
+number (``wcdrive.avr.f32`` computes those bit by bit as avr-libc does), a field of an
+unexpected type. tests/test_tick_fast.py holds it to the Python tick.
+
+``fast`` is None (the Python tick only) without a compiler, Python's headers or a
+writable cache, or with ``WCDRIVE_PURE_TICK=1`` (or ``WCDRIVE_PURE_F32=1``) in the
+environment.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from pathlib import Path
+from types import ModuleType
+
+from wcdrive import native
+from wcdrive.avr.arduino_print import _rounding
+from wcdrive.firmware import constants as C
+from wcdrive.firmware import motion
+from wcdrive.firmware.state import FirmwareState
+
+_SOURCE = Path(__file__).resolve().parent / "csrc" / "tick_fast.c"
+
+#: The constants the C tick uses, by name (``_bind`` checks each is there and typed).
+_FLOATS = ("ALPHA", "ONE_MINUS_ALPHA", "CPR", "TWO_PI", "PID_OUT_MAX", "PWM_SCALE", "STILL_SPEED",
+           "BRAKE_DONE_SPEED", "FAULT_REVERSE_SPEED", "FAULT_REVERSE_APPROACH", "FAULT_EFFORT_SHORTFALL",
+           "PIVOT_START_SPEED", "PIVOT_SPEED")
+_INTS = ("CONTROL_PERIOD_MS", "TX_CREDIT_MAX", "TX_CREDIT_PER_MS", "FAULT_STALL_PWM", "FAULT_STALL_TICKS",
+         "FAULT_REVERSE_TICKS", "FAULT_EFFORT_PWM", "FAULT_EFFORT_TICKS", "FAULT_ILLEGAL_PER_TICK",
+         "STILL_TICKS", "PIVOT_TICKS", "HIGH", "LOW")
+
+
+def _constants() -> dict[str, float | int]:
+    out: dict[str, float | int] = {name: float(getattr(C, name)) for name in _FLOATS}
+    out.update({name: int(getattr(C, name)) for name in _INTS})
+    out.update(ROUNDING_2=_rounding(2), PIVOT_NONE=motion.PIVOT_NONE,
+               PIVOT_STOPPING=motion.PIVOT_STOPPING, PIVOT_ROTATING=motion.PIVOT_ROTATING)
+    return out
+
+
+def pure() -> bool:
+    """Whether the environment asks for the Python tick only."""
+    names = ("WCDRIVE_PURE_TICK", "WCDRIVE_PURE_F32")
+    return any(os.environ.get(name, "") not in ("", "0") for name in names)
+
+
+def load_fast() -> ModuleType | None:
+    """The C tick, built on first use (``wcdrive.native``) and bound to ``FirmwareState``
+    and the constants; None when it cannot be built or ``pure()``."""
+    if pure():
+        return None
+    try:
+        module = native.load_extension(_SOURCE, "_tick_fast", ("-O2", "-ffp-contract=off"))
+        module._bind(FirmwareState, _constants(), {k: v.encode() for k, v in C.MODE_NAMES.items()})
+    except (native.BuildError, OSError) as exc:      # OSError: no writable cache, for one
+        logging.getLogger(__name__).warning("the control tick in pure Python (slower): %s", exc)
+        return None
+    return module
+
+
+fast = load_fast()
