@@ -23,7 +23,7 @@ def test_no_bundled_scenario_trips_a_fault(name: str) -> None:
     for t, data in scenario.host_commands():
         if t < scenario.duration:
             loop.send(data, at=round(t * F_CPU))
-    peak = {"stall": 0, "reverse": 0, "effort": 0}
+    peak = {"stall": 0, "reverse": 0, "runaway": 0, "effort": 0}
     fewest_counts = 10**9
     previous: tuple[int, ...] | None = None
 
@@ -32,6 +32,7 @@ def test_no_bundled_scenario_trips_a_fault(name: str) -> None:
         s = loop.fw.state
         peak["stall"] = max(peak["stall"], s.stallTicksL, s.stallTicksR)
         peak["reverse"] = max(peak["reverse"], s.reverseTicksL, s.reverseTicksR)
+        peak["runaway"] = max(peak["runaway"], s.runawayTicksL, s.runawayTicksR)
         peak["effort"] = max(peak["effort"], s.effortTicksL, s.effortTicksR)
         if previous is not None:
             for count, was, pwm, direction, setpoint in ((s.encTickL, *previous[0::2]),
@@ -44,9 +45,10 @@ def test_no_bundled_scenario_trips_a_fault(name: str) -> None:
     loop.run_until(round(scenario.duration * F_CPU), on_tick)
     out = b"".join(data for _, data in loop.take_output())
     print(f"{name}: stall ticks {peak['stall']}/{C.FAULT_STALL_TICKS}, reverse ticks "
-          f"{peak['reverse']}/{C.FAULT_REVERSE_TICKS}, effort ticks {peak['effort']}/"
+          f"{peak['reverse']}/{C.FAULT_REVERSE_TICKS}, runaway ticks {peak['runaway']}/"
+          f"{C.FAULT_RUNAWAY_TICKS}, effort ticks {peak['effort']}/"
           f"{C.FAULT_EFFORT_TICKS}, fewest counts in a driven tick {fewest_counts}")
     assert b"EVT:FAULT" not in out and loop.fw.state.faultFlags == 0
-    assert peak["stall"] == 0 and peak["reverse"] == 0
+    assert peak["stall"] == 0 and peak["reverse"] == 0 and peak["runaway"] == 0
     assert peak["effort"] <= C.FAULT_EFFORT_TICKS // 2
     assert fewest_counts >= 4

@@ -75,7 +75,8 @@ SMALL = {"pwmL": (0, 255), "pwmR": (0, 255), "dirL": (0, 1), "dirR": (0, 1), "mo
          "pivotPhase": (0, 2), "pivotTicksLeft": (0, 12), "stillTicks": (0, 255), "parked": (0, 1),
          "cmdSinceTick": (0, 1), "watchdogArmed": (0, 1), "emergencyStop": (0, 1), "tlmEnabled": (0, 1),
          "faultFlags": (0, 3), "stallTicksL": (0, 6), "stallTicksR": (0, 6), "reverseTicksL": (0, 4),
-         "reverseTicksR": (0, 4), "effortTicksL": (0, 12), "effortTicksR": (0, 12), "effortPwmL": (0, 255),
+         "reverseTicksR": (0, 4), "runawayTicksL": (0, 6), "runawayTicksR": (0, 6),
+         "effortTicksL": (0, 12), "effortTicksR": (0, 12), "effortPwmL": (0, 255),
          "effortPwmR": (0, 255), "estopLatched": (0, 1), "ppmLost": (0, 1), "txCredit": (0, 200),
          "stormTickL": (0, 1), "stormTickR": (0, 1), "errLinesThisTick": (0, 5)}
 

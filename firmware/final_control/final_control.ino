@@ -247,6 +247,7 @@ bool estopLatched = false;                  // e-stop: motion refused until "res
 uint16_t faultFlags = 0;
 uint8_t stallTicksL = 0, stallTicksR = 0;   // ticks driven without a count
 uint8_t reverseTicksL = 0, reverseTicksR = 0;   // ticks measured against the setpoint
+uint8_t runawayTicksL = 0, runawayTicksR = 0;   // ticks running away (runsAway)
 // Effort without progress: the duty and speed (toward the setpoint) when the setpoint
 // last changed or the wheel last gained speed; the lowest duty since.
 uint8_t effortPwmL = 0, effortPwmR = 0;
@@ -492,7 +493,8 @@ static void emergencyHalt() {
 // Measured against the setpoint does not count while the wheel came
 // WC_FAULT_REVERSE_APPROACH closer to it since prevMeasured (what the PID last ran on):
 // a healthy wheel lagging a reversal of its setpoint slows toward it; a reversed encoder
-// shows the wheel moving away, or no closer.
+// shows the wheel moving away, or no closer. Running away (runsAway) for
+// WC_FAULT_RUNAWAY_TICKS ticks in a row is a reversed encoder too; it holds no output.
 #define WHEEL_OK 0
 #define WHEEL_SUSPECT 1
 #define WHEEL_STALLED 2
@@ -522,10 +524,26 @@ static bool noEffect(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, flo
   return effortTicks >= WC_FAULT_EFFORT_TICKS;
 }
 
+// Running away: braked at WC_FAULT_RUNAWAY_PWM or more against its measured motion,
+// WC_FAULT_REVERSE_SPEED or more beyond its setpoint that way, and WC_FAULT_RUNAWAY_GAIN
+// or more faster than prevMeasured (what the PID last ran on). A braked wheel slows unless
+// something pushes it; one whose encoder counts against the motion speeds up, the more
+// the harder the PID pushes (positive feedback). That is a reversed encoder whose reading
+// flipped sign while its setpoint crossed zero, which the "against" rule never sees.
+static bool runsAway(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, float measured,
+                     float prevMeasured) {
+  bool forward = measured > 0.0f;
+  float beyond = forward ? measured - setpoint : setpoint - measured;
+  return appliedPwm >= WC_FAULT_RUNAWAY_PWM && (appliedDir == HIGH) != forward &&
+         fabs(measured) >= WC_FAULT_REVERSE_SPEED && beyond >= WC_FAULT_REVERSE_SPEED &&
+         fabs(measured) - fabs(prevMeasured) >= WC_FAULT_RUNAWAY_GAIN;
+}
+
 static uint8_t checkWheel(int32_t delta, uint32_t illegal, uint8_t storm, uint8_t appliedPwm,
                           uint8_t appliedDir, float setpoint, float measured, uint8_t& stallTicks,
-                          uint8_t& reverseTicks, uint8_t& effortPwm, float& effortSpeed,
-                          float& effortSetpoint, uint8_t& effortTicks, float prevMeasured) {
+                          uint8_t& reverseTicks, uint8_t& runawayTicks, uint8_t& effortPwm,
+                          float& effortSpeed, float& effortSetpoint, uint8_t& effortTicks,
+                          float prevMeasured) {
   if (storm || illegal >= WC_FAULT_ILLEGAL_PER_TICK) return WHEEL_IMPLAUSIBLE;
   bool driven = appliedPwm >= WC_FAULT_STALL_PWM && setpoint != 0.0f &&
                 (appliedDir == HIGH) == (setpoint > 0.0f);
@@ -537,6 +555,8 @@ static uint8_t checkWheel(int32_t delta, uint32_t illegal, uint8_t storm, uint8_
                  (setpoint > 0.0f) != (measured > 0.0f) && approach < WC_FAULT_REVERSE_APPROACH;
   reverseTicks = against ? reverseTicks + 1 : 0;
   if (reverseTicks >= WC_FAULT_REVERSE_TICKS) return WHEEL_REVERSED;
+  runawayTicks = runsAway(appliedPwm, appliedDir, setpoint, measured, prevMeasured) ? runawayTicks + 1 : 0;
+  if (runawayTicks >= WC_FAULT_RUNAWAY_TICKS) return WHEEL_REVERSED;
   if (noEffect(appliedPwm, appliedDir, setpoint, measured, effortPwm, effortSpeed, effortSetpoint,
                effortTicks)) {
     return WHEEL_NO_EFFECT;
@@ -662,9 +682,11 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
   uint8_t checkL = WHEEL_OK, checkR = WHEEL_OK;
   if (faultFlags == 0) {
     checkL = checkWheel(deltaL, illDeltaL, stormTickL, pwmL, dirL, setpointL, filtVelL, stallTicksL,
-                        reverseTicksL, effortPwmL, effortSpeedL, effortSetpointL, effortTicksL, prevMeasL);
+                        reverseTicksL, runawayTicksL, effortPwmL, effortSpeedL, effortSetpointL,
+                        effortTicksL, prevMeasL);
     checkR = checkWheel(deltaR, illDeltaR, stormTickR, pwmR, dirR, setpointR, filtVelR, stallTicksR,
-                        reverseTicksR, effortPwmR, effortSpeedR, effortSetpointR, effortTicksR, prevMeasR);
+                        reverseTicksR, runawayTicksR, effortPwmR, effortSpeedR, effortSetpointR,
+                        effortTicksR, prevMeasR);
     uint16_t faults;
     if (checkL == WHEEL_STALLED && checkR == WHEEL_STALLED) {
       faults = FAULT_DRIVER;   // both wheels driven, neither turns: the driver or its supply
@@ -678,6 +700,7 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
       cmdSinceTick = false;
       watchdogArmed = false;
       stallTicksL = stallTicksR = reverseTicksL = reverseTicksR = 0;
+      runawayTicksL = runawayTicksR = 0;
       sendFaultEvents(faults);
     }
   }

@@ -76,34 +76,55 @@ def no_effect(applied_pwm: int, applied_dir: int, setpoint: float, measured: flo
     return ticks >= C.FAULT_EFFORT_TICKS, (effort_pwm, effort_speed, effort_setpoint, ticks)
 
 
+def runs_away(applied_pwm: int, applied_dir: int, setpoint: float, measured: float,
+              prev_measured: float) -> bool:
+    """``runsAway``: braked at FAULT_RUNAWAY_PWM or more against its measured motion,
+    FAULT_REVERSE_SPEED or more beyond its setpoint that way, and FAULT_RUNAWAY_GAIN or
+    more faster than ``prev_measured`` (the speed the PID last ran on): a wheel whose
+    encoder counts against the motion, driven harder the faster it seems to go."""
+    forward = measured > 0.0
+    beyond = sub(measured, setpoint) if forward else sub(setpoint, measured)
+    return (applied_pwm >= C.FAULT_RUNAWAY_PWM and (applied_dir == C.HIGH) != forward
+            and abs(measured) >= C.FAULT_REVERSE_SPEED and beyond >= C.FAULT_REVERSE_SPEED
+            and sub(abs(measured), abs(prev_measured)) >= C.FAULT_RUNAWAY_GAIN)
+
+
 def check_wheel(delta: int, illegal: int, storm: int, applied_pwm: int, applied_dir: int,
                 setpoint: float, measured: float, stall_ticks: int, reverse_ticks: int,
-                effort: Effort, prev_measured: float) -> tuple[int, int, int, Effort]:
-    """``checkWheel``: ``(verdict, stall ticks, reverse ticks, effort reference)`` for
-    one wheel over the interval that ended: WHEEL_OK, WHEEL_SUSPECT (hold the output),
-    or a fault. A stall is a duty toward a non-zero setpoint without a count (braking
-    ends with none). A measured speed against the setpoint counts toward a reversed
-    encoder unless the wheel came FAULT_REVERSE_APPROACH closer to the setpoint since
-    ``prev_measured`` (the speed the PID last ran on): a healthy wheel lagging a
-    reversal of its setpoint slows toward it, a reversed encoder shows it moving away."""
+                runaway_ticks: int, effort: Effort, prev_measured: float
+                ) -> tuple[int, int, int, int, Effort]:
+    """``checkWheel``: ``(verdict, stall ticks, reverse ticks, runaway ticks, effort
+    reference)`` for one wheel over the interval that ended: WHEEL_OK, WHEEL_SUSPECT
+    (hold the output), or a fault. A stall is a duty toward a non-zero setpoint without
+    a count (braking ends with none). A measured speed against the setpoint counts
+    toward a reversed encoder unless the wheel came FAULT_REVERSE_APPROACH closer to the
+    setpoint since ``prev_measured`` (the speed the PID last ran on): a healthy wheel
+    lagging a reversal of its setpoint slows toward it, a reversed encoder shows it
+    moving away. A runaway (``runs_away``) for FAULT_RUNAWAY_TICKS ticks in a row is a
+    reversed encoder too: the one whose reading flipped sign with its setpoint."""
     if storm or illegal >= C.FAULT_ILLEGAL_PER_TICK:
-        return WHEEL_IMPLAUSIBLE, stall_ticks, reverse_ticks, effort
+        return WHEEL_IMPLAUSIBLE, stall_ticks, reverse_ticks, runaway_ticks, effort
     driven = (applied_pwm >= C.FAULT_STALL_PWM and setpoint != 0.0
               and (applied_dir == C.HIGH) == (setpoint > 0.0))
     stalled = driven and delta == 0
     stall_ticks = (stall_ticks + 1) & 0xFF if stalled else 0
     if stall_ticks >= C.FAULT_STALL_TICKS:
-        return WHEEL_STALLED, stall_ticks, reverse_ticks, effort
+        return WHEEL_STALLED, stall_ticks, reverse_ticks, runaway_ticks, effort
     approach = sub(measured, prev_measured) if setpoint > 0.0 else sub(prev_measured, measured)
     against = (abs(setpoint) >= C.FAULT_REVERSE_SPEED and abs(measured) >= C.FAULT_REVERSE_SPEED
                and (setpoint > 0.0) != (measured > 0.0) and approach < C.FAULT_REVERSE_APPROACH)
     reverse_ticks = (reverse_ticks + 1) & 0xFF if against else 0
     if reverse_ticks >= C.FAULT_REVERSE_TICKS:
-        return WHEEL_REVERSED, stall_ticks, reverse_ticks, effort
+        return WHEEL_REVERSED, stall_ticks, reverse_ticks, runaway_ticks, effort
+    running = runs_away(applied_pwm, applied_dir, setpoint, measured, prev_measured)
+    runaway_ticks = (runaway_ticks + 1) & 0xFF if running else 0
+    if runaway_ticks >= C.FAULT_RUNAWAY_TICKS:
+        return WHEEL_REVERSED, stall_ticks, reverse_ticks, runaway_ticks, effort
     tripped, effort = no_effect(applied_pwm, applied_dir, setpoint, measured, effort)
     if tripped:
-        return WHEEL_NO_EFFECT, stall_ticks, reverse_ticks, effort
-    return (WHEEL_SUSPECT if stalled or against else WHEEL_OK), stall_ticks, reverse_ticks, effort
+        return WHEEL_NO_EFFECT, stall_ticks, reverse_ticks, runaway_ticks, effort
+    verdict = WHEEL_SUSPECT if stalled or against else WHEEL_OK
+    return verdict, stall_ticks, reverse_ticks, runaway_ticks, effort
 
 
 def wheel_faults(check: int, stall: int, reversed_: int, implausible: int, motor: int) -> int:
@@ -125,13 +146,15 @@ def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_
     sends its events. Returns both wheels' verdicts."""
     if s.faultFlags:
         return WHEEL_OK, WHEEL_OK
-    check_l, s.stallTicksL, s.reverseTicksL, effort_l = check_wheel(
+    check_l, s.stallTicksL, s.reverseTicksL, s.runawayTicksL, effort_l = check_wheel(
         delta_l, ill_l, s.stormTickL, s.pwmL, s.dirL, s.setpointL, s.filtVelL, s.stallTicksL,
-        s.reverseTicksL, (s.effortPwmL, s.effortSpeedL, s.effortSetpointL, s.effortTicksL), s.prevMeasL)
+        s.reverseTicksL, s.runawayTicksL, (s.effortPwmL, s.effortSpeedL, s.effortSetpointL,
+                                           s.effortTicksL), s.prevMeasL)
     s.effortPwmL, s.effortSpeedL, s.effortSetpointL, s.effortTicksL = effort_l
-    check_r, s.stallTicksR, s.reverseTicksR, effort_r = check_wheel(
+    check_r, s.stallTicksR, s.reverseTicksR, s.runawayTicksR, effort_r = check_wheel(
         delta_r, ill_r, s.stormTickR, s.pwmR, s.dirR, s.setpointR, s.filtVelR, s.stallTicksR,
-        s.reverseTicksR, (s.effortPwmR, s.effortSpeedR, s.effortSetpointR, s.effortTicksR), s.prevMeasR)
+        s.reverseTicksR, s.runawayTicksR, (s.effortPwmR, s.effortSpeedR, s.effortSetpointR,
+                                           s.effortTicksR), s.prevMeasR)
     s.effortPwmR, s.effortSpeedR, s.effortSetpointR, s.effortTicksR = effort_r
     if check_l == WHEEL_STALLED and check_r == WHEEL_STALLED:
         faults = FAULT_DRIVER
@@ -145,6 +168,7 @@ def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_
         s.cmdSinceTick = 0
         s.watchdogArmed = 0
         s.stallTicksL = s.stallTicksR = s.reverseTicksL = s.reverseTicksR = 0
+        s.runawayTicksL = s.runawayTicksR = 0
         send_fault_events(s, faults, out)
     return check_l, check_r
 

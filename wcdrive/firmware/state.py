@@ -34,7 +34,8 @@ INT_FIELDS = (
     "errSuppressed", "errLinesThisTick", "cmdLen", "cmdCommas", "cmdDiscarding",
     "illTickL", "illTickR", "watchdogMs", "estopLatched", "tlmEnabled", "unframedLine", "lastSeq",
     "rxCount", "crcRejected", "stormTickL", "stormTickR", "faultFlags", "stallTicksL",
-    "stallTicksR", "reverseTicksL", "reverseTicksR", "effortPwmL", "effortPwmR",
+    "stallTicksR", "reverseTicksL", "reverseTicksR", "runawayTicksL", "runawayTicksR", "effortPwmL",
+    "effortPwmR",
     "effortTicksL", "effortTicksR", "txDropped", "txRingFull", "txCredit", "rxGaps", "rxLostTick",
     "lastTickTime", "lateTicks",
     "eeNext", "eeBusy",
@@ -118,6 +119,8 @@ class FirmwareState:
     stallTicksR: int = 0
     reverseTicksL: int = 0
     reverseTicksR: int = 0
+    runawayTicksL: int = 0
+    runawayTicksR: int = 0
     effortPwmL: int = 0
     effortPwmR: int = 0
     effortTicksL: int = 0

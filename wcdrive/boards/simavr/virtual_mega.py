@@ -72,7 +72,8 @@ VARIABLE_FORMATS = {
           "watchdogArmed", "emergencyStop", "ppmLost", "stillTicks", "parked", "cmdLen",
           "cmdCommas", "cmdDiscarding", "errLinesThisTick", "lastEncodedL", "lastEncodedR",
           "timer0_fract", "estopLatched", "tlmEnabled", "unframedLine", "stormTickL", "stormTickR",
-          "stallTicksL", "stallTicksR", "reverseTicksL", "reverseTicksR", "stormL", "stormR",
+          "stallTicksL", "stallTicksR", "reverseTicksL", "reverseTicksR", "runawayTicksL",
+          "runawayTicksR", "stormL", "stormR",
           "resetCause", "effortPwmL", "effortPwmR", "effortTicksL", "effortTicksR", "eeNext", "eeBusy"),
 }
 _FORMAT_OF = {name: fmt for fmt, names in VARIABLE_FORMATS.items() for name in names}

@@ -75,6 +75,7 @@ static double f_from_int(int64_t n) { return rnd((double)n); }   /* |n| < 2**53 
     X(encTickL) X(encTickR) X(illTickL) X(illTickR) X(stormTickL) X(stormTickR) \
     X(rxLostTick) X(prevEncL) X(prevEncR) X(rawVelL) X(rawVelR) X(filtVelL) X(filtVelR) \
     X(faultFlags) X(stallTicksL) X(stallTicksR) X(reverseTicksL) X(reverseTicksR) \
+    X(runawayTicksL) X(runawayTicksR) \
     X(effortPwmL) X(effortSpeedL) X(effortSetpointL) X(effortTicksL) \
     X(effortPwmR) X(effortSpeedR) X(effortSetpointR) X(effortTicksR) \
     X(pwmL) X(pwmR) X(dirL) X(dirR) X(setpointL) X(setpointR) X(targetL) X(targetR) \
@@ -141,10 +142,11 @@ static int arg_int(PyObject *o, int64_t *out) {
 
 static struct {
     double alpha, one_minus_alpha, cpr, two_pi, pid_out_max, pwm_scale, still_speed,
-        brake_done_speed, reverse_speed, reverse_approach, effort_shortfall, pivot_start_speed,
+        brake_done_speed, reverse_speed, reverse_approach, runaway_gain, effort_shortfall,
+        pivot_start_speed,
         pivot_speed, rounding2;
     int64_t control_period_ms, tx_credit_max, tx_credit_per_ms, stall_pwm, stall_ticks,
-        reverse_ticks, effort_pwm, effort_ticks, illegal_per_tick, still_ticks, pivot_ticks,
+        reverse_ticks, runaway_pwm, runaway_ticks, effort_pwm, effort_ticks, illegal_per_tick, still_ticks, pivot_ticks,
         high, low, pivot_none, pivot_stopping, pivot_rotating;
 } K;
 static PyObject *mode_names;      /* dict: mode -> bytes */
@@ -230,11 +232,21 @@ static int no_effect(int64_t pwm, int64_t dir, double setpoint, double measured,
     return e->ticks >= K.effort_ticks;
 }
 
+/* runs_away */
+static int runs_away(int64_t pwm, int64_t dir, double setpoint, double measured,
+                     double prev_measured) {
+    int forward = measured > 0.0;
+    double beyond = forward ? f_sub(measured, setpoint) : f_sub(setpoint, measured);
+    return pwm >= K.runaway_pwm && ((dir == K.high) != forward)
+           && fabs(measured) >= K.reverse_speed && beyond >= K.reverse_speed
+           && f_sub(fabs(measured), fabs(prev_measured)) >= K.runaway_gain;
+}
+
 /* check_wheel: WHEEL_OK, WHEEL_SUSPECT or WHEEL_FAULT (any fault: the Python tick
  * latches it) */
 static int check_wheel(int64_t delta, int64_t illegal, int64_t storm, int64_t pwm, int64_t dir,
                        double setpoint, double measured, int64_t *stall, int64_t *reverse,
-                       Effort *e, double prev_measured) {
+                       int64_t *runaway, Effort *e, double prev_measured) {
     if (storm || illegal >= K.illegal_per_tick)
         return WHEEL_FAULT;
     int driven = pwm >= K.stall_pwm && setpoint != 0.0 && ((dir == K.high) == (setpoint > 0.0));
@@ -247,6 +259,9 @@ static int check_wheel(int64_t delta, int64_t illegal, int64_t storm, int64_t pw
                   && (setpoint > 0.0) != (measured > 0.0) && approach < K.reverse_approach;
     *reverse = against ? ((*reverse + 1) & 0xFF) : 0;
     if (*reverse >= K.reverse_ticks)
+        return WHEEL_FAULT;
+    *runaway = runs_away(pwm, dir, setpoint, measured, prev_measured) ? ((*runaway + 1) & 0xFF) : 0;
+    if (*runaway >= K.runaway_ticks)
         return WHEEL_FAULT;
     if (no_effect(pwm, dir, setpoint, measured, e))
         return WHEEL_FAULT;
@@ -394,18 +409,19 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
     /* _check_faults: a fault that latches goes to the Python tick */
     int check_l = WHEEL_OK, check_r = WHEEL_OK;
     if (I(faultFlags) == 0) {
-        int64_t stall_l = I(stallTicksL), rev_l = I(reverseTicksL);
-        int64_t stall_r = I(stallTicksR), rev_r = I(reverseTicksR);
+        int64_t stall_l = I(stallTicksL), rev_l = I(reverseTicksL), run_l = I(runawayTicksL);
+        int64_t stall_r = I(stallTicksR), rev_r = I(reverseTicksR), run_r = I(runawayTicksR);
         Effort el = { I(effortPwmL), I(effortTicksL), D(effortSpeedL), D(effortSetpointL) };
         Effort er = { I(effortPwmR), I(effortTicksR), D(effortSpeedR), D(effortSetpointR) };
         check_l = check_wheel(delta_l, ill_l, I(stormTickL), I(pwmL), I(dirL), D(setpointL),
-                              D(filtVelL), &stall_l, &rev_l, &el, D(prevMeasL));
+                              D(filtVelL), &stall_l, &rev_l, &run_l, &el, D(prevMeasL));
         check_r = check_wheel(delta_r, ill_r, I(stormTickR), I(pwmR), I(dirR), D(setpointR),
-                              D(filtVelR), &stall_r, &rev_r, &er, D(prevMeasR));
+                              D(filtVelR), &stall_r, &rev_r, &run_r, &er, D(prevMeasR));
         if (check_l == WHEEL_FAULT || check_r == WHEEL_FAULT)
             Py_RETURN_NONE;
         SETI(stallTicksL, stall_l); SETI(reverseTicksL, rev_l);
         SETI(stallTicksR, stall_r); SETI(reverseTicksR, rev_r);
+        SETI(runawayTicksL, run_l); SETI(runawayTicksR, run_r);
         SETI(effortPwmL, el.pwm); SETF(effortSpeedL, el.speed);
         SETF(effortSetpointL, el.setpoint); SETI(effortTicksL, el.ticks);
         SETI(effortPwmR, er.pwm); SETF(effortSpeedR, er.speed);
@@ -598,6 +614,7 @@ static PyObject *bind(PyObject *self, PyObject *args) {
           && const_double(consts, "BRAKE_DONE_SPEED", &k.brake_done_speed)
           && const_double(consts, "FAULT_REVERSE_SPEED", &k.reverse_speed)
           && const_double(consts, "FAULT_REVERSE_APPROACH", &k.reverse_approach)
+          && const_double(consts, "FAULT_RUNAWAY_GAIN", &k.runaway_gain)
           && const_double(consts, "FAULT_EFFORT_SHORTFALL", &k.effort_shortfall)
           && const_double(consts, "PIVOT_START_SPEED", &k.pivot_start_speed)
           && const_double(consts, "PIVOT_SPEED", &k.pivot_speed)
@@ -608,6 +625,8 @@ static PyObject *bind(PyObject *self, PyObject *args) {
           && const_int(consts, "FAULT_STALL_PWM", &k.stall_pwm)
           && const_int(consts, "FAULT_STALL_TICKS", &k.stall_ticks)
           && const_int(consts, "FAULT_REVERSE_TICKS", &k.reverse_ticks)
+          && const_int(consts, "FAULT_RUNAWAY_PWM", &k.runaway_pwm)
+          && const_int(consts, "FAULT_RUNAWAY_TICKS", &k.runaway_ticks)
           && const_int(consts, "FAULT_EFFORT_PWM", &k.effort_pwm)
           && const_int(consts, "FAULT_EFFORT_TICKS", &k.effort_ticks)
           && const_int(consts, "FAULT_ILLEGAL_PER_TICK", &k.illegal_per_tick)
