@@ -254,6 +254,10 @@ class PortLoop:
                 io_at = ee_at if io_at is None else min(io_at, ee_at)
             if io_at is not None and io_at > last:
                 io_at = None
+            if not writing and self._eeprom_ready.due is not None and (io_at is None or io_at > overflow):
+                # No save in progress (a firmware put in mid-save), and no byte read at the
+                # next overflow: the stepped path's poll there forgets the old write's time.
+                self._eeprom_ready.due = None
             fw = self.fw
             timer = self.timer
             # Overflows before that one: the first at which the tick is due.
@@ -273,7 +277,7 @@ class PortLoop:
             if arrived is not None and arrived <= io_at:
                 self._receive(fw, io_at)
             fw = self.fw
-            if writing or fw.state.eeBusy:
+            if writing or fw.state.eeBusy or self._eeprom_ready.due is not None:
                 self._eeprom_ready.poll(fw.state, io_at)
             millis = timer.millis
             if fw.due(millis):
