@@ -9,8 +9,8 @@ speed" table, in one run so that the machine's load weighs on all of them alike:
   it was);
 * the command itself: ``wcdrive sim corridor_100m --no-plots --json`` in ``--cli`` fresh
   processes, the median of the ``real_time_factor`` each reports;
-* port + plant against simavr + plant on one scenario, measured side by side (port,
-  simavr, port: the ratio of the port's median to simavr's run), with the firmware
+* port + plant against simavr + plant on one scenario, measured side by side (3 port
+  runs, simavr, 3 port runs: the ratio of the port's median to simavr's run), with the firmware
   differences the simavr run found (0 expected).
 
     python benchmarks/sim_speed.py            # 5 runs a scenario, 5 CLI runs, simavr on step_response
@@ -47,14 +47,17 @@ def rtf(name: str, *, stepped: bool = False, ekf: bool = False) -> float:
         runner.PortLoop = original  # type: ignore[misc]
 
 
-def side_by_side(name: str) -> dict[str, float]:
-    """Port, simavr, port on scenario ``name``."""
-    first = rtf(name)
+def side_by_side(name: str, runs: int = 3) -> dict:
+    """Port, simavr, port on scenario ``name``: the port's figure is the median of
+    ``runs`` runs just before the simavr run and ``runs`` just after it (a port run
+    takes milliseconds, so one slow run weighs less in a median of several)."""
+    before = [rtf(name) for _ in range(runs)]
     sim = runner.run(load(name), backend="simavr")
-    second = rtf(name)
-    port = statistics.median([first, second])
+    after = [rtf(name) for _ in range(runs)]
+    port = statistics.median(before + after)
     return {"port": port, "simavr": sim.real_time_factor, "ratio": port / sim.real_time_factor,
-            "differences": float(sim.firmware_differences or 0), "simulated": sim.duration}
+            "differences": float(sim.firmware_differences or 0), "simulated": sim.duration,
+            "port_runs": before + after}
 
 
 def cli_rtf(name: str = "corridor_100m") -> float:
@@ -107,7 +110,8 @@ def main(argv: list[str] | None = None) -> int:
         s = side_by_side(name)
         print(f"\nport + plant vs simavr + plant ({name}, {s['simulated']:.1f} s, side by side): "
               f"{s['port']:,.0f}x vs {s['simavr']:.2f}x real time, ratio {s['ratio']:,.0f}; "
-              f"firmware differences {s['differences']:.0f}")
+              f"firmware differences {s['differences']:.0f} (port runs before and after simavr: "
+              + ", ".join(f"{f:,.0f}" for f in s["port_runs"]) + ")")
     return 0
 
 
