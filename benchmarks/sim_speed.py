@@ -51,6 +51,8 @@ def side_by_side(name: str, runs: int = 3) -> dict:
     """Port, simavr, port on scenario ``name``: the port's figure is the median of
     ``runs`` runs just before the simavr run and ``runs`` just after it (a port run
     takes milliseconds, so one slow run weighs less in a median of several)."""
+    for _ in range(2):         # warm-up, not counted: after the CLI's child processes the
+        rtf(name)              # first runs here measured at half speed (an idle core)
     before = [rtf(name) for _ in range(runs)]
     sim = runner.run(load(name), backend="simavr")
     after = [rtf(name) for _ in range(runs)]
