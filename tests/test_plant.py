@@ -231,3 +231,17 @@ def test_anything_else_in_the_space_takes_cpSpaceStep() -> None:
     plain.set_drive(200, 1, 200, 1)
     plain.advance(2000)
     assert slowed.pose[0] < 0.9 * plain.pose[0]        # the damping of its own took effect
+
+
+def test_pose_is_what_pymunk_reads() -> None:
+    """``Plant.pose`` reads Chipmunk directly: the same floats as ``body.position`` and
+    ``body.angle``, after motion and after the body is moved by hand."""
+    p = Plant()
+    for d in ((200, 1, 120, 1), (90, 0, 250, 1)):
+        p.set_drive(*d)
+        p.advance_batch(173)
+        b = p.body
+        assert p.pose == (b.position.x, b.position.y, b.angle)
+    p.body.angle = 2.0
+    p.body.position = (3.25, -1.5)
+    assert p.pose == (3.25, -1.5, 2.0) == (p.body.position.x, p.body.position.y, p.body.angle)

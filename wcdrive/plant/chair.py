@@ -46,6 +46,7 @@ from typing import Protocol
 
 import numpy as np
 import pymunk
+from pymunk._chipmunk import lib as _chipmunk
 
 from wcdrive.native import BuildError, load
 from wcdrive.plant.params import ChairParams
@@ -328,10 +329,12 @@ class Plant:
 
     @property
     def pose(self) -> tuple[float, float, float]:
-        """(x, y, heading) of the axle midpoint, ground truth."""
-        b = self.body
-        x, y = b.position
-        return x, y, b.angle
+        """(x, y, heading) of the axle midpoint, ground truth: ``body.position`` and
+        ``body.angle`` as pymunk reads them (Chipmunk's cpBodyGetPosition and
+        cpBodyGetAngle), without the Vec2d in between (the tick log reads it every tick)."""
+        body = self.body._body
+        position = _chipmunk.cpBodyGetPosition(body)
+        return position.x, position.y, _chipmunk.cpBodyGetAngle(body)
 
     @property
     def yaw_rate(self) -> float:
