@@ -197,13 +197,25 @@ def test_anything_else_in_the_space_takes_cpSpaceStep() -> None:
         plant.space.add(pymunk.Circle(plant.body, 0.4))
         plant.space.add(pymunk.Segment(plant.space.static_body, (0.6, -5.0), (0.6, 5.0), 0.01))
 
-    for change in (setups, walls):
+    def swapped(plant: Plant) -> None:             # the chassis out, another body in
+        plant.space.remove(plant.body)
+        other = pymunk.Body(1.0, 1.0)
+        other.velocity = (1.0, 0.0)
+        plant.space.add(other)
+
+    def static(plant: Plant) -> None:              # cpSpaceStep integrates no static body
+        plant.body.body_type = pymunk.Body.STATIC
+        plant.space.gravity = (0.0, -9.81)
+
+    for change in (setups, walls, swapped, static):
         fast, ref = Plant(), Plant(use_kernel=False)
         for p in (fast, ref):
             change(p)
             p.set_drive(200, 1, 200, 1)
             p.advance(2000)
         assert fast.pose == pytest.approx(ref.pose, abs=1e-9), change.__name__
+        bodies = [(b.position.x, b.position.y) for b in fast.space.bodies]
+        assert bodies == pytest.approx([(b.position.x, b.position.y) for b in ref.space.bodies], abs=1e-9)
     # a shape on the chassis and nothing to hit: cpSpaceStep still moves its bounding box
     boxes = []
     for p in (Plant(), Plant(use_kernel=False)):

@@ -224,3 +224,11 @@ def test_bind_checks_the_state_type() -> None:
         tick_fast.fast._bind(NoSlots, tick_fast._constants(), {})
     with pytest.raises(ValueError):
         tick_fast.fast._bind(FirmwareState, {}, {})
+
+
+def test_a_bind_that_fails_leaves_the_python_tick(monkeypatch, caplog) -> None:
+    """What ``_bind`` refuses (here: no constants) is a warning and the Python tick, not
+    an import error of the firmware modules."""
+    monkeypatch.setattr(tick_fast, "_constants", lambda: {})
+    assert tick_fast.load_fast() is None
+    assert "pure Python" in caplog.text

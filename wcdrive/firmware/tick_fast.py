@@ -60,7 +60,9 @@ def load_fast() -> ModuleType | None:
     try:
         module = native.load_extension(_SOURCE, "_tick_fast", ("-O2", "-ffp-contract=off"))
         module._bind(FirmwareState, _constants(), {k: v.encode() for k, v in C.MODE_NAMES.items()})
-    except (native.BuildError, OSError) as exc:      # OSError: no writable cache, for one
+    except (native.BuildError, OSError, TypeError, ValueError) as exc:
+        # OSError: no writable cache, for one; TypeError/ValueError: _bind refused what it
+        # was given (a state type or constant it cannot use)
         logging.getLogger(__name__).warning("the control tick in pure Python (slower): %s", exc)
         return None
     return module

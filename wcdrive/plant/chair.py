@@ -67,7 +67,8 @@ class ChairStruct(ctypes.Structure):
     _fields_ += [(n, _P) for n in ("space", "body", "get_velocity", "get_angle",
                                   "get_angular_velocity", "set_force", "set_torque", "space_step",
                                   "update_position", "update_velocity", "get_damping", "get_gravity",
-                                  "get_sleep_threshold", "each_body", "each_constraint", "body_each_shape")]
+                                  "get_sleep_threshold", "each_body", "each_constraint", "body_each_shape",
+                                  "get_body_type")]
     _fields_ += [(n, _D * 2) for n in ("volts", "angle", "speed", "current", "slip", "force",
                                       "caster_heading")]
     _fields_ += [(n, _D) for n in ("scrub_energy", "scrub_time", "swivel_work", "side_impulse", "time")]
@@ -218,6 +219,7 @@ class Plant:
         s.each_body = address("cpSpaceEachBody")
         s.each_constraint = address("cpSpaceEachConstraint")
         s.body_each_shape = address("cpBodyEachShape")
+        s.get_body_type = address("cpBodyGetType")
 
     def _custom_funcs(self) -> None:
         """Tells the kernel whether the body has update functions of its own (then it

@@ -512,7 +512,7 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
     if (I(tlmEnabled)) {
         int64_t flags = (I(watchdogArmed) ? 1 : 0) | (I(emergencyStop) ? 2 : 0)
                         | (I(estopLatched) ? 4 : 0) | (I(ppmLost) ? 8 : 0) | (I(parked) ? 16 : 0)
-                        | ((I(pivotPhase) << 5) & 0xFF) | (I(faultFlags) ? 128 : 0);
+                        | (int64_t)(((uint64_t)I(pivotPhase) << 5) & 0xFF) | (I(faultFlags) ? 128 : 0);
         int64_t tlm[16] = { now & M32, I(rxCount), I(lastSeq), I(pwmL), I(pwmR), I(dirL), I(dirR),
                             I(illTickL), I(illTickR), flags, I(rejectedCount), I(crcRejected),
                             I(freeRam), I(faultFlags), I(rxLostTick), I(lateTicks) };

@@ -11,11 +11,14 @@
  * to do but what it does for each body: cpBodyUpdatePosition, then
  * cpBodyUpdateVelocity with the space's gravity and cpfpow(damping, dt). Those two
  * Chipmunk functions are called directly then (space_step()): the same code on the same
- * numbers, without the collision and solver passes (about 30% of a step).
+ * numbers, without the collision and solver passes (about 30% of a step). Two things
+ * cpSpaceStep also does are skipped, as nothing of the plant reads them: the space's
+ * time stamp and its current step (pymunk's Space.current_time_step stays as it was).
  * tests/test_plant.py holds the two paths to the same motion bit for bit.
  * Built on first use by wcdrive.native (gcc -O2 -ffp-contract=off).
  */
 #include <math.h>
+#include <stddef.h>
 #include <stdint.h>
 
 #define SWIVEL_RATE_SCALE 0.2   /* rad/s, as in chair.py */
@@ -29,6 +32,7 @@ typedef void (*set_f_fn)(void *, double);
 typedef void (*step_fn)(void *, double);
 typedef void (*update_velocity_fn)(void *, vec_t, double, double);
 typedef void (*each_fn)(void *, void *, void *);
+typedef int (*get_type_fn)(const void *);
 
 typedef struct {
     /* parameters */
@@ -39,7 +43,7 @@ typedef struct {
     void *space, *body;
     void *get_velocity, *get_angle, *get_angular_velocity, *set_force, *set_torque, *space_step;
     void *update_position, *update_velocity, *get_damping, *get_gravity, *get_sleep_threshold;
-    void *each_body, *each_constraint, *body_each_shape;
+    void *each_body, *each_constraint, *body_each_shape, *get_body_type;
     /* state */
     double volts[2];
     double angle[2], speed[2], current[2], slip[2], force[2];
@@ -51,21 +55,27 @@ typedef struct {
     int32_t custom_funcs;
 } chair_t;
 
-static void count_one(void *item, void *data) { (void)item; ++*(int *)data; }
+typedef struct { int n; void *last; } count_t;
+static void count_one(void *item, void *data) { ((count_t *)data)->n++; ((count_t *)data)->last = item; }
 static void count_shape(void *body, void *shape, void *data) { (void)body; (void)shape; ++*(int *)data; }
 
-/* Whether cpSpaceStep would do nothing for this space but integrate the chassis. */
+#define CP_BODY_TYPE_DYNAMIC 0
+
+/* Whether cpSpaceStep would do nothing for this space but integrate the chassis: the
+ * chassis, dynamic, is the space's one body. */
 static int lone_body(const chair_t *c) {
+    count_t bodies = { 0, NULL };
+    if (c->custom_funcs || !isinf(((get_f_fn)c->get_sleep_threshold)(c->space))
+        || ((get_type_fn)c->get_body_type)(c->body) != CP_BODY_TYPE_DYNAMIC)
+        return 0;
+    ((each_fn)c->each_body)(c->space, (void *)count_one, &bodies);
+    if (bodies.n != 1 || bodies.last != c->body)
+        return 0;
+    count_t constraints = { 0, NULL };
+    ((each_fn)c->each_constraint)(c->space, (void *)count_one, &constraints);
+    if (constraints.n != 0)
+        return 0;
     int n = 0;
-    if (c->custom_funcs || !isinf(((get_f_fn)c->get_sleep_threshold)(c->space)))
-        return 0;
-    ((each_fn)c->each_body)(c->space, (void *)count_one, &n);
-    if (n != 1)
-        return 0;
-    n = 0;
-    ((each_fn)c->each_constraint)(c->space, (void *)count_one, &n);
-    if (n != 0)
-        return 0;
     ((each_fn)c->body_each_shape)(c->body, (void *)count_shape, &n);
     return n == 0;
 }
