@@ -7,6 +7,7 @@ thorough one: the differential suite then runs at least 200 traces of 5 s each.
 from __future__ import annotations
 
 import os
+import signal
 from pathlib import Path
 
 import pytest
@@ -26,6 +27,17 @@ settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "default"))
 
 def thorough() -> bool:
     return settings().max_examples >= 200
+
+
+# ---- Ctrl-C for the programs the tests start -------------------------------------------
+# A test run started in the background by a shell without job control (``cmd &`` in a
+# script, nohup) inherits SIGINT ignored, and so would every program a test starts:
+# Python then never raises KeyboardInterrupt, and the tests that press Ctrl-C on
+# ``wcdrive pty``/``sim``/``bench run`` (test_exit_safety, test_dtr_reset, ...) wait in
+# vain. A handler (not an ignore) is reset to the default when a child starts, so the
+# children get Ctrl-C back.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 # ---- how much the differential proof covered in this run ---------------------------
