@@ -702,9 +702,12 @@ class WheelchairMachine(RuleBasedStateMachine):
         assert chair.wait_for_handshake(WALL_TIMEOUT) == 3
         assert chair.firmware == "final_control"
         _, lines = self._settle()
-        # the new board hears hello and, when the e-stop was latched, the e-stop again
+        # the new board hears hello first and, when the e-stop was latched, the e-stop
+        # again; nothing else but a hello said again (one whose answer took longer than
+        # the session's wait, as on a loaded machine: seen once in CI)
         bodies = [e.body for e in lines if e.accepted]
-        assert bodies == ([b"hello", b"estop"] if self.latched else [b"hello"]), lines
+        assert bodies[:1] == [b"hello"], lines
+        assert [b for b in bodies if b != b"hello"] == ([b"estop"] if self.latched else []), lines
 
     # ---- invariants --------------------------------------------------------------------
     @invariant()
