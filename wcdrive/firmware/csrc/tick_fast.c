@@ -96,11 +96,12 @@ static Py_ssize_t offset[N_FIELDS];
 
 static PyObject **slot(PyObject *s, int f) { return (PyObject **)((char *)s + offset[f]); }
 
-/* What the tick reads: each field as a double or an int64, and whether it was read. */
+/* What the tick reads (each field as a double or an int64, as field_is_float says) and
+ * which fields it wrote. */
 typedef struct {
     double d[N_FIELDS];
     int64_t i[N_FIELDS];
-    unsigned char written[N_FIELDS], is_float[N_FIELDS];
+    unsigned char written[N_FIELDS];
 } Vals;
 
 #define INT_LIMIT ((int64_t)1 << 62)
@@ -114,7 +115,6 @@ static int read_int(PyObject *s, int f, Vals *v) {
     if (overflow || n >= INT_LIMIT || n <= -INT_LIMIT)
         return 0;
     v->i[f] = n;
-    v->is_float[f] = 0;
     return 1;
 }
 
@@ -123,7 +123,6 @@ static int read_float(PyObject *s, int f, Vals *v) {
     if (o == NULL || !PyFloat_CheckExact(o))
         return 0;
     v->d[f] = PyFloat_AS_DOUBLE(o);
-    v->is_float[f] = 1;
     return 1;
 }
 
@@ -351,7 +350,6 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
         if (field_is_float[f])
             continue;
         if (f == F_lastTickTime && *slot(s, f) == Py_None) {
-            v.is_float[f] = 0;
             v.i[f] = -1;            /* None: lastControlTime, below */
             continue;
         }
@@ -536,7 +534,7 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
     for (int f = 0; f < N_FIELDS; f++) {
         if (!v.written[f])
             continue;
-        PyObject *o = v.is_float[f] ? PyFloat_FromDouble(v.d[f]) : PyLong_FromLongLong(v.i[f]);
+        PyObject *o = field_is_float[f] ? PyFloat_FromDouble(v.d[f]) : PyLong_FromLongLong(v.i[f]);
         if (o == NULL) {
             for (int k = 0; k < n_made; k++)
                 Py_DECREF(made[k]);
