@@ -5,7 +5,7 @@ visible to any program that uses pyserial, without importing wcdrive first:
 pyserial imports ``serial.urlhandler.protocol_<scheme>`` for a URL. The
 ``wcdrive-serial-urls.pth`` file installed beside this module puts a finder on
 ``sys.meta_path`` at interpreter start that answers that import, for wcdrive's
-schemes only, with ``wcdrive.urlhandler.protocol_<scheme>``. Nothing is imported
+schemes only, with ``wcdrive.transports.urlhandler.protocol_<scheme>``. Nothing is imported
 until a program opens such a URL.
 
 PYTEST_DONT_REWRITE: the .pth imports this module before pytest can (pytest would
@@ -40,7 +40,7 @@ class SerialUrlFinder:
     def find_spec(name: str, path=None, target=None) -> ModuleSpec | None:
         if not name.startswith(_PREFIX) or name[len(_PREFIX):] not in SCHEMES:
             return None
-        return ModuleSpec(name, _Alias("wcdrive.urlhandler.protocol_" + name[len(_PREFIX):]))
+        return ModuleSpec(name, _Alias("wcdrive.transports.urlhandler.protocol_" + name[len(_PREFIX):]))
 
 
 def install() -> None:

@@ -1,4 +1,4 @@
-"""The firmware's timing budget, cycle by cycle (issue 16), from the compiled ELF in
+"""The firmware's timing budget, cycle by cycle, from the compiled ELF in
 simavr: the harness charges each interrupt entry its 5 cycles, as the chip does.
 
     python benchmarks/firmware_timing.py            # the full run; --write puts the
@@ -267,7 +267,7 @@ def write(table: str) -> None:
     if start in text:
         text = re.sub(re.escape(start) + ".*?" + re.escape(end), lambda _: block, text, flags=re.S)
     else:
-        text += ("\n## Firmware timing (issue 16)\n\n`python benchmarks/firmware_timing.py --write`\n\n"
+        text += ("\n## Firmware timing\n\n`python benchmarks/firmware_timing.py --write`\n\n"
                  + block + "\n")
     path.write_text(text)
 

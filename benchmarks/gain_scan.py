@@ -1,5 +1,5 @@
-"""Which runtime parameters make the chair oscillate (issue 13, "Safe parameters"):
-the velocity step of tests/test_gain_safety.py (``step_response``: the parameters set
+"""Which runtime parameters make the chair oscillate ("Safe parameters"):
+the velocity step of tests/firmware/test_gain_safety.py (``step_response``: the parameters set
 by framed ``set:`` commands, a CMDVEL step kept fed, the port at the Mega's timing on
 the pymunk plant, reversals of the TRUE wheel speed after settling) over a grid of
 gains or over random points of a box of ranges.
@@ -42,7 +42,7 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from tests.test_gain_safety import (  # noqa: E402
+from tests.firmware.test_gain_safety import (  # noqa: E402
     MAX_REVERSALS,
     PARAMS,
     SPEED_MAX,

@@ -1,4 +1,4 @@
-"""Reliability benchmark for protocol v3 (issue #14): the Python port and the compiled
+"""Reliability benchmark for protocol v3: the Python port and the compiled
 firmware in simavr take the same hostile input, and nothing but a valid command moves
 the chair. docs/benchmarks.md ("Reliability (protocol v3)") keeps the figures.
 
@@ -521,7 +521,7 @@ class _PortBoard:
     motors: at each tick the plant has run the 50 ms since the last under the duty that
     tick set, and the encoders count its wheels. R1 tests the parser: the random
     command stream whips the chair about (a new motion every 50 ms) until the encoder
-    fault checks (issue 13) take a wheel for reversed or stalled, which latches a fault
+    fault checks take a wheel for reversed or stalled, which latches a fault
     that refuses motion until a ``reset`` once parked; so a latched fault is cleared
     after its tick (``faults`` counts them). ``strict`` says hello first."""
 
@@ -1254,7 +1254,7 @@ class _Rig:
 
     def __init__(self, elf: ElfPath, rng: random.Random, pace: float = 1.0) -> None:
         from wcdrive.boards.simavr.mega_board import MegaBoard
-        from wcdrive.wheelchair import LINK_TIMEOUT, Wheelchair
+        from wcdrive.host.wheelchair import LINK_TIMEOUT, Wheelchair
 
         self.pace = pace
         self.board = MegaBoard(elf, realtime=True, speed=pace)
@@ -1284,7 +1284,7 @@ def _r3_trial(rig: _Rig, kind: str, rng: random.Random) -> R3Trial:
     the chair has stopped; then the link comes back (replugged: a DTR reset on open)
     and the host must drive again."""
     from wcdrive.errors import WcdriveError
-    from wcdrive.telemetry import LinkLost
+    from wcdrive.host.telemetry import LinkLost
 
     chair, link, board = rig.chair, rig.link, rig.board
     period, stretch = HOST_PERIOD_S / rig.pace, 1.0 / rig.pace      # in wall seconds

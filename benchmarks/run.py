@@ -92,7 +92,7 @@ def bench_replay(seconds: float) -> dict[str, float]:
 
     import wcdrive  # noqa: F401  (wcsim://)
     from wcdrive.protocol.codec import frame
-    from wcdrive.replay import replay
+    from wcdrive.tools.replay import replay
     from wcdrive.transports.recording import RecordingPort
 
     port = RecordingPort(serial.serial_for_url("wcsim://?speed=20", timeout=0.05))

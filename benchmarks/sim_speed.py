@@ -1,4 +1,4 @@
-"""The simulation's speed (issue 21), the figures of docs/benchmarks.md's "Simulation
+"""The simulation's speed, the figures of docs/benchmarks.md's "Simulation
 speed" table, in one run so that the machine's load weighs on all of them alike:
 
 * every bundled scenario's real-time factor on the port backend (the median of

@@ -11,9 +11,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from wcdrive._util.resources import firmware_dir
 from wcdrive.boards.simavr.build import firmware_elf
 from wcdrive.boards.simavr.virtual_mega import VirtualMega
-from wcdrive.resources import firmware_dir
 
 OPS = {"div": 1, "mul": 2, "add": 3, "sub": 4, "strtod": 5, "print": 6, "from_int": 7, "to_int": 8}
 

@@ -36,7 +36,7 @@ T = TypeVar("T")
 FIRST_COMMAND_S = 0.010
 #: Edges/s per wheel in generated traces. The firmware counts every edge up to
 #: 70,000 edges/s on both wheels at once, coincident edges included (issue 16:
-#: tests/test_harness.py); traces keep a margin for the UART interrupts.
+#: tests/boards/test_harness.py); traces keep a margin for the UART interrupts.
 MAX_TRACE_EDGE_RATE = 60000.0
 
 
@@ -465,7 +465,7 @@ def flood(draw: Draw, serial: list[tuple[float, bytes]], duration: float
     or more from the start. loop() falls behind now and then (a tick formats its lines
     while a ``set:`` is parsed and answered) and the RX ring overflows: bytes lost,
     marked, counted and answered ``ERR:overrun``. Bursts alone no longer lose a byte since
-    the interrupts got faster (issue 16). Returns the serial writes before the flood and
+    the interrupts got faster. Returns the serial writes before the flood and
     the flood, and the encoders' motion."""
     start = duration - draw.real(0.9, 1.4)
     frames = [frame(b"hello", draw.integer(0, SEQ_MAX))]

@@ -30,7 +30,7 @@ echo "== building the firmware"
 make -s -C firmware/final_control
 # and the builds the tests use (the per-user cache), once, before the workers start
 python3 -c "from wcdrive.boards.simavr.build import firmware_elf, harness_library
-from wcdrive.resources import firmware_dir
+from wcdrive._util.resources import firmware_dir
 firmware_elf(); firmware_elf(firmware_dir('fpcheck')); harness_library()"
 
 echo "== ruff"

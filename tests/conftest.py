@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 from hypothesis import HealthCheck, settings
 
-#: The example downstream project has its own tests, run by tests/test_downstream.py
+#: The example downstream project has its own tests, run by tests/meta/test_downstream.py
 #: in a fresh venv.
 collect_ignore = ["downstream"]
 

@@ -4,8 +4,8 @@ import logging as _logging
 
 import serial as _serial
 
-if "wcdrive.urlhandler" not in _serial.protocol_handler_packages:
-    _serial.protocol_handler_packages.append("wcdrive.urlhandler")
+if "wcdrive.transports.urlhandler" not in _serial.protocol_handler_packages:
+    _serial.protocol_handler_packages.append("wcdrive.transports.urlhandler")
 
 __version__ = "0.1.0"
 
@@ -22,8 +22,8 @@ from wcdrive.errors import (
     WcdriveProtocolError,
     WcdriveTimeoutError,
 )
-from wcdrive.robot import Robot
-from wcdrive.wheelchair import stop_all
+from wcdrive.host.robot import Robot
+from wcdrive.host.wheelchair import stop_all
 
 __all__ = [
     "EddieRobot",

@@ -2,6 +2,6 @@
 
 import sys
 
-from wcdrive.cli import main
+from wcdrive.tools.cli import main
 
 sys.exit(main())

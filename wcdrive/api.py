@@ -21,7 +21,7 @@ URLs map onto pyserial (the query goes to the handler, which alone parses it):
   ``WcdriveBusyError``), reopened after an unplug;
 - ``eddie+sim://[?speed=S&seed=N]`` -> ``wceddie://``: a simulated Parallax Eddie, and
   ``eddie:///dev/ttyUSB0``: a real one. These return an ``EddieRobot``
-  (docs/eddie.md), which has the navigation surface of ``wcdrive.robot.Robot``.
+  (docs/eddie.md), which has the navigation surface of ``wcdrive.host.robot.Robot``.
 
 On connect the board resets (a real Mega does when its port opens); the API waits
 for it to boot, then says hello (a v3 frame, tried 3 times with growing waits). A
@@ -71,9 +71,17 @@ from wcdrive.errors import (
     WcdriveConnectionError,
     WcdrivePermissionError,
 )
+from wcdrive.host.wheelchair import (
+    LINK_TIMEOUT,
+    LinkEvent,
+    LinkLost,
+    LinkRestored,
+    Reset,
+    Telemetry,
+    Wheelchair,
+)
 from wcdrive.transports.port import Port
 from wcdrive.transports.recording import RecordingPort
-from wcdrive.wheelchair import LINK_TIMEOUT, LinkEvent, LinkLost, LinkRestored, Reset, Telemetry, Wheelchair
 
 __all__ = ["SCHEMES", "LinkEvent", "LinkLost", "LinkRestored", "Reset", "Telemetry", "Wheelchair", "connect"]
 
@@ -152,11 +160,11 @@ def connect(url: str = "sim://", *, boot_timeout: float = 10.0, record: bool | s
             **options: Any) -> Wheelchair | EddieRobot:
     """Opens ``url``, waits for the board's boot and feedback, says hello (module
     docstring). ``record``: keep every byte both ways (``chair.recording``) for
-    ``wcdrive.replay``; ``record="run.mcap"``: write ROS 2 messages (odometry, tf, the
+    ``wcdrive.tools.replay``; ``record="run.mcap"``: write ROS 2 messages (odometry, tf, the
     wheels, the commands, the board's lines; on a simulated board its ground truth and
     gyro too) into that MCAP file, finished when the chair closes
-    (``wcdrive.ros2.ChairPublisher``). ``ros``: publish those messages to this sink
-    instead (a ``wcdrive.ros2.McapSink`` or ``LiveSink``; closed with the chair), with
+    (``wcdrive.ros2.bridge.ChairPublisher``). ``ros``: publish those messages to this sink
+    instead (a ``wcdrive.ros2.bridge.McapSink`` or ``LiveSink``; closed with the chair), with
     ``record=True`` too if wanted. ``legacy``: drive a board that never answers hello with
     protocol v1 instead of raising ``WcdriveProtocolError``. ``link_timeout``: seconds
     without a line before the link counts as lost (default 0.15 s, longer for a
@@ -164,8 +172,8 @@ def connect(url: str = "sim://", *, boot_timeout: float = 10.0, record: bool | s
     (``odometry_method``, ``reconnect_timeout``, ``stop_on_signals``)."""
     publisher = None
     if isinstance(record, str) or ros is not None:
-        from wcdrive import ros2
         from wcdrive.protocol.spec import real
+        from wcdrive.ros2 import bridge as ros2
 
         sink = ros if ros is not None else ros2.McapSink(str(record))
         record = record is True
@@ -183,7 +191,7 @@ def connect(url: str = "sim://", *, boot_timeout: float = 10.0, record: bool | s
 
     def wrap(port: Port) -> Port:
         if publisher is not None:
-            from wcdrive.ros2 import TapPort
+            from wcdrive.ros2.bridge import TapPort
 
             return TapPort(RecordingPort(port) if record else port, publisher)
         return RecordingPort(port) if record else port
@@ -207,7 +215,7 @@ def connect(url: str = "sim://", *, boot_timeout: float = 10.0, record: bool | s
             recording = getattr(first, "recording", None)
             again_port = RecordingPort(again, recording) if recording is not None else again
             if publisher is not None:
-                from wcdrive.ros2 import TapPort
+                from wcdrive.ros2.bridge import TapPort
 
                 return TapPort(again_port, publisher)
             return again_port

@@ -1,7 +1,7 @@
 // wc_config.h: every constant of the final_control firmware in one place.
 //
 // GENERATED from protocol/spec.toml by `python -m wcdrive.protocol.spec --write`:
-// edit the spec, not this file. tests/test_protocol.py fails when they differ.
+// edit the spec, not this file. tests/protocol/test_protocol.py fails when they differ.
 #ifndef WC_CONFIG_H
 #define WC_CONFIG_H
 
@@ -104,7 +104,7 @@
 #define WC_EEPROM_LAYOUT 1         // the block's first byte: its layout version (a blank EEPROM holds 0xFF)
 
 // ---- Ranges of the runtime parameters (get:/set:; the defaults are the constants above) ---
-#define WC_GAIN_P_MIN 1.0f         // kp_l, kp_r in [GAIN_P_MIN, GAIN_P_MAX] (tests/test_gain_safety.py: pure integral control oscillates)
+#define WC_GAIN_P_MIN 1.0f         // kp_l, kp_r in [GAIN_P_MIN, GAIN_P_MAX] (tests/firmware/test_gain_safety.py: pure integral control oscillates)
 #define WC_GAIN_P_MAX 10.0f
 #define WC_GAIN_I_MIN 0.01f        // ki_l, ki_r in [GAIN_I_MIN, GAIN_I_MAX] (the anti-windup divides by ki)
 #define WC_GAIN_I_MAX 10.0f

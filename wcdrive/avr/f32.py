@@ -29,7 +29,7 @@ import struct
 from pathlib import Path
 from types import ModuleType
 
-from wcdrive import native
+from wcdrive._util import native
 
 _F32 = struct.Struct("<f")
 _U32 = struct.Struct("<I")
@@ -227,7 +227,7 @@ _FAST_SOURCE = Path(__file__).resolve().parent / "csrc" / "f32_fast.c"
 
 
 def load_fast() -> ModuleType | None:
-    """The C fast path, built on first use (``wcdrive.native``), bound to ``reference``;
+    """The C fast path, built on first use (``wcdrive._util.native``), bound to ``reference``;
     None without a compiler, Python's headers or a writable cache (``WCDRIVE_CACHE``), or
     with ``WCDRIVE_PURE_F32=1`` in the environment (the Python functions only)."""
     if os.environ.get("WCDRIVE_PURE_F32", "") not in ("", "0"):

@@ -56,7 +56,7 @@ def overflows_until(target_elapsed: int, start_fract: int = 0) -> int:
 
 #: The cycle at which Timer0 starts counting after reset (``init()`` in wiring.c sets its
 #: prescaler): its first overflow interrupt is done 16,384 cycles later, at cycle 25,987,
-#: as measured on the ELF in simavr (tests/test_fault_mutants.py checks it; it moves
+#: as measured on the ELF in simavr (tests/firmware/test_fault_mutants.py checks it; it moves
 #: when the start-up code before ``init()`` grows: 21,250 for firmware 3.0.0, 24,955
 #: before the sketch had its own serial class, whose constructor and larger .bss run
 #: first; the harness now also charges the 5 cycles of each interrupt entry; the EEPROM

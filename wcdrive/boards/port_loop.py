@@ -8,7 +8,7 @@ encoder counts and its PWM/DIR drive the plant from then on. The plant steps at 
 ``dt`` in between, a tick's steps in one call of its C kernel (``Plant.advance_batch``),
 the gyro's samples of those steps in one more (``Gyro.sample_steps``).
 
-``run_until`` is event-driven (issue 21): nothing happens at an overflow unless bytes
+``run_until`` is event-driven: nothing happens at an overflow unless bytes
 are read or the tick runs there, so it jumps from event to event: the overflow at which
 the next bytes have arrived or a ``save``'s EEPROM-ready interrupt is due, the first
 overflow at which ``Firmware.due`` holds (from ``Firmware.due_after``, the same
@@ -17,7 +17,7 @@ condition solved for the time), a reset, the end.
 3/125 of one per overflow). The firmware alone decides when it ticks (``due`` and
 ``due_after`` side by side), so a change of its timing needs no change here.
 ``stepped=True`` runs the reference path, every overflow in turn with ``due`` asked at
-each; tests/test_sim_speed.py holds the two to the same bytes, ticks and states.
+each; tests/sim/test_sim_speed.py holds the two to the same bytes, ticks and states.
 
 Faults (``wcdrive.plant.faults``, given as ``faults=``): a healthy encoder's count is
 taken from its wheel's angle (``encoder_counts``), the fast path. While an encoder fault
@@ -310,7 +310,7 @@ class PortLoop:
         holds, or None: ``Firmware.due_after`` says how many ms from now the tick falls
         due, and Timer0's model (``millis_after``) the overflow at which ``millis()``
         has moved that far (``stepped=True`` asks ``due`` at every overflow instead;
-        tests/test_sim_speed.py holds the two paths to the same runs)."""
+        tests/sim/test_sim_speed.py holds the two paths to the same runs)."""
         if span <= 0:
             return None
         f0 = self.timer.fract
@@ -364,7 +364,7 @@ class PortLoop:
 
     def _run_stepped(self, end_cycle: int, on_tick: Callable[[float], None] | None = None) -> None:
         """The reference path of ``run_until``: every Timer0 overflow in turn, ``due``
-        asked at each (as before the loop was event-driven; tests/test_sim_speed.py
+        asked at each (as before the loop was event-driven; tests/sim/test_sim_speed.py
         checks that both paths give the same bytes, ticks and states)."""
         while True:
             overflow = self._overflow

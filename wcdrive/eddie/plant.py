@@ -35,12 +35,29 @@ from typing import Any
 import numpy as np
 import pymunk
 
+from wcdrive.eddie.geometry import (
+    ADC_VREF,
+    IR_MOUNTS,
+    IR_NOISE_V,
+    IR_RANGE,
+    PING_HALF_ANGLE,
+    PING_MOUNTS,
+    PING_RANGE,
+    POSITIONS_PER_REV,
+    WHEEL_RADIUS,
+    WHEEL_SEPARATION,
+    Mount,
+    ir_distance,
+    ir_volts,
+    positions,
+)
 from wcdrive.plant.params import ChairParams
 
-POSITIONS_PER_REV = 36
-WHEEL_RADIUS = 0.0762
-WHEEL_SEPARATION = 0.3
-
+__all__ = [
+    "ADC_VREF", "IR_MOUNTS", "IR_NOISE_V", "IR_RANGE", "PING_HALF_ANGLE", "PING_MOUNTS", "PING_RANGE",
+    "POSITIONS_PER_REV", "WHEEL_RADIUS", "WHEEL_SEPARATION", "Mount", "RangeSensors", "add_wall",
+    "eddie_params", "ir_distance", "ir_volts", "positions",
+]
 
 def eddie_params(wheel_separation: float = WHEEL_SEPARATION, **changes: Any) -> ChairParams:
     """Eddie's figures in the chair model's parameters (module docstring)."""
@@ -58,56 +75,11 @@ def eddie_params(wheel_separation: float = WHEEL_SEPARATION, **changes: Any) -> 
     return dataclasses.replace(base, **changes)
 
 
-def positions(angle_left: float, angle_right: float) -> tuple[int, int]:
-    """The Position Controllers' counts for these wheel angles (rad, forward +)."""
-    scale = POSITIONS_PER_REV / (2.0 * math.pi)
-    return math.floor(angle_left * scale), math.floor(angle_right * scale)
-
-
 def add_wall(space: pymunk.Space, a: tuple[float, float], b: tuple[float, float]) -> pymunk.Segment:
     """A static wall segment from ``a`` to ``b`` (m) that the range sensors see."""
     wall = pymunk.Segment(space.static_body, a, b, 0.01)
     space.add(wall)
     return wall
-
-
-@dataclasses.dataclass(frozen=True)
-class Mount:
-    """A sensor on the base: ahead of the axle, left of the centre line (m), facing
-    ``yaw`` (rad, counter-clockwise from forward)."""
-
-    ahead: float
-    left: float
-    yaw: float
-
-
-PING_MOUNTS = {0: Mount(0.20, 0.06, 0.0), 1: Mount(0.20, -0.06, 0.0)}
-PING_RANGE = (0.02, 3.0)
-PING_HALF_ANGLE = math.radians(15.0)
-IR_MOUNTS = {1: Mount(0.19, 0.08, math.radians(30.0)), 2: Mount(0.20, 0.0, 0.0),
-             3: Mount(0.19, -0.08, math.radians(-30.0))}
-IR_RANGE = (0.10, 0.80)
-IR_NOISE_V = 0.015
-ADC_VREF = 5.0
-
-
-def ir_volts(distance: float | None) -> float:
-    """The IR sensor's output for a wall ``distance`` m away (None: nothing seen)."""
-    if distance is None or distance > IR_RANGE[1]:
-        return 0.25
-    d_cm = max(distance, 1e-3) * 100.0
-    if d_cm < 10.0:
-        return (27.86 / 10.0) ** (1 / 1.15) * d_cm / 10.0
-    return float((27.86 / d_cm) ** (1 / 1.15))
-
-
-def ir_distance(counts: int) -> float | None:
-    """The inverse, for hosts: an ADC count (12-bit) to metres in 0.10..0.80, None when
-    the reading is below the 0.80 m level (nothing in range)."""
-    volts = counts / 4096.0 * ADC_VREF
-    if volts < ir_volts(IR_RANGE[1]):
-        return None
-    return min(max(27.86 / volts ** 1.15 / 100.0, IR_RANGE[0]), IR_RANGE[1])
 
 
 class RangeSensors:

@@ -1,5 +1,5 @@
 """``EddieRobot``: the host's side of the Eddie control board, with the navigation
-surface of ``wcdrive.robot.Robot``.
+surface of ``wcdrive.host.robot.Robot``.
 
 The board speaks request/reply ASCII (docs/eddie.md): one command line ended by CR,
 one reply line ended by CR. ``EddieRobot`` owns the port through one lock, so the
@@ -13,7 +13,7 @@ two's complement for negatives) and parses replies at fixed positions.
   position loop from its 0.5 s speed average, so resending the same pair at 10 Hz
   would disturb it). Beyond 32767 positions/s: ``ValueError``.
 * Odometry: a thread polls ``DIST``, ``HEAD`` and ``SPD`` at ``poll_hz`` (25 Hz by
-  default, at least 20) and integrates ``DIST`` with ``wcdrive.odometry.WheelOdometry``
+  default, at least 20) and integrates ``DIST`` with ``wcdrive.host.odometry.WheelOdometry``
   (positions, 36 per revolution, radius 0.0762 m, the configured separation), with its
   covariance. ``HEAD`` is kept as ``heading_deg`` but not used: the board computes it
   with its own constant (186 positions per turn, a 0.395 m separation) and whole degrees.
@@ -25,7 +25,7 @@ two's complement for negatives) and parses replies at fixed positions.
   that has no ``WATCH``.
 * Connecting: ``VER`` is asked until the board answers (``boot_timeout``, 3 s), in case
   opening the port resets the Propeller; then ``RST`` (odometry starts at 0).
-* Telemetry: each poll gives a ``wcdrive.telemetry.Telemetry`` (``count_left``/
+* Telemetry: each poll gives a ``wcdrive.host.telemetry.Telemetry`` (``count_left``/
   ``count_right`` are ``DIST``'s positions, not mirrored; speeds in rad/s from ``SPD``;
   ``mode`` is ``"eddie"``).
 """
@@ -38,10 +38,10 @@ import threading
 import time
 from collections.abc import Callable, Iterator
 
-from wcdrive.eddie.plant import POSITIONS_PER_REV, WHEEL_RADIUS, WHEEL_SEPARATION, ir_distance
+from wcdrive.eddie.geometry import POSITIONS_PER_REV, WHEEL_RADIUS, WHEEL_SEPARATION, ir_distance
 from wcdrive.errors import WcdriveCommandError, WcdriveConnectionError, WcdriveTimeoutError
-from wcdrive.odometry import OdometryEstimate, OdometryParams, WheelOdometry
-from wcdrive.telemetry import Telemetry
+from wcdrive.host.odometry import OdometryEstimate, OdometryParams, WheelOdometry
+from wcdrive.host.telemetry import Telemetry
 from wcdrive.transports.port import Port
 from wcdrive.transports.recording import Recording, RecordingPort
 
@@ -214,7 +214,7 @@ class EddieRobot:
 
     def ir_distances(self) -> list[float | None]:
         """The IR sensors on ADC channels 1..3 (left, centre, right) in metres, None
-        when nothing is within their 0.10..0.80 m (``wcdrive.eddie.plant.ir_distance``)."""
+        when nothing is within their 0.10..0.80 m (``wcdrive.eddie.geometry.ir_distance``)."""
         counts = self.adc()
         return [ir_distance(counts[c]) for c in (1, 2, 3)]
 

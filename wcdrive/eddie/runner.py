@@ -26,9 +26,10 @@ from pathlib import Path
 import pymunk
 
 from wcdrive.eddie.board import EddieLoop, Wall
-from wcdrive.eddie.plant import PING_MOUNTS, POSITIONS_PER_REV, WHEEL_RADIUS, eddie_params
+from wcdrive.eddie.geometry import PING_MOUNTS, POSITIONS_PER_REV, WHEEL_RADIUS
+from wcdrive.eddie.plant import eddie_params
 from wcdrive.eddie.robot import PING_M_PER_UNIT, RAD_PER_POSITION, gospd_counts, signed, std_hex
-from wcdrive.odometry import OdometryParams, WheelOdometry
+from wcdrive.host.odometry import OdometryParams, WheelOdometry
 from wcdrive.sim import scenario
 from wcdrive.sim.scenario import Scenario, ScenarioError
 

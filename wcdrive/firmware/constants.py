@@ -1,6 +1,6 @@
 """The firmware's constants, from ``protocol/spec.toml`` (the file that generates
 ``firmware/final_control/wc_config.h``), as binary32 where the firmware uses float.
-``tests/test_protocol.py`` checks that every constant of the spec is here."""
+``tests/protocol/test_protocol.py`` checks that every constant of the spec is here."""
 
 from __future__ import annotations
 

@@ -49,7 +49,7 @@ def boot_line(cause: str = "POWER_ON") -> bytes:
     """The BOOT line after a reset of the given cause (``reset_cause_name``)."""
     return b"BOOT:final_control," + cause.encode() + b"\r\n"
 #: What ``measureFreeRam()`` reports on the Mega build (bytes between the heap and the
-#: stack in loop()); the simulated board reports it too. tests/test_protocol_v2.py checks
+#: stack in loop()); the simulated board reports it too. tests/firmware/test_estop_and_reset.py checks
 #: it against the ELF running in simavr, so a firmware change that moves it fails there.
 FREE_RAM = 6727
 

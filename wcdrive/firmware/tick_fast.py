@@ -6,7 +6,7 @@ would, or None having changed nothing: then the Python tick, the reference, runs
 (``Firmware.tick`` does that). The C path declines everything but the common case: a
 fault that latches, the watchdog firing, any binary32 result that is not an ordinary
 number (``wcdrive.avr.f32`` computes those bit by bit as avr-libc does), a field of an
-unexpected type. tests/test_tick_fast.py holds it to the Python tick.
+unexpected type. tests/firmware/test_tick_fast.py holds it to the Python tick.
 
 ``fast`` is None (the Python tick only) without a compiler, Python's headers or a
 writable cache, or with ``WCDRIVE_PURE_TICK=1`` (or ``WCDRIVE_PURE_F32=1``) in the
@@ -20,7 +20,7 @@ import os
 from pathlib import Path
 from types import ModuleType
 
-from wcdrive import native
+from wcdrive._util import native
 from wcdrive.avr.arduino_print import _rounding
 from wcdrive.firmware import constants as C
 from wcdrive.firmware import motion
@@ -53,7 +53,7 @@ def pure() -> bool:
 
 
 def load_fast() -> ModuleType | None:
-    """The C tick, built on first use (``wcdrive.native``) and bound to ``FirmwareState``
+    """The C tick, built on first use (``wcdrive._util.native``) and bound to ``FirmwareState``
     and the constants; None when it cannot be built or ``pure()``."""
     if pure():
         return None

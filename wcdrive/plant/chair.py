@@ -25,7 +25,7 @@ dt)`` several:
 
 The force model exists twice: ``_python_step`` here is the readable reference, and
 ``csrc/chair_kernel.c`` the same lines in C, which calls pymunk's Chipmunk through
-function pointers so a step costs well under a microsecond. ``tests/test_plant.py``
+function pointers so a step costs well under a microsecond. ``tests/plant/test_plant.py``
 checks that both give the same trajectory. Without a C compiler the Python path runs.
 
 The body's position is the drive axle's midpoint, the odometry reference point.
@@ -48,7 +48,7 @@ import numpy as np
 import pymunk
 from pymunk._chipmunk import lib as _chipmunk
 
-from wcdrive.native import BuildError, load
+from wcdrive._util.native import BuildError, load
 from wcdrive.plant.params import ChairParams
 
 _D = ctypes.c_double

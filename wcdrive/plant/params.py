@@ -73,7 +73,7 @@ class ChairParams:
         driver's current limit (torque ``Ke G eff I``, ``Ke`` from the rated voltage at
         top speed) on the chair's mass and the wheels' and rotors' inertia, plus the
         drive wheels' rolling resistance. 1.12 m/s^2 for these figures:
-        tests/test_fault_injection.py checks it against a full-reverse stop."""
+        tests/sim/test_fault_injection.py checks it against a full-reverse stop."""
         ke = self.supply_voltage / (self.gear_ratio * self.top_wheel_speed)
         force = 2.0 * self.current_limit * ke * self.gear_ratio * self.gear_efficiency / self.wheel_radius
         inertia = 2.0 * (self.wheel_inertia + self.rotor_inertia * self.gear_ratio**2) / self.wheel_radius**2

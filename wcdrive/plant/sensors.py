@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from wcdrive.history import History
+from wcdrive._util.history import History
 from wcdrive.plant.chair import load_kernel
 from wcdrive.plant.params import ChairParams
 from wcdrive.protocol.spec import real

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from wcdrive.resources import firmware_dir, protocol_dir
+from wcdrive._util.resources import firmware_dir, protocol_dir
 
 __all__ = ["PARAMETERS", "Parameter", "build_id", "constants", "header", "load", "value"]
 
@@ -141,7 +141,7 @@ def header(spec: dict[str, Any] | None = None) -> str:
         "// wc_config.h: every constant of the final_control firmware in one place.",
         "//",
         "// GENERATED from protocol/spec.toml by `python -m wcdrive.protocol.spec --write`:",
-        "// edit the spec, not this file. tests/test_protocol.py fails when they differ.",
+        "// edit the spec, not this file. tests/protocol/test_protocol.py fails when they differ.",
         "#ifndef WC_CONFIG_H",
         "#define WC_CONFIG_H",
     ]

@@ -1,4 +1,4 @@
-"""A simulated run as ROS 2 messages (``wcdrive.ros2``): ``wcdrive sim --mcap FILE``
+"""A simulated run as ROS 2 messages (``wcdrive.ros2.bridge``): ``wcdrive sim --mcap FILE``
 writes them into an MCAP file, ``wcdrive sim --live`` serves them to Foxglove at the
 pace of the simulated clock.
 
@@ -23,9 +23,9 @@ from typing import Any
 
 import numpy as np
 
-from wcdrive import ros2
-from wcdrive.odometry import UNUSED, OdometryParams
+from wcdrive.host.odometry import UNUSED, OdometryParams
 from wcdrive.plant.params import ChairParams
+from wcdrive.ros2 import bridge as ros2
 from wcdrive.sim.runner import SimResult
 
 #: Seed 000's ekf.yaml: odom0_pose_covariance and odom0_twist_covariance (x, y, z,

@@ -39,13 +39,13 @@ from wcdrive.boards.simavr.plant_on_pins import PlantOnPins
 from wcdrive.boards.simavr.virtual_mega import VirtualMega
 from wcdrive.hil.lockstep import Recorder, compare
 from wcdrive.hil.traces import Trace
-from wcdrive.localization import Ekf2D, EkfConfig
-from wcdrive.navigation import PurePursuit
-from wcdrive.odometry import GyroIntegrator, OdometryParams, WheelOdometry
+from wcdrive.host.odometry import GyroIntegrator, OdometryParams, WheelOdometry
 from wcdrive.plant import Gyro, Plant
 from wcdrive.plant.encoders import EdgeTrain
 from wcdrive.plant.faults import Fault
 from wcdrive.protocol.codec import Feedback, LineDecoder, encode_cmdvel
+from wcdrive.sim.localization import Ekf2D, EkfConfig
+from wcdrive.sim.navigation import PurePursuit
 from wcdrive.sim.scenario import Scenario
 
 #: m/s: the chair is at a standstill once its speed stays below this.
@@ -96,7 +96,7 @@ class SimResult:
     faults: tuple[Fault, ...] = ()
     #: ``fault_metrics``: when the fault figures count from (None: no fault, no silence).
     fault_at: float | None = None
-    #: (n, 3): the seeds' EKF (``wcdrive.localization``) on velocity odometry and the
+    #: (n, 3): the seeds' EKF (``wcdrive.sim.localization``) on velocity odometry and the
     #: gyro: seed 000's ekf.yaml (wheels: x, y, vx), and seed 002's scheme (wheels: vx, vy).
     #: None unless the run asked for them (``run(..., ekf=True)``).
     odom_ekf: np.ndarray | None = None
@@ -268,7 +268,7 @@ class _Host:
 
 class _Pilot:
     """The closed-loop host: every host period, a ``cmdvel`` from pure pursuit
-    (``wcdrive.navigation``) on its own estimate (wheel odometry or the EKF); after the
+    (``wcdrive.sim.navigation``) on its own estimate (wheel odometry or the EKF); after the
     goal, stops for ``settle_s``."""
 
     def __init__(self, scenario: Scenario, host: _Host) -> None:
@@ -474,9 +474,9 @@ def cyclic_gc_paused() -> Iterator[None]:
     A run allocates some containers a tick that live on (the tick log's rows, the
     gyro's samples), so the collector's generational passes keep re-scanning a growing
     heap: a quarter of ``corridor_100m``'s time in a process that has imported
-    ``wcdrive.cli``. A run makes no cyclic garbage a tick (reference counting frees
+    ``wcdrive.tools.cli``. A run makes no cyclic garbage a tick (reference counting frees
     what it drops; the few objects a run leaves in cycles are the same whatever its
-    length: tests/test_sim_speed.py), so nothing piles up while the collector waits.
+    length: tests/sim/test_sim_speed.py), so nothing piles up while the collector waits.
 
     Runs in several threads at once (a Dask worker's) share the pause: the collector
     comes back when the last of them ends, if it was on when the first began."""

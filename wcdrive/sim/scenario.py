@@ -20,7 +20,7 @@
     rate_hz = 200000         # encoder_noise: edges per second on channel A
 
 A closed-loop scenario gives a path instead of segments; the host follows it with a
-pure-pursuit controller (``wcdrive.navigation``) against its own odometry, sending a
+pure-pursuit controller (``wcdrive.sim.navigation``) against its own odometry, sending a
 ``cmdvel`` at ``host_rate_hz``:
 
     path = [[1.0, 0.0], [1.0, 1.0]]   # waypoints (m) in the odometry frame, from (0, 0)
@@ -49,10 +49,10 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from wcdrive.navigation import FollowParams
 from wcdrive.plant.faults import FAULT_KINDS, SIDED_KINDS, Fault
 from wcdrive.plant.params import ChairParams
 from wcdrive.protocol.codec import encode_cmdvel, encode_ppm, encode_set, encode_wheel
+from wcdrive.sim.navigation import FollowParams
 
 BUNDLED = Path(__file__).resolve().parent / "scenarios"
 _KINDS = ("cmdvel", "wheel", "ppm", "stop", "silence")

@@ -27,8 +27,8 @@ from typing import TYPE_CHECKING, Any
 import pytest
 
 if TYPE_CHECKING:
+    from wcdrive.host.wheelchair import Wheelchair
     from wcdrive.testing.stepped import SteppedChair
-    from wcdrive.wheelchair import Wheelchair
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:

@@ -1,5 +1,5 @@
 """Hypothesis strategies for the chair's inputs, the generators the project's own
-property and differential tests use (``tests/test_differential.py`` draws its traces
+property and differential tests use (``tests/firmware/test_differential.py`` draws its traces
 from ``traces()``).
 
 Each strategy wraps a generator that takes a source of choices (``wcdrive.hil.traces``:

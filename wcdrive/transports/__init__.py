@@ -1,2 +1,2 @@
 """Ways to reach a board: the ``Port`` interface, the pty bridge, the CAN link and the
-recording port. The pyserial URL handlers are in ``wcdrive.urlhandler``."""
+recording port. The pyserial URL handlers are in ``wcdrive.transports.urlhandler``."""

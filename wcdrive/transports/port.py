@@ -2,7 +2,7 @@
 
 It is pyserial's, so a ``serial.Serial`` on a device path, anything
 ``serial.serial_for_url`` opens (``wcsim://``, ``wcavr://``, ``wccan://``) and the
-``RecordingPort`` wrapper all are Ports. ``tests/contract/`` runs one suite over every
+``RecordingPort`` wrapper all are Ports. ``tests/transports/contract/`` runs one suite over every
 backend.
 """
 

@@ -1,5 +1,5 @@
 """Recordings of a serial session: every byte the host wrote and every byte the board
-sent, with host timestamps, from the board's boot on. ``wcdrive.replay`` runs one
+sent, with host timestamps, from the board's boot on. ``wcdrive.tools.replay`` runs one
 through the Python port; ``wcdrive bench run --record`` makes them on a real board.
 
     chair = wcdrive.connect("/dev/ttyACM0", record=True)

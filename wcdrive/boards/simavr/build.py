@@ -4,7 +4,7 @@ firmware ELF.
 Nothing prebuilt is shipped, and nothing is built inside the installed package.
 ``harness_library()`` compiles ``csrc/wcsim.c`` (beside this module) against Debian's
 libsimavr 1.6; ``firmware_elf()`` runs the firmware's own Makefile on the sketch
-folder (``wcdrive.resources.firmware_dir()``) with its build folder in the per-user
+folder (``wcdrive._util.resources.firmware_dir()``) with its build folder in the per-user
 cache. Both raise ``BuildError`` with the command that installs what is missing.
 """
 
@@ -16,8 +16,8 @@ import shutil
 import subprocess
 from pathlib import Path
 
-from wcdrive.native import BuildError, compile_shared
-from wcdrive.resources import cache_dir, firmware_dir
+from wcdrive._util.native import BuildError, compile_shared
+from wcdrive._util.resources import cache_dir, firmware_dir
 
 __all__ = ["DEBIAN_PACKAGES", "BuildError", "firmware_elf", "harness_library"]
 

@@ -1,0 +1,93 @@
+"""A healthy chair that is told to turn on the spot while it still rolls forward must not
+latch ``ENC_REVERSED``: the wheel whose setpoint reverses lags the ramp, so for a few
+ticks its setpoint is past -FAULT_REVERSE_SPEED while it still turns forward faster than
+FAULT_REVERSE_SPEED. What tells that wheel from one whose encoder is wired backwards is
+that it is slowing toward its setpoint (FAULT_REVERSE_APPROACH); a reversed encoder shows
+the wheel moving away from the setpoint, or not closer (tests/firmware/test_fault_detection.py,
+tests/sim/test_fault_injection.py, tests/firmware/test_fault_mutants.py keep those detected).
+
+This is what latched ``EVT:FAULT,ENC_REVERSED_R`` at the end of corridor_closed with a 1 m
+lookahead (commit 57ec0bc): pure pursuit asked for a turn on the spot (0, -0.6 rad/s)
+within 0.2 m of the goal while the chair still rolled at about 0.5 m/s.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from wcdrive.boards.port_loop import F_CPU, PortLoop
+from wcdrive.firmware import constants as C
+from wcdrive.firmware.control import WHEEL_OK, WHEEL_REVERSED, WHEEL_SUSPECT, check_wheel
+from wcdrive.plant import Gyro, Plant
+from wcdrive.sim import runner
+from wcdrive.sim.scenario import Scenario, load
+
+#: Forward at ``v`` m/s for 3 s, then a turn on the spot at ``w`` rad/s (the right
+#: wheel's target reverses); each tripped ENC_REVERSED_R on a healthy chair.
+SPIN_FROM_MOTION = [(0.8, -0.6), (0.8, -2.0), (0.5, -3.0)]
+
+
+def _scenario(tmp_path, v: float, w: float) -> Scenario:
+    path = tmp_path / "spin_from_motion.toml"
+    path.write_text(f'name = "spin_from_motion"\nhost_rate_hz = 10\nsettle_s = 1.0\n'
+                    f"[[segment]]\ncmdvel = [{v}, 0.0]\nduration = 3.0\n"
+                    f"[[segment]]\ncmdvel = [0.0, {w}]\nduration = 1.5\n")
+    return load(str(path))
+
+
+@pytest.mark.parametrize(("v", "w"), SPIN_FROM_MOTION)
+def test_turning_on_the_spot_from_motion_latches_no_fault(tmp_path, v: float, w: float) -> None:
+    """The right wheel measures forward, beyond FAULT_REVERSE_SPEED, while its setpoint
+    is beyond -FAULT_REVERSE_SPEED for at least FAULT_REVERSE_TICKS ticks in a row (the
+    case the old check took for a reversed encoder), and no fault latches."""
+    scenario = _scenario(tmp_path, v, w)
+    loop = PortLoop(Plant(scenario.params()), Gyro(scenario.params(), 0))
+    for t, data in scenario.host_commands():
+        if t < scenario.duration:
+            loop.send(data, at=round(t * F_CPU))
+    run = longest = 0
+
+    def on_tick(_: float) -> None:
+        nonlocal run, longest
+        s = loop.fw.state
+        lagging = s.setpointR <= -C.FAULT_REVERSE_SPEED and s.filtVelR >= C.FAULT_REVERSE_SPEED
+        run = run + 1 if lagging else 0
+        longest = max(longest, run)
+
+    loop.run_until(round(scenario.duration * F_CPU), on_tick)
+    out = b"".join(data for _, data in loop.take_output())
+    assert longest >= C.FAULT_REVERSE_TICKS           # the old check's condition held
+    assert b"EVT:FAULT" not in out and loop.fw.state.faultFlags == 0
+    assert loop.fw.state.reverseTicksR == 0
+
+
+@pytest.mark.simavr
+def test_turning_on_the_spot_from_motion_on_the_firmware(tmp_path) -> None:
+    """The same on the compiled sketch in simavr, the port replaying it: no fault, 0
+    differences."""
+    result = runner.run(_scenario(tmp_path, *SPIN_FROM_MOTION[1]), backend="simavr")
+    assert not any("EVT:FAULT" in line for _, line in result.events), result.events
+    assert result.firmware_differences == 0
+
+
+def _check(measured: float, previous: float, setpoint: float = -2.0, ticks: int = 0) -> tuple[int, int]:
+    verdict, _, reverse_ticks, _, _ = check_wheel(40, 0, 0, 40, C.LOW, setpoint, measured, 0, ticks,
+                                                  0, (0, 0.0, 0.0, 0), previous)
+    return verdict, reverse_ticks
+
+
+def test_a_wheel_slowing_toward_its_setpoint_is_not_counted() -> None:
+    """Against the setpoint, beyond FAULT_REVERSE_SPEED both: not counted while the
+    wheel came FAULT_REVERSE_APPROACH or more closer to the setpoint since the PID last
+    ran (either sign of setpoint); counted, and reversed at FAULT_REVERSE_TICKS, while
+    it holds its speed or moves away."""
+    step = C.FAULT_REVERSE_APPROACH
+    assert _check(1.5, 1.5 + step) == (WHEEL_OK, 0)
+    assert _check(-1.5, -1.5 - step, setpoint=2.0) == (WHEEL_OK, 0)
+    assert _check(1.5, 1.5 + 0.5 * step) == (WHEEL_SUSPECT, 1)
+    assert _check(1.5, 1.5) == (WHEEL_SUSPECT, 1)
+    assert _check(1.6, 1.5) == (WHEEL_SUSPECT, 1)
+    assert _check(-1.6, -1.5, setpoint=2.0) == (WHEEL_SUSPECT, 1)
+    assert _check(1.5, 1.5, ticks=C.FAULT_REVERSE_TICKS - 1) == (WHEEL_REVERSED, C.FAULT_REVERSE_TICKS)
+    # Approaching resets the count, as any tick that is not against does.
+    assert _check(1.5, 1.5 + step, ticks=C.FAULT_REVERSE_TICKS - 1) == (WHEEL_OK, 0)

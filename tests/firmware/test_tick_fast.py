@@ -1,0 +1,234 @@
+"""The C control tick (wcdrive/firmware/csrc/tick_fast.c) against the Python tick it
+stands in for (``control.control_tick``, the reference): on random states and inputs
+the same bytes and the same state bit for bit, or a refusal that changed nothing; on
+whole scenarios the same runs. The differential suite holds the port, this path by
+default, to the compiled firmware."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import struct
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import example, given, settings
+from hypothesis import strategies as st
+
+from wcdrive.avr.f32 import f32, from_bits
+from wcdrive.firmware import constants as C
+from wcdrive.firmware import final_control, tick_fast
+from wcdrive.firmware.control import control_tick
+from wcdrive.firmware.state import FLOAT_FIELDS, FirmwareState
+from wcdrive.sim import runner, scenario
+
+REPO = Path(__file__).resolve().parents[2]
+
+pytestmark = pytest.mark.skipif(tick_fast.fast is None,
+                                reason="the C tick did not build (a warning says why)")
+
+
+def fast_tick(s: FirmwareState, now: int, *inputs: int) -> bytes | None:
+    assert tick_fast.fast is not None
+    return tick_fast.fast.tick(s, now, *inputs)
+
+
+def python_tick(s: FirmwareState, now: int, *inputs: int) -> bytes:
+    out = bytearray()
+    control_tick(s, now, inputs[0], inputs[1], out, *inputs[2:])
+    return bytes(out)
+
+
+def as_bits(s: FirmwareState) -> dict[str, object]:
+    """Every field, floats as their double's bits (so -0.0, NaN payloads and unrounded
+    values count)."""
+    return {k: struct.pack("<d", v) if isinstance(v, float) else v for k, v in s.as_dict().items()}
+
+
+def agree(state: FirmwareState, now: int, inputs: tuple[int, ...]) -> bool:
+    """C and Python from copies of ``state``: the same bytes and state, or a C refusal
+    that left its copy as it was. Returns whether C computed the tick."""
+    c_state, py_state = state.copy(), state.copy()
+    sent = fast_tick(c_state, now, *inputs)
+    if sent is None:
+        assert as_bits(c_state) == as_bits(state), "a refused tick changed the state"
+        return False
+    want = python_tick(py_state, now, *inputs)
+    assert sent == want
+    assert as_bits(c_state) == as_bits(py_state)
+    for name in FLOAT_FIELDS:           # and the same types
+        assert type(getattr(c_state, name)) is type(getattr(py_state, name)), name
+    return True
+
+
+# ---- random states -------------------------------------------------------------------
+ordinary = st.floats(-40.0, 40.0, width=32)
+SPECIAL = [0.0, -0.0, 1e-40, -1e-40, 2.0**-126, 3e38, -3e38, math.inf, -math.inf, math.nan,
+           from_bits(0xFFC01234), 0.1]            # 0.1: a double that is not a binary32
+floats = st.one_of(ordinary, ordinary, ordinary, st.sampled_from(SPECIAL), st.floats(width=32))
+u32 = st.integers(0, 2**32 - 1)
+SMALL = {"pwmL": (0, 255), "pwmR": (0, 255), "dirL": (0, 1), "dirR": (0, 1), "mode": (-1, 3),
+         "pivotPhase": (0, 2), "pivotTicksLeft": (0, 12), "stillTicks": (0, 255), "parked": (0, 1),
+         "cmdSinceTick": (0, 1), "watchdogArmed": (0, 1), "emergencyStop": (0, 1), "tlmEnabled": (0, 1),
+         "faultFlags": (0, 3), "stallTicksL": (0, 6), "stallTicksR": (0, 6), "reverseTicksL": (0, 4),
+         "reverseTicksR": (0, 4), "runawayTicksL": (0, 6), "runawayTicksR": (0, 6),
+         "effortTicksL": (0, 12), "effortTicksR": (0, 12), "effortPwmL": (0, 255),
+         "effortPwmR": (0, 255), "estopLatched": (0, 1), "ppmLost": (0, 1), "txCredit": (0, 200),
+         "stormTickL": (0, 1), "stormTickR": (0, 1), "errLinesThisTick": (0, 5)}
+
+
+@st.composite
+def states(draw) -> tuple[FirmwareState, int, tuple[int, ...]]:
+    s = FirmwareState()
+    for name in FLOAT_FIELDS:
+        if draw(st.booleans()):
+            setattr(s, name, draw(floats))
+    for name, (lo, hi) in SMALL.items():
+        if draw(st.booleans()):
+            setattr(s, name, draw(st.integers(lo, hi)))
+    s.lastControlTime = draw(u32)
+    s.lastTickTime = draw(st.one_of(st.just(s.lastControlTime), u32, st.none()))
+    s.lastCmdTime = (s.lastControlTime - draw(st.integers(0, 2000))) & 0xFFFFFFFF
+    s.prevEncL, s.prevEncR = draw(st.integers(-(2**31), 2**31 - 1)), draw(st.integers(-(2**31), 2**31 - 1))
+    s.illTickL, s.illTickR = draw(u32), draw(u32)
+    s.tickCount, s.lateTicks, s.txDropped = draw(u32), draw(u32), draw(u32)
+    s.freeRam = draw(st.integers(0, 8192))
+    now = (s.lastControlTime + draw(st.one_of(st.integers(49, 52), st.integers(0, 2**32 - 1)))) & 0xFFFFFFFF
+    moved = st.one_of(st.integers(-3000, 3000), st.integers(-(2**33), 2**33))
+    inputs = (s.prevEncL + draw(moved), s.prevEncR + draw(moved),
+              (s.illTickL + draw(st.integers(0, 3))) & 0xFFFFFFFF,
+              (s.illTickR + draw(st.integers(0, 3))) & 0xFFFFFFFF,
+              draw(st.sampled_from((0, 0, 0, 1))), draw(st.sampled_from((0, 0, 0, 1))), draw(u32))
+    return s, now, inputs
+
+
+@settings(max_examples=2000)
+@given(states())
+@example((FirmwareState(lastControlTime=1000, targetL=2.0, targetR=2.0), 1050, (0, 0, 0, 0, 0, 0, 0)))
+@example((FirmwareState(lastControlTime=1000, lastTickTime=1050), 1050, (5, 5, 0, 0, 0, 0, 0)))  # dt 0
+def test_the_c_tick_agrees_with_the_python_tick(case) -> None:
+    state, now, inputs = case
+    agree(state, now, inputs)
+
+
+def test_random_ordinary_ticks_take_the_c_path() -> None:
+    """Most ticks of a chair in motion are computed in C (else the checks above would
+    pass on refusals alone), and all agree: 20,000 states along a driven trajectory."""
+    rng = np.random.default_rng(3)
+    s = FirmwareState(lastControlTime=1000, tlmEnabled=1)
+    taken = 0
+    now, left, right = 1000, 0, 0
+    for k in range(20_000):
+        if k % 40 == 0:
+            s.targetL, s.targetR = (f32(float(x)) for x in rng.uniform(-4, 4, 2))
+            s.cmdSinceTick = 1
+        now = (now + 50) & 0xFFFFFFFF
+        left += int(rng.integers(-400, 400))
+        right += int(rng.integers(-400, 400))
+        inputs = (left, right, 0, 0, 0, 0, 0)
+        taken += agree(s, now, inputs)
+        python_tick(s, now, *inputs)            # the trajectory goes on in Python
+        s.faultFlags = 0                        # (random counts would latch faults)
+    assert taken > 15_000, taken
+
+
+def test_a_fault_or_the_watchdog_goes_to_the_python_tick() -> None:
+    """A tick that latches a fault or fires the watchdog is refused, the state as it was."""
+    stalled = FirmwareState(lastControlTime=1000, setpointL=2.0, targetL=2.0, pwmL=200, dirL=C.HIGH,
+                            stallTicksL=C.FAULT_STALL_TICKS - 1)
+    assert fast_tick(stalled.copy(), 1050, 0, 0, 0, 0, 0, 0, 0) is None
+    assert b"EVT:FAULT" in python_tick(stalled.copy(), 1050, 0, 0, 0, 0, 0, 0, 0)
+    watched = FirmwareState(lastControlTime=1000, watchdogArmed=1, lastCmdTime=0, watchdogMs=500)
+    assert fast_tick(watched.copy(), 1050, 0, 0, 0, 0, 0, 0, 0) is None
+    assert b"EVT:WATCHDOG" in python_tick(watched.copy(), 1050, 0, 0, 0, 0, 0, 0, 0)
+
+
+def test_an_unexpected_field_type_goes_to_the_python_tick() -> None:
+    for name, value in (("targetL", 2), ("pwmL", 3.0), ("mode", True), ("tickCount", 2**70)):
+        s = FirmwareState(lastControlTime=1000)
+        setattr(s, name, value)
+        assert fast_tick(s, 1050, 0, 0, 0, 0, 0, 0, 0) is None, name
+
+    class Sub(FirmwareState):
+        pass
+
+    assert fast_tick(Sub(lastControlTime=1000), 1050, 0, 0, 0, 0, 0, 0, 0) is None
+
+
+def test_the_firmware_ticks_in_c() -> None:
+    """``Firmware.tick`` takes the C path; on a corridor run the one tick refused is
+    the one whose watchdog fires at the end."""
+    assert final_control._fast_tick is tick_fast.fast.tick
+    calls = refused = 0
+    real = final_control._fast_tick
+
+    def counting(*args):
+        nonlocal calls, refused
+        calls += 1
+        sent = real(*args)
+        refused += sent is None
+        return sent
+
+    final_control._fast_tick = counting
+    try:
+        result = runner.run(scenario.load("corridor_100m"))
+    finally:
+        final_control._fast_tick = real
+    stops = [line for _, line in result.events if line.startswith(("EVT:WATCHDOG", "EVT:FAULT"))]
+    assert stops == ["EVT:WATCHDOG"]
+    assert calls > 2000 and refused == 1, (calls, refused)
+
+
+SCENARIOS = ["corridor_closed", "fault_encoder_reversed", "fault_motor_dead", "fault_wheel_locked",
+             "fault_encoder_noise", "fault_reset", "watchdog", "reversal_pivot", "fault_silence"]
+
+
+@pytest.mark.parametrize("name", SCENARIOS)
+def test_a_scenario_runs_the_same_with_the_python_tick(name: str) -> None:
+    """The same scenario with the C tick and with the Python tick only: every tick's
+    state, the plant's motion and every byte the board sent."""
+    sc = scenario.load(name)
+    real = final_control._fast_tick
+    try:
+        a = runner.run(sc)
+        final_control._fast_tick = None
+        b = runner.run(sc)
+    finally:
+        final_control._fast_tick = real
+    for key in ("truth", "setpoint", "measured", "pwm", "counts", "wheel_speed", "tick_cycles"):
+        assert np.array_equal(getattr(a, key), getattr(b, key)), key
+    assert a.serial_lines == b.serial_lines
+
+
+def test_pure_python_when_asked() -> None:
+    code = ("from wcdrive.firmware import tick_fast, final_control; "
+            "print(tick_fast.fast, final_control._fast_tick)")
+    env = {**os.environ, "WCDRIVE_PURE_TICK": "1"}
+    run = subprocess.run([sys.executable, "-c", code], cwd=REPO, env=env, capture_output=True, text=True,
+                         timeout=120)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.split() == ["None", "None"]
+
+
+def test_bind_checks_the_state_type() -> None:
+    @dataclasses.dataclass
+    class NoSlots:
+        x: int = 0
+
+    assert tick_fast.fast is not None
+    with pytest.raises(TypeError):
+        tick_fast.fast._bind(NoSlots, tick_fast._constants(), {})
+    with pytest.raises(ValueError):
+        tick_fast.fast._bind(FirmwareState, {}, {})
+
+
+def test_a_bind_that_fails_leaves_the_python_tick(monkeypatch, caplog) -> None:
+    """What ``_bind`` refuses (here: no constants) is a warning and the Python tick, not
+    an import error of the firmware modules."""
+    monkeypatch.setattr(tick_fast, "_constants", lambda: {})
+    assert tick_fast.load_fast() is None
+    assert "pure Python" in caplog.text

@@ -1,0 +1,1 @@
+"""Utilities every floor may use: resource paths, native builds, bounded histories."""

@@ -1,0 +1,581 @@
+"""``Wheelchair``: the public API over one board, as ``wcdrive.connect`` returns it.
+
+A façade only: the protocol lives in ``wcdrive.host.session.Session`` (reader thread, hello,
+liveness, reconnect, acknowledged requests) and telemetry with odometry in
+``wcdrive.host.telemetry.TelemetryHub``. How the link is opened is ``wcdrive.api``'s business.
+
+Exit safety: every way a program lets go of a chair sends a stop (best effort) and
+closes the port. ``close()`` and leaving a ``with`` block do; so does garbage
+collection of a ``Wheelchair`` nobody closed and the end of the interpreter (one
+``weakref.finalize`` per chair covers both, ``atexit`` included, so a
+``KeyboardInterrupt`` that ends a script stops its chair too). ``SIGTERM`` and
+``SIGHUP`` kill a Python process without running any of that, so the first chair made
+in the main thread installs a handler for each of them whose action is still the
+default one (``stop_on_signals=True``): it stops and closes every open chair, then
+lets the signal kill the process as it would have (exit status -15 / 143). A handler
+the program installed itself is left alone (it then owns the exit: raising
+``SystemExit`` there is enough, or ``wcdrive.stop_all()``). SIGKILL cannot be caught:
+the board's watchdog stops the chair ``watchdog_ms`` (500 ms) after the last command.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import signal
+import threading
+import time
+import weakref
+from collections.abc import Callable, Iterator
+from types import FrameType
+from typing import Literal, overload
+
+import numpy as np
+
+from wcdrive.avr.avrlibc import strtod
+from wcdrive.avr.f32 import f32
+from wcdrive.errors import (
+    WcdriveCommandError,
+    WcdriveConnectionError,
+    WcdriveError,
+    WcdriveEstopError,
+    WcdriveFaultError,
+    WcdriveProtocolError,
+    WcdriveTimeoutError,
+)
+from wcdrive.host.boardclock import BoardClock
+from wcdrive.host.odometry import OdometryEstimate
+from wcdrive.host.session import Session
+from wcdrive.host.telemetry import LinkEvent, LinkLost, LinkRestored, Reset, Telemetry, TelemetryHub
+from wcdrive.protocol.codec import (
+    DEFAULTS,
+    ESTOP,
+    MAX_ANGULAR,
+    MAX_LINEAR,
+    MAX_WHEEL,
+    RESET,
+    SAVE,
+    ExtendedTelemetry,
+    Param,
+    encode_cmdvel,
+    encode_get,
+    encode_set,
+    encode_wheel,
+)
+from wcdrive.protocol.spec import integer
+from wcdrive.transports.port import Port
+from wcdrive.transports.recording import Recording
+
+__all__ = ["LINK_TIMEOUT", "LinkEvent", "LinkLost", "LinkRestored", "Reset", "Telemetry", "Wheelchair",
+           "install_signal_handlers", "stop_all"]
+
+#: Default ``link_timeout``: three feedback periods (150 ms) without a line from the board.
+LINK_TIMEOUT = 3 * integer("CONTROL_PERIOD_MS") / 1000.0
+#: The signals whose default action (terminate, no cleanup) the chairs' handler replaces.
+STOP_SIGNALS = ("SIGTERM", "SIGHUP")
+
+
+def _as_board_reads(value: float, limit: float) -> float:
+    """``value`` (already checked against ``limit``) at the 3 decimals the codec writes,
+    stepped 0.001 toward zero when the board would read that text just past its
+    binary32 limit: avr-libc's ``strtod`` is not correctly rounded, and reads "9.400"
+    as 9.4000006, above the firmware's 9.3999996, so ``x:0.000,t:9.400,`` is refused."""
+    text = f"{abs(value):.3f}"
+    while strtod(text.encode())[0] > f32(limit):
+        text = f"{float(text) - 0.001:.3f}"
+    return math.copysign(float(text), value)
+
+
+#: The chairs of this process: their shutdown, by session (the closed ones are pruned
+#: as new ones come). No lock: a finalizer may run on any thread, in the middle of
+#: anything (garbage collection), so every use is one atomic dict operation.
+_OPEN: dict[int, weakref.finalize] = {}
+_HANDLED: set[int] = set()
+
+
+def _shutdown(session: Session, on_close: Callable[[], None] | None) -> None:
+    """The way out of every chair (``close``, garbage collection, interpreter exit, a
+    signal): a stop, then the port closes. Refers to the session only, never to the
+    ``Wheelchair``, so that it can run when that is collected."""
+    try:
+        session.close(session.stop_line())
+    finally:
+        if on_close is not None:
+            on_close()
+
+
+def stop_all() -> int:
+    """Stops and closes every chair this process has open (best effort); returns how
+    many. What the signal handler does; also for a program's own handlers."""
+    finalizers = [f for f in tuple(_OPEN.values()) if f.alive]
+    for finalizer in finalizers:
+        try:
+            finalizer()
+        except Exception:
+            pass
+    return len(finalizers)
+
+
+def _on_signal(signum: int, frame: FrameType | None) -> None:
+    stop_all()
+    signal.signal(signum, signal.SIG_DFL)
+    os.kill(os.getpid(), signum)            # dies as the signal would have killed it
+
+
+def install_signal_handlers() -> list[str]:
+    """Installs the stop-then-die handler for ``SIGTERM`` and ``SIGHUP`` where their
+    action is still the default (never over a handler the program installed); only
+    from the main thread. Returns the signals it installed now. ``Wheelchair`` calls it
+    unless ``stop_on_signals=False``."""
+    if threading.current_thread() is not threading.main_thread():
+        return []
+    installed = []
+    for name in STOP_SIGNALS:
+        signum = getattr(signal, name, None)
+        if signum is None or signum in _HANDLED:
+            continue
+        try:
+            if signal.getsignal(signum) is signal.SIG_DFL:
+                signal.signal(signum, _on_signal)
+                _HANDLED.add(signum)
+                installed.append(name)
+        except (OSError, ValueError):
+            pass
+    return installed
+
+
+class Wheelchair:
+    """A chair behind a serial-like ``port`` (a ``wcdrive.transports.port.Port``);
+    ``wcdrive.connect(url)`` makes one and waits for the board's hello.
+
+    - ``name``: the URL or device path errors name (default: the port's own name).
+    - ``reopen``: how to open the same device again after it vanished (device paths),
+      tried for ``reconnect_timeout`` s; the new board is greeted again (hello).
+    - ``legacy``: a board that never answers hello is driven with protocol v1
+      (``protocol_version`` 1) instead of raising ``WcdriveProtocolError``.
+    - ``link_timeout``: seconds without any line from the board (it sends one every
+      50 ms) before the link counts as lost (``link_ok`` False, a ``LinkLost``
+      event, motion calls raise ``WcdriveConnectionError``); lines flowing again
+      restore it (``LinkRestored``).
+    - ``board_clock``: a simulated board's own clock (``ThreadedBoard.reported_time``,
+      which ``connect`` passes for ``sim://`` and ``simavr://``): ``link_timeout`` is
+      then seconds of the board's time, whatever its speed and however far behind the
+      wall clock a loaded machine leaves it.
+    - ``stop_on_signals``: install the ``SIGTERM``/``SIGHUP`` handler that stops every
+      chair before the process dies (module docstring).
+    - ``on_close`` runs after the port is closed.
+    """
+
+    def __init__(self, port: Port, *, name: str | None = None, odometry_method: str = "position",
+                 on_close: Callable[[], None] | None = None,
+                 reopen: Callable[[], Port] | None = None, reconnect_timeout: float = 60.0,
+                 legacy: bool = False, link_timeout: float = LINK_TIMEOUT,
+                 stop_on_signals: bool = True,
+                 board_clock: Callable[[], float | None] | None = None) -> None:
+        self._hub = TelemetryHub(odometry_method)
+        self._session = session = Session(
+            port, self._hub.deliver, name=name, reopen=reopen, reconnect_timeout=reconnect_timeout,
+            legacy=legacy, link_timeout=link_timeout, on_link=self._hub.deliver_link,
+            on_board_reset=self._hub.board_reset, board_clock=board_clock)
+        self._finalizer = weakref.finalize(self, _shutdown, session, on_close)
+        for key, finalizer in tuple(_OPEN.items()):
+            if not finalizer.alive:
+                _OPEN.pop(key, None)
+        _OPEN[id(session)] = self._finalizer
+        if stop_on_signals:
+            install_signal_handlers()
+
+    # ---- what the session knows ------------------------------------------------------
+    @property
+    def url(self) -> str:
+        """The URL or device path of the board (what errors name)."""
+        return self._session.name
+
+    @property
+    def protocol_version(self) -> int:
+        """The protocol the board speaks: 3 once it answered hello, 1 in legacy mode
+        after three hellos went unanswered, 0 until the handshake is over."""
+        return self._session.protocol_version
+
+    @property
+    def firmware(self) -> str:
+        """The firmware's name from its hello answer ("final_control"; "" before)."""
+        return self._session.firmware
+
+    @property
+    def firmware_version(self) -> str:
+        """The firmware's version from its hello answer ("3.0.0"; "" before)."""
+        return self._session.firmware_version
+
+    @property
+    def build_id(self) -> str:
+        """The firmware's build id from its hello answer (8 hex digits of the hash of
+        its sources, ``wcdrive.protocol.spec.build_id``; "" before)."""
+        return self._session.build_id
+
+    @property
+    def status(self) -> ExtendedTelemetry | None:
+        """The latest ``TLM:`` line (after hello), or None."""
+        return self._session.status
+
+    @property
+    def errors(self) -> list[str]:
+        """Every ``ERR:`` reason the board sent, the reasons of the ``NAK:`` answers to
+        motion commands, and "link lost"."""
+        return self._session.errors
+
+    @property
+    def history_limit(self) -> int:
+        """How many items each history keeps, the newest (``errors``, ``events``,
+        ``telemetry_arrays``, and what an unread ``telemetry()`` iterator queues): ring
+        buffers, 10,000 by default. Settable: ``chair.history_limit = 100_000``."""
+        return self._session.errors.maxlen
+
+    @history_limit.setter
+    def history_limit(self, value: int) -> None:
+        self._hub.history = value
+        for history in (self._session.errors, self._session.events, self._session.faults_announced):
+            history.maxlen = value
+
+    @property
+    def events(self) -> list[str]:
+        """Every ``EVT:`` the board sent, and the link's: LINK_LOST, LINK_RESTORED,
+        RECONNECTED (a vanished device was reopened)."""
+        return self._session.events
+
+    @property
+    def reconnect_timeout(self) -> float:
+        """Seconds a vanished device is reopened for."""
+        return self._session.reconnect_timeout
+
+    @reconnect_timeout.setter
+    def reconnect_timeout(self, value: float) -> None:
+        self._session.reconnect_timeout = value
+
+    # ---- the link ----------------------------------------------------------------------
+    @property
+    def link_ok(self) -> bool:
+        """True while the board's lines arrive: the last less than ``link_timeout`` s
+        ago (False before the first line, after ``close()``, while the device is gone)."""
+        return self._session.link_ok
+
+    @property
+    def link_timeout(self) -> float:
+        """Seconds without a line from the board before the link counts as lost
+        (default ``LINK_TIMEOUT``, 0.15 s: three feedback periods)."""
+        return self._session.link_timeout
+
+    @link_timeout.setter
+    def link_timeout(self, value: float) -> None:
+        if not value > 0:
+            raise ValueError(f"link_timeout must be positive, not {value}")
+        self._session.link_timeout = value
+
+    @property
+    def since_last_line(self) -> float:
+        """Seconds since the board's last line (inf before the first)."""
+        return self._session.since_last_line
+
+    def on_link(self, callback: Callable[[LinkEvent], None]) -> None:
+        """Calls ``callback`` with a ``LinkLost`` when the board goes silent for
+        ``link_timeout`` s (or its device vanishes) and a ``LinkRestored`` when its
+        lines flow again; from the link monitor or the reader thread, one at a time,
+        in order. Keep it short: the link waits for it."""
+        self._hub.on_link(callback)
+
+    def on_reset(self, callback: Callable[[Reset], None]) -> None:
+        """Calls ``callback`` with a ``Reset`` when the board's counts restart (a board
+        reset, a reopened device), from the reader thread: the odometry re-baselined
+        its counts and its pose carries on. ``resets`` keeps them all."""
+        self._hub.on_reset(callback)
+
+    @property
+    def resets(self) -> list[Reset]:
+        """Every ``Reset`` so far."""
+        return list(self._hub.resets)
+
+    def _require_link(self, what: str) -> None:
+        """Raises when ``what`` cannot go out: the chair is closed, the handshake
+        failed, or the link is lost."""
+        session = self._session
+        if session.closed.is_set():
+            raise WcdriveConnectionError(f"the link to {session.name} is closed: connect() again")
+        if session.handshake_error is not None:
+            raise WcdriveProtocolError(str(session.handshake_error))
+        if not session.link_ok:
+            silent = session.since_last_line
+            raise WcdriveConnectionError(
+                f"the link to {session.name} is lost: "
+                + ("no line from the board yet" if math.isinf(silent) else
+                   f"no line from the board for {silent:.2f} s (link_timeout {session.link_timeout} s)")
+                + f"; {what} not sent. The board's watchdog stops the chair; the link "
+                "recovers by itself when its lines flow again (chair.link_ok)")
+
+    # ---- commands ----------------------------------------------------------------
+    def set_velocity(self, linear: float, angular: float) -> None:
+        """Drive at ``linear`` m/s and ``angular`` rad/s (ValueError when out of range;
+        the board takes them to 3 decimals, and the limits themselves 0.001 short).
+        Raises ``WcdriveConnectionError`` while the link is lost."""
+        encode_cmdvel(linear, angular)          # ValueError when out of range
+        self._move(encode_cmdvel(_as_board_reads(linear, MAX_LINEAR),
+                                 _as_board_reads(angular, MAX_ANGULAR)))
+
+    def set_wheels(self, left: float, right: float) -> None:
+        """Wheel speeds in rad/s, forward positive (ValueError outside the WHEEL range;
+        the board refuses speeds beyond its ``max_wheel`` parameter: "range" in
+        ``errors``, and the command before stays in force)."""
+        encode_wheel(right, left)               # ValueError when out of range
+        self._move(encode_wheel(_as_board_reads(right, MAX_WHEEL), _as_board_reads(left, MAX_WHEEL)))
+
+    def stop(self) -> None:
+        """Targets to zero at the normal ramp. Always sent: also while the e-stop is
+        latched and while the link is lost (raises only when the port is closed or
+        gone)."""
+        self._session.send_motion(encode_cmdvel(0.0, 0.0))
+
+    def estop(self) -> None:
+        """Latch the e-stop: the board stops at its emergency rate and refuses motion
+        until ``reset_estop()``. Acknowledged and retried; raises when the board never
+        confirms (after sending a plain stop as well). The host keeps it latched until
+        ``reset_estop()``: a board that resets meanwhile (a reconnect) is latched again.
+        While the link is lost the e-stop and a stop go out unconfirmed and
+        ``WcdriveConnectionError`` says so."""
+        session = self._session
+        if session.protocol_version == 1:
+            self.stop()
+            raise WcdriveProtocolError(f"{session.name} speaks protocol v1 (legacy), which has no "
+                                       "latched e-stop: a stop was sent instead; flash the v3 firmware")
+        session.estop_held = True
+        if not session.link_ok and not session.closed.is_set() and session.handshake_error is None:
+            try:
+                session.send_frame(ESTOP.rstrip(b"\n"))
+                self.stop()
+            except WcdriveError:
+                pass
+            raise WcdriveConnectionError(
+                f"the link to {session.name} is lost: the e-stop and a stop were sent but the "
+                "board cannot confirm them. The host holds the e-stop latched (motion raises) "
+                "and latches it again when the board speaks; the board's watchdog stops the chair")
+        self._require_link("the e-stop")
+        try:
+            session.request(ESTOP.rstrip(b"\n"))
+        except (WcdriveTimeoutError, WcdriveConnectionError):
+            try:
+                self.stop()
+            except WcdriveError:
+                pass
+            raise
+
+    def reset_estop(self, timeout: float = 5.0) -> None:
+        """Release the e-stop, and any latched fault, once the chair has parked (the
+        board refuses earlier: this waits and retries until ``timeout``). The chair
+        stays at rest until a command."""
+        if self.protocol_version == 1:
+            raise WcdriveProtocolError(f"{self.url} speaks protocol v1 (legacy): there is no "
+                                       "e-stop to reset")
+        self._require_link("reset")
+        deadline = time.monotonic() + timeout
+        while True:
+            try:
+                self._session.request(RESET.rstrip(b"\n"))
+                self._session.estop_held = False
+                self._session.estop_announced = False
+                self._session.faults_announced.clear()
+                self._session.status = None          # the last TLM predates the reset
+                return
+            except WcdriveCommandError as exc:
+                if exc.reason != "busy" or time.monotonic() > deadline:
+                    raise
+            time.sleep(0.05)
+
+    @property
+    def faults(self) -> tuple[str, ...]:
+        """The faults the board has latched (``ENC_STALL_L``, ``DRIVER_DEAD``, ...;
+        PROTOCOL.md "Faults"), as its TLM line or its ``EVT:FAULT`` lines report them;
+        empty when none. Motion raises ``WcdriveFaultError`` until ``reset_estop()``."""
+        status = self._session.status
+        names = list(status.fault_names) if status is not None else []
+        for name in self._session.faults_announced:
+            if name not in names:
+                names.append(name)
+        return tuple(names)
+
+    @property
+    def reset_cause(self) -> str:
+        """Why the board last reset, from its ``BOOT:`` line (``POWER_ON``, ``EXTERNAL``,
+        ``BROWN_OUT``, ``WATCHDOG``, ...), or "" when no BOOT line was seen."""
+        return self._session.reset_cause
+
+    @property
+    def estop_latched(self) -> bool:
+        """True while the e-stop is latched (as the board reports it, or as sent)."""
+        status = self._session.status
+        if status is not None and status.estop_latched:
+            return True
+        return self._session.estop_held or self._session.estop_announced
+
+    def get_param(self, name: str) -> float:
+        """A runtime parameter (protocol/PROTOCOL.md, "Parameters")."""
+        return self._param(encode_get(name))
+
+    def set_param(self, name: str, value: float) -> float:
+        """Sets a parameter; returns the value now in force (as the board rounded it)."""
+        return self._param(encode_set(name, value))
+
+    def save_params(self, timeout: float = 1.0) -> None:
+        """Stores the parameters in force in the board's EEPROM (protocol/PROTOCOL.md,
+        "Parameters in EEPROM"): it loads them at every boot from then on
+        (``params_at_boot``). The board writes them in the background, one byte per
+        3.4 ms (about 140 ms); a save sent meanwhile is refused ``busy``, and this
+        retries it until ``timeout``."""
+        self._eeprom_command(SAVE, timeout)
+
+    def restore_defaults(self) -> None:
+        """Puts every parameter back to the firmware's default. The EEPROM keeps what was
+        saved (the next boot loads it again) until ``save_params()``."""
+        self._eeprom_command(DEFAULTS, 0.0)
+
+    @property
+    def params_at_boot(self) -> str:
+        """What the board said of its parameters when it last booted: ``PARAMS_LOADED``
+        (those saved in its EEPROM) or ``PARAMS_DEFAULT,<why>`` (``blank``, ``version``,
+        ``crc``, ``range``); "" when no such line was seen (a board without parameters
+        in EEPROM sends none)."""
+        return self._session.params_at_boot
+
+    def _eeprom_command(self, command: bytes, timeout: float) -> None:
+        if self.protocol_version == 1:
+            raise WcdriveProtocolError(f"{self.url} speaks protocol v1 (legacy): it has no "
+                                       "parameters")
+        self._require_link(repr(command.decode().strip()))
+        deadline = time.monotonic() + timeout
+        while True:
+            try:
+                self._session.request(command.rstrip(b"\n"))
+                return
+            except WcdriveCommandError as exc:
+                if exc.reason != "busy" or time.monotonic() > deadline:
+                    raise
+            time.sleep(0.05)
+
+    def _param(self, command: bytes) -> float:
+        if self.protocol_version == 1:
+            raise WcdriveProtocolError(f"{self.url} speaks protocol v1 (legacy): it has no "
+                                       "parameters")
+        self._require_link(repr(command.decode()))
+        data = self._session.request(command)
+        if not isinstance(data, Param):
+            raise WcdriveProtocolError(f"{self.url}: expected a PAR: line, got {data!r}")
+        return data.value
+
+    def send_command(self, command: bytes) -> None:
+        """Any motion command (``encode_ppm(...)``, ``b"rp1.0,lp1.0,"``), framed as
+        every line is: for tools; navigation code uses the methods above."""
+        self._move(command)
+
+    @property
+    def recording(self) -> Recording:
+        """The session so far (``connect(..., record=True)``)."""
+        recording = getattr(self._session.port, "recording", None)
+        if not isinstance(recording, Recording):
+            raise WcdriveProtocolError(f"{self.url} is not being recorded: connect(url, record=True)")
+        return recording
+
+    def _move(self, command: bytes) -> None:
+        self._require_link(repr(command.decode(errors="replace")))
+        faults = self.faults
+        if faults:
+            raise WcdriveFaultError(f"{self.url} latched a fault ({', '.join(faults)}) and "
+                                    "refuses motion: find the cause, then reset_estop() once "
+                                    "the chair has parked", faults)
+        if self.estop_latched:
+            raise WcdriveEstopError(f"the e-stop of {self.url} is latched: call reset_estop() "
+                                    "once it is safe", "estop")
+        self._session.send_motion(command)
+
+    # ---- handshake and telemetry ------------------------------------------------------
+    def wait_for_handshake(self, timeout: float = 5.0) -> int:
+        """Waits until the board answered hello; returns the protocol version (3; 1 in
+        legacy mode). Raises ``WcdriveProtocolError`` when it never answers (unless
+        legacy) or names a version this host does not know, ``WcdriveTimeoutError``
+        when the handshake is not over after ``timeout`` s."""
+        return self._session.wait_for_handshake(timeout)
+
+    def wait_for_telemetry(self, timeout: float = 5.0) -> Telemetry:
+        """The next tick's telemetry (``WcdriveTimeoutError`` after ``timeout`` s)."""
+        for t in self.telemetry(timeout=timeout):
+            return t
+        raise WcdriveTimeoutError(f"no feedback from {self.url} in {timeout} s: is the firmware "
+                                  "running, at 115200 baud?")
+
+    @overload
+    def telemetry(self, timeout: float | None = None, *, link_events: Literal[False] = False
+                  ) -> Iterator[Telemetry]: ...
+
+    @overload
+    def telemetry(self, timeout: float | None = None, *, link_events: Literal[True]
+                  ) -> Iterator[Telemetry | LinkEvent]: ...
+
+    def telemetry(self, timeout: float | None = None, *, link_events: bool = False
+                  ) -> Iterator[Telemetry] | Iterator[Telemetry | LinkEvent]:
+        """Feedback as it arrives; ends after ``timeout`` s without any, or when the
+        chair is closed. ``link_events=True``: ``LinkLost`` and ``LinkRestored`` come
+        too, in their place among the ticks (``isinstance`` tells them apart)."""
+        if link_events:
+            return self._hub.stream_with_link(self._session.closed, timeout)
+        return self._hub.stream(self._session.closed, timeout)
+
+    def on_telemetry(self, callback: Callable[[Telemetry], None]) -> None:
+        """Calls ``callback`` from the reader thread with every tick."""
+        self._hub.on_telemetry(callback)
+
+    def telemetry_arrays(self) -> dict[str, np.ndarray]:
+        """Everything received so far as numpy arrays."""
+        return self._hub.arrays()
+
+    @property
+    def odometry(self) -> OdometryEstimate:
+        """The odometry estimate now (twist timed by the board's clock)."""
+        return self._hub.odometry()
+
+    @property
+    def board_clock(self) -> BoardClock:
+        """The board's clock as the host tracks it: ``board_clock.filter.rate`` (host s
+        per board s), ``to_host(board_time)``, ``resets``."""
+        return self._hub.clock
+
+    def odometry_stream(self, rate_hz: float = 50.0) -> Iterator[OdometryEstimate]:
+        """The odometry estimate at ``rate_hz`` (50 Hz by default, as the guide's EKF
+        expects), on a steady grid of times (``estimate.time``, host monotonic s): each
+        estimate is extrapolated to its grid time from the latest encoder counts."""
+        return self._hub.odometry_stream(self._session.closed, rate_hz)
+
+    def on_odometry(self, callback: Callable[[OdometryEstimate], None], rate_hz: float = 50.0
+                    ) -> threading.Thread:
+        """Calls ``callback`` with the odometry at ``rate_hz`` from a thread of its own,
+        until the chair is closed."""
+        hub, closed = self._hub, self._session.closed    # the thread must not keep the chair alive
+
+        def run() -> None:
+            for estimate in hub.odometry_stream(closed, rate_hz):
+                callback(estimate)
+
+        thread = threading.Thread(target=run, name="wcdrive-odometry", daemon=True)
+        thread.start()
+        return thread
+
+    # ---- lifecycle -------------------------------------------------------------------
+    @property
+    def closed(self) -> bool:
+        """True once the chair was closed (by ``close()`` or on the way out)."""
+        return self._session.closed.is_set()
+
+    def close(self) -> None:
+        """Stops the chair, then closes the link. Safe to call twice."""
+        self._finalizer()
+
+    def __enter__(self) -> Wheelchair:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

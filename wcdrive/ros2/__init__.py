@@ -1,0 +1,1 @@
+"""ROS 2 messages from the chair: MCAP recordings, the Foxglove live view, the port tap."""
