@@ -1,13 +1,16 @@
 """A board or link as a pyserial port: the part every ``wc*://`` handler shares.
 
 Subclasses open their board (a ``ThreadedBoard``, or the CAN link) from the URL in
-``_open_board``; the URL's query is parsed there and nowhere else. Baud rate and
-framing settings are accepted and ignored, as on a USB CDC port.
+``_open_board``; every handler's query is parsed by ``url_options`` here, and nowhere
+else. Baud rate and framing settings are accepted and ignored, as on a USB CDC port.
 """
 
 from __future__ import annotations
 
 import time
+import urllib.parse
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from typing import Any, Protocol
 
 from serial.serialutil import PortNotOpenError, SerialBase, SerialException, to_bytes
@@ -42,6 +45,57 @@ class BoardLike(Protocol):
     @property
     def rx_dropped(self) -> int:
         """Bytes received and dropped because the receive buffer was full."""
+
+
+@dataclass(frozen=True)
+class Option:
+    """One ``?name=value`` of a URL: its default and how its text is read (``parse``
+    raises ``ValueError`` on a bad value)."""
+
+    default: Any
+    parse: Callable[[str], Any]
+
+
+def speed_option(text: str) -> float:
+    """A wall-clock speed factor within 0.01 .. 1000."""
+    speed = float(text)
+    if not 0.01 <= speed <= 1000.0:
+        raise ValueError("speed must be within 0.01 .. 1000")
+    return speed
+
+
+def flag_option(text: str) -> bool:
+    """``0``/``false`` off, anything else on."""
+    return text not in ("0", "false")
+
+
+def choice_option(*choices: str) -> Callable[[str], str]:
+    """One of ``choices``."""
+    def parse(text: str) -> str:
+        if text not in choices:
+            raise ValueError(f"must be one of {', '.join(choices)}")
+        return text
+    return parse
+
+
+def url_options(url: str, scheme: str, usage: str, options: Mapping[str, Option]
+                ) -> tuple[urllib.parse.SplitResult, dict[str, Any], frozenset[str]]:
+    """The URL split, its query read against ``options`` (each default where absent),
+    and the names the query gave. A wrong scheme, an unknown option or a bad value is a ``SerialException``
+    that names it and shows ``usage``."""
+    parts = urllib.parse.urlsplit(url)
+    if parts.scheme != scheme:
+        raise SerialException(f"expected {usage}, got {url!r}")
+    values = {name: option.default for name, option in options.items()}
+    given = urllib.parse.parse_qs(parts.query, True)
+    for name, texts in given.items():
+        if name not in options:
+            raise SerialException(f"{scheme}://: unknown option {name!r} ({usage})")
+        try:
+            values[name] = options[name].parse(texts[-1])
+        except ValueError as exc:
+            raise SerialException(f"{scheme}://: {name}={texts[-1]!r}: {exc} ({usage})") from exc
+    return parts, values, frozenset(given)
 
 
 class BoardSerial(SerialBase):

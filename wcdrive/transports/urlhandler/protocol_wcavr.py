@@ -10,13 +10,19 @@ wall clock use it). The ELF defaults to firmware/final_control, built on first u
 
 from __future__ import annotations
 
-import urllib.parse
-
 from serial.serialutil import SerialException
 
-from wcdrive.transports.urlhandler.board_serial import BoardSerial
+from wcdrive.transports.urlhandler.board_serial import (
+    BoardSerial,
+    Option,
+    flag_option,
+    speed_option,
+    url_options,
+)
 
-_USAGE = "wcavr://[elf][?realtime=0&speed=S&plant=0]"
+USAGE = "wcavr://[elf][?realtime=0&speed=S&plant=0]"
+OPTIONS = {"realtime": Option(True, flag_option), "speed": Option(1.0, speed_option),
+           "plant": Option(True, flag_option)}
 
 
 class Serial(BoardSerial):
@@ -25,22 +31,8 @@ class Serial(BoardSerial):
     def _open_board(self, url: str):
         from wcdrive.boards.simavr.mega_board import MegaBoard
 
-        parts = urllib.parse.urlsplit(url)
-        if parts.scheme != "wcavr":
-            raise SerialException(f"expected {_USAGE}, got {url!r}")
-        options = {k: v[0] for k, v in urllib.parse.parse_qs(parts.query, True).items()}
-        unknown = set(options) - {"realtime", "plant", "speed"}
-        if unknown:
-            raise SerialException(f"wcavr://: unknown option {sorted(unknown)[0]!r} ({_USAGE})")
-        realtime = options.get("realtime", "1") not in ("0", "false")
-        try:
-            speed = float(options.get("speed", "1"))
-        except ValueError:
-            raise SerialException(f"wcavr://: speed must be a number ({_USAGE})") from None
-        if not 0.01 <= speed <= 1000.0:
-            raise SerialException("wcavr:// speed must be within 0.01 .. 1000")
-        if not realtime and "speed" in options:
+        parts, o, given = url_options(url, "wcavr", USAGE, OPTIONS)
+        if not o["realtime"] and "speed" in given:
             raise SerialException("wcavr://: realtime=0 runs flat out; give speed= or realtime=0, not both")
         elf = (parts.netloc + parts.path) or None
-        return MegaBoard(elf, realtime=realtime, speed=speed,
-                         plant=options.get("plant", "1") not in ("0", "false"))
+        return MegaBoard(elf, realtime=o["realtime"], speed=o["speed"], plant=o["plant"])

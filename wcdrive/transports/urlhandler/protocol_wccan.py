@@ -10,23 +10,23 @@ virtual bus is per process).
 
 from __future__ import annotations
 
-import urllib.parse
-
 from serial.serialutil import SerialException
 
 from wcdrive.errors import WcdriveConnectionError
 from wcdrive.transports.can_link import CanLink, open_can_link
-from wcdrive.transports.urlhandler.board_serial import BoardSerial
+from wcdrive.transports.urlhandler.board_serial import BoardSerial, url_options
+
+USAGE = "wccan://<interface>/<channel>"
 
 
 class Serial(BoardSerial):
     """pyserial's ``serial_for_url("wccan://...")``."""
 
     def _open_board(self, url: str) -> CanLink:
-        parts = urllib.parse.urlsplit(url)
+        parts, _, _ = url_options(url, "wccan", USAGE, {})
         channel = parts.path.lstrip("/")
-        if parts.scheme != "wccan" or not parts.netloc or not channel or parts.query:
-            raise SerialException(f"expected wccan://<interface>/<channel>, got {url!r}")
+        if not parts.netloc or not channel:
+            raise SerialException(f"expected {USAGE}, got {url!r}")
         try:
             return open_can_link(parts.netloc, channel)
         except WcdriveConnectionError as exc:
