@@ -45,6 +45,7 @@ from wcdrive.boards.simavr.build import build_dir, firmware_elf
 from wcdrive.errors import WcdriveError
 from wcdrive.protocol.codec import ExtendedTelemetry, Feedback, LineDecoder
 from wcdrive.sim import scenario
+from wcdrive.tools.options import add_ros_output
 from wcdrive.tools.replay import main as replay_main
 from wcdrive.transports.recording import Recording
 
@@ -437,10 +438,8 @@ def add_parser(sub: Any) -> None:
         r.add_argument("--plot", help="also write plots to this directory")
         r.add_argument("--yes", action="store_true",
                        help="do not ask whether the wheels are off the ground")
-        ros_out = r.add_mutually_exclusive_group()
-        ros_out.add_argument("--mcap", metavar="FILE", help="also write ROS 2 messages into an MCAP file")
-        ros_out.add_argument("--live", action="store_true", help="serve ROS 2 messages to Foxglove")
-        r.add_argument("--live-port", type=int, default=8765, help="--live: the port (default 8765)")
+        add_ros_output(r, exclusive=True, mcap_help="also write ROS 2 messages into an MCAP file",
+                       live_help="serve ROS 2 messages to Foxglove")
         r.add_argument("--speed", type=float, default=1.0,
                        help="scenario time per wall time (only for simulated boards)")
         r.set_defaults(func=_run)

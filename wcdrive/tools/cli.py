@@ -43,6 +43,7 @@ from wcdrive.hil import verify
 from wcdrive.protocol.spec import integer
 from wcdrive.sim import report, runner, scenario
 from wcdrive.tools import bench, console, sweep
+from wcdrive.tools.options import add_ros_output
 from wcdrive.transports.can_link import CanGateway, open_bus
 from wcdrive.transports.pty_bridge import PtyBridge
 
@@ -259,13 +260,11 @@ def parser() -> argparse.ArgumentParser:
     sim.add_argument("--ekf", action="store_true",
                      help="also run the host's two EKFs (docs/odometry.md) on the 400 Hz gyro and "
                           "report odom_ekf_*: about 25 times slower (--mcap and --live imply it)")
-    sim.add_argument("--mcap", metavar="FILE",
-                     help="write the run as ROS 2 messages into an MCAP file (with several "
-                          "scenarios: FILE-<name>.mcap)")
-    sim.add_argument("--live", action="store_true",
-                     help="serve the run's ROS 2 messages to Foxglove (WebSocket), paced by "
-                          "the board's clock")
-    sim.add_argument("--live-port", type=int, default=8765, help="--live: the port (default 8765)")
+    add_ros_output(sim, exclusive=False,
+                   mcap_help="write the run as ROS 2 messages into an MCAP file (with several "
+                             "scenarios: FILE-<name>.mcap)",
+                   live_help="serve the run's ROS 2 messages to Foxglove (WebSocket), paced by "
+                             "the board's clock")
     sim.set_defaults(func=_sim)
 
     ver = sub.add_parser("verify", help="differential check of the port against the firmware in simavr",
