@@ -14,12 +14,11 @@ The same object sits behind ``serial.serial_for_url("wcsim://")`` and the pty br
 from __future__ import annotations
 
 import math
-import time
 
 from wcdrive.avr.uart import UART_BYTE_CYCLES
 from wcdrive.boards.port_loop import F_CPU, PortLoop
 from wcdrive.boards.receive_buffer import DEFAULT_CAPACITY
-from wcdrive.boards.threaded import ThreadedBoard
+from wcdrive.boards.threaded import ThreadedBoard, WallClock
 from wcdrive.plant import ChairParams, Gyro, Plant
 
 #: Simulated time between two looks at the wall clock.
@@ -47,15 +46,13 @@ class SimulatedBoard(ThreadedBoard):
     times ``speed``; what ``wcsim://`` opens."""
 
     def __init__(self, params: ChairParams | None = None, *, speed: float = 1.0, seed: int = 0) -> None:
-        if not 0.01 <= speed <= 1000.0:
-            raise ValueError("speed must be within 0.01 .. 1000")
+        self.clock = WallClock(speed)
         super().__init__("wcsim", rx_capacity(speed))
         self.params = params or ChairParams()
         self.plant = Plant(self.params)
         # a live board runs for hours: its gyro keeps the newest 10 s of samples
         self.loop = PortLoop(self.plant, Gyro(self.params, seed, history=GYRO_HISTORY))
         self.speed = speed
-        self._wall0: float | None = None
 
     @property
     def time(self) -> float:
@@ -77,10 +74,8 @@ class SimulatedBoard(ThreadedBoard):
         self.loop.send(data)
 
     def _advance(self) -> bytes:
-        if self._wall0 is None:
-            self._wall0 = time.monotonic()
-        target = (time.monotonic() - self._wall0) * self.speed
-        if target <= self.time:
+        target = self.clock.target(self.time)
+        if target is None:
             return b""
         # A board that fell behind (a loaded machine) catches up a slice at a time, so
         # its output reaches the reader in bounded chunks, not one that grows with the lag.

@@ -142,3 +142,26 @@ class ThreadedBoard:
                 self._reported_at = time.monotonic()
             pause = self._pause()
             time.sleep(pause if pause > 0 else 0)
+
+
+class WallClock:
+    """Paces a simulated board to the wall clock times ``speed``: ``target(now_s)`` is
+    the simulated time the board should reach, or None while it is not behind.
+
+    The clock starts at the first call, so a board that waits to be opened starts at
+    its own time zero. ``speed`` is within 0.01 .. 1000 (a ``ValueError`` otherwise)."""
+
+    def __init__(self, speed: float) -> None:
+        if not 0.01 <= speed <= 1000.0:
+            raise ValueError("speed must be within 0.01 .. 1000")
+        self.speed = speed
+        self._wall0: float | None = None
+
+    def target(self, now_s: float) -> float | None:
+        """The simulated time due now, when it is past ``now_s`` (the board's time)."""
+        wall = time.monotonic()
+        if self._wall0 is None:
+            self._wall0 = wall
+        target = (wall - self._wall0) * self.speed
+        return target if target > now_s else None
+

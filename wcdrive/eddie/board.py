@@ -14,11 +14,10 @@ to the wall clock (times ``speed``) in a background thread: what ``wceddie://`` 
 from __future__ import annotations
 
 import math
-import time
 from collections import deque
 from collections.abc import Sequence
 
-from wcdrive.boards.threaded import ThreadedBoard
+from wcdrive.boards.threaded import ThreadedBoard, WallClock
 from wcdrive.eddie.firmware import DIVISOR, MAX_ON_TIME, EddieFirmware
 from wcdrive.eddie.plant import RangeSensors, add_wall, eddie_params, positions
 from wcdrive.plant import ChairParams, Plant
@@ -107,13 +106,11 @@ class EddieSimBoard(ThreadedBoard):
     def __init__(self, params: ChairParams | None = None, *, speed: float = 1.0, seed: int = 0,
                  walls: Sequence[Wall] = (), start: tuple[float, float, float] = (0.0, 0.0, 0.0),
                  eol: str = "firmware") -> None:
-        if not 0.01 <= speed <= 1000.0:
-            raise ValueError("speed must be within 0.01 .. 1000")
+        self.clock = WallClock(speed)
         super().__init__("wceddie")
         self.loop = EddieLoop(params, walls=walls, start=start, seed=seed, eol=eol)
         self.plant = self.loop.plant
         self.speed = speed
-        self._wall0: float | None = None
 
     @property
     def time(self) -> float:
@@ -134,10 +131,8 @@ class EddieSimBoard(ThreadedBoard):
         self.loop.send(data)
 
     def _advance(self) -> bytes:
-        if self._wall0 is None:
-            self._wall0 = time.monotonic()
-        target = (time.monotonic() - self._wall0) * self.speed
-        if target <= self.loop.time:
+        target = self.clock.target(self.loop.time)
+        if target is None:
             return b""
         self.loop.run_until(target)
         return b"".join(data for _, data in self.loop.take_output())
