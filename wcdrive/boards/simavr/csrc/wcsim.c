@@ -507,16 +507,24 @@ uint8_t wcsim_mcusr(wcsim_t *s) { return mcusr_get(s); }
 
 size_t wcsim_resets_count(wcsim_t *s) { return s->n_resets; }
 
+/* The log drains: each *_take copies up to max entries from the front of its log
+ * and removes them. take_count is how many; drop_front removes them. */
+static size_t take_count(size_t len, size_t max) { return len < max ? len : max; }
+
+static void drop_front(void *log, size_t *len, size_t n, size_t size) {
+    memmove(log, (char *)log + n * size, (*len - n) * size);
+    *len -= n;
+}
+
 /* Copies and removes up to max reset-log entries from the front of the log. */
 size_t wcsim_resets_take(wcsim_t *s, uint64_t *cycles, uint8_t *causes, uint8_t *mcusr, size_t max) {
-    size_t n = s->n_resets < max ? s->n_resets : max;
+    size_t n = take_count(s->n_resets, max);
     for (size_t i = 0; i < n; i++) {
         cycles[i] = s->resets[i].cycle;
         causes[i] = s->resets[i].cause;
         mcusr[i] = s->resets[i].mcusr;
     }
-    memmove(s->resets, s->resets + n, (s->n_resets - n) * sizeof(*s->resets));
-    s->n_resets -= n;
+    drop_front(s->resets, &s->n_resets, n, sizeof(*s->resets));
     return n;
 }
 
@@ -614,41 +622,38 @@ size_t wcsim_rx_lost_count(wcsim_t *s) { return s->n_rx_lost; }
 /* Copies and removes up to max entries from the front of the log of lost bytes. */
 size_t wcsim_rx_lost_take(wcsim_t *s, uint64_t *cycles, uint64_t *indices, uint8_t *bytes,
                           uint8_t *why, size_t max) {
-    size_t n = s->n_rx_lost < max ? s->n_rx_lost : max;
+    size_t n = take_count(s->n_rx_lost, max);
     for (size_t i = 0; i < n; i++) {
         cycles[i] = s->rx_lost[i].cycle;
         indices[i] = s->rx_lost[i].index;
         bytes[i] = s->rx_lost[i].byte;
         why[i] = s->rx_lost[i].why;
     }
-    memmove(s->rx_lost, s->rx_lost + n, (s->n_rx_lost - n) * sizeof(*s->rx_lost));
-    s->n_rx_lost -= n;
+    drop_front(s->rx_lost, &s->n_rx_lost, n, sizeof(*s->rx_lost));
     return n;
 }
 
 /* Copies and removes up to max TX entries from the front of the log. */
 size_t wcsim_tx_take(wcsim_t *s, uint64_t *cycles, uint8_t *bytes, size_t max) {
-    size_t n = s->n_tx < max ? s->n_tx : max;
+    size_t n = take_count(s->n_tx, max);
     for (size_t i = 0; i < n; i++) {
         cycles[i] = s->tx[i].cycle;
         bytes[i] = s->tx[i].byte;
     }
-    memmove(s->tx, s->tx + n, (s->n_tx - n) * sizeof(*s->tx));
-    s->n_tx -= n;
+    drop_front(s->tx, &s->n_tx, n, sizeof(*s->tx));
     return n;
 }
 
 size_t wcsim_hits_count(wcsim_t *s) { return s->n_hits; }
 
 size_t wcsim_hits_take(wcsim_t *s, uint64_t *cycles, uint32_t *hooks, uint32_t *args, size_t max) {
-    size_t n = s->n_hits < max ? s->n_hits : max;
+    size_t n = take_count(s->n_hits, max);
     for (size_t i = 0; i < n; i++) {
         cycles[i] = s->hits[i].cycle;
         hooks[i] = s->hits[i].hook;
         args[i] = s->hits[i].arg;
     }
-    memmove(s->hits, s->hits + n, (s->n_hits - n) * sizeof(*s->hits));
-    s->n_hits -= n;
+    drop_front(s->hits, &s->n_hits, n, sizeof(*s->hits));
     return n;
 }
 
