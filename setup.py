@@ -6,13 +6,19 @@
 - ``wcdrive-serial-urls.pth`` goes to site-packages beside ``_wcdrive_serial_urls.py``,
   for wheels and editable installs alike: pyserial then finds ``wcsim://``,
   ``wcavr://`` and ``wccan://`` without importing wcdrive first.
+- The C helpers (``NATIVE``) are built at install. Without a C compiler (or Python's
+  headers) the install still succeeds and says so; wcdrive then compiles them on first
+  use where it can, and runs the Python paths where it cannot (``wcdrive --version``
+  tells which).
 """
 
 from __future__ import annotations
 
+import hashlib
 from pathlib import Path
 
-from setuptools import setup
+from setuptools import Extension, setup
+from setuptools.command.build_ext import build_ext
 from setuptools.command.build_py import build_py
 from setuptools.command.editable_wheel import editable_wheel
 
@@ -33,6 +39,63 @@ DATA = {
     "wcdrive._data.firmware.fpcheck": "firmware/fpcheck",
 }
 DATA_FILES = ["*.toml", "*.md", "*.dbc", "*.ino", "*.h", "Makefile"]
+
+
+#: The C helpers. -ffp-contract=off: each binary32 operation rounds once, as on the AVR
+#: (no fused multiply-add), which the port's bit-exactness needs.
+_FLAGS = ["-O2", "-ffp-contract=off"]
+NATIVE = [
+    Extension("wcdrive.avr._f32_fast", ["wcdrive/avr/csrc/f32_fast.c"], extra_compile_args=_FLAGS,
+              optional=True),
+    Extension("wcdrive.firmware._tick_fast", ["wcdrive/firmware/csrc/tick_fast.c"],
+              extra_compile_args=_FLAGS, optional=True),
+    # plain C loaded with ctypes (no Python module in it), built the same way
+    Extension("wcdrive.plant._chair_kernel", ["wcdrive/plant/csrc/chair_kernel.c"],
+              extra_compile_args=_FLAGS, libraries=["m"], optional=True),
+]
+
+
+class OptionalBuildExt(build_ext):
+    """Builds the C helpers; a helper that cannot be built is reported, not fatal."""
+
+    def run(self) -> None:
+        try:
+            super().run()
+        except Exception as exc:
+            self._skipped("all C helpers", exc)
+
+    def build_extension(self, ext: Extension) -> None:
+        try:
+            super().build_extension(ext)
+        except Exception as exc:
+            self._skipped(ext.name, exc)
+            return
+        # the source's hash beside the helper: wcdrive uses a helper only while it was
+        # built from the source it ships (wcdrive._util.native.prebuilt)
+        built = Path(self.get_ext_fullpath(ext.name))
+        digest = hashlib.sha256((ROOT / ext.sources[0]).read_bytes()).hexdigest()
+        Path(str(built) + ".sha256").write_text(digest + "\n")
+
+    def copy_extensions_to_source(self) -> None:
+        super().copy_extensions_to_source()
+        build_py = self.get_finalized_command("build_py")
+        for ext in self.extensions:
+            inplace, regular = self._get_inplace_equivalent(build_py, ext)
+            if Path(regular + ".sha256").exists():
+                self.copy_file(regular + ".sha256", inplace + ".sha256", level=self.verbose)
+
+    def get_outputs(self) -> list[str]:
+        return [*super().get_outputs(), *(o + ".sha256" for o in super().get_outputs())]
+
+    @staticmethod
+    def _skipped(what: str, exc: Exception) -> None:
+        print(f"wcdrive: {what} not built at install ({exc}); wcdrive compiles them on first "
+              "use where a C compiler is there, else runs the slower Python paths "
+              "(apt-get install gcc python3-dev, then reinstall)")
+
+    def get_export_symbols(self, ext: Extension) -> list[str]:
+        # the plant's kernel is plain C: no PyInit_ to export
+        return [] if ext.name.endswith("_chair_kernel") else super().get_export_symbols(ext)
 
 
 class BuildPyWithPth(build_py):
@@ -75,5 +138,7 @@ setup(
                               "avr/csrc/*.c", "firmware/csrc/*.c", "boards/simavr/csrc/*.c"],
                   **{name: DATA_FILES for name in DATA}},
     py_modules=["_wcdrive_serial_urls"],
-    cmdclass={"build_py": BuildPyWithPth, "editable_wheel": EditableWheelWithPth},
+    ext_modules=NATIVE,
+    cmdclass={"build_py": BuildPyWithPth, "editable_wheel": EditableWheelWithPth,
+              "build_ext": OptionalBuildExt},
 )

@@ -142,9 +142,11 @@ def test_the_reference_is_pure_python() -> None:
     assert F.reference["mul"].__globals__["_round"] is F.reference["f32"]
 
 
-def test_an_unwritable_cache_falls_back_to_python(tmp_path: Path) -> None:
-    """The library imports, and a simulated chair runs, where nothing can be built: the
-    binary32 operations and the plant in pure Python (a warning says why)."""
+def test_an_unwritable_cache_needs_no_build(tmp_path: Path) -> None:
+    """Where nothing can be built (the cache is not writable), the library imports and a
+    simulated chair runs on the helpers the install built. Without those, the binary32
+    operations and the plant run in pure Python, a warning saying why:
+    tests/meta/test_wheel.py's install without a compiler shows that."""
     not_a_dir = tmp_path / "file"
     not_a_dir.write_text("")
     code = ("import wcdrive.host.wheelchair; from wcdrive.avr import f32; from wcdrive.plant import Plant; "
@@ -153,5 +155,4 @@ def test_an_unwritable_cache_falls_back_to_python(tmp_path: Path) -> None:
     run = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=env, capture_output=True, text=True,
                          timeout=120)
     assert run.returncode == 0, run.stderr
-    assert run.stdout.split() == ["True", "False", repr(F.mul(0.1, 3.0))]
-    assert "pure Python" in run.stderr
+    assert run.stdout.split() == ["False", "True", repr(F.mul(0.1, 3.0))]

@@ -1,5 +1,7 @@
-"""``wcdrive._util.native`` builds a helper once per source, safely from several threads at once
-(Dask workers run simulations in threads; each may be first to need a helper)."""
+"""``wcdrive._util.native``: the helpers the install built are used only while they match
+the source; a helper built on first use is built once per source, safely from several
+threads at once (Dask workers run simulations in threads; each may be first to need
+one)."""
 
 from __future__ import annotations
 
@@ -45,3 +47,29 @@ def test_a_compile_error_says_what_failed(tmp_path: Path, monkeypatch) -> None:
     source.write_text("int broken(void) { return }\n")
     with pytest.raises(native.BuildError, match=r"compiling broken\.c failed"):
         native.load(source, "broken")
+
+
+HELPERS = [("wcdrive.avr._f32_fast", "avr/csrc/f32_fast.c", native.prebuilt),
+           ("wcdrive.firmware._tick_fast", "firmware/csrc/tick_fast.c", native.prebuilt),
+           ("wcdrive.plant._chair_kernel", "plant/csrc/chair_kernel.c", native.prebuilt_library)]
+
+
+@pytest.mark.parametrize(("module", "source", "find"), HELPERS)
+def test_the_install_built_each_helper_and_it_is_used_only_for_its_own_source(
+        module: str, source: str, find, tmp_path: Path) -> None:
+    import wcdrive
+
+    real = Path(wcdrive.__file__).parent / source
+    assert find(module, real) is not None, f"the install did not build {module} (setup.py NATIVE)"
+    edited = tmp_path / real.name
+    edited.write_bytes(real.read_bytes() + b"\n/* edited since the install */\n")
+    assert find(module, edited) is None          # a changed C file is compiled anew, never stale
+
+
+def test_every_helper_this_process_loaded_says_how() -> None:
+    from wcdrive.avr import f32
+    from wcdrive.firmware import tick_fast
+    from wcdrive.plant.chair import load_kernel
+
+    assert f32.fast is not None and tick_fast.fast is not None and load_kernel() is not None
+    assert set(native.paths()) >= {"binary32", "control tick", "plant kernel"}

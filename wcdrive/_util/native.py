@@ -1,8 +1,12 @@
-"""Compiles small C helpers from source on first use and loads them: shared libraries
-with ctypes (``load``), CPython extension modules with importlib (``load_extension``).
+"""The C helpers (the binary32 arithmetic, the control tick, the plant's kernel): built
+when wcdrive is installed, else compiled on first use, else absent.
 
-The library is built with the system C compiler into a cache directory keyed by the
-source's hash (``wcdrive._util.resources.cache_dir()``); nothing prebuilt ships.
+``pip install`` builds each helper (setup.py's ``ext_modules``) into the package, and
+``prebuilt``/``prebuilt_library`` find it there. Where the install found no compiler,
+``load``/``load_extension`` compile the source with the system C compiler into a cache
+directory keyed by the source's hash (``wcdrive._util.resources.cache_dir()``). Each
+helper's loader records how it was had (``record``); ``paths()`` tells them, for
+``wcdrive --version``.
 """
 
 from __future__ import annotations
@@ -24,6 +28,62 @@ from wcdrive._util.resources import cache_dir
 
 class BuildError(RuntimeError):
     """A C helper could not be compiled; the message says what to install."""
+
+
+#: How each helper was had: "built at install", "built at first use", or why it is
+#: Python (``record``).
+_HOW: dict[str, str] = {}
+
+
+def record(helper: str, how: str) -> None:
+    """Notes how ``helper`` was loaded (or why not), for ``paths``."""
+    _HOW[helper] = how
+
+
+def paths() -> dict[str, str]:
+    """Each C helper loaded so far and how: ``{"binary32": "built at install", ...}``."""
+    return dict(_HOW)
+
+
+def _prebuilt_path(module: str, source: Path) -> str | None:
+    """Where the install built ``module``, if it did and from ``source`` as it is now
+    (the hash setup.py wrote beside it): a checkout whose C changed since the install
+    compiles the new source instead of running the old build."""
+    try:
+        spec = importlib.util.find_spec(module)
+    except (ImportError, ValueError):
+        return None
+    if spec is None or spec.origin is None or not spec.origin.endswith(
+            tuple(importlib.machinery.EXTENSION_SUFFIXES)):
+        return None
+    try:
+        recorded = Path(spec.origin + ".sha256").read_text().strip()
+    except OSError:
+        return None
+    return spec.origin if recorded == hashlib.sha256(source.read_bytes()).hexdigest() else None
+
+
+def prebuilt(module: str, source: Path) -> ModuleType | None:
+    """The extension module ``module`` (``wcdrive.avr._f32_fast``) as the install built it
+    from ``source``, or None where it did not (or built it from another source)."""
+    if _prebuilt_path(module, source) is None:
+        return None
+    try:
+        return importlib.import_module(module)
+    except ImportError:
+        return None
+
+
+def prebuilt_library(module: str, source: Path) -> ctypes.CDLL | None:
+    """The shared library the install built from ``source`` under the name ``module``
+    (loaded with ctypes: it is C with no Python module in it), or None."""
+    path = _prebuilt_path(module, source)
+    if path is None:
+        return None
+    try:
+        return ctypes.CDLL(path)
+    except OSError:
+        return None
 
 
 def compile_shared(source: Path, name: str, libs: tuple[str, ...] = (),

@@ -227,17 +227,25 @@ _FAST_SOURCE = Path(__file__).resolve().parent / "csrc" / "f32_fast.c"
 
 
 def load_fast() -> ModuleType | None:
-    """The C fast path, built on first use (``wcdrive._util.native``), bound to ``reference``;
-    None without a compiler, Python's headers or a writable cache (``WCDRIVE_CACHE``), or
-    with ``WCDRIVE_PURE_F32=1`` in the environment (the Python functions only)."""
+    """The C fast path bound to ``reference``: the one the install built, else built on
+    first use (``wcdrive._util.native``); None without either (no compiler, no Python
+    headers, no writable cache), or with ``WCDRIVE_PURE_F32=1`` in the environment (the
+    Python functions only)."""
     if os.environ.get("WCDRIVE_PURE_F32", "") not in ("", "0"):
+        native.record("binary32", "Python (WCDRIVE_PURE_F32)")
         return None
-    try:
-        module = native.load_extension(_FAST_SOURCE, "_f32_fast", ("-O2", "-ffp-contract=off"))
-    except (native.BuildError, OSError) as exc:     # OSError: no writable cache, for one
-        logging.getLogger(__name__).warning("binary32 in pure Python (slower): %s", exc)
-        return None
+    module = native.prebuilt("wcdrive.avr._f32_fast", _FAST_SOURCE)
+    how = "built at install"
+    if module is None:
+        try:
+            module = native.load_extension(_FAST_SOURCE, "_f32_fast", ("-O2", "-ffp-contract=off"))
+            how = "built at first use"
+        except (native.BuildError, OSError) as exc:     # OSError: no writable cache, for one
+            logging.getLogger(__name__).warning("binary32 in pure Python (slower): %s", exc)
+            native.record("binary32", f"Python ({exc})".splitlines()[0])
+            return None
     module._bind(*(reference[name] for name in FAST_NAMES))
+    native.record("binary32", how)
     return module
 
 

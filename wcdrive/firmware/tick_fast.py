@@ -53,18 +53,26 @@ def pure() -> bool:
 
 
 def load_fast() -> ModuleType | None:
-    """The C tick, built on first use (``wcdrive._util.native``) and bound to ``FirmwareState``
-    and the constants; None when it cannot be built or ``pure()``."""
+    """The C tick bound to ``FirmwareState`` and the constants: the one the install built,
+    else built on first use (``wcdrive._util.native``); None when it cannot be had or
+    ``pure()``."""
     if pure():
+        native.record("control tick", "Python (WCDRIVE_PURE_TICK)")
         return None
+    how = "built at install"
     try:
-        module = native.load_extension(_SOURCE, "_tick_fast", ("-O2", "-ffp-contract=off"))
+        module = native.prebuilt("wcdrive.firmware._tick_fast", _SOURCE)
+        if module is None:
+            module = native.load_extension(_SOURCE, "_tick_fast", ("-O2", "-ffp-contract=off"))
+            how = "built at first use"
         module._bind(FirmwareState, _constants(), {k: v.encode() for k, v in C.MODE_NAMES.items()})
     except (native.BuildError, OSError, TypeError, ValueError) as exc:
         # OSError: no writable cache, for one; TypeError/ValueError: _bind refused what it
         # was given (a state type or constant it cannot use)
         logging.getLogger(__name__).warning("the control tick in pure Python (slower): %s", exc)
+        native.record("control tick", f"Python ({exc})".splitlines()[0])
         return None
+    native.record("control tick", how)
     return module
 
 

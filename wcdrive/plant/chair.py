@@ -48,7 +48,7 @@ import numpy as np
 import pymunk
 from pymunk._chipmunk import lib as _chipmunk
 
-from wcdrive._util.native import BuildError, load
+from wcdrive._util.native import BuildError, load, prebuilt_library, record
 from wcdrive.plant.params import ChairParams
 
 _D = ctypes.c_double
@@ -86,12 +86,16 @@ _kernel: ctypes.CDLL | bool | None = None
 
 
 def load_kernel() -> ctypes.CDLL | None:
-    """The C kernel (``chair_advance``, ``gyro_samples``), compiled on first use; None
-    when no compiler is there."""
+    """The C kernel (``chair_advance``, ``gyro_samples``): the one the install built, else
+    compiled on first use; None when neither can be had."""
     global _kernel
     if _kernel is None:
         try:
-            lib = load(_KERNEL_SOURCE, "chairkernel", ("-lm",), ("-O2", "-ffp-contract=off"))
+            lib = prebuilt_library("wcdrive.plant._chair_kernel", _KERNEL_SOURCE)
+            how = "built at install"
+            if lib is None:
+                lib = load(_KERNEL_SOURCE, "chairkernel", ("-lm",), ("-O2", "-ffp-contract=off"))
+                how = "built at first use"
             lib.chair_advance.argtypes = [ctypes.POINTER(ChairStruct), ctypes.c_int32, _D, _D,
                                           _P, _P, _P]
             lib.chair_advance.restype = None
@@ -101,7 +105,9 @@ def load_kernel() -> ctypes.CDLL | None:
                                                   _P, _P, ctypes.c_int32, _P, _P]
             lib.chair_advance_sampled.restype = ctypes.c_int32
             _kernel = lib
-        except (BuildError, OSError):                   # OSError: no writable cache
+            record("plant kernel", how)
+        except (BuildError, OSError) as exc:            # OSError: no writable cache
+            record("plant kernel", f"Python ({exc})".splitlines()[0])
             _kernel = False
     return _kernel if isinstance(_kernel, ctypes.CDLL) else None
 

@@ -1,6 +1,6 @@
 """``wcdrive``: the one command line.
 
-    wcdrive --version                                    package and protocol versions
+    wcdrive --version                                    package and protocol versions, native paths
     wcdrive sim [SCENARIO ...] [--backend port|simavr] [--json] [--out DIR] [--no-plots] [--ekf]
     wcdrive sim --list
     wcdrive verify --traces N --seed S [--elf PATH]      the port against the firmware in simavr
@@ -50,6 +50,29 @@ from wcdrive.transports.pty_bridge import PtyBridge
 #: The exit status of a command ended by Ctrl-C (128 + SIGINT), as shells report it.
 INTERRUPTED = 130
 
+
+
+def version_text() -> str:
+    """``wcdrive --version``: the package, the protocol, and how each C helper was had
+    (built at install, at first use, or Python and why)."""
+    from wcdrive._util import native
+    from wcdrive.avr import f32  # noqa: F401  (each loads its C helper, or records why not)
+    from wcdrive.firmware import tick_fast  # noqa: F401
+    from wcdrive.plant.chair import load_kernel
+
+    load_kernel()
+    lines = [f"wcdrive {__version__} (protocol v{integer('PROTOCOL_VERSION')})"]
+    lines += [f"  {helper}: {how}" for helper, how in sorted(native.paths().items())]
+    return "\n".join(lines)
+
+
+class _Version(argparse.Action):
+    """``--version``, computed when asked (it loads the C helpers)."""
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace,
+                 values: object, option_string: str | None = None) -> None:
+        print(version_text())
+        parser.exit()
 
 def _sim(args: argparse.Namespace) -> int:
     if args.list:
@@ -238,8 +261,8 @@ def _sweep(args: argparse.Namespace) -> int:
 def parser() -> argparse.ArgumentParser:
     """The whole command line."""
     top = argparse.ArgumentParser(prog="wcdrive", description="wcdrive: the wheelchair, simulated or real.")
-    top.add_argument("--version", action="version",
-                     version=f"wcdrive {__version__} (protocol v{integer('PROTOCOL_VERSION')})")
+    top.add_argument("--version", action=_Version, nargs=0,
+                     help="the package and protocol versions, and which paths run in C")
     top.add_argument("--debug", action="store_true",
                      help="show tracebacks and log the wcdrive loggers at DEBUG")
     sub = top.add_subparsers(dest="command", required=True)
