@@ -6,9 +6,11 @@ default, to the compiled firmware."""
 
 from __future__ import annotations
 
+import ast
 import dataclasses
 import math
 import os
+import re
 import struct
 import subprocess
 import sys
@@ -232,3 +234,72 @@ def test_a_bind_that_fails_leaves_the_python_tick(monkeypatch, caplog) -> None:
     monkeypatch.setattr(tick_fast, "_constants", lambda: {})
     assert tick_fast.load_fast() is None
     assert "pure Python" in caplog.text
+
+
+# ---- the twin rule: a change to the tick touches control.py and tick_fast.c alike ----
+#: Fields only the Python tick writes: those of the ticks the C tick declines (a fault
+#: latches, whose emergency halt sets faultFlags and emergencyStop and forgets
+#: lastTravel). Any other field the Python tick writes, the C tick must write too.
+PYTHON_ONLY = {"emergencyStop", "faultFlags", "lastTravel"}
+_FIRMWARE = Path(tick_fast.__file__).resolve().parent
+
+
+def python_tick_writes(sources: dict[str, str]) -> set[str]:
+    """The ``FirmwareState`` fields that ``control_tick`` and every function it calls
+    (in ``sources``: module name -> text) assign."""
+    funcs: dict[str, ast.FunctionDef] = {}
+    for text in sources.values():
+        funcs.update({n.name: n for n in ast.parse(text).body if isinstance(n, ast.FunctionDef)})
+    seen: set[str] = set()
+    todo = ["control_tick"]
+    while todo:
+        name = todo.pop()
+        if name in seen or name not in funcs:
+            continue
+        seen.add(name)
+        for node in ast.walk(funcs[name]):
+            if isinstance(node, ast.Call):
+                f = node.func
+                if isinstance(f, (ast.Name, ast.Attribute)):
+                    todo.append(f.id if isinstance(f, ast.Name) else f.attr)
+    written: set[str] = set()
+    for name in seen:
+        states = {a.arg for a in funcs[name].args.args
+                  if a.annotation is not None and "FirmwareState" in ast.unparse(a.annotation)}
+        written |= {node.attr for node in ast.walk(funcs[name])
+                    if isinstance(node, ast.Attribute) and isinstance(node.ctx, ast.Store)
+                    and isinstance(node.value, ast.Name) and node.value.id in states}
+    return written
+
+
+def c_tick_writes(text: str) -> set[str]:
+    """The fields tick_fast.c writes back: ``SETI``/``SETF``, and slots it marks written."""
+    body = re.sub(r"#define[^\n]*", "", text)
+    return (set(re.findall(r"\bSET[IF]\((\w+),", body))
+            | set(re.findall(r"written\[F_(\w+)\]\s*=[^=]", body))
+            | set(re.findall(r"\b[id]\[F_(\w+)\]\s*=[^=]", body)))
+
+
+def _sources() -> tuple[dict[str, str], str]:
+    py = {m: (_FIRMWARE / f"{m}.py").read_text() for m in ("control", "motion", "output")}
+    return py, (_FIRMWARE / "csrc" / "tick_fast.c").read_text()
+
+
+def test_the_c_tick_writes_every_field_the_python_tick_writes() -> None:
+    py, c = _sources()
+    python, native = python_tick_writes(py), c_tick_writes(c)
+    assert len(python) > 40
+    assert python - native == PYTHON_ONLY, "fields the Python tick writes and the C tick does not"
+    assert native - python == set(), "fields the C tick writes and the Python tick does not"
+
+
+def test_the_twin_check_sees_a_field_left_out() -> None:
+    """The check can fail: a field the Python tick starts writing, or one the C tick
+    stops writing."""
+    py, c = _sources()
+    py["control"] += "\n\ndef _extra(s: FirmwareState) -> None:\n    s.rxCount = 0\n"
+    py["control"] = py["control"].replace("def control_tick(", "def control_tick_(", 1)
+    py["control"] += "\n\ndef control_tick(s: FirmwareState) -> None:\n    control_tick_(s)\n    _extra(s)\n"
+    assert "rxCount" in python_tick_writes(py) - c_tick_writes(c)
+    dropped = c.replace("SETF(rawVelL,", "(void)(rawVelL,", 1)
+    assert "rawVelL" not in c_tick_writes(dropped) and "rawVelL" in c_tick_writes(c)
