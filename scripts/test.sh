@@ -1,8 +1,14 @@
 #!/usr/bin/env bash
 # The test command (README): installs what it needs, builds the firmware and the
 # simavr harness from source, lints (ruff, with the layering rule) and type-checks
-# (mypy), and runs the whole suite with the thorough hypothesis profile. Works on a
-# fresh Debian bookworm machine as root (or with sudo).
+# (mypy), and runs the whole suite. Works on a fresh Debian bookworm machine as root
+# (or with sudo).
+#
+# Two depths, one command, both derandomized (a red run is red again on the same code):
+#   bash scripts/test.sh            the fast profile ("default") and a short differential
+#   CI=true bash scripts/test.sh    the thorough profile ("ci"): 200 examples a test and
+#                                   the full differential (what .ci/run runs)
+# HYPOTHESIS_PROFILE=NAME overrides either; extra arguments go to pytest.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -39,5 +45,8 @@ python3 -m ruff check .
 echo "== mypy"
 python3 -m mypy
 
-echo "== pytest (hypothesis profile: ${HYPOTHESIS_PROFILE:=ci})"
+if [ -z "${HYPOTHESIS_PROFILE:-}" ]; then
+  if [ "${CI:-}" = "true" ]; then HYPOTHESIS_PROFILE=ci; else HYPOTHESIS_PROFILE=default; fi
+fi
+echo "== pytest (hypothesis profile: $HYPOTHESIS_PROFILE)"
 python3 -m pytest -n 2 --hypothesis-profile="$HYPOTHESIS_PROFILE" "$@"

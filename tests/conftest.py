@@ -1,7 +1,15 @@
 """Shared fixtures and the hypothesis profiles.
 
-``default`` is fast, for development; ``ci`` (selected by scripts/test.sh) is the
-thorough one: the differential suite then runs at least 200 traces of 5 s each.
+- ``default``: fast, for development and ``bash scripts/test.sh`` on a person's
+  machine; the differential suite runs 4 traces of 1.5 s.
+- ``ci``: thorough, what ``scripts/test.sh`` runs with ``CI=true``: 200 examples a
+  test, the differential suite 200 traces of 5 s.
+- ``explore``: as thorough, with fresh random examples each run and hypothesis'
+  example database, to look for new failures (docs/testing.md).
+
+``default`` and ``ci`` are derandomized (each test's examples follow from its name),
+so a red run is red again on the same code; ``explore`` prints the seed that replays
+it (``--hypothesis-seed``).
 """
 
 from __future__ import annotations
@@ -17,12 +25,23 @@ from hypothesis import HealthCheck, settings
 #: in a fresh venv.
 collect_ignore = ["downstream"]
 
-settings.register_profile("default", max_examples=20, deadline=None)
+settings.register_profile("default", max_examples=20, deadline=None, derandomize=True, database=None,
+                          print_blob=True)
 settings.register_profile(
     "ci", max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow],
+    derandomize=True, database=None, print_blob=True,
+)
+settings.register_profile(
+    "explore", max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow],
     print_blob=True,
 )
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "default"))
+
+
+def pytest_report_header(config: pytest.Config) -> str:
+    profile = getattr(settings, "_current_profile", "?")
+    how = "derandomized" if settings().derandomize else "random examples (replay: --hypothesis-seed)"
+    return f"hypothesis profile: {profile} ({settings().max_examples} examples, {how})"
 
 
 def thorough() -> bool:
