@@ -31,7 +31,7 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from tests.support.sim_digest import RECORDED, digest
+from tests.support.sim_digest import RECORDED, digest, fields
 from wcdrive.avr.timer0 import OVERFLOW_CYCLES
 from wcdrive.boards.port_loop import F_CPU, PortLoop
 from wcdrive.firmware.final_control import Firmware
@@ -63,9 +63,7 @@ def _signature(monkeypatch: pytest.MonkeyPatch, name: str, stepped: bool
     result = runner.run(load(name))
     monkeypatch.undo()
     out: dict[str, object] = {"states": states}
-    for key, value in vars(result).items():
-        if key == "wall_time":
-            continue
+    for key, value in fields(result).items():
         out[key] = value.tobytes() + str(value.shape).encode() if isinstance(value, np.ndarray) else value
     metrics = result.metrics()
     metrics.pop("real_time_factor")
