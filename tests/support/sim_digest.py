@@ -1,6 +1,7 @@
-"""A digest of a ``wcdrive sim`` port run: a sha256 per field of its ``SimResult``
-(every line the board sent with its cycle, the tick log, the plant's motion log, the
-gyro's samples, the odometries, every figure; not the wall time), for
+"""A digest of a ``wcdrive sim`` port run: a sha256 per field of its ``SimResult`` and
+its records, by the names in ``FIELDS`` (every line the board sent with its cycle, the
+tick log, the plant's motion log, the gyro's samples, the odometries, every figure;
+not the wall time), for
 tests/sim/test_sim_speed.py's recorded outputs (``tests/data/sim_digests.json``).
 
 Re-record (only when the port's outputs change on purpose, e.g. the firmware's timing):
