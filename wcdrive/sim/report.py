@@ -6,7 +6,7 @@ import json
 import math
 from pathlib import Path
 
-from wcdrive.sim.runner import SimResult
+from wcdrive.sim.result import SimResult
 
 
 def table(result: SimResult) -> str:

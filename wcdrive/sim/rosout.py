@@ -26,7 +26,7 @@ import numpy as np
 from wcdrive.host.odometry import UNUSED, OdometryParams
 from wcdrive.plant.params import ChairParams
 from wcdrive.ros2 import bridge as ros2
-from wcdrive.sim.runner import SimResult
+from wcdrive.sim.result import SimResult
 
 #: Seed 000's ekf.yaml: odom0_pose_covariance and odom0_twist_covariance (x, y, z,
 #: roll, pitch, yaw; 1e6 = "not used").

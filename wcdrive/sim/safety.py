@@ -41,7 +41,7 @@ import numpy as np
 from wcdrive.avr.timer0 import F_CPU
 from wcdrive.plant.faults import Fault
 from wcdrive.protocol.spec import real
-from wcdrive.sim.runner import SimResult
+from wcdrive.sim.result import SimResult
 from wcdrive.sim.scenario import Scenario
 
 #: s: the chair stands still this soon after an encoder, wheel or motor fault (the
