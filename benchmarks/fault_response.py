@@ -24,12 +24,12 @@ def measure(name: str, backend: str) -> dict[str, object]:
     result = runner.run(sc, backend=backend)
     m = result.fault_metrics()
     at = m["fault_at_s"]
-    latched = next((t for t, line in result.events if line.startswith("EVT:FAULT") and at is not None
+    latched = next((t for t, line in result.link.events if line.startswith("EVT:FAULT") and at is not None
                     and t >= at), None)
     kind, _ = safety.trigger(sc)
     return {
         "scenario": name, "backend": backend, "kind": kind, "fault_at_s": at,
-        "event": next((line for t, line in result.events if at is not None and t >= at - 1e-9), None),
+        "event": next((line for t, line in result.link.events if at is not None and t >= at - 1e-9), None),
         "detected_after_s": None if latched is None or at is None else round(latched - at, 3),
         "commanded_mps": round(safety.commanded_speed(sc, at or 0.0), 3),
         "peak_after_mps": m["peak_speed_after_fault_mps"],

@@ -19,8 +19,8 @@ import numpy as np
 
 from wcdrive.sim import runner, scenario
 
-ESTIMATES = (("odom_wheel", "position"), ("odom_velocity", "velocity"), ("odom_gyro", "wheels + gyro"),
-             ("odom_ekf", "EKF seed 000"), ("odom_ekf_vel", "EKF wheel vel."))
+ESTIMATES = (("wheel", "position"), ("velocity", "velocity"), ("gyro", "wheels + gyro"),
+             ("ekf", "EKF seed 000"), ("ekf_vel", "EKF wheel vel."))
 
 
 def default_scenarios() -> list[str]:
@@ -36,9 +36,9 @@ def default_scenarios() -> list[str]:
 
 def row(result: runner.SimResult) -> list[str]:
     cells = [result.scenario, f"{result.duration:.1f}"]
-    truth = result.truth
+    truth = result.truth.pose
     for key, _ in ESTIMATES:
-        est = getattr(result, key)
+        est = getattr(result.odometry, key)
         assert est is not None
         final = math.hypot(*(est[-1, :2] - truth[-1, :2]))
         rms = float(np.sqrt(np.mean(np.sum((est[:, :2] - truth[:, :2]) ** 2, axis=1))))

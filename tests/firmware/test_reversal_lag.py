@@ -66,7 +66,7 @@ def test_turning_on_the_spot_from_motion_on_the_firmware(tmp_path) -> None:
     """The same on the compiled sketch in simavr, the port replaying it: no fault, 0
     differences."""
     result = runner.run(_scenario(tmp_path, *SPIN_FROM_MOTION[1]), backend="simavr")
-    assert not any("EVT:FAULT" in line for _, line in result.events), result.events
+    assert not any("EVT:FAULT" in line for _, line in result.link.events), result.link.events
     assert result.firmware_differences == 0
 
 

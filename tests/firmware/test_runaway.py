@@ -69,17 +69,17 @@ def _run(directory: str, side: str, w: float, backend: str) -> runner.SimResult:
 
 def _check_bounds(r: runner.SimResult, side: str) -> None:
     event = f"EVT:FAULT,ENC_REVERSED_{side[0].upper()}"
-    faults = [(t, line) for t, line in r.events if line.startswith("EVT:FAULT")]
-    assert faults and faults[0][1] == event, r.events
+    faults = [(t, line) for t, line in r.link.events if line.startswith("EVT:FAULT")]
+    assert faults and faults[0][1] == event, r.link.events
     assert faults[0][0] - FAULT_AT <= LATCH_WITHIN_S, faults
     wheel = 0 if side == "left" else 1
-    after = r.tick_time >= FAULT_AT
-    peak = float(np.max(np.abs(r.wheel_speed[after, wheel])))
+    after = r.board.tick_time >= FAULT_AT
+    peak = float(np.max(np.abs(r.truth.wheel_speed[after, wheel])))
     assert peak <= PEAK_WHEEL_RAD_S, peak
     m = r.fault_metrics()
     assert m["travel_after_fault_m"] is not None and m["travel_after_fault_m"] <= TRAVEL_M, m
     assert m["standstill_after_fault_s"] is not None, m          # it stops, and stays stopped
-    assert r.pwm[-1].tolist() == [0, 0]
+    assert r.board.pwm[-1].tolist() == [0, 0]
 
 
 @pytest.mark.parametrize(("side", "w"), CASES)

@@ -180,7 +180,7 @@ def test_the_firmware_ticks_in_c() -> None:
         result = runner.run(scenario.load("corridor_100m"))
     finally:
         final_control._fast_tick = real
-    stops = [line for _, line in result.events if line.startswith(("EVT:WATCHDOG", "EVT:FAULT"))]
+    stops = [line for _, line in result.link.events if line.startswith(("EVT:WATCHDOG", "EVT:FAULT"))]
     assert stops == ["EVT:WATCHDOG"]
     assert calls > 2000 and refused == 1, (calls, refused)
 
@@ -201,9 +201,10 @@ def test_a_scenario_runs_the_same_with_the_python_tick(name: str) -> None:
         b = runner.run(sc)
     finally:
         final_control._fast_tick = real
-    for key in ("truth", "setpoint", "measured", "pwm", "counts", "wheel_speed", "tick_cycles"):
-        assert np.array_equal(getattr(a, key), getattr(b, key)), key
-    assert a.serial_lines == b.serial_lines
+    for record, key in (("truth", "pose"), ("board", "setpoint"), ("board", "measured"), ("board", "pwm"),
+                        ("board", "counts"), ("truth", "wheel_speed"), ("board", "tick_cycles")):
+        assert np.array_equal(getattr(getattr(a, record), key), getattr(getattr(b, record), key)), key
+    assert a.link.lines == b.link.lines
 
 
 def test_pure_python_when_asked() -> None:

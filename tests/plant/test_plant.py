@@ -52,15 +52,15 @@ def test_current_limit_bounds_the_motor_current() -> None:
 
 def test_kinematics_0_5_m_s_with_0_2_rad_s() -> None:
     r = _run([("cmdvel", (0.5, 0.2), 15.0)])
-    i = np.searchsorted(r.tick_time, 14.5)
-    assert r.setpoint[i] == pytest.approx((2.91, 3.65), abs=0.005)     # left, right
-    assert r.wheel_speed[i] == pytest.approx((2.91, 3.65), abs=0.02)
+    i = np.searchsorted(r.board.tick_time, 14.5)
+    assert r.board.setpoint[i] == pytest.approx((2.91, 3.65), abs=0.005)     # left, right
+    assert r.truth.wheel_speed[i] == pytest.approx((2.91, 3.65), abs=0.02)
 
 
 def test_ramp_takes_0_to_10_rad_s_in_2_s() -> None:
     r = _run([("wheel", (10.0, 10.0), 3.0)])
-    start = r.tick_time[np.argmax(r.setpoint[:, 0] > 0)]
-    reached = r.tick_time[np.argmax(r.setpoint[:, 0] >= 10.0)]
+    start = r.board.tick_time[np.argmax(r.board.setpoint[:, 0] > 0)]
+    reached = r.board.tick_time[np.argmax(r.board.setpoint[:, 0] >= 10.0)]
     assert reached - start == pytest.approx(2.0 - 0.05, abs=0.06)     # first step at the first tick
 
 
@@ -68,13 +68,14 @@ def test_no_windup_overshoot_after_saturation() -> None:
     """A weak battery (20 V) cannot reach 17.5 rad/s: the PID saturates for seconds,
     then a step down to 3 rad/s must not undershoot (back-calculation)."""
     r = _run([("wheel", (17.5, 17.5), 6.0), ("wheel", (3.0, 3.0), 6.0)], battery_voltage=20.0)
-    t = r.tick_time
+    t = r.board.tick_time
     saturated = (t > 4.0) & (t < 6.0)
-    assert np.mean(np.abs(r.pwm[saturated]) == 255) > 0.5 and np.all(np.abs(r.pwm[saturated]) >= 240)
+    pwm = np.abs(r.board.pwm[saturated])
+    assert np.mean(pwm == 255) > 0.5 and np.all(pwm >= 240)
     after = (t > 6.0) & (t < 12.0)
-    assert r.measured[after].min() > 3.0 - 0.05          # approaches 3.0 from above, no dip
-    late = r.measured[(t > 11.0) & (t < 12.0)].mean()
-    assert late < r.measured[(t > 8.0) & (t < 9.0)].mean() and late < 3.6   # settling from above
+    assert r.board.measured[after].min() > 3.0 - 0.05          # approaches 3.0 from above, no dip
+    late = r.board.measured[(t > 11.0) & (t < 12.0)].mean()
+    assert late < r.board.measured[(t > 8.0) & (t < 9.0)].mean() and late < 3.6   # settling from above
 
 
 def test_slip_turns_wheel_odometry_but_not_the_gyro() -> None:
@@ -90,7 +91,7 @@ def test_slip_turns_wheel_odometry_but_not_the_gyro() -> None:
 
 def _reverse_start(r: runner.SimResult) -> int:
     """First tick at which the chair moves backwards faster than 0.1 m/s."""
-    speed = 0.5 * 0.1524 * r.wheel_speed.sum(axis=1)
+    speed = 0.5 * 0.1524 * r.truth.wheel_speed.sum(axis=1)
     return int(np.argmax(speed < -0.1))
 
 
@@ -100,12 +101,12 @@ def test_pivot_swings_the_casters_round_before_reversing() -> None:
     pivot = runner.run(scenario.load("reversal_pivot"))
     straight = runner.run(scenario.load("reversal_no_pivot"))
     i, j = _reverse_start(pivot), _reverse_start(straight)
-    assert np.all(np.degrees(np.abs(pivot.caster[i])) > 60.0)
-    assert np.all(np.degrees(np.abs(straight.caster[j])) < 30.0)
+    assert np.all(np.degrees(np.abs(pivot.truth.caster[i])) > 60.0)
+    assert np.all(np.degrees(np.abs(straight.truth.caster[j])) < 30.0)
     # Without the pivot the swing happens while reversing: it ends later in the manoeuvre.
     def swung(r: runner.SimResult) -> float:
-        k = int(np.argmax(np.all(np.abs(r.caster) > math.radians(150), axis=1)))
-        return float(r.tick_time[k] - r.tick_time[_reverse_start(r)])
+        k = int(np.argmax(np.all(np.abs(r.truth.caster) > math.radians(150), axis=1)))
+        return float(r.board.tick_time[k] - r.board.tick_time[_reverse_start(r)])
     assert swung(pivot) < swung(straight)
 
 
@@ -126,7 +127,7 @@ def test_gyro_noise_matches_the_bmi085_figure() -> None:
 def test_runs_are_deterministic() -> None:
     a = runner.run(scenario.load("l_shape"), seed=3)
     b = runner.run(scenario.load("l_shape"), seed=3)
-    assert np.array_equal(a.truth, b.truth) and np.array_equal(a.odom_gyro, b.odom_gyro)
+    assert np.array_equal(a.truth.pose, b.truth.pose) and np.array_equal(a.odometry.gyro, b.odometry.gyro)
 
 
 @pytest.mark.parametrize("path", scenario.bundled(), ids=lambda p: p.stem)
@@ -149,11 +150,11 @@ def test_simavr_backend_gives_the_same_firmware_outputs(elf) -> None:
     sc = Scenario("short", "", (Segment("cmdvel", (0.4, 0.3), 1.5), Segment("cmdvel", (-0.3, 0.0), 1.5)),
                   settle_s=0.5)
     r = runner.run(sc, backend="simavr", elf=elf)
-    assert r.firmware_events_compared > 100
+    assert r.lockstep.events_compared > 100
     assert r.firmware_differences == 0
     port = runner.run(sc)
     # Not identical (the simavr tick latches counts mid-step), but the same motion.
-    assert np.abs(r.truth[-1, :2] - port.truth[-1, :2]).max() < 0.02
+    assert np.abs(r.truth.pose[-1, :2] - port.truth.pose[-1, :2]).max() < 0.02
 
 
 def _drive_bits(plant: Plant, seed: int = 5, ticks: int = 80) -> list[bytes]:

@@ -72,12 +72,12 @@ def test_closed_loop_scenarios_reach_their_goals_on_the_port(name: str) -> None:
     assert m["goal_error_m"] <= sc.follow.truth_tolerance, m["goal_error_m"]
     assert m["goal_within_tolerance"] is True
     assert result.duration < sc.duration                         # ended once there
-    assert not any(line.startswith("EVT:FAULT") for _, line in result.events)  # no detector tripped
+    assert not any(line.startswith("EVT:FAULT") for _, line in result.link.events)  # no detector tripped
     assert sc.path is not None
     for wx, wy in sc.path:                                       # and drove by every waypoint
-        nearest = min(math.hypot(x - wx, y - wy) for x, y, _ in result.truth)
+        nearest = min(math.hypot(x - wx, y - wy) for x, y, _ in result.truth.pose)
         assert nearest <= max(0.15, sc.follow.truth_tolerance), (wx, wy, nearest)
-    assert result.cmd_vel and all(abs(v) <= sc.follow.speed + 1e-9 for _, v, _ in result.cmd_vel)
+    assert result.link.cmd_vel and all(abs(v) <= sc.follow.speed + 1e-9 for _, v, _ in result.link.cmd_vel)
 
 
 @pytest.mark.simavr

@@ -29,6 +29,7 @@ from wcdrive.plant.encoders import state_for_count
 from wcdrive.plant.faults import EncoderWire, Fault, swap_ab
 from wcdrive.protocol.codec import encode_cmdvel
 from wcdrive.sim import runner, safety, scenario
+from wcdrive.sim.result import BoardLog, GroundTruth, Odometry
 from wcdrive.sim.scenario import Scenario, ScenarioError, Segment
 from wcdrive.tools.cli import main as wcdrive_main
 
@@ -330,14 +331,13 @@ def _synthetic(speed: list[float], volts: list[float], fault_at: float, ticks=(0
     n = len(speed)
     z = np.zeros((1, 2))
     return runner.SimResult(
-        scenario="x", backend="port", duration=n * 0.1, wall_time=1.0, ticks=1, tick_time=np.zeros(1),
-        truth=np.zeros((1, 3)), odom_wheel=np.zeros((1, 3)), odom_velocity=np.zeros((1, 3)),
-        odom_gyro=np.zeros((1, 3)), setpoint=z, measured=z, wheel_speed=z, pwm=z, caster=z, counts=z,
-        caster_scrub_energy=0, caster_scrub_time=0, caster_swivel_work=0, caster_side_impulse=0,
-        step_time=0.1 * np.arange(1, n + 1), step_speed=np.array(speed),
-        step_contact_speed=np.stack((np.array(speed), 0.5 * np.array(speed)), axis=1),
-        step_volts=np.stack((np.array(volts), np.zeros(n)), axis=1),
-        tick_cycles=np.array(ticks, dtype=np.int64), fault_at=fault_at)
+        scenario="x", backend="port", duration=n * 0.1, wall_time=1.0,
+        truth=GroundTruth(np.zeros((1, 3)), z, z, step_time=0.1 * np.arange(1, n + 1),
+                          step_speed=np.array(speed),
+                          step_contact_speed=np.stack((np.array(speed), 0.5 * np.array(speed)), axis=1),
+                          step_volts=np.stack((np.array(volts), np.zeros(n)), axis=1)),
+        board=BoardLog(np.zeros(1), z, z, z, z, tick_cycles=np.array(ticks, dtype=np.int64)),
+        odometry=Odometry(np.zeros((1, 3)), np.zeros((1, 3)), np.zeros((1, 3))), fault_at=fault_at)
 
 
 def test_fault_figures_from_ground_truth() -> None:
@@ -420,67 +420,68 @@ def test_sim_table_names_the_fault(tmp_path: Path) -> None:
 
 # ---- each kind on both backends: inputs and ground truth ------------------------------
 def _after(r: runner.SimResult, t: float) -> np.ndarray:
-    return r.tick_time > t
+    return r.board.tick_time > t
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_cut_encoder_count_freezes_on_both_backends(backend: str) -> None:
     r = _run("fault_encoder_cut_both", backend)
-    counts = r.counts[r.tick_time > 1.5 + 0.002]
+    counts = r.board.counts[r.board.tick_time > 1.5 + 0.002]
     assert np.all(counts == counts[0])
-    assert np.ptp(r.counts[(r.tick_time > 1.0) & (r.tick_time < 1.5)], axis=0).min() > 500
+    assert np.ptp(r.board.counts[(r.board.tick_time > 1.0) & (r.board.tick_time < 1.5)], axis=0).min() > 500
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_reversed_encoder_counts_against_the_wheel_on_both_backends(backend: str) -> None:
     r = _run("fault_encoder_reversed", backend)
-    window = (r.tick_time > 1.51) & (r.tick_time < 1.62)
+    window = (r.board.tick_time > 1.51) & (r.board.tick_time < 1.62)
     # the left encoder counts down going forward; reversed, it counts up
-    assert np.all(r.wheel_speed[window, 0] > 1.0)
-    assert np.all(np.diff(r.counts[window, 0]) > 0)
-    before = (r.tick_time > 1.2) & (r.tick_time < 1.5)
-    assert np.all(np.diff(r.counts[before, 0]) < 0)
+    assert np.all(r.truth.wheel_speed[window, 0] > 1.0)
+    assert np.all(np.diff(r.board.counts[window, 0]) > 0)
+    before = (r.board.tick_time > 1.2) & (r.board.tick_time < 1.5)
+    assert np.all(np.diff(r.board.counts[before, 0]) < 0)
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_locked_wheel_stands_still_on_both_backends(backend: str) -> None:
     r = _run("fault_wheel_locked", backend)
-    assert np.all(r.wheel_speed[_after(r, 1.51), 0] == 0.0)
-    assert np.all(r.wheel_speed[(r.tick_time > 1.0) & (r.tick_time < 1.5), 0] > 2.0)
+    assert np.all(r.truth.wheel_speed[_after(r, 1.51), 0] == 0.0)
+    assert np.all(r.truth.wheel_speed[(r.board.tick_time > 1.0) & (r.board.tick_time < 1.5), 0] > 2.0)
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_dead_motor_on_both_backends(backend: str) -> None:
     r = _run("fault_motor_dead", backend)
-    before, after = np.searchsorted(r.step_time, [1.45, 2.0])
-    left, right = r.step_contact_speed[before]
+    before, after = np.searchsorted(r.truth.step_time, [1.45, 2.0])
+    left, right = r.truth.step_contact_speed[before]
     assert abs(left - right) < 0.02
     # the left motor drives no more: its side falls behind whatever duty it gets
-    left, right = r.step_contact_speed[after]
-    assert left < right - 0.02 and r.step_volts[after, 0] > r.step_volts[before, 0]
+    left, right = r.truth.step_contact_speed[after]
+    assert left < right - 0.02 and r.truth.step_volts[after, 0] > r.truth.step_volts[before, 0]
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_noise_reaches_the_isr_on_both_backends(backend: str) -> None:
     r = _run("fault_encoder_noise_100k", backend)
-    assert any(line == "EVT:FAULT,ENC_IMPLAUSIBLE_L" for _, line in r.events)
-    assert not any(line == "EVT:FAULT,ENC_IMPLAUSIBLE_R" for _, line in r.events)
+    assert any(line == "EVT:FAULT,ENC_IMPLAUSIBLE_L" for _, line in r.link.events)
+    assert not any(line == "EVT:FAULT,ENC_IMPLAUSIBLE_R" for _, line in r.link.events)
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_reset_reboots_the_board_on_both_backends(backend: str) -> None:
     r = _run("fault_reset", backend)
-    assert [line for _, line in r.boots] == ["BOOT:final_control,POWER_ON", "BOOT:final_control,EXTERNAL"]
-    assert 1.5 <= r.boots[1][0] < 1.505                     # sent once setup() has run
-    i = np.searchsorted(r.step_time, 1.5 + 1e-9)
-    assert np.all(r.step_volts[i:i + 40] == 0.0) and np.any(r.step_volts[i - 5:i] != 0.0)
+    boots = [line for _, line in r.link.boots]
+    assert boots == ["BOOT:final_control,POWER_ON", "BOOT:final_control,EXTERNAL"]
+    assert 1.5 <= r.link.boots[1][0] < 1.505                     # sent once setup() has run
+    i = np.searchsorted(r.truth.step_time, 1.5 + 1e-9)
+    assert np.all(r.truth.step_volts[i:i + 40] == 0.0) and np.any(r.truth.step_volts[i - 5:i] != 0.0)
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_link_cut_silences_the_host_on_both_backends(backend: str) -> None:
     r = _run("fault_link_cut", backend)
     assert r.fault_at is not None and 3.52 < r.fault_at < 3.521 + 2 * UART_BYTE_CYCLES / F_CPU
-    assert any(line == "EVT:WATCHDOG" for _, line in r.events)
+    assert any(line == "EVT:WATCHDOG" for _, line in r.link.events)
 
 
 # ---- the issue's safety bounds ----------------------------------------------------------
@@ -501,8 +502,9 @@ def test_bounds_can_fail() -> None:
     firmware before issue 13, simulated by forcing full duty) breaks every bound."""
     sc = scenario.load("fault_encoder_cut_both")
     r = _run("fault_encoder_cut_both", "port")
-    bad = dataclasses.replace(r, events=[], step_volts=np.full_like(r.step_volts, 24.0),
-                              step_speed=np.where(r.step_time > 1.5, 1.9, r.step_speed))
+    truth = dataclasses.replace(r.truth, step_volts=np.full_like(r.truth.step_volts, 24.0),
+                                step_speed=np.where(r.truth.step_time > 1.5, 1.9, r.truth.step_speed))
+    bad = dataclasses.replace(r, link=dataclasses.replace(r.link, events=[]), truth=truth)
     problems = safety.violations(sc, bad)
     assert len(problems) == 4, problems
     assert safety.stopping_bound(1.95, 500) == pytest.approx(1.95 * 0.6 + 1.95**2 / (2 * 15 * 0.1524) + 0.1)

@@ -24,6 +24,8 @@ import json
 import math
 import subprocess
 import sys
+import types
+import typing
 from pathlib import Path
 
 import numpy as np
@@ -31,7 +33,7 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from tests.support.sim_digest import RECORDED, digest
+from tests.support.sim_digest import FIELDS, RECORDED, digest, fields
 from wcdrive.avr.timer0 import OVERFLOW_CYCLES
 from wcdrive.boards.port_loop import F_CPU, PortLoop
 from wcdrive.firmware.final_control import Firmware
@@ -63,9 +65,7 @@ def _signature(monkeypatch: pytest.MonkeyPatch, name: str, stepped: bool
     result = runner.run(load(name))
     monkeypatch.undo()
     out: dict[str, object] = {"states": states}
-    for key, value in vars(result).items():
-        if key == "wall_time":
-            continue
+    for key, value in fields(result).items():
         out[key] = value.tobytes() + str(value.shape).encode() if isinstance(value, np.ndarray) else value
     metrics = result.metrics()
     metrics.pop("real_time_factor")
@@ -90,6 +90,27 @@ def test_every_scenario_runs_the_same_on_the_event_loop(monkeypatch: pytest.Monk
         changed = [key for key in now if now[key] != recorded[key]]
         assert not changed, (f"{name}: {changed} differ from the recorded outputs; re-record only "
                              "for a change on purpose (tests/support/sim_digest.py)")
+
+
+def test_the_digest_names_every_field_of_a_result() -> None:
+    """``FIELDS`` (the digest's names) reaches every field of ``SimResult`` and of its
+    records but the wall time, each once: a field added to a record is digested."""
+    leaves = set()
+    for name, hint in typing.get_type_hints(runner.SimResult).items():
+        options = typing.get_args(hint) if isinstance(hint, types.UnionType) else (hint,)   # a record or None
+        record = next((t for t in options if dataclasses.is_dataclass(t)), None)
+        if record is None:
+            leaves.add(name)
+        else:
+            leaves.update(f"{name}.{f.name}" for f in dataclasses.fields(record))
+    paths = list(FIELDS.values())
+    assert len(set(paths)) == len(paths)
+    assert leaves - {"wall_time"} == set(paths) - {"ticks"}
+
+
+def test_a_backend_object_runs_as_its_name() -> None:
+    sc = load("fault_reset")
+    assert digest(runner.run(sc, backend=runner.PortBackend())) == digest(runner.run(sc, backend="port"))
 
 
 # ---- the loop alone, on random inputs ---------------------------------------------------

@@ -1,2 +1,3 @@
 """``wcdrive sim``: scenarios (``scenario``), the closed loop of host, firmware and
-plant (``runner``), and what a run prints and draws (``report``)."""
+plant (``runner``, with the run's host in ``host``), what a run gives (``result``), and
+what it prints and draws (``report``)."""

@@ -6,7 +6,7 @@ import json
 import math
 from pathlib import Path
 
-from wcdrive.sim.runner import SimResult
+from wcdrive.sim.result import SimResult
 
 
 def table(result: SimResult) -> str:
@@ -40,9 +40,9 @@ def table(result: SimResult) -> str:
                  f"{m['caster_side_impulse_ns']:.1f} N s, scrub {m['caster_scrub_energy_j']:.3f} J")
     lines.append(f"  lines from the board: {m['lines_feedback']} feedback, {m['lines_error']} ERR, "
                  f"{m['lines_event']} EVT")
-    if result.firmware_differences is not None:
-        lines.append(f"  port vs firmware: {result.firmware_differences} differences over "
-                     f"{result.firmware_events_compared} firmware events")
+    if result.lockstep is not None:
+        lines.append(f"  port vs firmware: {result.lockstep.differences} differences over "
+                     f"{result.lockstep.events_compared} firmware events")
     lines.append(f"  control ticks: at most {m['max_tick_gap_ms']:.1f} ms apart")
     if m.get("closed_loop"):
         reached = m["goal_reached_s"]
@@ -65,7 +65,7 @@ def table(result: SimResult) -> str:
                      f"{secs('pwm_zero_after_fault_s')}, standstill after "
                      f"{secs('standstill_after_fault_s')}, travel {m['travel_after_fault_m']:.3f} m, "
                      f"peak {m['peak_speed_after_fault_mps']:.3f} m/s")
-    for t, line in result.boots[1:] + result.events:
+    for t, line in result.link.boots[1:] + result.link.events:
         lines.append(f"  {t:8.3f} s  {line}")
     return "\n".join(lines)
 
@@ -94,13 +94,14 @@ def plots(result: SimResult, out: Path) -> list[Path]:
     import matplotlib.pyplot as plt
 
     out.mkdir(parents=True, exist_ok=True)
-    t = result.tick_time
+    board, truth, odometry = result.board, result.truth, result.odometry
+    t = board.tick_time
     paths = []
 
     fig, ax = plt.subplots(figsize=(6.5, 6))
-    ax.plot(result.truth[:, 0], result.truth[:, 1], "k-", lw=2, label="ground truth")
-    ax.plot(result.odom_wheel[:, 0], result.odom_wheel[:, 1], "C0--", label="wheel odometry")
-    ax.plot(result.odom_gyro[:, 0], result.odom_gyro[:, 1], "C2:", lw=2, label="wheels + gyro")
+    ax.plot(truth.pose[:, 0], truth.pose[:, 1], "k-", lw=2, label="ground truth")
+    ax.plot(odometry.wheel[:, 0], odometry.wheel[:, 1], "C0--", label="wheel odometry")
+    ax.plot(odometry.gyro[:, 0], odometry.gyro[:, 1], "C2:", lw=2, label="wheels + gyro")
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
@@ -112,9 +113,9 @@ def plots(result: SimResult, out: Path) -> list[Path]:
     fig, axes = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
     for i, side in enumerate(("left", "right")):
         a = axes[i]
-        a.plot(t, result.setpoint[:, i], "k-", label="setpoint (ramped)")
-        a.plot(t, result.measured[:, i], "C0-", label="measured (filtered)")
-        a.plot(t, result.wheel_speed[:, i], "C1--", lw=1, label="true wheel speed")
+        a.plot(t, board.setpoint[:, i], "k-", label="setpoint (ramped)")
+        a.plot(t, board.measured[:, i], "C0-", label="measured (filtered)")
+        a.plot(t, truth.wheel_speed[:, i], "C1--", lw=1, label="true wheel speed")
         a.set_ylabel(f"{side} wheel (rad/s)")
         a.grid(True, alpha=0.3)
     axes[0].legend(loc="best", fontsize=8)
@@ -123,8 +124,8 @@ def plots(result: SimResult, out: Path) -> list[Path]:
     paths.append(_save(fig, out / "wheels.png"))
 
     fig, ax = plt.subplots(figsize=(8, 3.5))
-    ax.step(t, result.pwm[:, 0], where="post", label="left")
-    ax.step(t, result.pwm[:, 1], where="post", label="right")
+    ax.step(t, board.pwm[:, 0], where="post", label="left")
+    ax.step(t, board.pwm[:, 1], where="post", label="right")
     ax.set_xlabel("time (s)")
     ax.set_ylabel("PWM duty, signed by DIR")
     ax.set_ylim(-260, 260)

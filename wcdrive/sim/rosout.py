@@ -26,7 +26,7 @@ import numpy as np
 from wcdrive.host.odometry import UNUSED, OdometryParams
 from wcdrive.plant.params import ChairParams
 from wcdrive.ros2 import bridge as ros2
-from wcdrive.sim.runner import SimResult
+from wcdrive.sim.result import SimResult
 
 #: Seed 000's ekf.yaml: odom0_pose_covariance and odom0_twist_covariance (x, y, z,
 #: roll, pitch, yaw; 1e6 = "not used").
@@ -40,11 +40,12 @@ def _ticks(result: SimResult, params: ChairParams) -> Iterator[Message]:
     op = OdometryParams(wheel_radius=params.wheel_radius, wheelbase=params.wheelbase,
                         counts_per_rev=params.counts_per_rev)
     per_count = 2.0 * math.pi / op.counts_per_rev
-    t = result.tick_time
-    counts = result.counts
+    board, truth, odometry = result.board, result.truth, result.odometry
+    t = board.tick_time
+    counts = board.counts
     for i in range(len(t)):
         ti = float(t[i])
-        x, y, th = (float(v) for v in result.odom_wheel[i])
+        x, y, th = (float(v) for v in odometry.wheel[i])
         v = w = 0.0
         gv = gw = 0.0
         if i > 0 and t[i] > t[i - 1]:
@@ -52,25 +53,25 @@ def _ticks(result: SimResult, params: ChairParams) -> Iterator[Message]:
             d_left = -(counts[i, 0] - counts[i - 1, 0]) * per_count * op.wheel_radius
             d_right = (counts[i, 1] - counts[i - 1, 1]) * per_count * op.wheel_radius
             v, w = 0.5 * (d_left + d_right) / dt, (d_right - d_left) / op.wheelbase / dt
-            tx0, ty0, tt0 = result.truth[i - 1]
-            tx1, ty1, tt1 = result.truth[i]
+            tx0, ty0, tt0 = truth.pose[i - 1]
+            tx1, ty1, tt1 = truth.pose[i]
             gv = ((tx1 - tx0) * math.cos(tt1) + (ty1 - ty0) * math.sin(tt1)) / dt
             gw = math.remainder(tt1 - tt0, 2 * math.pi) / dt
         yield ti, "/odom", ros2.odometry(ti, x, y, th, v, w, ODOM_POSE_COVARIANCE, ODOM_TWIST_COVARIANCE)
         yield ti, "/tf", ros2.tf(ti, x, y, th)
         yield ti, "/joint_states", ros2.joint_state(
             ti, (-float(counts[i, 0]) * per_count, float(counts[i, 1]) * per_count),
-            (float(result.measured[i, 0]), float(result.measured[i, 1])))
-        tx, ty, tth = (float(c) for c in result.truth[i])
+            (float(board.measured[i, 0]), float(board.measured[i, 1])))
+        tx, ty, tth = (float(c) for c in truth.pose[i])
         yield ti, "/ground_truth", ros2.odometry(ti, tx, ty, tth, gv, gw)
-        if result.odom_ekf_vel is not None:
-            ex, ey, eth = (float(c) for c in result.odom_ekf_vel[i])
+        if odometry.ekf_vel is not None:
+            ex, ey, eth = (float(c) for c in odometry.ekf_vel[i])
             yield ti, "/odometry/filtered", ros2.odometry(ti, ex, ey, eth, 0.0, 0.0)
 
 
 def _imu(result: SimResult, params: ChairParams) -> Iterator[Message]:
     variance = math.radians(params.gyro_noise_dps) ** 2
-    for t, rate in zip(result.gyro_time, result.gyro_rate, strict=True):
+    for t, rate in zip(result.odometry.gyro_time, result.odometry.gyro_rate, strict=True):
         yield float(t), "/imu", ros2.imu(float(t), float(rate), variance)
 
 
@@ -80,8 +81,8 @@ def messages(result: SimResult, params: ChairParams | None = None) -> Iterator[M
     streams = [
         _ticks(result, params),
         _imu(result, params),
-        ((t, "/cmd_vel", ros2.twist(v, w)) for t, v, w in result.cmd_vel),
-        ((t, "/diagnostics/serial", ros2.serial_line(t, line)) for t, line in result.serial_lines),
+        ((t, "/cmd_vel", ros2.twist(v, w)) for t, v, w in result.link.cmd_vel),
+        ((t, "/diagnostics/serial", ros2.serial_line(t, line)) for t, line in result.link.lines),
     ]
     yield from heapq.merge(*streams, key=lambda m: m[0])
 

@@ -41,7 +41,7 @@ import numpy as np
 from wcdrive.avr.timer0 import F_CPU
 from wcdrive.plant.faults import Fault
 from wcdrive.protocol.spec import real
-from wcdrive.sim.runner import SimResult
+from wcdrive.sim.result import SimResult
 from wcdrive.sim.scenario import Scenario
 
 #: s: the chair stands still this soon after an encoder, wheel or motor fault (the
@@ -124,10 +124,11 @@ def trigger(scenario: Scenario) -> tuple[str, Fault | None]:
 
 def speed_at(result: SimResult, t: float) -> float:
     """m/s: the chair's true speed at time ``t`` (the physics step ending there)."""
-    if result.step_time.size == 0:
+    truth = result.truth
+    if truth.step_time.size == 0:
         return 0.0
-    i = min(int(np.searchsorted(result.step_time, t - 1e-12)), result.step_time.size - 1)
-    return float(result.step_speed[i])
+    i = min(int(np.searchsorted(truth.step_time, t - 1e-12)), truth.step_time.size - 1)
+    return float(truth.step_speed[i])
 
 
 def violations(scenario: Scenario, result: SimResult) -> list[str]:
@@ -139,7 +140,7 @@ def violations(scenario: Scenario, result: SimResult) -> list[str]:
         return []
     out: list[str] = []
     kind, _ = trigger(scenario)
-    events = [(t, line) for t, line in result.events if t >= at - 1e-9]
+    events = [(t, line) for t, line in result.link.events if t >= at - 1e-9]
     if kind in ("encoder_cut", "encoder_reversed", "wheel_locked", "motor_dead"):
         if not any(line.startswith("EVT:FAULT,") for _, line in events):
             out.append(f"no EVT:FAULT line after the {kind} at {at} s")
@@ -168,7 +169,7 @@ def violations(scenario: Scenario, result: SimResult) -> list[str]:
                     out.append(f"no {name} line")
         if m["standstill_after_fault_s"] is None:
             out.append("the chair never stops")
-        if any(line.endswith(",WATCHDOG") for _, line in result.boots):
+        if any(line.endswith(",WATCHDOG") for _, line in result.link.boots):
             out.append("the hardware watchdog reset the board")
     elif kind in ("link_cut", "silence"):
         watchdog = scenario.board_params.get("watchdog_ms", WATCHDOG_MS)
@@ -192,13 +193,14 @@ def violations(scenario: Scenario, result: SimResult) -> list[str]:
         if m["standstill_after_fault_s"] is None:
             out.append("the chair never stops")
     elif kind == "reset":
-        after = result.tick_cycles[result.tick_cycles > round(at * F_CPU)]
+        ticks, truth = result.board.tick_cycles, result.truth
+        after = ticks[ticks > round(at * F_CPU)]
         first_tick = after[0] / F_CPU if after.size else result.duration
-        window = (result.step_time > at + 1e-9) & (result.step_time <= first_tick)
-        if np.any(result.step_volts[window] != 0.0):
+        window = (truth.step_time > at + 1e-9) & (truth.step_time <= first_tick)
+        if np.any(truth.step_volts[window] != 0.0):
             out.append("the motors were powered between the reset and the first control tick after it")
         boot = f"BOOT:final_control,{RESET_CAUSE}"
-        if not any(line == boot and t >= at - 1e-9 for t, line in result.boots):
+        if not any(line == boot and t >= at - 1e-9 for t, line in result.link.boots):
             out.append(f"no {boot} line after the reset")
     return out
 

@@ -1,0 +1,240 @@
+"""What one ``wcdrive sim`` run gives (``SimResult``), in a few records: the plant's
+ground truth, the board's state at every control tick, the serial link both ways, the
+host's odometries, and, where they apply, the closed loop's goal and the comparison of
+the compiled firmware with the port.
+
+The fault figures (``SimResult.fault_metrics``) come from the ground truth of the
+plant's motion after every physics step: the chair's speed is that of the faster of its
+two drive-wheel contact points (so a chair spinning on the spot is not "still"), and its
+travel the longer of their two paths.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from wcdrive.boards.port_loop import F_CPU
+from wcdrive.plant.faults import Fault
+
+#: m/s: the chair is at a standstill once its speed stays below this.
+STANDSTILL_SPEED = 0.01
+
+
+def _empty(*shape: int) -> np.ndarray:
+    return np.zeros(shape)
+
+
+@dataclass
+class GroundTruth:
+    """The plant's motion: a row per control tick (as ``BoardLog.tick_time``), a row per
+    physics step (``step_*``), and the casters' totals over the run."""
+
+    pose: np.ndarray            # (n, 3): x, y, heading at each tick
+    wheel_speed: np.ndarray     # (n, 2): true wheel speed (rad/s)
+    caster: np.ndarray          # (n, 2): caster swivel angles relative to the chassis (rad)
+    caster_scrub_energy: float = 0.0
+    caster_scrub_time: float = 0.0
+    caster_swivel_work: float = 0.0
+    caster_side_impulse: float = 0.0
+    #: Per physics step: the time at its end (s), the chair's speed (m/s, module
+    #: docstring), the wheels' contact speeds (left, right; m/s) and the motor
+    #: voltages the driver applied over it (left, right; V, signed).
+    step_time: np.ndarray = field(default_factory=lambda: _empty(0))
+    step_speed: np.ndarray = field(default_factory=lambda: _empty(0))
+    step_contact_speed: np.ndarray = field(default_factory=lambda: _empty(0, 2))
+    step_volts: np.ndarray = field(default_factory=lambda: _empty(0, 2))
+
+
+@dataclass
+class BoardLog:
+    """The firmware's state at every control tick, a row per tick (columns as noted)."""
+
+    tick_time: np.ndarray       # (n,): s
+    setpoint: np.ndarray        # (n, 2): left, right ramped setpoints (rad/s)
+    measured: np.ndarray        # (n, 2): filtered wheel speed the PID saw
+    pwm: np.ndarray             # (n, 2): signed duty (-255..255)
+    counts: np.ndarray          # (n, 2): the encoder counts the tick latched (left, right)
+    #: The cycle of every control tick.
+    tick_cycles: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+
+
+@dataclass
+class LinkLog:
+    """The serial link both ways: every line the board sent, its ``EVT:`` and ``BOOT:``
+    lines, as (s, line); the host's count of the lines by kind; the host's velocity
+    commands as (s, m/s, rad/s)."""
+
+    lines: list[tuple[float, str]] = field(default_factory=list)
+    events: list[tuple[float, str]] = field(default_factory=list)
+    boots: list[tuple[float, str]] = field(default_factory=list)
+    line_counts: dict[str, int] = field(default_factory=dict)
+    cmd_vel: list[tuple[float, float, float]] = field(default_factory=list)
+
+
+@dataclass
+class Odometry:
+    """The host's pose estimates at every control tick, (n, 3) each (x, y, heading), and
+    the gyro's samples (s, rad/s) they read."""
+
+    wheel: np.ndarray           # position-based wheel odometry
+    velocity: np.ndarray        # velocity-based
+    gyro: np.ndarray            # wheel distance + gyro heading
+    #: The seeds' EKF (``wcdrive.sim.localization``) on velocity odometry and the
+    #: gyro: seed 000's ekf.yaml (wheels: x, y, vx), and seed 002's scheme (wheels: vx, vy).
+    #: None unless the run asked for them (``run(..., ekf=True)``).
+    ekf: np.ndarray | None = None
+    ekf_vel: np.ndarray | None = None
+    gyro_time: np.ndarray = field(default_factory=lambda: _empty(0))
+    gyro_rate: np.ndarray = field(default_factory=lambda: _empty(0))
+
+
+@dataclass
+class Goal:
+    """A closed-loop run (a ``path`` scenario): the goal (m), the time the host's estimate
+    reached it (None: never), the published bound on the true error (m) and which
+    estimate the host steered by."""
+
+    position: tuple[float, float]
+    reached_s: float | None
+    tolerance: float
+    steered_by: str
+
+
+@dataclass
+class Lockstep:
+    """The compiled firmware's events replayed on the port (simavr backend): how many
+    differed, of how many compared."""
+
+    differences: int
+    events_compared: int
+
+
+@dataclass
+class SimResult:
+    """One run of a scenario: the ground truth, the board's ticks, the link, the host's
+    odometries, the closed loop's goal (None: open loop) and, with the simavr backend,
+    the comparison of the firmware with the port (None on the port)."""
+
+    scenario: str
+    backend: str
+    duration: float
+    wall_time: float
+    truth: GroundTruth
+    board: BoardLog
+    odometry: Odometry
+    link: LinkLog = field(default_factory=LinkLog)
+    faults: tuple[Fault, ...] = ()
+    #: ``fault_metrics``: when the fault figures count from (None: no fault, no silence).
+    fault_at: float | None = None
+    goal: Goal | None = None
+    lockstep: Lockstep | None = None
+
+    @property
+    def ticks(self) -> int:
+        """How many control ticks the board ran."""
+        return len(self.board.tick_cycles)
+
+    @property
+    def firmware_differences(self) -> int | None:
+        """``lockstep.differences`` (None on the port)."""
+        return None if self.lockstep is None else self.lockstep.differences
+
+    def fault_metrics(self) -> dict[str, float | None]:
+        """The fault figures: ``max_tick_gap_ms`` (the longest interval between two
+        control ticks, or from the last tick to the end, by the simulated clock),
+        ``fault_at_s`` (the first fault's ``at``; for a ``link_cut`` or a ``silence``
+        segment, the time the last byte before it reached the board), and from then
+        on: ``pwm_zero_after_fault_s`` (until both duties are 0 to the end),
+        ``standstill_after_fault_s`` (until the chair's speed stays below
+        ``STANDSTILL_SPEED``), ``travel_after_fault_m`` and
+        ``peak_speed_after_fault_mps``; None where there is no fault or it never
+        happens."""
+        ticks = self.board.tick_cycles
+        end = round(self.duration * F_CPU)
+        if ticks.size:
+            gaps = np.diff(np.concatenate((ticks, [end])))
+            gap = float(gaps.max()) / F_CPU * 1000.0
+        else:
+            gap = self.duration * 1000.0
+        out: dict[str, float | None] = {"max_tick_gap_ms": gap, "fault_at_s": self.fault_at,
+                                        "pwm_zero_after_fault_s": None,
+                                        "standstill_after_fault_s": None,
+                                        "travel_after_fault_m": None,
+                                        "peak_speed_after_fault_mps": None}
+        truth = self.truth
+        if self.fault_at is None or truth.step_time.size == 0:
+            return out
+        at = self.fault_at
+        t = truth.step_time
+        dt = float(t[1] - t[0]) if t.size > 1 else float(t[0])
+        after = t > at + 1e-12
+        out["travel_after_fault_m"] = float(np.max(np.sum(truth.step_contact_speed[after], axis=0)) * dt) \
+            if after.any() else 0.0
+        out["peak_speed_after_fault_mps"] = float(truth.step_speed[after].max()) if after.any() else 0.0
+        powered = np.flatnonzero(np.any(truth.step_volts != 0.0, axis=1))
+        if not powered.size or powered[-1] < t.size - 1:
+            # the step after the last powered one is the first unpowered for good
+            zero_from = t[powered[-1] + 1] - dt if powered.size else 0.0
+            out["pwm_zero_after_fault_s"] = max(0.0, float(zero_from) - at)
+        moving = np.flatnonzero(truth.step_speed >= STANDSTILL_SPEED)
+        if not moving.size or moving[-1] < t.size - 1:
+            still_from = t[moving[-1]] if moving.size else 0.0
+            out["standstill_after_fault_s"] = max(0.0, float(still_from) - at)
+        return out
+
+    @property
+    def real_time_factor(self) -> float:
+        """Simulated seconds per wall second."""
+        return self.duration / self.wall_time if self.wall_time > 0 else math.inf
+
+    def metrics(self) -> dict[str, object]:
+        """The run's figures by name: the final pose of the ground truth and of each
+        odometry with its errors, the tracking error, the caster totals, the
+        port-vs-firmware differences, the line counts, the board's events and the fault
+        figures (``fault_metrics``)."""
+        truth, odometry, link = self.truth, self.odometry, self.link
+        tx, ty, tth = truth.pose[-1]
+        out: dict[str, object] = {
+            "scenario": self.scenario, "backend": self.backend,
+            "simulated_s": round(self.duration, 3), "ticks": self.ticks,
+            "real_time_factor": round(self.real_time_factor, 1),
+            "truth_x": tx, "truth_y": ty, "truth_heading_deg": math.degrees(tth),
+        }
+        for name, est in (("odom_wheel", odometry.wheel), ("odom_velocity", odometry.velocity),
+                          ("odom_gyro", odometry.gyro), ("odom_ekf", odometry.ekf),
+                          ("odom_ekf_vel", odometry.ekf_vel)):
+            if est is None:
+                continue
+            ex, ey, eth = est[-1]
+            out[f"{name}_x"], out[f"{name}_y"] = ex, ey
+            out[f"{name}_heading_deg"] = math.degrees(eth)
+            out[f"{name}_position_error_m"] = math.hypot(ex - tx, ey - ty)
+            out[f"{name}_heading_error_deg"] = math.degrees(_wrap(eth - tth))
+        err = self.board.setpoint - self.board.measured
+        out["tracking_rms_rad_s"] = float(np.sqrt(np.mean(err**2))) if err.size else 0.0
+        out["caster_scrub_energy_j"] = truth.caster_scrub_energy
+        out["caster_scrub_time_s"] = truth.caster_scrub_time
+        out["caster_swivel_work_j"] = truth.caster_swivel_work
+        out["caster_side_impulse_ns"] = truth.caster_side_impulse
+        out["firmware_differences"] = self.firmware_differences
+        out.update({f"lines_{k}": v for k, v in link.line_counts.items()})
+        out["events"] = [[t, line] for t, line in link.events]
+        out["boots"] = [[t, line] for t, line in link.boots]
+        out.update(self.fault_metrics())
+        out["closed_loop"] = self.goal is not None
+        if self.goal is not None:
+            goal = self.goal
+            gx, gy = goal.position
+            error = math.hypot(tx - gx, ty - gy)
+            out.update(goal_x=gx, goal_y=gy, goal_error_m=error, goal_reached_s=goal.reached_s,
+                       goal_tolerance_m=goal.tolerance, steered_by=goal.steered_by,
+                       goal_within_tolerance=goal.reached_s is not None
+                       and error <= (goal.tolerance or 0.0))
+        return out
+
+
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2 * math.pi) - math.pi
