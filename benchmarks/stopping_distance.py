@@ -1,4 +1,4 @@
-"""The stopping-distance table of issue 13 (docs/safety.md): how far the chair travels,
+"""The stopping-distance table (docs/safety.md): how far the chair travels,
 and how long it takes to stand still, after the host's last byte.
 
     python benchmarks/stopping_distance.py [--backend port|simavr|both]

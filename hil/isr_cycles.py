@@ -4,7 +4,7 @@
 to its ``reti`` (conditional branches and skips both ways; handlers have no loops) and
 returns each path's cycles on the ATmega2560 (22-bit PC: ``call``/``ret``/``reti`` 5
 cycles), plus ``ENTRY_CYCLES``: the chip's interrupt response (5) and the vector's
-``jmp`` (3). It is the static half of issue 16's budget; the harness charges the same
+``jmp`` (3). It is the static half of the firmware's timing budget; the harness charges the same
 entry in simulation (``VirtualMega.interrupts_taken``).
 """
 

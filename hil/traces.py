@@ -35,7 +35,7 @@ T = TypeVar("T")
 #: When the first byte may arrive: setup() is done after about 2 ms.
 FIRST_COMMAND_S = 0.010
 #: Edges/s per wheel in generated traces. The firmware counts every edge up to
-#: 70,000 edges/s on both wheels at once, coincident edges included (issue 16:
+#: 70,000 edges/s on both wheels at once, coincident edges included (the timing budget:
 #: tests/boards/test_harness.py); traces keep a margin for the UART interrupts.
 MAX_TRACE_EDGE_RATE = 60000.0
 
@@ -385,7 +385,7 @@ def storm(draw: Draw, encoders: dict[str, EdgeTrain],
     tick latches an implausible-encoder fault. The other wheel is still from just before
     the storm until the guard has surely tripped: its interrupts would compete with the
     storm's for those 0.6 ms, and the edges it would lose are beyond the decoder model's
-    latency (issue 16's timing budget)."""
+    latency (the timing budget)."""
     side = draw.choice(["left", "right"])
     rate = draw.real(100_000.0, 500_000.0)
     length = draw.real(0.0025, 0.02)

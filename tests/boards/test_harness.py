@@ -68,7 +68,7 @@ def test_fifty_thousand_edges_per_second_are_all_counted(mega: VirtualMega) -> N
 @pytest.mark.parametrize("phase", [0.0, 0.25, 0.5, 0.9])
 def test_seventy_thousand_edges_per_second_on_both_wheels_are_all_counted(mega: VirtualMega,
                                                                         phase: float) -> None:
-    """Issue 16's goal: 70,000 edges/s on both wheels at once (2.5 times top speed), the
+    """The timing budget's goal: 70,000 edges/s on both wheels at once (2.5 times top speed), the
     right wheel's edges ``phase`` of an edge interval after the left's (0: coincident),
     for 0.3 s: every edge counted, none illegal, no storm."""
     rate, seconds = 70_000.0, 0.3

@@ -1,4 +1,4 @@
-"""Resets in the simavr harness ("reset"; issue 17, DTR): ``VirtualMega.reset``
+"""Resets in the simavr harness (a reset, DTR): ``VirtualMega.reset``
 (external, brown-out, power-on) and the AVR's own watchdog, with MCUSR as the chip
 shows it, the clock running on, the stimulus kept; shown on tiny AVR programs compiled
 here with avr-gcc (no Arduino core), then on the firmware and on the live board."""

@@ -53,7 +53,7 @@ def _run(trace: Trace) -> Recording:
 
 
 def _events(tx: bytes) -> list[bytes]:
-    """The EVT lines, but the boot's EVT:PARAMS_* (issue 17's EEPROM parameters)."""
+    """The EVT lines, but the boot's EVT:PARAMS_* (the EEPROM parameters)."""
     lines = tx.split(b"\r\n")
     return [line for line in lines if line.startswith(b"EVT:") and not line.startswith(b"EVT:PARAMS")]
 

@@ -15,7 +15,7 @@ from wcdrive.hil.isr_cycles import ENTRY_CYCLES, isr_paths
 pytestmark = pytest.mark.simavr
 
 ROOT = Path(__file__).resolve().parents[2]
-#: Issue 16: an encoder interrupt, entry to reti, the 5-cycle entry included.
+#: The budget: an encoder interrupt, entry to reti, the 5-cycle entry included.
 ISR_BUDGET = 60
 #: The path of a storm's last edge (it masks the encoder: once per storm, then silence).
 STORM_PATH_BUDGET = 66

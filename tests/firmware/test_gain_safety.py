@@ -1,4 +1,4 @@
-"""Issue 13, "Safe parameters": every combination of runtime parameters the board
+"""Safe parameters: every combination of runtime parameters the board
 accepts tracks a velocity step on the plant without sustained oscillation, and without
 tripping a fault on the healthy plant.
 
@@ -34,9 +34,9 @@ The property, on each wheel, from the TRUE wheel speed ``w`` (``plant.left.speed
   ``w`` retreats ``THRESHOLD`` from its latest extreme). ``THRESHOLD`` is 0.1 rad/s
   (15 mm/s at the rim): 8 encoder counts a 50 ms tick, far above the one-count
   quantisation (0.0126 rad/s) the PID reacts to, and a sixth of the swing of the gains
-  of issue 13 (0.6 rad/s peak to peak). Turns of the speed are counted rather than
+  of the reported oscillation (0.6 rad/s peak to peak). Turns of the speed are counted rather than
   crossings of ``w*``, because a loop can chatter without ever reaching its target:
-  with the gains of issue 13 at 2 m/s the duty swings from 255 to -55 every other tick
+  with the oscillating gains at 2 m/s the duty swings from 255 to -55 every other tick
   while the wheel stays 1.6 rad/s below its setpoint;
 * no sustained oscillation: at most ``MAX_REVERSALS`` (2: one overshoot and its
   return) on each wheel within ``WINDOW_S`` (3 s) of settling, before any stop;
@@ -52,8 +52,8 @@ The property, on each wheel, from the TRUE wheel speed ``w`` (``plant.left.speed
 Hypothesis draws every parameter over its whole accepted range (the ends drawn often),
 left and right apart, and the step over 0.3 to 2.0 m/s, forward or reverse. The
 oscillation and the faults are two tests over the same draws, so a failure names its
-cause; explicit cases cover the corners of the box and the gains of issue 13, and
-``test_the_check_can_fail`` shows that the check rejects the oscillation of issue 13
+cause; explicit cases cover the corners of the box and the oscillating gains, and
+``test_the_check_can_fail`` shows that the check rejects the reported oscillation
 whatever the spec accepts.
 """
 
@@ -101,7 +101,7 @@ CORNER_SPEEDS = (0.3, 2.0, -1.0, -2.0)
 
 BY_NAME: dict[str, Param] = {p.name: p for p in PARAMS}
 GAINS = ("kp_l", "ki_l", "kd_l", "kp_r", "ki_r", "kd_r")
-#: Issue 13: "with kp=100, ki=100, kd=10 ... the wheels oscillate".
+#: The reported oscillation: "with kp=100, ki=100, kd=10 ... the wheels oscillate".
 ISSUE_13 = {"kp_l": 100.0, "ki_l": 100.0, "kd_l": 10.0, "kp_r": 100.0, "ki_r": 100.0, "kd_r": 10.0}
 
 
@@ -379,7 +379,7 @@ def test_the_defaults_track_a_step() -> None:
 
 
 def test_the_check_can_fail() -> None:
-    """The gains of issue 13 break the property at every speed, and the reversal count
+    """The oscillating gains break the property at every speed, and the reversal count
     alone catches their oscillation (a fault may stop the chatter first at some speeds).
     The gains are written into the firmware's globals, so this holds whatever ranges the
     spec accepts."""

@@ -167,7 +167,7 @@ def test_a_reversed_encoder_is_caught_whenever_it_flips_during_a_turn() -> None:
     assert worst_gain <= 1.25 and worst_travel <= 0.9
 
 
-#: Issue 13's grid of healthy manoeuvres (docs/safety.md): forward for 3 s, then a turn
+#: The grid of healthy manoeuvres (docs/safety.md): forward for 3 s, then a turn
 #: on the spot, a reverse, a wheel-for-wheel spin or a curve, at four max_accel.
 def _grid() -> list[str]:
     out = []

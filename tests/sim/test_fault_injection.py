@@ -488,7 +488,7 @@ def test_link_cut_silences_the_host_on_both_backends(backend: str) -> None:
 @pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("name", FAULT_SCENARIOS)
 def test_safety_bounds(name: str, backend: str) -> None:
-    """Issue 13, "Done when", per bundled fault scenario: on the firmware before the fix
+    """The safety bounds (docs/safety.md), per bundled fault scenario: on the firmware before the fix
     these fail (runaway, coasting, a starved control loop)."""
     r = _run(name, backend)
     if backend == "simavr":
@@ -499,7 +499,7 @@ def test_safety_bounds(name: str, backend: str) -> None:
 
 def test_bounds_can_fail() -> None:
     """``violations`` is not vacuous: a chair that runs away after an encoder cut (the
-    firmware before issue 13, simulated by forcing full duty) breaks every bound."""
+    firmware before fault detection, simulated by forcing full duty) breaks every bound."""
     sc = scenario.load("fault_encoder_cut_both")
     r = _run("fault_encoder_cut_both", "port")
     truth = dataclasses.replace(r.truth, step_volts=np.full_like(r.truth.step_volts, 24.0),

@@ -1,4 +1,4 @@
-"""Issue 21, the simulation at 1000x: what was made faster gives the same bits.
+"""The simulation at 1000x: what was made faster gives the same bits.
 
 * The event-driven ``PortLoop.run_until`` against its reference path (``stepped=True``,
   every Timer0 overflow in turn, as the loop was before): every bundled scenario through
@@ -6,13 +6,13 @@
   its cycle, the firmware's whole state after every tick, the plant's and the gyro's
   outputs, every figure), and random byte streams, faults, resets and chunkings
   (hypothesis) straight on the loop. What both paths share is held to the outputs
-  recorded before issue 21 (``tests/data/sim_digests.json``, nine scenarios).
+  recorded before the simulation was made faster (``tests/data/sim_digests.json``, nine scenarios).
 * ``Gyro.sample_steps`` against ``Gyro.sample`` one sample at a time.
 * ``WheelOdometry.integrate`` (the covariance propagated when read) against ``update``.
 * ``benchmarks/sim_speed.py --quick`` runs and prints its table.
 
 Each test can fail: ``test_the_comparison_sees_a_one_overflow_slip`` shows it for the
-loop; the report of issue 21 lists the mutants that turned the rest red.
+loop; docs/benchmarks.md lists the mutants that turned the rest red.
 """
 
 from __future__ import annotations
@@ -83,7 +83,7 @@ def test_every_scenario_runs_the_same_on_the_event_loop(monkeypatch: pytest.Monk
     assert not differing, f"{name}: {differing}"
     if name in RECORDED:
         # what both paths share (the plant's batches, the gyro, the wire, the odometry),
-        # against the outputs recorded before issue 21 (tests/support/sim_digest.py)
+        # against the outputs recorded before the speed-up (tests/support/sim_digest.py)
         recorded = json.loads((ROOT / "tests" / "data" / "sim_digests.json").read_text())[name]
         now = digest(result)
         assert now.keys() == recorded.keys()
@@ -199,7 +199,7 @@ def test_the_event_loop_matches_the_stepped_loop_on_random_inputs(sends, cuts, f
                               st.binary(min_size=0, max_size=20)), max_size=60))
 def test_the_wire_keeps_bytes_as_the_byte_queue_did(ops) -> None:
     """``port_loop._Wire`` (runs of bytes) against the queue of (arrival, byte) that
-    ``PortLoop`` kept before issue 21."""
+    ``PortLoop`` kept before its event-driven path."""
     from collections import deque
 
     from wcdrive.avr.uart import UART_BYTE_CYCLES
@@ -270,7 +270,7 @@ def test_the_event_loop_asks_due_rarely() -> None:
 
 # ---- the gyro and the odometry --------------------------------------------------------
 class _GyroBefore:
-    """``Gyro`` as it was before issue 21 (one scalar draw at a time), sampled as
+    """``Gyro`` as it was before the batched kernel (one scalar draw at a time), sampled as
     ``port_loop.advance`` sampled it: ``sample`` per sample."""
 
     def __init__(self, params: ChairParams, seed: int) -> None:

@@ -1,4 +1,4 @@
-"""The safety bounds of issue 13 ("Done when"), checked on a run of a fault scenario.
+"""The safety bounds (docs/safety.md), checked on a run of a fault scenario.
 
 ``violations(scenario, result)`` lists, in words, every bound a ``SimResult`` breaks
 (empty: the run is safe). By the scenario's first fault (or its ``silence`` segment):
