@@ -102,7 +102,7 @@ CORNER_SPEEDS = (0.3, 2.0, -1.0, -2.0)
 BY_NAME: dict[str, Param] = {p.name: p for p in PARAMS}
 GAINS = ("kp_l", "ki_l", "kd_l", "kp_r", "ki_r", "kd_r")
 #: The reported oscillation: "with kp=100, ki=100, kd=10 ... the wheels oscillate".
-ISSUE_13 = {"kp_l": 100.0, "ki_l": 100.0, "kd_l": 10.0, "kp_r": 100.0, "ki_r": 100.0, "kd_r": 10.0}
+OSCILLATING_GAINS = {"kp_l": 100.0, "ki_l": 100.0, "kd_l": 10.0, "kp_r": 100.0, "ki_r": 100.0, "kd_r": 10.0}
 
 
 def wire_value(p: Param, value: float) -> str:
@@ -386,7 +386,7 @@ def test_the_check_can_fail() -> None:
     runs = []
     for speed in (SPEED_MIN, 1.0, -1.0, SPEED_MAX):
         board = Firmware(boot_millis=0)
-        for name, value in ISSUE_13.items():
+        for name, value in OSCILLATING_GAINS.items():
             setattr(board.state, BY_NAME[name].field, f32(value))
         runs.append(step_response({}, speed, firmware=board))
         assert runs[-1].failures(), runs[-1].describe()
@@ -394,9 +394,9 @@ def test_the_check_can_fail() -> None:
 
 
 @pytest.mark.parametrize("speed", CORNER_SPEEDS)
-def test_the_gains_of_issue_13(speed: float) -> None:
+def test_the_accepted_gains_nearest_the_oscillating_ones(speed: float) -> None:
     """kp=100, ki=100, kd=10, or the nearest gains the board accepts."""
-    check(accepted(ISSUE_13), speed)
+    check(accepted(OSCILLATING_GAINS), speed)
 
 
 @pytest.mark.parametrize("speed", CORNER_SPEEDS)
@@ -410,7 +410,7 @@ EXAMPLES = max(40, 2 * settings().max_examples)
 
 @settings(parent=settings(), max_examples=EXAMPLES)
 @given(values=PARAMETER_SETS, speed=SPEEDS)
-@example(values=accepted(ISSUE_13), speed=1.0)
+@example(values=accepted(OSCILLATING_GAINS), speed=1.0)
 def test_no_accepted_combination_oscillates(values: dict[str, float], speed: float) -> None:
     run = run_step(values, speed)
     assert not run.oscillation(), run.describe()
