@@ -30,6 +30,7 @@ import serial
 
 import wcdrive
 from wcdrive.boards.sim_board import SimulatedBoard
+from wcdrive.host.requests import Request
 from wcdrive.host.session import Session
 from wcdrive.protocol.codec import encode_cmdvel, encode_ppm
 from wcdrive.transports.pty_bridge import PtyBridge
@@ -481,7 +482,7 @@ def test_failures_on_a_live_chair_name_it(rig) -> None:
     chair = wcdrive.connect(path)
     try:
         with pytest.raises(wcdrive.WcdriveCommandError, match=f"{re.escape(path)} refused .*range"):
-            chair._session.request(b"set:max_accel=99")
+            chair._session.request(Request.set_text("max_accel", b"99"))
         tamper.on_line = lambda line: None if line.startswith((b"ACK:", b"NAK:", b"PAR:")) else line
         with pytest.raises(wcdrive.WcdriveTimeoutError, match=f"no answer from {re.escape(path)}"):
             chair.get_param("kp_l")

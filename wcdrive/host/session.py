@@ -34,6 +34,7 @@ from wcdrive.errors import (
     WcdriveProtocolError,
     WcdriveTimeoutError,
 )
+from wcdrive.host.requests import Request, RequestKind
 from wcdrive.host.telemetry import LinkEvent, LinkLost, LinkRestored
 from wcdrive.protocol.codec import (
     SEQ_MAX,
@@ -85,7 +86,7 @@ _V = TypeVar("_V")
 
 #: ``_after_lost_answer``: the board did not act on the line; it may go out again.
 _SEND_AGAIN = object()
-#: ``_exchange``: a ``get:`` whose answer was lost: ask again, under a new number (the
+#: ``_exchange``: a GET whose answer was lost: ask again, under a new number (the
 #: board acted on the old one; a read never nests another request).
 _ASK_AGAIN = object()
 #: How many recent sequence numbers remember their send order (motion included).
@@ -291,8 +292,8 @@ class Session:
         finally:
             self._writing = False
 
-    def request(self, command: bytes) -> object | None:
-        """A frame whose answer is awaited; returns the data line answered with it
+    def request(self, request: Request) -> object | None:
+        """``request`` as a frame whose answer is awaited; returns the data line answered with it
         (``PAR:``), or None. Raises WcdriveCommandError on a NAK (WcdriveEstopError for
         "estop"), WcdriveTimeoutError when the board never answers,
         WcdriveConnectionError when the link is lost meanwhile.
@@ -305,48 +306,50 @@ class Session:
         ``REQUEST_TIMEOUT`` s without an answer). When a TLM shows it parsed but its
         answer was lost (a corrupted byte on the way back, or the board's limit of 3
         answers a tick, which every frame uses, motion too), the outcome is read from
-        the board instead of acting twice: the e-stop flag of that TLM for ``estop``
-        and ``reset``, a ``get:`` for a ``set:`` (which goes out again only when the
-        value in force is not the one asked for); a ``get:`` is asked again under a
-        new number, up to ``REQUEST_TRIES`` times."""
+        the board instead of acting twice: the e-stop flag of that TLM for ESTOP and
+        RESET, a GET for a SET (which goes out again only when the value in force is
+        not the one asked for); a GET is asked again under a new number, up to
+        ``REQUEST_TRIES`` times."""
+        command = request.command
         for _ in range(self.REQUEST_TRIES):
             with self._lock:
-                request = _Request(self._next_seq())
-                self._requests[request.seq] = request
+                tracked = _Request(self._next_seq())
+                self._requests[tracked.seq] = tracked
             try:
-                result = self._exchange(command, request)
+                result = self._exchange(request, tracked)
             finally:
                 with self._lock:
-                    self._requests.pop(request.seq, None)
+                    self._requests.pop(tracked.seq, None)
             if result is not _ASK_AGAIN:
                 return result
         raise WcdriveTimeoutError(f"no answer from {self.name} to {command.decode()!r} "
                                   f"in {self.REQUEST_TRIES} tries: is the link up?")
 
-    def _exchange(self, command: bytes, request: _Request, sent: bool = False) -> object | None:
-        """Sends ``request`` (unless ``sent``: its first frame went out already) and
-        awaits its outcome, sending it again while the board shows it did not get it."""
+    def _exchange(self, request: Request, tracked: _Request, sent: bool = False) -> object | None:
+        """Sends ``request`` as ``tracked`` (unless ``sent``: its first frame went out
+        already) and awaits its outcome, sending it again while the board shows it did
+        not get it."""
+        command = request.command
         deadline = time.monotonic() + self.REQUEST_TIMEOUT * (self.REQUEST_TRIES + 1)
         for _ in range(self.REQUEST_TRIES):
             if not sent:
-                self._send_request(command, request)
+                self._send_request(command, tracked)
             sent = False
-            outcome = self._await(request, deadline)
+            outcome = self._await(tracked, deadline)
             if outcome == "answered":
-                if request.reason is not None:
-                    cls = WcdriveEstopError if request.reason == "estop" else WcdriveCommandError
-                    raise cls(f"{self.name} refused {command.decode()!r}: {request.reason}",
-                              request.reason)
-                if command.startswith((b"get:", b"set:")):
-                    name = command[4:].partition(b"=")[0]
-                    data = request.data
-                    if not isinstance(data, Param) or data.name.encode() != name:
-                        if command.startswith(b"set:"):        # its PAR: line was lost: read
-                            return self.request(b"get:" + name)    # the value (a get never nests)
+                if tracked.reason is not None:
+                    cls = WcdriveEstopError if tracked.reason == "estop" else WcdriveCommandError
+                    raise cls(f"{self.name} refused {command.decode()!r}: {tracked.reason}",
+                              tracked.reason)
+                if request.kind in (RequestKind.GET, RequestKind.SET):
+                    data = tracked.data
+                    if not isinstance(data, Param) or data.name != request.param:
+                        if request.kind is RequestKind.SET:    # its PAR: line was lost: read
+                            return self.request(request.read_back())   # the value (a get never nests)
                         return _ASK_AGAIN
-                return request.data
+                return tracked.data
             if outcome == "seen":
-                result = self._after_lost_answer(command, request)
+                result = self._after_lost_answer(request, tracked)
                 if result is not _SEND_AGAIN:
                     return result
             elif outcome == "link":
@@ -387,24 +390,23 @@ class Session:
                 wake = deadline if waited else min(deadline, request.sent_at + self.REQUEST_TIMEOUT)
                 self._changed.wait(wake - now)
 
-    def _after_lost_answer(self, command: bytes, request: _Request) -> object | None:
+    def _after_lost_answer(self, request: Request, tracked: _Request) -> object | None:
         """The board parsed the line but its answer never came: what it did, read from
         the board, or ``_SEND_AGAIN`` when it did not act on it."""
-        seen = request.seen
+        seen = tracked.seen
         assert seen is not None
-        if command == b"estop":
+        if request.kind is RequestKind.ESTOP:
             return None if seen.estop_latched else _SEND_AGAIN
-        if command == b"reset":
+        if request.kind is RequestKind.RESET:
             if seen.estop_latched:              # reset answers NAK only when not parked
                 raise WcdriveCommandError(f"{self.name} refused 'reset': busy", "busy")
             return None
-        if command.startswith(b"get:"):
+        if request.kind is RequestKind.GET:
             return _ASK_AGAIN
-        if not command.startswith(b"set:"):
+        if request.kind is not RequestKind.SET:
             return _SEND_AGAIN
-        name, _, text = command[4:].partition(b"=")
-        current = self.request(b"get:" + name)
-        if isinstance(current, Param) and _same_value(current.value, text):
+        current = self.request(request.read_back())
+        if isinstance(current, Param) and _same_value(current.value, request.text):
             return current
         return _SEND_AGAIN
 
@@ -623,25 +625,26 @@ class Session:
         e-stop went out while the link was down): latch it there, as a request (sent
         again only when the board shows it did not get it). The first frame goes out at
         once, from this thread (the reader); a thread of its own awaits the answer."""
+        request = Request.estop()
         with self._lock:
-            request = _Request(self._next_seq())
-            self._requests[request.seq] = request
+            tracked = _Request(self._next_seq())
+            self._requests[tracked.seq] = tracked
         try:
-            self._send_request(b"estop", request)
+            self._send_request(request.command, tracked)
         except WcdriveConnectionError:
             with self._lock:
-                self._requests.pop(request.seq, None)
+                self._requests.pop(tracked.seq, None)
             self.errors.append("e-stop not re-sent")
             return
 
         def finish() -> None:
             try:
-                self._exchange(b"estop", request, sent=True)
+                self._exchange(request, tracked, sent=True)
             except WcdriveError as exc:
                 self.errors.append(f"e-stop not re-latched: {exc}")
             finally:
                 with self._lock:
-                    self._requests.pop(request.seq, None)
+                    self._requests.pop(tracked.seq, None)
 
         threading.Thread(target=finish, name="wcdrive-relatch", daemon=True).start()
 

@@ -45,21 +45,16 @@ from wcdrive.errors import (
 )
 from wcdrive.host.boardclock import BoardClock
 from wcdrive.host.odometry import OdometryEstimate
+from wcdrive.host.requests import Request
 from wcdrive.host.session import Session
 from wcdrive.host.telemetry import LinkEvent, LinkLost, LinkRestored, Reset, Telemetry, TelemetryHub
 from wcdrive.protocol.codec import (
-    DEFAULTS,
-    ESTOP,
     MAX_ANGULAR,
     MAX_LINEAR,
     MAX_WHEEL,
-    RESET,
-    SAVE,
     ExtendedTelemetry,
     Param,
     encode_cmdvel,
-    encode_get,
-    encode_set,
     encode_wheel,
 )
 from wcdrive.protocol.spec import integer
@@ -348,7 +343,7 @@ class Wheelchair:
         session.estop_held = True
         if not session.link_ok and not session.closed.is_set() and session.handshake_error is None:
             try:
-                session.send_frame(ESTOP.rstrip(b"\n"))
+                session.send_frame(Request.estop().command)
                 self.stop()
             except WcdriveError:
                 pass
@@ -358,7 +353,7 @@ class Wheelchair:
                 "and latches it again when the board speaks; the board's watchdog stops the chair")
         self._require_link("the e-stop")
         try:
-            session.request(ESTOP.rstrip(b"\n"))
+            session.request(Request.estop())
         except (WcdriveTimeoutError, WcdriveConnectionError):
             try:
                 self.stop()
@@ -377,7 +372,7 @@ class Wheelchair:
         deadline = time.monotonic() + timeout
         while True:
             try:
-                self._session.request(RESET.rstrip(b"\n"))
+                self._session.request(Request.reset())
                 self._session.estop_held = False
                 self._session.estop_announced = False
                 self._session.faults_announced.clear()
@@ -416,11 +411,11 @@ class Wheelchair:
 
     def get_param(self, name: str) -> float:
         """A runtime parameter (protocol/PROTOCOL.md, "Parameters")."""
-        return self._param(encode_get(name))
+        return self._param(Request.get(name))
 
     def set_param(self, name: str, value: float) -> float:
         """Sets a parameter; returns the value now in force (as the board rounded it)."""
-        return self._param(encode_set(name, value))
+        return self._param(Request.set(name, value))
 
     def save_params(self, timeout: float = 1.0) -> None:
         """Stores the parameters in force in the board's EEPROM (protocol/PROTOCOL.md,
@@ -428,12 +423,12 @@ class Wheelchair:
         (``params_at_boot``). The board writes them in the background, one byte per
         3.4 ms (about 140 ms); a save sent meanwhile is refused ``busy``, and this
         retries it until ``timeout``."""
-        self._eeprom_command(SAVE, timeout)
+        self._eeprom_command(Request.save(), timeout)
 
     def restore_defaults(self) -> None:
         """Puts every parameter back to the firmware's default. The EEPROM keeps what was
         saved (the next boot loads it again) until ``save_params()``."""
-        self._eeprom_command(DEFAULTS, 0.0)
+        self._eeprom_command(Request.defaults(), 0.0)
 
     @property
     def params_at_boot(self) -> str:
@@ -443,27 +438,27 @@ class Wheelchair:
         in EEPROM sends none)."""
         return self._session.params_at_boot
 
-    def _eeprom_command(self, command: bytes, timeout: float) -> None:
+    def _eeprom_command(self, request: Request, timeout: float) -> None:
         if self.protocol_version == 1:
             raise WcdriveProtocolError(f"{self.url} speaks protocol v1 (legacy): it has no "
                                        "parameters")
-        self._require_link(repr(command.decode().strip()))
+        self._require_link(repr(request.command.decode()))
         deadline = time.monotonic() + timeout
         while True:
             try:
-                self._session.request(command.rstrip(b"\n"))
+                self._session.request(request)
                 return
             except WcdriveCommandError as exc:
                 if exc.reason != "busy" or time.monotonic() > deadline:
                     raise
             time.sleep(0.05)
 
-    def _param(self, command: bytes) -> float:
+    def _param(self, request: Request) -> float:
         if self.protocol_version == 1:
             raise WcdriveProtocolError(f"{self.url} speaks protocol v1 (legacy): it has no "
                                        "parameters")
-        self._require_link(repr(command.decode()))
-        data = self._session.request(command)
+        self._require_link(repr(request.command.decode()))
+        data = self._session.request(request)
         if not isinstance(data, Param):
             raise WcdriveProtocolError(f"{self.url}: expected a PAR: line, got {data!r}")
         return data.value
