@@ -195,23 +195,23 @@ class Wheelchair:
     @property
     def firmware(self) -> str:
         """The firmware's name from its hello answer ("final_control"; "" before)."""
-        return self._session.firmware
+        return self._session.handshake.firmware
 
     @property
     def firmware_version(self) -> str:
         """The firmware's version from its hello answer ("3.0.0"; "" before)."""
-        return self._session.firmware_version
+        return self._session.handshake.firmware_version
 
     @property
     def build_id(self) -> str:
         """The firmware's build id from its hello answer (8 hex digits of the hash of
         its sources, ``wcdrive.protocol.spec.build_id``; "" before)."""
-        return self._session.build_id
+        return self._session.handshake.build_id
 
     @property
     def status(self) -> ExtendedTelemetry | None:
         """The latest ``TLM:`` line (after hello), or None."""
-        return self._session.status
+        return self._session.board.status
 
     @property
     def errors(self) -> list[str]:
@@ -229,7 +229,7 @@ class Wheelchair:
     @history_limit.setter
     def history_limit(self, value: int) -> None:
         self._hub.history = value
-        for history in (self._session.errors, self._session.events, self._session.faults_announced):
+        for history in (self._session.errors, self._session.events, self._session.board.faults_announced):
             history.maxlen = value
 
     @property
@@ -295,8 +295,8 @@ class Wheelchair:
         session = self._session
         if session.closed.is_set():
             raise WcdriveConnectionError(f"the link to {session.name} is closed: connect() again")
-        if session.handshake_error is not None:
-            raise WcdriveProtocolError(str(session.handshake_error))
+        if session.handshake.error is not None:
+            raise WcdriveProtocolError(str(session.handshake.error))
         if not session.link_ok:
             silent = session.since_last_line
             raise WcdriveConnectionError(
@@ -340,8 +340,8 @@ class Wheelchair:
             self.stop()
             raise WcdriveProtocolError(f"{session.name} speaks protocol v1 (legacy), which has no "
                                        "latched e-stop: a stop was sent instead; flash the v3 firmware")
-        session.estop_held = True
-        if not session.link_ok and not session.closed.is_set() and session.handshake_error is None:
+        session.board.estop_held = True
+        if not session.link_ok and not session.closed.is_set() and session.handshake.error is None:
             try:
                 session.send_frame(Request.estop().command)
                 self.stop()
@@ -373,10 +373,7 @@ class Wheelchair:
         while True:
             try:
                 self._session.request(Request.reset())
-                self._session.estop_held = False
-                self._session.estop_announced = False
-                self._session.faults_announced.clear()
-                self._session.status = None          # the last TLM predates the reset
+                self._session.board.estop_released()  # the last TLM predates the reset
                 return
             except WcdriveCommandError as exc:
                 if exc.reason != "busy" or time.monotonic() > deadline:
@@ -388,26 +385,18 @@ class Wheelchair:
         """The faults the board has latched (``ENC_STALL_L``, ``DRIVER_DEAD``, ...;
         PROTOCOL.md "Faults"), as its TLM line or its ``EVT:FAULT`` lines report them;
         empty when none. Motion raises ``WcdriveFaultError`` until ``reset_estop()``."""
-        status = self._session.status
-        names = list(status.fault_names) if status is not None else []
-        for name in self._session.faults_announced:
-            if name not in names:
-                names.append(name)
-        return tuple(names)
+        return self._session.board.faults
 
     @property
     def reset_cause(self) -> str:
         """Why the board last reset, from its ``BOOT:`` line (``POWER_ON``, ``EXTERNAL``,
         ``BROWN_OUT``, ``WATCHDOG``, ...), or "" when no BOOT line was seen."""
-        return self._session.reset_cause
+        return self._session.board.reset_cause
 
     @property
     def estop_latched(self) -> bool:
         """True while the e-stop is latched (as the board reports it, or as sent)."""
-        status = self._session.status
-        if status is not None and status.estop_latched:
-            return True
-        return self._session.estop_held or self._session.estop_announced
+        return self._session.board.estop_latched
 
     def get_param(self, name: str) -> float:
         """A runtime parameter (protocol/PROTOCOL.md, "Parameters")."""
@@ -436,7 +425,7 @@ class Wheelchair:
         (those saved in its EEPROM) or ``PARAMS_DEFAULT,<why>`` (``blank``, ``version``,
         ``crc``, ``range``); "" when no such line was seen (a board without parameters
         in EEPROM sends none)."""
-        return self._session.params_at_boot
+        return self._session.board.params_at_boot
 
     def _eeprom_command(self, request: Request, timeout: float) -> None:
         if self.protocol_version == 1:
