@@ -15,10 +15,10 @@ The parts, one concern each: ``tracker`` (``RequestTracker``: sequence numbers, 
 send order, requests, retries, lost answers), ``handshake`` (``Handshake``: hello and
 the protocol version), ``link`` (``LinkMonitor``: liveness, ``LinkLost`` and
 ``LinkRestored``, on a thread of its own that also paces the hello's retries) and
-``board`` (``BoardState``: what the board reported, and the e-stop the host holds).
-The session itself owns the port: the reader thread, writes, reopening a device that
-vanished, the way out; it routes each message to the parts, and re-latches the e-stop
-the host holds when the board lost it.
+``board`` (``BoardState``: what the board reported, and the e-stop the host holds)
+and ``wire`` (``Wire``: the port, its writes, reopening it, closing it). The session
+itself runs the reader thread, routes each message to the parts, starts over when the
+board resets, and re-latches the e-stop the host holds when the board lost it.
 """
 
 from __future__ import annotations
@@ -39,6 +39,7 @@ from wcdrive.host.link_monitor import LinkMonitor
 from wcdrive.host.requests import Request
 from wcdrive.host.telemetry import LinkEvent
 from wcdrive.host.tracker import RequestTracker
+from wcdrive.host.wire import Wire
 from wcdrive.protocol.codec import (
     Ack,
     Boot,
@@ -95,9 +96,9 @@ class Session:
     clock (``LinkMonitor``).
 
     Threads: the reader (``wcdrive-reader``, here), the link monitor (``link``'s) and,
-    for an e-stop re-latched, one that awaits its answer. ``_write_lock`` (reentrant:
-    a signal handler or a finalizer may run on a thread in the middle of a write and
-    must still get its stop out) is held around every write."""
+    for an e-stop re-latched, one that awaits its answer. Locks: the wire's, around
+    every write; the tracker's, the handshake's and the link monitor's, each over its
+    own state."""
 
     def __init__(self, port: Port, on_feedback: FeedbackHandler, *, name: str | None = None,
                  reopen: Callable[[], Port] | None = None, reconnect_timeout: float = 60.0,
@@ -105,18 +106,15 @@ class Session:
                  on_link: Callable[[LinkEvent], None] | None = None,
                  on_board_reset: Callable[[], None] | None = None,
                  board_clock: Callable[[], float | None] | None = None) -> None:
-        self.port = port
         self.name = name or _port_name(port)
         self.reconnect_timeout = reconnect_timeout
         self._deliver = on_feedback
         self._on_board_reset = on_board_reset
         self._reopen = reopen
         self._decoder = LineDecoder()
-        self._write_lock = threading.RLock()
-        self._writing = False                  # a write is under way (interrupted: a partial line)
-        self._link_up = threading.Event()      # the port is there (cleared while reopening)
-        self._link_up.set()
-        self.closed = threading.Event()
+        self.wire = Wire(port, self.name)
+        #: Set once the session is closed.
+        self.closed = self.wire.closed
         #: Ring buffers of the newest ``DEFAULT_HISTORY`` items (``History``: a list
         #: whose ``maxlen`` is settable).
         self.errors: History[str] = History()
@@ -127,8 +125,8 @@ class Session:
             self.name, self.closed, link_timeout=link_timeout, board_clock=board_clock,
             on_link=on_link, events=self.events, errors=self.errors,
             wake=self._wake_requests, on_restored=self._link_restored,
-            pace=lambda now: self.handshake.step(now), bytes_waiting=self._bytes_waiting)
-        self.tracker = RequestTracker(self.name, self._write, self._write_lock,
+            pace=lambda now: self.handshake.step(now), bytes_waiting=self.wire.bytes_waiting)
+        self.tracker = RequestTracker(self.name, self.wire.write, self.wire.lock,
                                       lambda: self.link.lost, self.errors)
         self.handshake = Handshake(self.name, lambda: self.tracker.send_frame(b"hello"),
                                    self._greeted, legacy=legacy)
@@ -142,6 +140,11 @@ class Session:
         self.link.start()
 
     # ---- what the parts know -------------------------------------------------------
+    @property
+    def port(self) -> Port:
+        """The port to the board (a new one after a reconnect)."""
+        return self.wire.port
+
     @property
     def protocol_version(self) -> int:
         """The protocol the board speaks: 3 once it answered hello, 1 in legacy mode
@@ -191,23 +194,7 @@ class Session:
     def send(self, data: bytes) -> None:
         """Writes ``data`` as it is; raises ``WcdriveConnectionError`` when the link is
         closed, lost or the write fails."""
-        with self._write_lock:
-            self._write(data)
-
-    def _write(self, data: bytes) -> None:
-        if self.closed.is_set():
-            raise WcdriveConnectionError(f"the link to {self.name} is closed: connect() again")
-        if not self._link_up.is_set():
-            raise WcdriveConnectionError(f"the link to {self.name} is lost (unplugged?); reopening "
-                                         "it: the board's watchdog has stopped the chair")
-        self._writing = True
-        try:
-            self.port.write(data)
-        except Exception as exc:                # pyserial's, the OS's, python-can's: name the port
-            raise WcdriveConnectionError(
-                f"writing to {self.name} failed ({exc}); is it still plugged in?") from exc
-        finally:
-            self._writing = False
+        self.wire.send(data)
 
     def request(self, request: Request) -> object | None:
         """Sends ``request`` as a frame whose answer is awaited; returns the data line
@@ -250,7 +237,7 @@ class Session:
     def _read_loop(self) -> None:
         while not self.closed.is_set():
             try:
-                data = self.port.read(max(1, self.port.in_waiting))
+                data = self.wire.read()
             except (serial.SerialException, OSError, TypeError, AttributeError):
                 if self.closed.is_set():
                     return
@@ -367,46 +354,19 @@ class Session:
 
         threading.Thread(target=finish, name="wcdrive-relatch", daemon=True).start()
 
-    # ---- the port --------------------------------------------------------------------
-    def _bytes_waiting(self) -> bool:
-        """Whether the board's bytes wait unread in the port."""
-        try:
-            return int(self.port.in_waiting) > 0
-        except Exception:
-            return False
-
+    # ---- the board starts over -------------------------------------------------------
     def _reconnect(self) -> bool:
         """The device vanished: reopen it until ``reconnect_timeout``; the board resets
         on open, so the handshake starts over."""
-        if self._reopen is None:
+        if self._reopen is None or not self.wire.reopen(self._reopen, self.reconnect_timeout):
             return False
-        self._link_up.clear()
-        try:
-            self.port.close()
-        except Exception:
-            pass
-        deadline = time.monotonic() + self.reconnect_timeout
-        while not self.closed.is_set() and time.monotonic() < deadline:
-            try:
-                port = self._reopen()
-            except Exception:
-                time.sleep(0.25)
-                continue
-            self.port = port
-            if self.closed.is_set():            # closed meanwhile: let the device go
-                try:
-                    port.close()
-                except Exception:
-                    pass
-                return False
-            self._decoder = LineDecoder()
-            self.link.reopened()
-            self._forget_board()
-            self._link_up.set()
-            _log.warning("%s: reconnected", self.name)
-            self.events.append("RECONNECTED")
-            return True
-        return False
+        self._decoder = LineDecoder()
+        self.link.reopened()
+        self._forget_board()
+        self.wire.restored()
+        _log.warning("%s: reconnected", self.name)
+        self.events.append("RECONNECTED")
+        return True
 
     def _forget_board(self) -> None:
         """The board has reset (a reopened device, or a ``BOOT:`` line mid-session): what
@@ -427,32 +387,15 @@ class Session:
         handler or a finalizer can call it on any thread at any moment."""
         seq = self.tracker.next_seq_unlocked()
         line = _STOP + b"\n" if self.protocol_version == 1 else frame(_STOP, seq)
-        return (b"\n" if self._writing else b"") + line
+        return (b"\n" if self.wire.writing else b"") + line
 
     def close(self, last_words: bytes = b"") -> None:
         """Writes ``last_words`` (best effort), then closes the port. Safe to call twice,
         from any thread (a signal handler, a finalizer)."""
         if self.closed.is_set():
             return
-        locked = self._write_lock.acquire(timeout=0.5)
-        try:
-            if last_words:
-                self.port.write(last_words)
-            self.port.flush()
-        except Exception:
-            pass
-        finally:
-            if locked:
-                self._write_lock.release()
-        self.closed.set()
+        self.wire.close(last_words)
         self.link.close()
-        cancel = getattr(self.port, "cancel_read", None)
-        try:
-            if cancel is not None:
-                cancel()                        # wake the reader's select at once
-            self.port.close()
-        except Exception:
-            pass
         # The reader's select holds the device until it returns: wait for it, so that the
         # device (and its exclusive lock) is free when close() returns.
         if threading.current_thread() is not self._reader:
