@@ -204,16 +204,16 @@ class Session:
 
         The board acts on every frame it parses, a repeated one too, so the line
         goes out again (with the same sequence number) only when the board shows that
-        it did not get it: for ``REQUEST_TIMEOUT`` s and two TLM lines, no TLM reported
-        its number or that of a frame sent after it (motion frames count: they share
-        the counter and the send order; a board without TLM lines:
+        it did not get it: for ``RequestTracker.REQUEST_TIMEOUT`` s and two TLM lines,
+        no TLM reported its number or that of a frame sent after it (motion frames
+        count: they share the counter and the send order; a board without TLM lines:
         ``REQUEST_TIMEOUT`` s without an answer). When a TLM shows it parsed but its
         answer was lost (a corrupted byte on the way back, or the board's limit of 3
         answers a tick, which every frame uses, motion too), the outcome is read from
         the board instead of acting twice: the e-stop flag of that TLM for ESTOP and
         RESET, a GET for a SET (which goes out again only when the value in force is
         not the one asked for); a GET is asked again under a new number, up to
-        ``REQUEST_TRIES`` times."""
+        ``RequestTracker.REQUEST_TRIES`` times."""
         return self.tracker.request(request)
 
     # ---- handshake -------------------------------------------------------------------
