@@ -30,7 +30,8 @@ import serial
 
 import wcdrive
 from wcdrive.boards.sim_board import SimulatedBoard
-from wcdrive.host.session import Session
+from wcdrive.host.handshake import Handshake
+from wcdrive.host.requests import Request
 from wcdrive.protocol.codec import encode_cmdvel, encode_ppm
 from wcdrive.transports.pty_bridge import PtyBridge
 
@@ -207,7 +208,7 @@ def test_a_garbled_first_hello_is_retried(rig) -> None:
     hellos = re.findall(rb"\$\d+:hello\*[0-9A-F]{4}", b"".join(tamper.written))
     assert len(hellos) == 2 and hellos[0] != hellos[1]
     assert tamper.board.loop.fw.state.crcRejected == 1
-    assert took < Session.HELLO_WAITS[0], took       # retried on its ERR, not after its wait
+    assert took < Handshake.HELLO_WAITS[0], took       # retried on its ERR, not after its wait
 
 
 def test_a_lost_hello_answer_is_retried_after_a_wait(rig) -> None:
@@ -481,7 +482,7 @@ def test_failures_on_a_live_chair_name_it(rig) -> None:
     chair = wcdrive.connect(path)
     try:
         with pytest.raises(wcdrive.WcdriveCommandError, match=f"{re.escape(path)} refused .*range"):
-            chair._session.request(b"set:max_accel=99")
+            chair._session.request(Request.set_text("max_accel", b"99"))
         tamper.on_line = lambda line: None if line.startswith((b"ACK:", b"NAK:", b"PAR:")) else line
         with pytest.raises(wcdrive.WcdriveTimeoutError, match=f"no answer from {re.escape(path)}"):
             chair.get_param("kp_l")
@@ -492,5 +493,5 @@ def test_failures_on_a_live_chair_name_it(rig) -> None:
 
 
 def test_the_session_counts_hello_waits_as_a_backoff() -> None:
-    waits = Session.HELLO_WAITS
+    waits = Handshake.HELLO_WAITS
     assert len(waits) == 3 and all(b > a for a, b in itertools.pairwise(waits))

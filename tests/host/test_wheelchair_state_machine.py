@@ -76,6 +76,7 @@ from wcdrive.errors import WcdriveCommandError, WcdriveConnectionError, WcdriveE
 from wcdrive.firmware import constants as C
 from wcdrive.firmware.commands import parse
 from wcdrive.firmware.state import FirmwareState
+from wcdrive.host.requests import Request
 from wcdrive.host.telemetry import LinkLost, LinkRestored
 from wcdrive.protocol.codec import MAX_ANGULAR, MAX_LINEAR, MAX_WHEEL, encode_cmdvel, encode_wheel
 from wcdrive.protocol.spec import PARAMETERS
@@ -603,9 +604,10 @@ class WheelchairMachine(RuleBasedStateMachine):
     def set_param_refused_by_the_board(self, setting: tuple[str, bytes]) -> None:
         """What the codec refuses, sent anyway: the board's NAK reaches the caller."""
         name, text = setting
-        command = b"set:%s=%s" % (name.encode(), text)
+        request = Request.set_text(name, text)
+        command = request.command
         with pytest.raises(WcdriveCommandError) as refused:
-            self._chair()._session.request(command)
+            self._chair()._session.request(request)
         assert refused.value.reason == "range"
         _, lines = self._settle()
         assert not any(e.accepted for e in lines if e.body == command), lines

@@ -45,21 +45,16 @@ from wcdrive.errors import (
 )
 from wcdrive.host.boardclock import BoardClock
 from wcdrive.host.odometry import OdometryEstimate
+from wcdrive.host.requests import Request
 from wcdrive.host.session import Session
 from wcdrive.host.telemetry import LinkEvent, LinkLost, LinkRestored, Reset, Telemetry, TelemetryHub
 from wcdrive.protocol.codec import (
-    DEFAULTS,
-    ESTOP,
     MAX_ANGULAR,
     MAX_LINEAR,
     MAX_WHEEL,
-    RESET,
-    SAVE,
     ExtendedTelemetry,
     Param,
     encode_cmdvel,
-    encode_get,
-    encode_set,
     encode_wheel,
 )
 from wcdrive.protocol.spec import integer
@@ -200,23 +195,23 @@ class Wheelchair:
     @property
     def firmware(self) -> str:
         """The firmware's name from its hello answer ("final_control"; "" before)."""
-        return self._session.firmware
+        return self._session.handshake.firmware
 
     @property
     def firmware_version(self) -> str:
         """The firmware's version from its hello answer ("3.0.0"; "" before)."""
-        return self._session.firmware_version
+        return self._session.handshake.firmware_version
 
     @property
     def build_id(self) -> str:
         """The firmware's build id from its hello answer (8 hex digits of the hash of
         its sources, ``wcdrive.protocol.spec.build_id``; "" before)."""
-        return self._session.build_id
+        return self._session.handshake.build_id
 
     @property
     def status(self) -> ExtendedTelemetry | None:
         """The latest ``TLM:`` line (after hello), or None."""
-        return self._session.status
+        return self._session.board.status
 
     @property
     def errors(self) -> list[str]:
@@ -234,7 +229,7 @@ class Wheelchair:
     @history_limit.setter
     def history_limit(self, value: int) -> None:
         self._hub.history = value
-        for history in (self._session.errors, self._session.events, self._session.faults_announced):
+        for history in (self._session.errors, self._session.events, self._session.board.faults_announced):
             history.maxlen = value
 
     @property
@@ -300,8 +295,8 @@ class Wheelchair:
         session = self._session
         if session.closed.is_set():
             raise WcdriveConnectionError(f"the link to {session.name} is closed: connect() again")
-        if session.handshake_error is not None:
-            raise WcdriveProtocolError(str(session.handshake_error))
+        if session.handshake.error is not None:
+            raise WcdriveProtocolError(str(session.handshake.error))
         if not session.link_ok:
             silent = session.since_last_line
             raise WcdriveConnectionError(
@@ -345,10 +340,10 @@ class Wheelchair:
             self.stop()
             raise WcdriveProtocolError(f"{session.name} speaks protocol v1 (legacy), which has no "
                                        "latched e-stop: a stop was sent instead; flash the v3 firmware")
-        session.estop_held = True
-        if not session.link_ok and not session.closed.is_set() and session.handshake_error is None:
+        session.board.estop_held = True
+        if not session.link_ok and not session.closed.is_set() and session.handshake.error is None:
             try:
-                session.send_frame(ESTOP.rstrip(b"\n"))
+                session.send_frame(Request.estop().command)
                 self.stop()
             except WcdriveError:
                 pass
@@ -358,7 +353,7 @@ class Wheelchair:
                 "and latches it again when the board speaks; the board's watchdog stops the chair")
         self._require_link("the e-stop")
         try:
-            session.request(ESTOP.rstrip(b"\n"))
+            session.request(Request.estop())
         except (WcdriveTimeoutError, WcdriveConnectionError):
             try:
                 self.stop()
@@ -377,11 +372,8 @@ class Wheelchair:
         deadline = time.monotonic() + timeout
         while True:
             try:
-                self._session.request(RESET.rstrip(b"\n"))
-                self._session.estop_held = False
-                self._session.estop_announced = False
-                self._session.faults_announced.clear()
-                self._session.status = None          # the last TLM predates the reset
+                self._session.request(Request.reset())
+                self._session.board.estop_released()  # the last TLM predates the reset
                 return
             except WcdriveCommandError as exc:
                 if exc.reason != "busy" or time.monotonic() > deadline:
@@ -393,34 +385,26 @@ class Wheelchair:
         """The faults the board has latched (``ENC_STALL_L``, ``DRIVER_DEAD``, ...;
         PROTOCOL.md "Faults"), as its TLM line or its ``EVT:FAULT`` lines report them;
         empty when none. Motion raises ``WcdriveFaultError`` until ``reset_estop()``."""
-        status = self._session.status
-        names = list(status.fault_names) if status is not None else []
-        for name in self._session.faults_announced:
-            if name not in names:
-                names.append(name)
-        return tuple(names)
+        return self._session.board.faults
 
     @property
     def reset_cause(self) -> str:
         """Why the board last reset, from its ``BOOT:`` line (``POWER_ON``, ``EXTERNAL``,
         ``BROWN_OUT``, ``WATCHDOG``, ...), or "" when no BOOT line was seen."""
-        return self._session.reset_cause
+        return self._session.board.reset_cause
 
     @property
     def estop_latched(self) -> bool:
         """True while the e-stop is latched (as the board reports it, or as sent)."""
-        status = self._session.status
-        if status is not None and status.estop_latched:
-            return True
-        return self._session.estop_held or self._session.estop_announced
+        return self._session.board.estop_latched
 
     def get_param(self, name: str) -> float:
         """A runtime parameter (protocol/PROTOCOL.md, "Parameters")."""
-        return self._param(encode_get(name))
+        return self._param(Request.get(name))
 
     def set_param(self, name: str, value: float) -> float:
         """Sets a parameter; returns the value now in force (as the board rounded it)."""
-        return self._param(encode_set(name, value))
+        return self._param(Request.set(name, value))
 
     def save_params(self, timeout: float = 1.0) -> None:
         """Stores the parameters in force in the board's EEPROM (protocol/PROTOCOL.md,
@@ -428,12 +412,12 @@ class Wheelchair:
         (``params_at_boot``). The board writes them in the background, one byte per
         3.4 ms (about 140 ms); a save sent meanwhile is refused ``busy``, and this
         retries it until ``timeout``."""
-        self._eeprom_command(SAVE, timeout)
+        self._eeprom_command(Request.save(), timeout)
 
     def restore_defaults(self) -> None:
         """Puts every parameter back to the firmware's default. The EEPROM keeps what was
         saved (the next boot loads it again) until ``save_params()``."""
-        self._eeprom_command(DEFAULTS, 0.0)
+        self._eeprom_command(Request.defaults(), 0.0)
 
     @property
     def params_at_boot(self) -> str:
@@ -441,29 +425,29 @@ class Wheelchair:
         (those saved in its EEPROM) or ``PARAMS_DEFAULT,<why>`` (``blank``, ``version``,
         ``crc``, ``range``); "" when no such line was seen (a board without parameters
         in EEPROM sends none)."""
-        return self._session.params_at_boot
+        return self._session.board.params_at_boot
 
-    def _eeprom_command(self, command: bytes, timeout: float) -> None:
+    def _eeprom_command(self, request: Request, timeout: float) -> None:
         if self.protocol_version == 1:
             raise WcdriveProtocolError(f"{self.url} speaks protocol v1 (legacy): it has no "
                                        "parameters")
-        self._require_link(repr(command.decode().strip()))
+        self._require_link(repr(request.command.decode()))
         deadline = time.monotonic() + timeout
         while True:
             try:
-                self._session.request(command.rstrip(b"\n"))
+                self._session.request(request)
                 return
             except WcdriveCommandError as exc:
                 if exc.reason != "busy" or time.monotonic() > deadline:
                     raise
             time.sleep(0.05)
 
-    def _param(self, command: bytes) -> float:
+    def _param(self, request: Request) -> float:
         if self.protocol_version == 1:
             raise WcdriveProtocolError(f"{self.url} speaks protocol v1 (legacy): it has no "
                                        "parameters")
-        self._require_link(repr(command.decode()))
-        data = self._session.request(command)
+        self._require_link(repr(request.command.decode()))
+        data = self._session.request(request)
         if not isinstance(data, Param):
             raise WcdriveProtocolError(f"{self.url}: expected a PAR: line, got {data!r}")
         return data.value
