@@ -161,7 +161,9 @@ class FaultyPort(PortWrapper):
 
     - With no rule and no cut on ``rx``, the board's bytes pass as they come; else
       whole lines (a line is held until its ``\\n`` came).
-    - Cut: the bytes are lost while the port stays open and calls return as usual.
+    - Cut: the bytes are lost while the port stays open and calls return as usual;
+      with rules on ``rx``, whole lines (one whose ``\n`` comes after the ``restore``
+      arrives whole, as if the cut had come between lines).
       ``cut(partial=True)``: the next write, if longer than a byte, hands only a random
       head of itself (1 .. len-1 bytes) to the board, as when the cable goes mid-line.
     - Unplugged: ``read``, ``write``, ``flush`` and ``in_waiting`` raise
@@ -198,7 +200,6 @@ class FaultyPort(PortWrapper):
             self.rx.cut = self.rx.cut or rx
             self._cut_partial = partial and tx
             if rx:                              # what was on its way is lost too
-                self._partial.clear()
                 self._ready.clear()
                 self._rx_held.clear()
 
@@ -279,7 +280,14 @@ class FaultyPort(PortWrapper):
         """``data``, read from the wrapped port, through the cut and the ``rx`` rules:
         what the host gets of it now (lines held back come later)."""
         with self._lock:
-            if self.unplugged or self.rx.cut:
+            if self.unplugged:
+                return b""
+            if self.rx.cut:
+                if self.rx.rules:               # lines: lose the whole ones, keep the tail
+                    self._partial += data
+                    del self._partial[:self._partial.rfind(b"\n") + 1]
+                else:
+                    self._partial.clear()
                 return b""
             if self._passing():
                 self.rx.passed += len(data)
