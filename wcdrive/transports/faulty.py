@@ -159,11 +159,11 @@ class FaultyPort(PortWrapper):
     ``Direction``: ``drop``, ``flip``, ``delay``, ``edit``), ``cut``/``restore`` (the
     link dead, both ways or one) and ``unplug``/``replug`` (the device gone).
 
-    - With no rule and no cut on ``rx``, the board's bytes pass as they come; else
-      whole lines (a line is held until its ``\\n`` came).
+    - With no rule and no cut on ``rx``, the board's bytes pass as they come; else,
+      and always with ``lines``, whole lines (a line is held until its ``\\n`` came).
     - Cut: the bytes are lost while the port stays open and calls return as usual;
-      with rules on ``rx``, whole lines (one whose ``\n`` comes after the ``restore``
-      arrives whole, as if the cut had come between lines).
+      with rules on ``rx`` or ``lines``, whole lines (one whose ``\\n`` comes after the
+      ``restore`` arrives whole, as if the cut had come between lines).
       ``cut(partial=True)``: the next write, if longer than a byte, hands only a random
       head of itself (1 .. len-1 bytes) to the board, as when the cable goes mid-line.
     - Unplugged: ``read``, ``write``, ``flush`` and ``in_waiting`` raise
@@ -177,8 +177,9 @@ class FaultyPort(PortWrapper):
     """
 
     def __init__(self, port: Port, seed: int | random.Random = 0,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+                 clock: Callable[[], float] = time.monotonic, lines: bool = False) -> None:
         super().__init__(port)
+        self.lines = lines
         self.rng = seed if isinstance(seed, random.Random) else random.Random(seed)
         self.clock = clock
         self._lock = threading.RLock()
@@ -274,7 +275,7 @@ class FaultyPort(PortWrapper):
 
     # ---- the board's side: rx -------------------------------------------------------------
     def _passing(self) -> bool:
-        return not (self.rx.rules or self.rx.cut or self._partial or self._rx_held)
+        return not (self.lines or self.rx.rules or self.rx.cut or self._partial or self._rx_held)
 
     def on_read(self, data: bytes) -> bytes:
         """``data``, read from the wrapped port, through the cut and the ``rx`` rules:
@@ -283,7 +284,7 @@ class FaultyPort(PortWrapper):
             if self.unplugged:
                 return b""
             if self.rx.cut:
-                if self.rx.rules:               # lines: lose the whole ones, keep the tail
+                if self.lines or self.rx.rules:     # lose whole lines, keep the tail
                     self._partial += data
                     del self._partial[:self._partial.rfind(b"\n") + 1]
                 else:
