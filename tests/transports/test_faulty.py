@@ -218,3 +218,47 @@ def test_the_same_seed_gives_the_same_faults_under_a_session() -> None:
                 chair.wait_for_telemetry(10.0)
         hits.append([after for _, after in rule.hits])
     assert hits[0] == hits[1] and len(hits[0]) == 5
+
+
+def test_a_cut_of_a_port_judged_by_the_line_keeps_lines_whole() -> None:
+    """``lines=True`` (or rules on rx): what the board sent during the cut is lost by
+    the line; the line under way at the restore arrives whole."""
+    port, inner, _ = rig()
+    port.lines = True
+    inner.feed(b"ENC:1\r\nENC:2")
+    assert read_all(port) == b"ENC:1\r\n"
+    port.cut(tx=False)
+    inner.feed(b"2\r\nENC:3")
+    assert read_all(port) == b""
+    port.restore()
+    inner.feed(b"3\r\nENC:4\r\n")
+    assert read_all(port) == b"ENC:33\r\nENC:4\r\n"
+
+
+def test_without_lines_a_cut_loses_bytes_as_they_come() -> None:
+    port, inner, _ = rig()
+    port.cut(tx=False)
+    inner.feed(b"ENC:1\r\nENC:")
+    assert read_all(port) == b""
+    port.restore()
+    inner.feed(b"2\r\n")
+    assert read_all(port) == b"2\r\n"               # the tail of a line, as a cable gives it
+
+
+def test_a_read_by_the_line_waits_for_size_bytes_without_a_timeout() -> None:
+    port, inner, _ = rig()
+    port.lines = True
+    inner.timeout = None
+    inner.feed(b"ENC:1\r\nENC:2\r\nENC:3")
+    assert port.read(10) == b"ENC:1\r\nENC"         # not the 7 bytes of the first line
+    assert port.read(100) == b":2\r\n"             # the rest waits for its end: none came
+
+
+def test_a_closed_port_raises_though_it_read_ahead() -> None:
+    port, inner, _ = rig()
+    port.rx.drop(match=rb"^ACK:")
+    inner.feed(b"ENC:12345\r\n")
+    assert port.read(3) == b"ENC"
+    port.close()
+    with pytest.raises(serial.SerialException):
+        port.read(1)

@@ -32,7 +32,7 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from serial import SerialException
+from serial import PortNotOpenError, SerialException
 
 from wcdrive.transports.port import Port
 from wcdrive.transports.wrapper import PortWrapper
@@ -326,29 +326,34 @@ class FaultyPort(PortWrapper):
         return ready + int(self.port.in_waiting)
 
     def read(self, size: int = 1) -> bytes:
-        """Up to ``size`` bytes, waiting about the port's timeout at most."""
+        """Up to ``size`` bytes, as the wrapped port reads them: fewer only once its
+        ``timeout`` passed (with lines held back, a read may wait up to about twice it)."""
         self._check()
+        if not self.is_open:                    # what was read ahead is gone with the port
+            raise PortNotOpenError()
         self._release()
         timeout = self.port.timeout
         deadline = None if timeout is None else time.monotonic() + timeout
         while True:
             with self._lock:
                 self._ready += self._due()
-                if self._ready:
+                if len(self._ready) >= size:
                     break
-            with self._lock:
+                want = size - len(self._ready)
                 passing = self._passing()
-            # whole lines: what has come, so that a short read does not end mid-line
-            data = self.port.read(size if passing else max(size, int(self.port.in_waiting)))
+            if not passing:        # whole lines: what has come, so as not to end mid-line
+                want = max(want, int(self.port.in_waiting))
+            data = self.port.read(want)
             got = self.on_read(data)
             self._check()
             with self._lock:
                 self._ready += got
-                if self._ready or not data:
-                    break
+            if len(data) < want:                            # its timeout passed
+                break
             if deadline is not None and time.monotonic() >= deadline:
                 break
         with self._lock:
+            self._ready += self._due()
             out = bytes(self._ready[:size])
             del self._ready[:size]
         return out
