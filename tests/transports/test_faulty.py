@@ -245,13 +245,36 @@ def test_without_lines_a_cut_loses_bytes_as_they_come() -> None:
     assert read_all(port) == b"2\r\n"               # the tail of a line, as a cable gives it
 
 
+class Trickle(FakePort):
+    """A port without a timeout on which the board's bytes come a chunk at a time:
+    ``read(size)`` waits (takes chunks) until it has ``size`` bytes."""
+
+    def __init__(self, chunks: list[bytes]) -> None:
+        super().__init__(timeout=None)
+        self.chunks = chunks
+
+    def read(self, size: int = 1) -> bytes:
+        while len(self.incoming) < size and self.chunks:
+            self.feed(self.chunks.pop(0))
+        return super().read(size)
+
+
 def test_a_read_by_the_line_waits_for_size_bytes_without_a_timeout() -> None:
+    """Not the 7 bytes of the first whole line: ``size`` bytes, as the port's read."""
+    port = FaultyPort(Trickle([b"ENC:1\r\n", b"ENC:2\r\n", b"ENC:3\r\n"]), lines=True)
+    assert port.read(10) == b"ENC:1\r\nENC"
+    assert port.read(4) == b":2\r\n"
+
+
+def test_read_ahead_is_lost_with_a_cut() -> None:
+    """Bytes of whole lines read from the board but not yet by the host were on their
+    way: a cut loses them."""
     port, inner, _ = rig()
     port.lines = True
-    inner.timeout = None
-    inner.feed(b"ENC:1\r\nENC:2\r\nENC:3")
-    assert port.read(10) == b"ENC:1\r\nENC"         # not the 7 bytes of the first line
-    assert port.read(100) == b":2\r\n"             # the rest waits for its end: none came
+    inner.feed(b"ENC:0\r\nENC:1\r\n")
+    assert port.read(3) == b"ENC"
+    port.cut(tx=False)
+    assert read_all(port) == b""
 
 
 def test_a_closed_port_raises_though_it_read_ahead() -> None:
