@@ -169,8 +169,9 @@ class FaultyPort(PortWrapper):
     - Unplugged: ``read``, ``write``, ``flush`` and ``in_waiting`` raise
       ``SerialException`` (pyserial's message for a vanished USB device), a read
       blocked meanwhile too; what the board sent is lost, up to the ``replug``.
-    - ``read(size)`` returns up to ``size`` bytes within about the port's timeout;
-      what a line gave beyond ``size`` waits for the next read.
+    - ``read(size)`` returns fewer than ``size`` bytes only once the wrapped port's
+      timeout passed, as pyserial's; what a line gave beyond ``size`` waits for the
+      next read.
 
     What the wrapped port read reaches ``on_read`` before the faults: a subclass that
     overrides it sees every byte the board sent (and calls ``super().on_read``).
