@@ -69,11 +69,17 @@ def test_a_line_is_judged_once_its_end_came() -> None:
     assert read_all(port) == b"ENC:2\r\n"
 
 
-def test_a_read_smaller_than_a_line_leaves_the_rest_for_the_next() -> None:
+def read_ahead() -> FaultyPort:
+    """A port judging by the line that read a whole line, of which the host took 4 bytes."""
     port, inner, _ = rig()
-    port.rx.drop(match=rb"^ACK:")
+    port.lines = True
     inner.feed(b"ENC:12345\r\n")
     assert port.read(4) == b"ENC:"
+    return port
+
+
+def test_a_read_smaller_than_a_line_leaves_the_rest_for_the_next() -> None:
+    port = read_ahead()
     assert port.in_waiting == 7
     assert port.read(100) == b"12345\r\n"
 
@@ -269,19 +275,13 @@ def test_a_read_by_the_line_waits_for_size_bytes_without_a_timeout() -> None:
 def test_read_ahead_is_lost_with_a_cut() -> None:
     """Bytes of whole lines read from the board but not yet by the host were on their
     way: a cut loses them."""
-    port, inner, _ = rig()
-    port.lines = True
-    inner.feed(b"ENC:0\r\nENC:1\r\n")
-    assert port.read(3) == b"ENC"
+    port = read_ahead()
     port.cut(tx=False)
     assert read_all(port) == b""
 
 
 def test_a_closed_port_raises_though_it_read_ahead() -> None:
-    port, inner, _ = rig()
-    port.rx.drop(match=rb"^ACK:")
-    inner.feed(b"ENC:12345\r\n")
-    assert port.read(3) == b"ENC"
+    port = read_ahead()
     port.close()
     with pytest.raises(serial.SerialException):
         port.read(1)
