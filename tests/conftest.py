@@ -48,6 +48,14 @@ def thorough() -> bool:
     return settings().max_examples >= 200
 
 
+def pytest_addoption(parser: pytest.Parser) -> None:
+    """``--device PATH``: also run the port contract suite (tests/transports/contract/)
+    against a real board on that serial device."""
+    parser.addoption("--device", default=None, metavar="PATH",
+                     help="run tests/transports/contract/ against the board on this serial device "
+                          "too (e.g. /dev/ttyACM0)")
+
+
 # ---- Ctrl-C for the programs the tests start -------------------------------------------
 # A test run started in the background by a shell without job control (``cmd &`` in a
 # script, nohup) inherits SIGINT ignored, and so would every program a test starts:

@@ -33,56 +33,37 @@ from wcdrive.boards.sim_board import SimulatedBoard
 from wcdrive.host.handshake import Handshake
 from wcdrive.host.requests import Request
 from wcdrive.protocol.codec import encode_cmdvel, encode_ppm
+from wcdrive.transports.faulty import FaultyPort
 from wcdrive.transports.pty_bridge import PtyBridge
+from wcdrive.transports.recording import RecordingPort
 
 FRAME = re.compile(rb"\$(\d{1,5}):([ -~]*)\*([0-9A-F]{4})")
 
 
-class Tamper:
-    """Sits between a ``PtyBridge`` and its board (it is the bridge's ``SerialLike``):
-    ``on_write`` may change each write of the host, ``on_line`` each line of the board
-    (None drops it), and ``frozen`` drops all of the board's output while the pty
-    stays open. ``written`` keeps what reached the board."""
+class Tamper(FaultyPort):
+    """A ``FaultyPort`` over a ``wcsim://`` board at the wall clock's pace, judged by
+    the line, served by a ``PtyBridge`` (it is the bridge's ``SerialLike``: ``read``
+    takes the bridge's timeout and keeps the port's, 50 ms). ``written`` keeps what
+    reached the board, a write at a time."""
 
-    def __init__(self, board: SimulatedBoard) -> None:
-        self.board = board
-        self.on_write: Callable[[bytes], bytes] = lambda data: data
-        self.on_line: Callable[[bytes], bytes | None] = lambda line: line
-        self.frozen = False
-        self.written: list[bytes] = []
-        self._partial = b""
-        self._lock = threading.Lock()
+    def __init__(self) -> None:
+        super().__init__(RecordingPort(serial.serial_for_url("wcsim://?speed=1", timeout=0.05)), lines=True)
 
-    def write(self, data: bytes) -> int:
-        """What the host wrote, through ``on_write``, to the board."""
-        with self._lock:
-            data = self.on_write(bytes(data))
-            self.written.append(data)
-        self.board.write(data)
-        return len(data)
+    @property
+    def written(self) -> list[bytes]:
+        """Every write that reached the board."""
+        recording = self.port.recording            # type: ignore[attr-defined]
+        return [data for _, data in recording.sent]
 
     def read(self, size: int = 1, timeout: float | None = None) -> bytes:
-        """The board's complete lines through ``on_line`` (nothing while ``frozen``)."""
-        data = self._partial + self.board.read(size, timeout)
-        end = data.rfind(b"\n") + 1
-        self._partial = data[end:]
-        out = []
-        for line in data[:end].splitlines(keepends=True):
-            with self._lock:
-                kept = None if self.frozen else self.on_line(line)
-            if kept is not None:
-                out.append(kept)
-        return b"".join(out)
-
-    def close(self) -> None:
-        """Stops the board."""
-        self.board.close()
+        """Up to ``size`` bytes of the board's lines, within the port's timeout."""
+        return super().read(size)
 
 
 @pytest.fixture
 def rig():
-    """A ``Tamper`` over a simulated board at the wall clock's pace, behind a pty."""
-    tamper = Tamper(SimulatedBoard(speed=1.0).start())
+    """A ``Tamper`` behind a pty."""
+    tamper = Tamper()
     bridge = PtyBridge(tamper).start()
     yield tamper, bridge.path
     bridge.close()
@@ -158,7 +139,8 @@ def test_a_request_whose_answer_is_lost_is_not_repeated_while_motion_follows_it(
         return line
 
     with wcdrive.connect(path) as chair:
-        tamper.on_write, tamper.on_line = note_set, lose_set_answers
+        tamper.tx.edit(note_set)
+        tamper.rx.edit(lose_set_answers)
         driving = threading.Event()
         driving.set()
 
@@ -199,7 +181,7 @@ def _garble_hellos(count: int) -> Callable[[bytes], bytes]:
 
 def test_a_garbled_first_hello_is_retried(rig) -> None:
     tamper, path = rig
-    tamper.on_write = _garble_hellos(1)
+    tamper.tx.edit(_garble_hellos(1))
     start = time.monotonic()
     with wcdrive.connect(path) as chair:
         took = time.monotonic() - start
@@ -221,7 +203,7 @@ def test_a_lost_hello_answer_is_retried_after_a_wait(rig) -> None:
             return None
         return line
 
-    tamper.on_line = lose_first_hello
+    tamper.rx.edit(lose_first_hello)
     with wcdrive.connect(path) as chair:
         assert chair.protocol_version == 3 and dropped
     assert b"".join(tamper.written).count(b":hello*") == 2
@@ -229,7 +211,7 @@ def test_a_lost_hello_answer_is_retried_after_a_wait(rig) -> None:
 
 def test_no_hello_answer_raises_unless_legacy(rig) -> None:
     tamper, path = rig
-    tamper.on_write = _garble_hellos(10**6)
+    tamper.tx.edit(_garble_hellos(10**6))
     with pytest.raises(wcdrive.WcdriveProtocolError, match=f"{re.escape(path)} did not answer hello") as e:
         wcdrive.connect(path)
     assert "legacy=True" in str(e.value)
@@ -254,7 +236,7 @@ def test_no_hello_answer_raises_unless_legacy(rig) -> None:
 @pytest.mark.parametrize("legacy", [False, True])
 def test_an_unknown_protocol_version_raises(rig, legacy: bool) -> None:
     tamper, path = rig
-    tamper.on_line = lambda line: line.replace(b"HELLO:3,", b"HELLO:9,")
+    tamper.rx.edit(lambda line: line.replace(b"HELLO:3,", b"HELLO:9,"))
     with pytest.raises(wcdrive.WcdriveProtocolError, match=rf"{re.escape(path)} speaks protocol v9"):
         wcdrive.connect(path, legacy=legacy)
 
@@ -271,9 +253,8 @@ def test_a_frozen_board_output_is_noticed_within_200_ms_and_the_link_recovers(ri
             chair.set_velocity(0.2, 0.0)
             next(stream)
         assert chair.link_ok
-        with tamper._lock:
-            tamper.frozen = True
-            frozen_at = time.monotonic()
+        tamper.cut(tx=False)
+        frozen_at = time.monotonic()
         _wait(lambda: not chair.link_ok, "link_ok to turn False", timeout=1.0)
         noticed = time.monotonic() - frozen_at
         assert noticed < 0.2, noticed
@@ -293,8 +274,7 @@ def test_a_frozen_board_output_is_noticed_within_200_ms_and_the_link_recovers(ri
         time.sleep(0.2)
         assert [c for _, c in _frames(b"".join(tamper.written[before:]))] == [encode_cmdvel(0.0, 0.0)]
         assert not chair.link_ok and len(events) == 1               # still down, one event
-        with tamper._lock:
-            tamper.frozen = False
+        tamper.restore()
         _wait(lambda: chair.link_ok, "the link to recover", timeout=1.0)
         _wait(lambda: len(events) == 2, "the LinkRestored callback")
         restored = events[1]
@@ -319,17 +299,15 @@ def test_an_estop_during_a_dead_link_is_latched_once_the_link_is_back(rig) -> No
 
     with wcdrive.connect(path) as chair:
         chair.set_velocity(0.3, 0.0)
-        with tamper._lock:
-            tamper.frozen = True
-            tamper.on_write = drop                                  # nothing gets through
+        tamper.cut(tx=False)
+        tamper.tx.edit(drop)                                        # nothing gets through
         _wait(lambda: not chair.link_ok, "the link to be lost", timeout=1.0)
         with pytest.raises(wcdrive.WcdriveConnectionError, match="cannot confirm"):
             chair.estop()
         _wait(lambda: b":estop*" in b"".join(dropped), "the e-stop to be lost on the way")
         assert chair.estop_latched and not state.estopLatched
-        with tamper._lock:
-            tamper.frozen = False
-            tamper.on_write = lambda data: data
+        tamper.restore()
+        tamper.tx.clear()
         _wait(lambda: state.estopLatched, "the board to latch the e-stop", timeout=2.0)
         assert chair.link_ok and chair.estop_latched
         with pytest.raises(wcdrive.WcdriveEstopError):
@@ -483,7 +461,7 @@ def test_failures_on_a_live_chair_name_it(rig) -> None:
     try:
         with pytest.raises(wcdrive.WcdriveCommandError, match=f"{re.escape(path)} refused .*range"):
             chair._session.request(Request.set_text("max_accel", b"99"))
-        tamper.on_line = lambda line: None if line.startswith((b"ACK:", b"NAK:", b"PAR:")) else line
+        tamper.rx.edit(lambda line: None if line.startswith((b"ACK:", b"NAK:", b"PAR:")) else line)
         with pytest.raises(wcdrive.WcdriveTimeoutError, match=f"no answer from {re.escape(path)}"):
             chair.get_param("kp_l")
     finally:

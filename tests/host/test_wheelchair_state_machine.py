@@ -57,7 +57,6 @@ from __future__ import annotations
 
 import math
 import re
-import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -80,6 +79,7 @@ from wcdrive.host.requests import Request
 from wcdrive.host.telemetry import LinkLost, LinkRestored
 from wcdrive.protocol.codec import MAX_ANGULAR, MAX_LINEAR, MAX_WHEEL, encode_cmdvel, encode_wheel
 from wcdrive.protocol.spec import PARAMETERS
+from wcdrive.transports.faulty import FaultyPort
 
 BY_NAME = {p.name: p for p in PARAMETERS}
 DEFAULTS = {p.name: getattr(FirmwareState(), p.field) for p in PARAMETERS}
@@ -155,92 +155,52 @@ class BoardProbe:
             self.log.append(Line(millis, int(m[1]), m[2], accepted))
 
 
-class Link:
-    """The host's end of one ``wcsim://`` port, a ``Port`` for the session: counts the
-    bytes the host wrote, loses the board's answers on request (as a corrupted byte
-    would: the line never parses), corrupts a request line on its way out (one flipped
-    bit: the board answers ``ERR:checksum``), drops every line of the board while
-    ``frozen`` (the port stays open) and can be unplugged (reads raise, as pyserial's
-    do when a USB device goes away)."""
+class Link(FaultyPort):
+    """The host's end of one ``wcsim://`` port behind a ``FaultyPort``, the session's
+    ``Port``: ``written`` counts the bytes that reached the board, ``lose`` loses the
+    board's next answers and PAR lines (as a corrupted byte would: the line never
+    parses), ``corrupt_next_request`` flips a bit of the next request line's command
+    (the board answers ``ERR:checksum``), ``cut(tx=False)`` drops every line of the
+    board while the port stays open (``restore``), and ``unplug`` makes its calls raise,
+    as pyserial's do when a USB device goes away. The random choices come from
+    ``seed``, the board's seed."""
 
-    ANSWER = re.compile(rb"(?:ACK|NAK):\d+")
-    REQUEST = re.compile(rb"\$\d+:(?=estop|reset|get:|set:)")
+    ANSWER = re.compile(rb"^(?:ACK|NAK):\d+")
+    #: Group 1, where the flip goes: the first byte of a request's command.
+    REQUEST = re.compile(rb"^\$\d+:(?=estop|reset|get:|set:)(.)")
+    BODY = re.compile(rb"\$\d+:(.*)\*", re.S)
 
     def __init__(self, speed: float, seed: int) -> None:
-        self.port = serial.serial_for_url(f"wcsim://?speed={speed}&seed={seed}", timeout=0.1)
-        self.board: SimulatedBoard = self.port.board
+        super().__init__(serial.serial_for_url(f"wcsim://?speed={speed}&seed={seed}", timeout=0.1), seed=seed)
         self.probe = BoardProbe(self.board)
-        self.written = 0
-        self.lose_answers = 0          # ACK/NAK lines still to lose
-        self.lose_data = 0             # PAR lines still to lose
-        self.lost: list[bytes] = []
-        self.corrupt_requests = 0      # request lines still to corrupt
-        self.corrupted: set[bytes] = set()   # the commands the board got instead
-        self.unplugged = False
-        self.frozen = False
-        self._pending = bytearray()
-        self._lock = threading.Lock()
+        self._answers = self.rx.drop(match=self.ANSWER, count=0)
+        self._data = self.rx.drop(match=rb"^PAR:", count=0)
+        self._requests = self.tx.flip(match=self.REQUEST, count=0)
 
     @property
-    def timeout(self) -> float | None:
-        return self.port.timeout
-
-    @timeout.setter
-    def timeout(self, value: float | None) -> None:
-        self.port.timeout = value
-
-    def _check(self) -> None:
-        if self.unplugged:
-            raise serial.SerialException("device reports readiness to read but returned no data "
-                                         "(device disconnected or multiple access on port?)")
+    def written(self) -> int:
+        """Bytes that reached the board."""
+        return self.tx.passed
 
     @property
-    def in_waiting(self) -> int:
-        self._check()
-        return 0 if self.frozen else self.port.in_waiting
+    def lost(self) -> list[bytes]:
+        """The board's lines lost so far."""
+        return [line for rule in (self._answers, self._data) for line, _ in rule.hits]
 
-    def read(self, size: int = 1) -> bytes:
-        self._check()
-        self._pending += self.port.read(size)
-        end = self._pending.rfind(b"\n") + 1
-        if end == 0:
-            return b""
-        lines = bytes(self._pending[:end]).splitlines(keepends=True)
-        del self._pending[:end]
-        return b"".join(line for line in lines if self._keep(line))
+    @property
+    def corrupted(self) -> set[bytes]:
+        """The commands the board got instead of the corrupted ones."""
+        return {m[1] for _, line in self._requests.hits if line and (m := self.BODY.match(line))}
 
-    def _keep(self, line: bytes) -> bool:
+    def lose(self, answers: int, data: int) -> None:
+        """The next ``answers`` ACK/NAK lines and the next ``data`` PAR lines are lost."""
         with self._lock:
-            if self.frozen:
-                return False
-            if self.lose_answers > 0 and self.ANSWER.match(line):
-                self.lose_answers -= 1
-            elif self.lose_data > 0 and line.startswith(b"PAR:"):
-                self.lose_data -= 1
-            else:
-                return True
-            self.lost.append(line)
-            return False
+            self._answers.count, self._data.count = answers, data
 
-    def write(self, data: bytes) -> int | None:
-        self._check()
+    def corrupt_next_request(self) -> None:
+        """The next request line reaches the board with a flipped bit."""
         with self._lock:
-            m = self.REQUEST.match(data)
-            if self.corrupt_requests > 0 and m:
-                self.corrupt_requests -= 1
-                i = m.end()
-                data = data[:i] + bytes([data[i] ^ 1]) + data[i + 1:]
-                self.corrupted.add(data[i:data.index(b"*")])
-        n = self.port.write(data)
-        with self._lock:
-            self.written += len(data)
-        return n
-
-    def flush(self) -> None:
-        self.port.flush()
-
-    def close(self) -> None:
-        self.port.close()
+            self._requests.count = 1
 
 
 # ---- strategies ------------------------------------------------------------------------
@@ -638,16 +598,13 @@ class WheelchairMachine(RuleBasedStateMachine):
     def lose_answers(self, answers: int, data: int) -> None:
         """The next ``answers`` ACK/NAK lines and the next ``data`` PAR lines are lost
         on the way to the host."""
-        with self.link._lock:
-            self.link.lose_answers = answers
-            self.link.lose_data = data
+        self.link.lose(answers, data)
 
     @rule()
     def corrupt_next_request(self) -> None:
         """The next request line reaches the board with a flipped bit: the board refuses
         it (``ERR:checksum``) and the session must send it again, once."""
-        with self.link._lock:
-            self.link.corrupt_requests = 1
+        self.link.corrupt_next_request()
 
     @precondition(lambda self: self.freezes == 0)
     @rule(call=st.sampled_from(["set_velocity", "set_wheels", "get_param"]))
@@ -662,8 +619,7 @@ class WheelchairMachine(RuleBasedStateMachine):
         self._settle()
         events = len(self.link_events)
         chair.link_timeout = FREEZE_LINK_TIMEOUT
-        with self.link._lock:
-            self.link.frozen = True
+        self.link.cut(tx=False)
         try:
             # the flag flips first, then the LinkLost callback runs (another thread)
             _wait(lambda: not chair.link_ok and len(self.link_events) > events,
@@ -681,8 +637,7 @@ class WheelchairMachine(RuleBasedStateMachine):
                     chair.get_param("kp_l")
             assert self.link.written == written, "a command went out on a dead link"
         finally:
-            with self.link._lock:
-                self.link.frozen = False
+            self.link.restore()
         _wait(lambda: chair.link_ok and len(self.link_events) > events + 1,
               "the link to recover and the LinkRestored delivered")
         chair.link_timeout = 1.0
@@ -697,7 +652,7 @@ class WheelchairMachine(RuleBasedStateMachine):
         reconnects = chair.events.count("RECONNECTED")
         if self.latched:
             _note("unplugged with the e-stop latched")
-        self.link.unplugged = True
+        self.link.unplug()
         _wait(lambda: chair.events.count("RECONNECTED") > reconnects, "the session to reopen the port")
         self._new_board_model()
         chair.wait_for_telemetry(WALL_TIMEOUT)

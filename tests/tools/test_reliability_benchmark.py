@@ -1,4 +1,4 @@
-"""The reliability benchmark (benchmarks/reliability.py, issue #14) in a tiny run, so it
+"""The reliability benchmark (benchmarks/reliability/, issue #14) in a tiny run, so it
 cannot rot: no motion from invalid input, no corrupted frame executed or ACKed, port =
 firmware; and shown able to fail, on a port that takes unframed motion after hello or
 frames with any CRC."""
@@ -18,15 +18,19 @@ from wcdrive.firmware import commands
 from wcdrive.plant import ChairParams
 from wcdrive.protocol.codec import crc16, frame
 
-PATH = Path(__file__).resolve().parents[2] / "benchmarks" / "reliability.py"
+BENCHMARKS = Path(__file__).resolve().parents[2] / "benchmarks"
+PACKAGE = BENCHMARKS / "reliability"
 
 
 @pytest.fixture(scope="module")
 def rel() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("wcdrive_reliability_benchmark", PATH)
+    """The package ``benchmarks/reliability/``, loaded by path (``benchmarks`` is not
+    on the import path), its modules under ``wcdrive_reliability_benchmark.``."""
+    spec = importlib.util.spec_from_file_location("wcdrive_reliability_benchmark", PACKAGE / "__init__.py",
+                                                  submodule_search_locations=[str(PACKAGE)])
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module            # dataclasses look their module up
+    sys.modules[spec.name] = module            # dataclasses and relative imports look it up
     spec.loader.exec_module(module)
     return module
 
@@ -61,12 +65,27 @@ def test_quick_run_on_the_port(rel: ModuleType) -> None:
     assert "| R1: " in text and "| R2: " in text and "| 1 bit |" in text
 
 
+ARGS = ["--quick", "--no-simavr", "--port-lines", "500", "--port-frames", "500", "--legacy-frames", "500"]
+
+
 def test_command_line(rel: ModuleType, capsys: pytest.CaptureFixture[str]) -> None:
-    code = rel.main(["--quick", "--no-simavr", "--port-lines", "500", "--port-frames", "500",
-                     "--legacy-frames", "500"])
+    code = rel.main(ARGS)
     out = capsys.readouterr().out
     assert code == 0, out
     assert "No problem found." in out and "| test | on the port |" in out
+
+
+@pytest.mark.parametrize("command", [[str(BENCHMARKS / "reliability.py")], ["-m", "benchmarks.reliability"]],
+                         ids=["script", "module"])
+def test_the_documented_commands_run_it(command: list[str]) -> None:
+    """``python benchmarks/reliability.py`` (docs/benchmarks.md) and ``python -m
+    benchmarks.reliability`` (from the checkout) both run the package."""
+    import subprocess
+
+    done = subprocess.run([sys.executable, *command, *ARGS], cwd=BENCHMARKS.parent, capture_output=True,
+                          text=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "No problem found." in done.stdout and "| test | on the port |" in done.stdout
 
 
 @pytest.mark.simavr

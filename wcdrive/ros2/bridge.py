@@ -26,6 +26,8 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from wcdrive.transports.wrapper import PortWrapper
+
 #: Topic -> message type.
 TOPICS: dict[str, str] = {
     "/odom": "nav_msgs/msg/Odometry",
@@ -367,60 +369,26 @@ class ChairPublisher:
             self.sink.publish("/imu", imu(stamp_s, rate, variance), stamp_s)
 
 
-class TapPort:
-    """Wraps a ``Port``: what goes through also goes to a ``ChairPublisher``. It is a
-    ``Port`` itself."""
+class TapPort(PortWrapper):
+    """Wraps a ``Port``: what goes through also goes to a ``ChairPublisher`` (a write
+    once the wrapped port took it, a read when it brought bytes). It is a ``Port``
+    itself (``PortWrapper``)."""
 
     def __init__(self, port: Any, publisher: ChairPublisher) -> None:
-        self.port = port
+        super().__init__(port)
         self.publisher = publisher
-
-    @property
-    def timeout(self) -> float | None:
-        """The wrapped port's ``timeout``."""
-        return self.port.timeout
-
-    @timeout.setter
-    def timeout(self, value: float | None) -> None:
-        self.port.timeout = value
-
-    @property
-    def board(self) -> Any:
-        """The wrapped port's simulated board, if it has one."""
-        return getattr(self.port, "board", None)
 
     @property
     def recording(self) -> Any:
         """The wrapped port's recording (a ``RecordingPort``'s), if it has one."""
         return getattr(self.port, "recording", None)
 
-    def write(self, data: bytes) -> int | None:
-        """Writes through, then publishes."""
-        n = self.port.write(data)
-        self.publisher.wrote(bytes(data))
-        return n
+    def on_sent(self, data: bytes) -> None:
+        """Publishes what the host wrote."""
+        self.publisher.wrote(data)
 
-    def read(self, size: int = 1) -> bytes:
-        """Reads through, then publishes."""
-        data: bytes = self.port.read(size)
+    def on_read(self, data: bytes) -> bytes:
+        """Publishes what the host read (when there is any) and passes it on."""
         if data:
             self.publisher.read(data)
         return data
-
-    @property
-    def in_waiting(self) -> int:
-        """The wrapped port's."""
-        return int(self.port.in_waiting)
-
-    @property
-    def is_open(self) -> bool:
-        """The wrapped port's (True for a port without one)."""
-        return bool(getattr(self.port, "is_open", True))
-
-    def flush(self) -> None:
-        """Flushes the wrapped port."""
-        self.port.flush()
-
-    def close(self) -> None:
-        """Closes the wrapped port."""
-        self.port.close()

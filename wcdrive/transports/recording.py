@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from wcdrive.transports.port import Port
+from wcdrive.transports.wrapper import PortWrapper
 
 FORMAT = "wcdrive-recording/1"
 
@@ -60,53 +61,25 @@ class Recording:
                    [(t, bytes.fromhex(h)) for t, h in data["received"]], data.get("meta", {}))
 
 
-class RecordingPort:
-    """Wraps a ``Port``; logs what goes through it into ``recording``. It is a ``Port``
-    itself: ``timeout`` is the wrapped port's."""
+class RecordingPort(PortWrapper):
+    """Wraps a ``Port``; logs what goes through it into ``recording``: a write once the
+    wrapped port took it, a read when it brought bytes. It is a ``Port`` itself
+    (``PortWrapper``: ``timeout`` and the rest are the wrapped port's); closing it
+    keeps the recording."""
 
     def __init__(self, port: Port, recording: Recording | None = None) -> None:
-        self.port = port
+        super().__init__(port)
         self.recording = recording if recording is not None else Recording()
         self._lock = threading.Lock()
 
-    @property
-    def timeout(self) -> float | None:
-        """The wrapped port's ``timeout``."""
-        return self.port.timeout
-
-    @timeout.setter
-    def timeout(self, value: float | None) -> None:
-        self.port.timeout = value
-
-    def write(self, data: bytes) -> int | None:
-        """Writes through; logs ``data`` once the write succeeded."""
-        n = self.port.write(data)
+    def on_sent(self, data: bytes) -> None:
+        """Logs ``data`` as sent."""
         with self._lock:
-            self.recording.sent.append((time.monotonic(), bytes(data)))
-        return n
+            self.recording.sent.append((time.monotonic(), data))
 
-    def read(self, size: int = 1) -> bytes:
-        """Reads through; logs what came."""
-        data = self.port.read(size)
+    def on_read(self, data: bytes) -> bytes:
+        """Logs ``data`` as received (when there is any) and passes it on."""
         if data:
             with self._lock:
                 self.recording.received.append((time.monotonic(), bytes(data)))
         return data
-
-    @property
-    def in_waiting(self) -> int:
-        """The wrapped port's."""
-        return self.port.in_waiting
-
-    @property
-    def is_open(self) -> bool:
-        """The wrapped port's (pyserial's attribute; True for a port without one)."""
-        return bool(getattr(self.port, "is_open", True))
-
-    def flush(self) -> None:
-        """Flushes the wrapped port."""
-        self.port.flush()
-
-    def close(self) -> None:
-        """Closes the wrapped port (the recording stays)."""
-        self.port.close()

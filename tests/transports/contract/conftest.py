@@ -11,7 +11,18 @@ Every test in ``tests/transports/contract/`` takes the ``backend`` fixture and s
   ``serial.Serial`` (the code path of /dev/ttyACM0);
 - ``wccan``: ``serial_for_url("wccan://virtual/<channel>")``, the host end of CAN,
   with a ``CanGateway`` serving a ``wcsim://`` chair on the same virtual bus;
-- ``recording``: ``RecordingPort`` around ``wcsim://``.
+- ``recording``: ``RecordingPort`` around ``wcsim://``;
+- ``faulty``: ``FaultyPort`` around ``wcsim://`` with no fault, judging the board's
+  bytes by the line (``lines=True``: the path its faults take);
+- ``wceddie``: ``serial_for_url("wceddie://")``, the simulated Eddie board, which
+  speaks another protocol (``EDDIE``: it answers commands and sends nothing unasked);
+- ``device``: a real board, ``serial.Serial(<path>)``, only with ``--device <path>``
+  (``pytest tests/transports/contract --device /dev/ttyACM0``); not collected without.
+
+A backend's ``Dialect`` says what its board speaks: how a line ends and looks, a
+request it answers, and whether it sends feedback unasked. The tests that need the
+final_control firmware's feedback stream (moving wheels, its RX ring) are marked
+``final_control`` and run on its backends only.
 
 A ``Backend`` opens ports on the same URL or path as often as a test wants and closes
 all of them, and what it started (bridge, gateway), when the test ends; it then fails
@@ -32,6 +43,7 @@ from typing import Any
 import pytest
 import serial
 
+from wcdrive.protocol.codec import HELLO
 from wcdrive.transports.port import Port
 
 #: Simulated time against the wall clock of the simulated chairs (wcsim, pty, CAN):
@@ -50,6 +62,26 @@ FEEDBACK = re.compile(rb"ENC:(-?\d+),(-?\d+),VEL:[^,]+,[^,]+,MODE:(WHEEL|CMDVEL|
 BOOT = b"BOOT:final_control,POWER_ON\r\n"
 
 _channels = itertools.count()
+
+
+@dataclass(frozen=True)
+class Dialect:
+    """What a backend's board speaks: lines end in ``eol`` and match ``line``;
+    ``request`` is a command it answers with ``answer``; ``streams``: it sends feedback
+    unasked (else it speaks only when asked)."""
+
+    name: str
+    eol: bytes
+    line: re.Pattern[bytes]
+    request: bytes
+    answer: re.Pattern[bytes]
+    streams: bool
+
+
+FINAL_CONTROL = Dialect("final_control", b"\n", LINE, HELLO, re.compile(rb"HELLO:3,final_control,"), True)
+#: The Eddie's firmware: hex words, CR-terminated; HWVER answers the hardware version.
+EDDIE = Dialect("eddie", b"\r", re.compile(rb"(?:[0-9A-F]{3,8}(?: [0-9A-F]{3,8})*|ERROR(?: \w+)?)?\r"),
+                b"HWVER\r", re.compile(rb"0001\r"), False)
 
 
 @dataclass
@@ -73,6 +105,7 @@ class Backend:
     #: What ``in_waiting`` raises on a closed port: ``PortNotOpenError``, but
     #: pyserial's posix port calls ``ioctl(None)``, a ``TypeError``.
     in_waiting_closed_raises: tuple[type[BaseException], ...] = (serial.SerialException,)
+    dialect: Dialect = FINAL_CONTROL
     ports: list[Port] = field(default_factory=list)
     cleanups: list[Callable[[], Any]] = field(default_factory=list)
 
@@ -80,6 +113,12 @@ class Backend:
         port = self.opener(timeout)
         self.ports.append(port)
         return port
+
+    def ask(self, port: Port, n: int = 1) -> None:
+        """Makes a board that speaks only when asked say something (``n`` answers);
+        nothing for one that streams."""
+        if not self.dialect.streams:
+            port.write(self.dialect.request * n)
 
     def close_all(self) -> None:
         """Closes every port opened, then what the backend started (last first), even
@@ -130,6 +169,19 @@ def _make(name: str, request: pytest.FixtureRequest) -> Backend:
         from wcdrive.transports.recording import RecordingPort
 
         return Backend(name, lambda timeout: RecordingPort(_wcsim(timeout)))
+    if name == "faulty":
+        from wcdrive.transports.faulty import FaultyPort
+
+        return Backend(name, lambda timeout: FaultyPort(_wcsim(timeout), lines=True))
+    if name == "wceddie":
+        return Backend(name, lambda timeout: serial.serial_for_url(f"wceddie://?speed={SPEED}",
+                                                                   timeout=timeout),
+                       dialect=EDDIE, boots_on_open=False)             # it has no BOOT line
+    if name == "device":
+        path = request.config.getoption("--device")
+        return Backend(name, lambda timeout: serial.Serial(path, 115200, timeout=timeout),
+                       close_wakes_with=(serial.SerialException, OSError, TypeError),
+                       in_waiting_closed_raises=(serial.SerialException, OSError, TypeError))
     raise ValueError(name)
 
 
@@ -139,10 +191,32 @@ BACKENDS = [
     pytest.param("pty", id="pty"),
     pytest.param("wccan", id="wccan"),
     pytest.param("recording", id="recording"),
+    pytest.param("faulty", id="faulty"),
+    pytest.param("wceddie", id="wceddie"),
 ]
+#: The backends whose board is not final_control's.
+OTHER_DIALECTS = {"wceddie"}
 
 
-@pytest.fixture(params=BACKENDS)
+def pytest_configure(config: pytest.Config) -> None:
+    config.addinivalue_line("markers", "final_control: needs the final_control firmware's feedback "
+                                       "stream; runs on its backends only")
+
+
+def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
+    """``backend``: every backend (and ``device`` with ``--device``); for a test marked
+    ``final_control``, those whose board is final_control's."""
+    if "backend" not in metafunc.fixturenames:
+        return
+    params = list(BACKENDS)
+    if metafunc.config.getoption("--device", None):
+        params.append(pytest.param("device", id="device"))
+    if metafunc.definition.get_closest_marker("final_control") is not None:
+        params = [p for p in params if p.id not in OTHER_DIALECTS]
+    metafunc.parametrize("backend", params, indirect=True)
+
+
+@pytest.fixture
 def backend(request: pytest.FixtureRequest) -> Iterator[Backend]:
     before = set(threading.enumerate())
     made = _make(request.param, request)
@@ -191,14 +265,14 @@ def call_within(seconds: float, fn: Callable[[], Any]) -> tuple[Any, float]:
     return box["value"], elapsed
 
 
-def split_lines(data: bytes) -> tuple[list[bytes], bytes]:
-    """The complete ``\\n``-terminated lines of ``data`` and the incomplete rest."""
-    *lines, rest = data.split(b"\n")
-    return [line + b"\n" for line in lines], rest
+def split_lines(data: bytes, eol: bytes = b"\n") -> tuple[list[bytes], bytes]:
+    """The complete lines of ``data`` (each ending in ``eol``) and the incomplete rest."""
+    *lines, rest = data.split(eol)
+    return [line + eol for line in lines], rest
 
 
-def assert_well_formed(lines: list[bytes]) -> None:
-    bad = [line for line in lines if not LINE.fullmatch(line)]
+def assert_well_formed(lines: list[bytes], dialect: Dialect = FINAL_CONTROL) -> None:
+    bad = [line for line in lines if not dialect.line.fullmatch(line)]
     assert not bad, f"malformed lines: {bad[:5]}"
 
 
@@ -227,9 +301,23 @@ def n_feedback(n: int, after: bytes = b"") -> Callable[[bytes], bool]:
     return done
 
 
+def n_talked(backend: Backend, n: int) -> Callable[[bytes], bool]:
+    """``done`` for ``read_until``: ``n`` feedback lines, or ``n`` answers from a board
+    that speaks only when asked."""
+    if backend.dialect.streams:
+        return n_feedback(n)
+    return lambda data: len(backend.dialect.answer.findall(data)) >= n
+
+
 def wait_alive(backend: Backend, port: Port) -> bytes:
     """The first bytes of a freshly opened port: its BOOT line first where the board
-    boots on open, then feedback lines, all well-formed."""
+    boots on open, then feedback lines, all well-formed. A board that speaks only when
+    asked: the answers to two requests."""
+    if not backend.dialect.streams:
+        backend.ask(port, 2)
+        data = read_until(port, n_talked(backend, 2))
+        assert_well_formed(split_lines(data, backend.dialect.eol)[0], backend.dialect)
+        return data
     data = read_until(port, n_feedback(2))
     lines, _ = split_lines(data)
     if backend.boots_on_open:

@@ -1,5 +1,6 @@
 """The byte-level contract of a ``Port`` (``wcdrive.transports.port``), one suite run
-against every backend (``conftest.py``: wcsim, wcavr, pty, wccan, recording).
+against every backend (``conftest.py``: wcsim, wcavr, pty, wccan, recording, faulty,
+wceddie, and a real board with ``--device``).
 
 What a session relies on: opening and closing (twice is fine; a closed port raises
 ``serial.SerialException``), ``read`` honouring ``timeout`` (0 never blocks, ``None``
@@ -26,6 +27,7 @@ from tests.transports.contract.conftest import (
     call_within,
     feedback,
     n_feedback,
+    n_talked,
     read_until,
     split_lines,
     wait_alive,
@@ -47,9 +49,10 @@ def test_open_use_close(backend: Backend) -> None:
     port = backend.open(timeout=0.2)
     assert port.is_open
     wait_alive(backend, port)
-    assert port.write(HELLO) == len(HELLO)
+    request, answer = backend.dialect.request, backend.dialect.answer
+    assert port.write(request) == len(request)
     port.flush()
-    read_until(port, lambda data: b"HELLO:3,final_control," in data)
+    read_until(port, lambda data: answer.search(data) is not None)
 
     call_within(5.0, port.close)
     assert not port.is_open
@@ -65,6 +68,7 @@ def test_read_returns_at_its_timeout_with_fewer_bytes(backend: Backend) -> None:
     port = backend.open(timeout=0.2)
     wait_alive(backend, port)
     for _ in range(2):
+        backend.ask(port)
         data, took = call_within(0.2 + SLACK, lambda: port.read(100_000))
         assert took >= 0.19, f"returned after {took:.3f} s, before its timeout"
         assert 0 < len(data) < 100_000
@@ -72,9 +76,10 @@ def test_read_returns_at_its_timeout_with_fewer_bytes(backend: Backend) -> None:
 
 def test_timeout_zero_never_blocks(backend: Backend) -> None:
     port = backend.open(timeout=0)
+    backend.ask(port, 3)
     got = bytearray()
     deadline = time.monotonic() + 15
-    while len(feedback(split_lines(bytes(got))[0])) < 3:      # poll, as a non-blocking host does
+    while not n_talked(backend, 3)(bytes(got)):               # poll, as a non-blocking host does
         assert time.monotonic() < deadline, bytes(got)
         data, took = call_within(SLACK, lambda: port.read(100_000))
         assert took < 0.5, f"a timeout=0 read took {took:.3f} s"
@@ -86,6 +91,7 @@ def test_timeout_zero_never_blocks(backend: Backend) -> None:
 
 def test_timeout_none_waits_for_every_byte(backend: Backend) -> None:
     port = backend.open(timeout=None)
+    backend.ask(port, 120)                                     # 565 bytes of answers at least
     for size in (1, 64, 500):
         data, _ = call_within(15.0, lambda size=size: port.read(size))
         assert len(data) == size
@@ -104,18 +110,21 @@ def test_byte_reads_give_the_lines_of_bulk_reads(backend: Backend) -> None:
     """Two ports on the same board from its boot: the idle board's lines are the same
     whether read one byte at a time or 4 kB at a time."""
     first = backend.open(timeout=0.5)
-    bytewise = read_until(first, n_feedback(8), chunk=lambda port: 1)
+    backend.ask(first, 8)
+    bytewise = read_until(first, n_talked(backend, 8), chunk=lambda port: 1)
     first.close()
     second = backend.open(timeout=0.5)
-    bulk = read_until(second, n_feedback(8), chunk=lambda port: 4096)
-    a, b = split_lines(bytewise)[0], split_lines(bulk)[0]
-    if not backend.boots_on_open:
+    backend.ask(second, 8)
+    bulk = read_until(second, n_talked(backend, 8), chunk=lambda port: 4096)
+    eol = backend.dialect.eol
+    a, b = split_lines(bytewise, eol)[0], split_lines(bulk, eol)[0]
+    if not backend.boots_on_open and backend.dialect.streams:
         a, b = a[1:], b[1:]                  # the stream was joined mid-way
         # and the boot's lines (BOOT, EVT:PARAMS_*) only the first reader may have seen
         a = [line for line in a if not line.startswith((b"BOOT:", b"EVT:PARAMS"))]
         b = [line for line in b if not line.startswith((b"BOOT:", b"EVT:PARAMS"))]
-    assert_well_formed(a)
-    assert_well_formed(b)
+    assert_well_formed(a, backend.dialect)
+    assert_well_formed(b, backend.dialect)
     k = min(len(a), len(b))
     assert k >= 7
     assert a[:k] == b[:k]
@@ -140,6 +149,7 @@ def _drive_and_read(port: Port, chunk: int, wheel_lines: int) -> list[bytes]:
             return lines
 
 
+@pytest.mark.final_control
 def test_byte_reads_of_a_moving_chair(backend: Backend) -> None:
     """While the chair drives, 1-byte reads and then bulk reads on one port give
     whole, well-formed lines whose encoder counts run on without a gap in between:
@@ -160,6 +170,7 @@ def test_in_waiting_bytes_are_read_without_waiting(backend: Backend) -> None:
     port = backend.open(timeout=5.0)
     wait_alive(backend, port)
     for _ in range(3):
+        backend.ask(port, 25)                                  # 125 bytes of answers
         deadline = time.monotonic() + 15
         while port.in_waiting < 100:
             assert time.monotonic() < deadline, "in_waiting stays below 100"
@@ -170,6 +181,7 @@ def test_in_waiting_bytes_are_read_without_waiting(backend: Backend) -> None:
         assert took < 0.5, f"reading {n} waiting bytes took {took:.3f} s (timeout 5 s)"
 
 
+@pytest.mark.final_control
 def test_a_write_larger_than_the_rx_ring(backend: Backend) -> None:
     """1.7 kB in one write (the firmware's RX ring holds 64 bytes, the wire drains
     11.5 bytes a millisecond): the write returns its length at once, the board takes
@@ -200,9 +212,18 @@ def test_a_write_larger_than_the_rx_ring(backend: Backend) -> None:
 def test_lines_split_and_joined_across_writes(backend: Backend) -> None:
     """Three framed lines in one write are three commands. A line written a byte at a
     time is one command on a byte stream; the CAN host end takes whole lines only
-    (a part of one has no CAN form) and refuses the part with ValueError."""
+    (a part of one has no CAN form) and refuses the part with ValueError. A board of
+    another dialect: three of its requests in one write, then one a byte at a time."""
     port = backend.open(timeout=0.1)
     wait_alive(backend, port)
+    if not backend.dialect.streams:
+        request = backend.dialect.request
+        port.write(request * 3)
+        read_until(port, n_talked(backend, 3))
+        for i in range(len(request)):
+            assert port.write(request[i:i + 1]) == 1
+        read_until(port, n_talked(backend, 1))
+        return
     port.write(b"".join(frame(encode_wheel(0.5, 0.5), seq) for seq in (11, 12, 13)))
     # and a tick after them: the board answers at most 3 commands a tick
     data = read_until(port, n_feedback(1, after=b"ACK:13\r\n"))
