@@ -325,6 +325,16 @@ static void after_reset(wcsim_t *s, int cause, uint8_t mcusr_before) {
     log_reset(s, cause);
 }
 
+/* USART0's output comes to on_uart_tx, without simavr's stdio echo or poll sleep. */
+static void listen_to_uart_tx(wcsim_t *s) {
+    uint32_t flags = 0;
+    avr_ioctl(s->avr, AVR_IOCTL_UART_GET_FLAGS('0'), &flags);
+    flags &= ~(AVR_UART_FLAG_STDIO | AVR_UART_FLAG_POLL_SLEEP);
+    avr_ioctl(s->avr, AVR_IOCTL_UART_SET_FLAGS('0'), &flags);
+    avr_irq_register_notify(avr_io_getirq(s->avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUTPUT),
+                            on_uart_tx, s);
+}
+
 wcsim_t *wcsim_new(const char *elf_path, char *err, int errlen) {
     wcsim_t *s = calloc(1, sizeof(*s));
     if (!s) return NULL;
@@ -347,12 +357,7 @@ wcsim_t *wcsim_new(const char *elf_path, char *err, int errlen) {
     avr_load_firmware(s->avr, &s->fw);
     s->avr->sleep = no_sleep;
 
-    uint32_t flags = 0;
-    avr_ioctl(s->avr, AVR_IOCTL_UART_GET_FLAGS('0'), &flags);
-    flags &= ~(AVR_UART_FLAG_STDIO | AVR_UART_FLAG_POLL_SLEEP);
-    avr_ioctl(s->avr, AVR_IOCTL_UART_SET_FLAGS('0'), &flags);
-    avr_irq_register_notify(avr_io_getirq(s->avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUTPUT),
-                            on_uart_tx, s);
+    listen_to_uart_tx(s);
     /* The receiver is the harness's: UDR0 reads come here, not to simavr's 64-byte queue. */
     s->uart = find_uart0(s->avr);
     if (s->uart) {
@@ -516,16 +521,19 @@ static void drop_front(void *log, size_t *len, size_t n, size_t size) {
     *len -= n;
 }
 
+/* The body of a *_take: COPY copies entry i of log out, for the first n entries. */
+#define DRAIN(log, count, max, COPY)                   \
+    size_t n = take_count((count), (max));             \
+    for (size_t i = 0; i < n; i++) { COPY; }           \
+    drop_front((log), &(count), n, sizeof(*(log)));    \
+    return n
+
 /* Copies and removes up to max reset-log entries from the front of the log. */
 size_t wcsim_resets_take(wcsim_t *s, uint64_t *cycles, uint8_t *causes, uint8_t *mcusr, size_t max) {
-    size_t n = take_count(s->n_resets, max);
-    for (size_t i = 0; i < n; i++) {
-        cycles[i] = s->resets[i].cycle;
-        causes[i] = s->resets[i].cause;
-        mcusr[i] = s->resets[i].mcusr;
-    }
-    drop_front(s->resets, &s->n_resets, n, sizeof(*s->resets));
-    return n;
+    DRAIN(s->resets, s->n_resets, max,
+          (cycles[i] = s->resets[i].cycle,
+           causes[i] = s->resets[i].cause,
+           mcusr[i] = s->resets[i].mcusr));
 }
 
 /* Runs until avr->cycle >= target. Returns 0; 1 when it stopped at a break
@@ -622,39 +630,27 @@ size_t wcsim_rx_lost_count(wcsim_t *s) { return s->n_rx_lost; }
 /* Copies and removes up to max entries from the front of the log of lost bytes. */
 size_t wcsim_rx_lost_take(wcsim_t *s, uint64_t *cycles, uint64_t *indices, uint8_t *bytes,
                           uint8_t *why, size_t max) {
-    size_t n = take_count(s->n_rx_lost, max);
-    for (size_t i = 0; i < n; i++) {
-        cycles[i] = s->rx_lost[i].cycle;
-        indices[i] = s->rx_lost[i].index;
-        bytes[i] = s->rx_lost[i].byte;
-        why[i] = s->rx_lost[i].why;
-    }
-    drop_front(s->rx_lost, &s->n_rx_lost, n, sizeof(*s->rx_lost));
-    return n;
+    DRAIN(s->rx_lost, s->n_rx_lost, max,
+          (cycles[i] = s->rx_lost[i].cycle,
+           indices[i] = s->rx_lost[i].index,
+           bytes[i] = s->rx_lost[i].byte,
+           why[i] = s->rx_lost[i].why));
 }
 
 /* Copies and removes up to max TX entries from the front of the log. */
 size_t wcsim_tx_take(wcsim_t *s, uint64_t *cycles, uint8_t *bytes, size_t max) {
-    size_t n = take_count(s->n_tx, max);
-    for (size_t i = 0; i < n; i++) {
-        cycles[i] = s->tx[i].cycle;
-        bytes[i] = s->tx[i].byte;
-    }
-    drop_front(s->tx, &s->n_tx, n, sizeof(*s->tx));
-    return n;
+    DRAIN(s->tx, s->n_tx, max,
+          (cycles[i] = s->tx[i].cycle,
+           bytes[i] = s->tx[i].byte));
 }
 
 size_t wcsim_hits_count(wcsim_t *s) { return s->n_hits; }
 
 size_t wcsim_hits_take(wcsim_t *s, uint64_t *cycles, uint32_t *hooks, uint32_t *args, size_t max) {
-    size_t n = take_count(s->n_hits, max);
-    for (size_t i = 0; i < n; i++) {
-        cycles[i] = s->hits[i].cycle;
-        hooks[i] = s->hits[i].hook;
-        args[i] = s->hits[i].arg;
-    }
-    drop_front(s->hits, &s->n_hits, n, sizeof(*s->hits));
-    return n;
+    DRAIN(s->hits, s->n_hits, max,
+          (cycles[i] = s->hits[i].cycle,
+           hooks[i] = s->hits[i].hook,
+           args[i] = s->hits[i].arg));
 }
 
 /* Data space: registers, I/O, SRAM (addresses as avr-nm prints them less 0x800000). */
@@ -767,12 +763,7 @@ wcsim_t *wcsim_new_chip(const char *mmcu, uint32_t frequency, char *err, int err
     memset(s->avr->flash, 0xFF, s->avr->flashend + 1);
     s->avr->codeend = s->avr->flashend;
     s->avr->sleep = no_sleep;
-    uint32_t flags = 0;
-    avr_ioctl(s->avr, AVR_IOCTL_UART_GET_FLAGS('0'), &flags);
-    flags &= ~(AVR_UART_FLAG_STDIO | AVR_UART_FLAG_POLL_SLEEP);
-    avr_ioctl(s->avr, AVR_IOCTL_UART_SET_FLAGS('0'), &flags);
-    avr_irq_register_notify(avr_io_getirq(s->avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUTPUT),
-                            on_uart_tx, s);
+    listen_to_uart_tx(s);
     static const char *pwm_names[] = {"8>pwm_left", "8>pwm_right"};
     s->pwm_irq = avr_alloc_irq(&s->avr->irq_pool, 0, 2, pwm_names);
     s->run_fn = s->avr->run;
