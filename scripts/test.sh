@@ -5,7 +5,8 @@
 # (or with sudo).
 #
 # Two depths, one command, both derandomized (a red run is red again on the same code):
-#   bash scripts/test.sh            the fast profile ("default") and a short differential
+#   bash scripts/test.sh            the fast profile ("default"), a short differential, and
+#                                   not the packaging checks marked slow (the wheel builds)
 #   CI=true bash scripts/test.sh    the thorough profile ("ci"): 200 examples a test and
 #                                   the full differential (what .ci/run runs)
 # HYPOTHESIS_PROFILE=NAME overrides either; extra arguments go to pytest.
@@ -45,8 +46,11 @@ python3 -m ruff check .
 echo "== mypy"
 python3 -m mypy
 
+# The fast depth leaves out the packaging checks that build wheels (-m slow).
+DEPTH=(-m "not slow")
+if [ "${CI:-}" = "true" ]; then DEPTH=(); fi
 if [ -z "${HYPOTHESIS_PROFILE:-}" ]; then
   if [ "${CI:-}" = "true" ]; then HYPOTHESIS_PROFILE=ci; else HYPOTHESIS_PROFILE=default; fi
 fi
-echo "== pytest (hypothesis profile: $HYPOTHESIS_PROFILE)"
-python3 -m pytest -n 2 --hypothesis-profile="$HYPOTHESIS_PROFILE" "$@"
+echo "== pytest (hypothesis profile: $HYPOTHESIS_PROFILE${DEPTH[*]:+, ${DEPTH[*]}})"
+python3 -m pytest -n 2 --hypothesis-profile="$HYPOTHESIS_PROFILE" "${DEPTH[@]}" "$@"

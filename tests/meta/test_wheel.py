@@ -18,7 +18,8 @@ from tests.support.checkout import checkout_copy
 
 REPO = Path(__file__).resolve().parents[2]
 
-pytestmark = pytest.mark.simavr
+#: Each builds a wheel: the thorough depth only (scripts/test.sh).
+pytestmark = [pytest.mark.simavr, pytest.mark.slow]
 
 
 @pytest.fixture(scope="module")

@@ -7,10 +7,11 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from wcdrive.plant import ChairParams, Gyro, Plant, encoder_counts
+from wcdrive.plant.terrain import Ramp, Terrain
 from wcdrive.sim import runner, scenario
 from wcdrive.sim.scenario import Scenario, Segment
 
@@ -20,11 +21,19 @@ def _run(segments, duration_settle: float = 1.0, **chair) -> runner.SimResult:
     return runner.run(sc)
 
 
+#: The floors the kernel is held to the reference on: flat, a uniform grade across the
+#: start heading, and ramp bands (up, then down) the chair drives onto and off.
+FLOORS = {"flat": None, "slope": Terrain(6.0, 30.0),
+          "ramps": Terrain(0.0, 10.0, (Ramp(0.3, 1.2, -7.0), Ramp(1.5, 2.5, 5.0)))}
+
+
+@pytest.mark.parametrize("floor", FLOORS)
 @settings(max_examples=10, deadline=None)
 @given(drive=st.lists(st.tuples(st.integers(0, 255), st.integers(0, 1), st.integers(0, 255),
                                 st.integers(0, 1)), min_size=1, max_size=6))
-def test_c_kernel_matches_the_python_reference(drive) -> None:
-    fast, ref = Plant(), Plant(use_kernel=False)
+@example(drive=[(255, 1, 255, 1)] * 4 + [(0, 1, 0, 1)] * 2)      # onto the first ramp and beyond
+def test_c_kernel_matches_the_python_reference(floor, drive) -> None:
+    fast, ref = Plant(terrain=FLOORS[floor]), Plant(use_kernel=False, terrain=FLOORS[floor])
     assert fast.uses_kernel
     for d in drive:
         for p in (fast, ref):
@@ -33,6 +42,7 @@ def test_c_kernel_matches_the_python_reference(drive) -> None:
     assert fast.pose == pytest.approx(ref.pose, abs=1e-12)
     assert (fast.left.angle, fast.right.angle) == pytest.approx((ref.left.angle, ref.right.angle), abs=1e-12)
     assert fast.caster_heading == pytest.approx(ref.caster_heading, abs=1e-12)
+    assert fast.normal_loads == pytest.approx(ref.normal_loads, abs=1e-9)
 
 
 def test_full_duty_gives_the_seed_top_speed() -> None:

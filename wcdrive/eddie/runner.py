@@ -11,7 +11,8 @@ odometry's error at the end and the largest along the way.
 What does not carry over from the Mega's scenarios, and is reported, not faked:
 ``ppm`` segments (no RC input on Eddie: silence), ``[[fault]]`` and ``[params]`` (the
 Mega's), ``[chair]`` (the Mega's ChairParams; Eddie's come from ``[eddie]``, e.g.
-``wheel_separation = 0.3``). A scenario may place walls for the range sensors:
+``wheel_separation = 0.3``), ``[world]`` (Eddie drives on the flat). A scenario may
+place walls for the range sensors:
 ``[[wall]]`` tables with ``a = [x, y]`` and ``b = [x, y]`` in metres.
 """
 
@@ -35,6 +36,8 @@ from wcdrive.sim.scenario import Scenario, ScenarioError
 
 #: Eddie's own scenarios (walls), found by name after the bundled ones.
 SCENARIOS = Path(__file__).resolve().parent / "scenarios"
+#: The top-level tables Eddie reads from a scenario besides the Mega's: walls, overrides.
+EDDIE_KEYS = ("wall", "eddie")
 POLL_HZ = 25.0
 DEADMAN_S = 0.5
 
@@ -61,11 +64,11 @@ class EddieResult:
 def load(name: str) -> Scenario:
     """A bundled scenario, one of Eddie's own (``wcdrive/eddie/scenarios``), or a path."""
     try:
-        return scenario.load(name)
+        return scenario.load(name, extra=EDDIE_KEYS)
     except ScenarioError:
         own = SCENARIOS / f"{name}.toml"
         if own.exists():
-            return scenario.load(str(own))
+            return scenario.load(str(own), extra=EDDIE_KEYS)
         raise
 
 
@@ -107,6 +110,8 @@ def run(sc: Scenario, *, seed: int = 0) -> EddieResult:
         notes.append("[params] are the Mega's: ignored")
     if sc.chair:
         notes.append("[chair] is the Mega's ChairParams: ignored (Eddie's: [eddie])")
+    if not sc.terrain.flat:
+        notes.append("[world] not modelled on Eddie: a flat floor")
     # the host's timeline: (time, command pair or None for silence)
     plan: list[tuple[float, tuple[int, int] | None]] = []
     t = 0.02

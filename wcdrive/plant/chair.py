@@ -19,6 +19,13 @@ dt)`` several:
   once at ``mu N``: that sliding is the scrub (``caster_scrub_energy``, the force times
   the sliding speed), which a pivot makes and straight driving does not. Driving forward keeps the
   casters trailing; reversing makes them swing round (an unstable equilibrium).
+* The floor (``terrain``, a ``wcdrive.plant.terrain.Terrain``; flat by default): on a
+  grade ``t`` under the axle midpoint the floor's share of gravity, ``m g sin(t)``
+  toward the downhill heading, pulls the chassis at its centre of gravity, and the
+  normal loads are ``ChairParams.grade_loads``: ``m g cos(t)`` in all, moved onto the
+  casters facing downhill and onto the drive wheels facing uphill by the pull at
+  ``cog_height``. They set the tyres' friction limits and rolling resistance. The
+  chassis stays planar (pymunk 2D): x, y are the floor's own coordinates.
 * The chassis is a pymunk ``Body`` (mass, yaw inertia, centre of gravity ahead of the
   axle) in a ``Space``; the forces above are applied to it each step and pymunk
   integrates it. Walls or obstacles may be added to ``space``.
@@ -49,7 +56,8 @@ import pymunk
 from pymunk._chipmunk import lib as _chipmunk
 
 from wcdrive._util.native import BuildError, load, prebuilt_library, record
-from wcdrive.plant.params import ChairParams
+from wcdrive.plant.params import ChairParams, G
+from wcdrive.plant.terrain import MAX_RAMPS, Terrain
 
 _D = ctypes.c_double
 _P = ctypes.c_void_p
@@ -74,6 +82,11 @@ class ChairStruct(ctypes.Structure):
     _fields_ += [(n, _D) for n in ("scrub_energy", "scrub_time", "swivel_work", "side_impulse", "time")]
     _fields_ += [(n, ctypes.c_int32 * 2) for n in ("locked", "dead")]
     _fields_ += [("custom_funcs", ctypes.c_int32)]
+    _fields_ += [(n, ctypes.c_int32) for n in ("terrain", "n_ramps")]
+    _fields_ += [(n, _D) for n in ("mass_g", "cog_h", "n_drive0", "n_caster0", "down_c", "down_s",
+                                  "slope_sin", "slope_cos")]
+    _fields_ += [(n, _D * MAX_RAMPS) for n in ("ramp_from", "ramp_to", "ramp_sin", "ramp_cos")]
+    _fields_ += [("get_position", _P)]
 
 
 #: rad/s: the swivel friction torque is regularised as ``T tanh(rate / scale)``.
@@ -148,13 +161,14 @@ class WheelView:
 class Plant:
     """The chair of the module docstring: ``set_drive`` is its input, ``step`` and
     ``advance`` move it, ``left``/``right`` (``WheelView``) and the properties read it.
-    ``x``, ``y`` and ``heading`` place the axle midpoint at the start;
-    ``use_kernel=False`` takes the Python reference path."""
+    ``x``, ``y`` and ``heading`` place the axle midpoint at the start; ``terrain``
+    is the floor (default flat); ``use_kernel=False`` takes the Python reference path."""
 
     def __init__(self, params: ChairParams | None = None, *, x: float = 0.0, y: float = 0.0,
-                 heading: float = 0.0, use_kernel: bool = True) -> None:
+                 heading: float = 0.0, use_kernel: bool = True, terrain: Terrain | None = None) -> None:
         self.p = params or ChairParams()
         p = self.p
+        self.terrain = terrain or Terrain()
         self.space = pymunk.Space()
         self.body = pymunk.Body(p.mass, p.yaw_inertia)
         self.body.center_of_gravity = (p.cog_ahead_of_axle, 0.0)
@@ -187,6 +201,7 @@ class Plant:
         s.res = p.armature_resistance
         s.caster_heading[0] = heading + p.caster_initial_offsets[0]
         s.caster_heading[1] = heading + p.caster_initial_offsets[1]
+        self._set_terrain()
         self.left = WheelView(s, 0)
         self.right = WheelView(s, 1)
         self._motion_log: list[np.ndarray] | None = None
@@ -201,6 +216,56 @@ class Plant:
             self._bind_chipmunk()
             self._advance = self._kernel.chair_advance
             self._ref = ctypes.pointer(self.s)
+
+    def _set_terrain(self) -> None:
+        """The terrain's grades into the struct (sines and cosines worked out here, once,
+        for both paths), and the normal loads for the starting pose."""
+        s, p, terrain = self.s, self.p, self.terrain
+        s.n_drive0, s.n_caster0 = s.n_drive, s.n_caster
+        if terrain.flat:
+            return
+        s.terrain = 1
+        s.mass_g = p.mass * G
+        s.cog_h = p.cog_height
+        h = terrain.downhill_heading
+        s.down_c, s.down_s = math.cos(h), math.sin(h)
+        slope = math.radians(terrain.slope_deg)
+        s.slope_sin, s.slope_cos = math.sin(slope), math.cos(slope)
+        s.n_ramps = len(terrain.ramps)
+        for i, ramp in enumerate(terrain.ramps):
+            slope = math.radians(ramp.slope_deg)
+            s.ramp_from[i], s.ramp_to[i] = ramp.from_x, ramp.to_x
+            s.ramp_sin[i], s.ramp_cos[i] = math.sin(slope), math.cos(slope)
+        x, y = self.body.position
+        self._grade(x, y, math.cos(self.body.angle), math.sin(self.body.angle))
+
+    def _grade(self, x: float, y: float, cs: float, sn: float) -> tuple[float, float]:
+        """The floor under the axle midpoint (x, y), the chassis heading (cos, sin): sets the
+        normal loads (``ChairParams.grade_loads``) and returns the grade's pull on the
+        chassis, world frame (N)."""
+        s = self.s
+        along = x * s.down_c + y * s.down_s
+        g_sin, g_cos = s.slope_sin, s.slope_cos
+        for i in range(s.n_ramps):
+            if s.ramp_from[i] <= along < s.ramp_to[i]:
+                g_sin, g_cos = s.ramp_sin[i], s.ramp_cos[i]
+                break
+        if g_sin == 0.0:
+            s.n_drive, s.n_caster = s.n_drive0, s.n_caster0
+            return 0.0, 0.0
+        normal = s.mass_g * g_cos
+        pull = s.mass_g * g_sin
+        casters = (normal * s.cog_x + pull * (cs * s.down_c + sn * s.down_s) * s.cog_h) / s.caster_x
+        casters = _clamp(casters, 0.0, normal)
+        s.n_drive = 0.5 * (normal - casters)
+        s.n_caster = 0.5 * casters
+        return pull * s.down_c, pull * s.down_s
+
+    @property
+    def normal_loads(self) -> tuple[float, float]:
+        """N: the normal force on each drive wheel and on each caster over the last step
+        (before any step: at the starting pose)."""
+        return self.s.n_drive, self.s.n_caster
 
     def _bind_chipmunk(self) -> None:
         from pymunk._chipmunk import ffi, lib
@@ -226,6 +291,7 @@ class Plant:
         s.each_constraint = address("cpSpaceEachConstraint")
         s.body_each_shape = address("cpBodyEachShape")
         s.get_body_type = address("cpBodyGetType")
+        s.get_position = address("cpBodyGetPosition")
 
     def _custom_funcs(self) -> None:
         """Tells the kernel whether the body has update functions of its own (then it
@@ -500,6 +566,9 @@ class Plant:
         ax, ay = vx + w * xg * sn, vy - w * xg * cs
         u = ax * cs + ay * sn
         lat = -ax * sn + ay * cs
+        if s.terrain:
+            x, y = b.position
+            gx, gy = self._grade(x, y, cs, sn)
         half = s.half_base
         f_left = self._wheel(0, u - w * half, dt)
         f_right = self._wheel(1, u + w * half, dt)
@@ -542,7 +611,10 @@ class Plant:
             s.caster_heading[i] += (w + rate) * dt
         if scrubbing:
             s.scrub_time += dt
-        b.force = (fx_b * cs - fy_b * sn, fx_b * sn + fy_b * cs)
+        if s.terrain:
+            b.force = (fx_b * cs - fy_b * sn + gx, fx_b * sn + fy_b * cs + gy)
+        else:
+            b.force = (fx_b * cs - fy_b * sn, fx_b * sn + fy_b * cs)
         b.torque = torque_axle - xg * fy_b
         self.space.step(dt)
         s.time += dt

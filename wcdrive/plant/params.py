@@ -7,6 +7,7 @@ typical rather than measured; change them per chair with ``dataclasses.replace``
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -35,6 +36,7 @@ class ChairParams:
     length: float = 1.0                # m, footprint used for the yaw inertia
     width: float = 0.65                # m
     cog_ahead_of_axle: float = 0.12    # m: centre of gravity ahead of the drive axle
+    cog_height: float = 0.45           # m: centre of gravity above the floor, seated occupant (assumed)
     caster_ahead_of_axle: float = 0.45  # m: caster pivots ahead of the drive axle
     caster_half_track: float = 0.25    # m: caster pivots either side of the centre line
     caster_trail: float = 0.05         # m: contact patch behind the pivot
@@ -129,6 +131,57 @@ class ChairParams:
         # V = k G w + R load / (k G eta)  ->  G w k^2 - V k + R load / (G eta) = 0
         a, b, c = g * w, -V, R * load / (g * eta)
         return (-b + math.sqrt(b * b - 4 * a * c)) / (2 * a)
+
+    def grade_loads(self, slope: float, facing: float = 0.0) -> tuple[float, float]:
+        """N: the static normal force on each drive wheel and on each caster on a grade of
+        ``slope`` rad, the chair facing ``facing`` rad from the downhill heading (0:
+        nose downhill, pi: nose uphill). On the flat, ``drive_wheel_load`` and
+        ``caster_load``.
+
+        Moments about the drive wheels' contact line: the floor carries ``m g cos(slope)``,
+        and the grade's pull along the chair, ``m g sin(slope) cos(facing)`` at
+        ``cog_height`` above the floor, tips the load onto the casters facing downhill and
+        off them facing uphill::
+
+            casters = m g (cos(slope) cog_ahead_of_axle
+                           + sin(slope) cos(facing) cog_height) / caster_ahead_of_axle
+            drive wheels = m g cos(slope) - casters
+
+        each shared by two, the casters' share held within 0..m g cos(slope) (beyond it
+        the chair tips; the plant does not model that). A cross slope moves no load
+        between left and right in this model."""
+        normal = self.mass * G * math.cos(slope)
+        pull = self.mass * G * math.sin(slope) * math.cos(facing)
+        casters = (normal * self.cog_ahead_of_axle + pull * self.cog_height) / self.caster_ahead_of_axle
+        casters = min(max(casters, 0.0), normal)
+        return 0.5 * (normal - casters), 0.5 * casters
+
+    def rated_grade(self, occupant_mass: float | None = None) -> float:
+        """degrees: the steepest grade the chair can climb from rest, facing uphill, with
+        both motors at the driver's current limit (``occupant_mass`` kg in the seat, by
+        default this one's).
+
+        The static force balance at stall: the motors' torque at the current limit,
+        ``Ke G eff I`` each, through the wheel radius, against the grade's pull and the
+        rolling resistance of the loads ``grade_loads`` gives facing uphill::
+
+            2 Ke G eff I / r = m g (A sin(t) + B cos(t))
+            A = 1 + (crr - crr_caster) cog_height / caster_ahead_of_axle
+            B = crr (1 - s) + crr_caster s,   s = cog_ahead_of_axle / caster_ahead_of_axle
+
+        so ``t = asin(F / (m g hypot(A, B))) - atan2(B, A)``. Traction (``friction`` times
+        the drive wheels' load) and tipping are not limits here; 0 when the motors
+        cannot overcome rolling resistance."""
+        p = self if occupant_mass is None else dataclasses.replace(self, occupant_mass=occupant_mass)
+        ke = p.motor_constant
+        force = 2.0 * p.gear_ratio * p.gear_efficiency * ke * p.current_limit / p.wheel_radius
+        share = p.caster_load_share
+        a = 1.0 + (p.rolling_resistance - p.caster_rolling_resistance) * p.cog_height / p.caster_ahead_of_axle
+        b = p.rolling_resistance * (1.0 - share) + p.caster_rolling_resistance * share
+        ratio = force / (p.mass * G * math.hypot(a, b))
+        if ratio >= 1.0:
+            return 90.0
+        return max(0.0, math.degrees(math.asin(ratio) - math.atan2(b, a)))
 
     def wheel_friction(self, side: str) -> float:
         """The friction coefficient of the ``"left"`` or ``"right"`` drive tyre."""

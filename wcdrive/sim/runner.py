@@ -18,7 +18,8 @@ logs, the host's bytes on the wire):
 
 A scenario's ``[[fault]]`` entries act on both backends alike (``wcdrive.plant.faults``;
 the boards inject the encoder, plant and reset faults, and the host's bytes that fall
-in a ``link_cut`` never reach the board). What a run gives is a ``SimResult``
+in a ``link_cut`` never reach the board). The plant stands on the scenario's floor
+(``[world]``, ``Scenario.terrain``) on both backends. What a run gives is a ``SimResult``
 (``wcdrive.sim.result``).
 """
 
@@ -439,7 +440,7 @@ def run(scenario: Scenario, *, backend: str | Backend = "port", seed: int = 0, d
     if not 1e-5 <= dt <= 0.01:
         raise ValueError("dt must be within 10 us .. 10 ms")
     params = scenario.params()
-    plant = Plant(params)
+    plant = Plant(params, terrain=scenario.terrain)
     plant.start_motion_log()
     gyro = Gyro(params, seed)
     closed = scenario.closed_loop

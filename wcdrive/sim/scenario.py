@@ -19,6 +19,19 @@
     duration = 3.0           # optional: to the end of the scenario
     rate_hz = 200000         # encoder_noise: edges per second on channel A
 
+The floor is level unless a ``[world]`` table tilts it (``wcdrive.plant.terrain``):
+
+    [world]
+    slope_deg = 0.0          # uniform grade (degrees, |slope| < 30; negative: rises)
+    downhill_heading_deg = 0 # world heading the floor falls toward (0 = +x)
+    [[world.ramp]]           # any number: a band of the floor with a grade of its own
+    from_x = 1.0             # m along downhill_heading_deg where the band starts
+    to_x = 3.0               # m where it ends (the floor outside has slope_deg)
+    slope_deg = -6.0
+
+Every table's keys are checked: an unknown key, at the top level too, is a ScenarioError
+that names it.
+
 A closed-loop scenario gives a path instead of segments; the host follows it with a
 pure-pursuit controller (``wcdrive.sim.navigation``) against its own odometry, sending a
 ``cmdvel`` at ``host_rate_hz``:
@@ -46,17 +59,24 @@ from __future__ import annotations
 
 import dataclasses
 import tomllib
+from collections.abc import Collection
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from wcdrive.plant.faults import FAULT_KINDS, SIDED_KINDS, Fault
 from wcdrive.plant.params import ChairParams
+from wcdrive.plant.terrain import Ramp, Terrain
 from wcdrive.protocol.codec import encode_cmdvel, encode_ppm, encode_set, encode_wheel
 from wcdrive.sim.navigation import FollowParams
 
 BUNDLED = Path(__file__).resolve().parent / "scenarios"
 _KINDS = ("cmdvel", "wheel", "ppm", "stop", "silence")
 _FAULT_KEYS = ("at", "kind", "side", "duration", "rate_hz")
+#: The keys a scenario file may have at its top level.
+TOP_KEYS = ("name", "description", "host_rate_hz", "repeat", "settle_s", "chair", "params", "segment",
+            "fault", "path", "follow", "world")
+_WORLD_KEYS = ("slope_deg", "downhill_heading_deg", "ramp")
+_RAMP_KEYS = ("from_x", "to_x", "slope_deg")
 
 
 class ScenarioError(ValueError):
@@ -101,6 +121,8 @@ class Scenario:
     #: A closed-loop scenario's waypoints (m) and how the host follows them; None: open loop.
     path: tuple[tuple[float, float], ...] | None = None
     follow: FollowParams = field(default_factory=FollowParams)
+    #: The floor (``[world]``); flat without one.
+    terrain: Terrain = field(default_factory=Terrain)
 
     @property
     def closed_loop(self) -> bool:
@@ -154,17 +176,22 @@ def find(name_or_path: str) -> Path:
     raise ScenarioError(f"no scenario {name_or_path!r}: give a .toml path or one of: {names}")
 
 
-def load(name_or_path: str) -> Scenario:
+def load(name_or_path: str, *, extra: Collection[str] = ()) -> Scenario:
     """Reads and checks a scenario, by bundled name or path; a ScenarioError names
-    what is wrong."""
+    what is wrong. ``extra``: top-level keys the caller reads itself (Eddie's ``wall``
+    and ``eddie``), accepted here and left alone."""
     path = find(name_or_path)
     try:
         data = tomllib.loads(path.read_text())
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(f"{path}: not valid TOML: {exc}") from exc
+    _known_keys(data, (*TOP_KEYS, *extra), f"{path}", "at the top level")
     segments = []
     waypoints, follow = _path(data, path)
     for i, raw in enumerate(data.get("segment", [])):
+        if not isinstance(raw, dict):
+            raise ScenarioError(f"{path}: segments are [[segment]] tables")
+        _known_keys(raw, (*_KINDS, "duration"), f"{path}: segment {i + 1}", "")
         kinds = [k for k in _KINDS if k in raw]
         if len(kinds) != 1:
             raise ScenarioError(f"{path}: segment {i + 1} needs exactly one of {', '.join(_KINDS)}")
@@ -202,7 +229,7 @@ def load(name_or_path: str) -> Scenario:
         name=str(data.get("name", path.stem)), description=str(data.get("description", "")),
         segments=tuple(segments) * repeat, host_rate_hz=rate,
         settle_s=float(data.get("settle_s", 1.5)), chair=chair, source=path,
-        path=waypoints, follow=follow,
+        path=waypoints, follow=follow, terrain=_world(data.get("world", {}), path),
     )
     board_params = dict(data.get("params", {}))
     for name, value in board_params.items():
@@ -217,6 +244,39 @@ def load(name_or_path: str) -> Scenario:
                    for i, raw in enumerate(raw_faults))
     return dataclasses.replace(scenario, faults=faults,
                                board_params={k: float(v) for k, v in board_params.items()})
+
+
+def _known_keys(table: dict, known: Collection[str], where: str, what: str) -> None:
+    """ScenarioError naming ``table``'s keys that are not ``known``."""
+    unknown = set(table) - set(known)
+    if unknown:
+        place = f" {what}" if what else ""
+        raise ScenarioError(f"{where}: unknown keys{place}: {', '.join(sorted(unknown))} "
+                            f"(known: {', '.join(known)})")
+
+
+def _world(raw: object, where: Path) -> Terrain:
+    """The ``[world]`` table (module docstring) as a ``Terrain``."""
+    if not isinstance(raw, dict):
+        raise ScenarioError(f"{where}: world is a table ([world])")
+    _known_keys(raw, _WORLD_KEYS, f"{where}: [world]", "")
+    raw_ramps = raw.get("ramp", [])
+    if not isinstance(raw_ramps, list) or not all(isinstance(r, dict) for r in raw_ramps):
+        raise ScenarioError(f"{where}: [world] ramps are [[world.ramp]] tables")
+    ramps = []
+    for i, ramp in enumerate(raw_ramps):
+        _known_keys(ramp, _RAMP_KEYS, f"{where}: world.ramp {i + 1}", "")
+        missing = [k for k in _RAMP_KEYS if k not in ramp]
+        if missing:
+            raise ScenarioError(f"{where}: world.ramp {i + 1} needs {', '.join(missing)}")
+        try:
+            ramps.append(Ramp(ramp["from_x"], ramp["to_x"], ramp["slope_deg"]))
+        except ValueError as exc:
+            raise ScenarioError(f"{where}: world.ramp {i + 1}: {exc}") from exc
+    try:
+        return Terrain(raw.get("slope_deg", 0.0), raw.get("downhill_heading_deg", 0.0), tuple(ramps))
+    except ValueError as exc:
+        raise ScenarioError(f"{where}: [world]: {exc}") from exc
 
 
 def _path(data: dict, where: Path) -> tuple[tuple[tuple[float, float], ...] | None, FollowParams]:

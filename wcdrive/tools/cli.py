@@ -33,6 +33,7 @@ import os
 import sys
 import time
 import traceback
+from collections.abc import Callable
 from pathlib import Path
 
 import serial
@@ -77,12 +78,14 @@ class _Version(argparse.Action):
 def _sim(args: argparse.Namespace) -> int:
     if args.list:
         paths = list(scenario.bundled())
+        load: Callable[[str], scenario.Scenario] = scenario.load
         if args.robot == "eddie":                      # and Eddie's own (walls)
             from wcdrive.eddie import runner as eddie_runner
 
             paths += sorted(eddie_runner.SCENARIOS.glob("*.toml"))
+            load = eddie_runner.load
         for path in paths:
-            sc = scenario.load(str(path))
+            sc = load(str(path))
             loop = "closed loop" if sc.closed_loop else "open loop  "   # open: timed commands
             print(f"{sc.name:28s} {sc.duration:7.1f} s  {loop}  {sc.description}")
         return 0

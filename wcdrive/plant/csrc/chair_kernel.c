@@ -15,6 +15,8 @@
  * cpSpaceStep also does are skipped, as nothing of the plant reads them: the space's
  * time stamp and its current step (pymunk's Space.current_time_step stays as it was).
  * tests/test_plant.py holds the two paths to the same motion bit for bit.
+ * The floor's grade (Plant._grade) runs only when the plant has a terrain that is not
+ * flat, so the flat floor's steps are the same operations as without one.
  * Built on first use by wcdrive.native (gcc -O2 -ffp-contract=off).
  */
 #include <math.h>
@@ -23,6 +25,7 @@
 
 #define SWIVEL_RATE_SCALE 0.2   /* rad/s, as in chair.py */
 #define SCRUB_SLIP 1e-4         /* m/s, as in chair.py */
+#define MAX_RAMPS 8             /* wcdrive.plant.terrain.MAX_RAMPS */
 
 typedef struct { double x, y; } vec_t;
 typedef vec_t (*get_vec_fn)(const void *);
@@ -53,6 +56,12 @@ typedef struct {
     int32_t locked[2], dead[2];
     /* the body has update functions of its own (pymunk's velocity_func/position_func) */
     int32_t custom_funcs;
+    /* the floor (Plant._set_terrain): off on the flat; a uniform grade (sin, cos) and
+     * bands along the downhill heading (down_c, down_s) with their own */
+    int32_t terrain, n_ramps;
+    double mass_g, cog_h, n_drive0, n_caster0, down_c, down_s, slope_sin, slope_cos;
+    double ramp_from[MAX_RAMPS], ramp_to[MAX_RAMPS], ramp_sin[MAX_RAMPS], ramp_cos[MAX_RAMPS];
+    void *get_position;
 } chair_t;
 
 typedef struct { int n; void *last; } count_t;
@@ -156,6 +165,35 @@ static double wheel(chair_t *c, int i, double ground, double dt) {
     return force - rr;
 }
 
+/* Plant._grade: the normal loads on the floor under (x, y), the chassis heading
+ * (cs, sn); the grade's pull on the chassis (world frame) into *gx, *gy. */
+static void grade(chair_t *c, double x, double y, double cs, double sn, double *gx, double *gy) {
+    double along = x * c->down_c + y * c->down_s;
+    double g_sin = c->slope_sin, g_cos = c->slope_cos;
+    for (int i = 0; i < c->n_ramps; i++) {
+        if (c->ramp_from[i] <= along && along < c->ramp_to[i]) {
+            g_sin = c->ramp_sin[i];
+            g_cos = c->ramp_cos[i];
+            break;
+        }
+    }
+    if (g_sin == 0.0) {
+        c->n_drive = c->n_drive0;
+        c->n_caster = c->n_caster0;
+        *gx = 0.0;
+        *gy = 0.0;
+        return;
+    }
+    double normal = c->mass_g * g_cos;
+    double pull = c->mass_g * g_sin;
+    double casters = (normal * c->cog_x + pull * (cs * c->down_c + sn * c->down_s) * c->cog_h) / c->caster_x;
+    casters = clampd(casters, 0.0, normal);
+    c->n_drive = 0.5 * (normal - casters);
+    c->n_caster = 0.5 * casters;
+    *gx = pull * c->down_c;
+    *gy = pull * c->down_s;
+}
+
 static void step(chair_t *c, int lone, double dt) {
     vec_t v = ((get_vec_fn)c->get_velocity)(c->body);
     double th = ((get_f_fn)c->get_angle)(c->body);
@@ -164,6 +202,11 @@ static void step(chair_t *c, int lone, double dt) {
     double ax = v.x + w * xg * sn, ay = v.y - w * xg * cs;
     double u = ax * cs + ay * sn;
     double lat = -ax * sn + ay * cs;
+    double gx = 0.0, gy = 0.0;
+    if (c->terrain) {
+        vec_t pos = ((get_vec_fn)c->get_position)(c->body);
+        grade(c, pos.x, pos.y, cs, sn, &gx, &gy);
+    }
     double half = c->half_base;
     double f_left = wheel(c, 0, u - w * half, dt);
     double f_right = wheel(c, 1, u + w * half, dt);
@@ -207,6 +250,10 @@ static void step(chair_t *c, int lone, double dt) {
     if (scrubbing) c->scrub_time += dt;
     double torque_cog = torque_axle - xg * fy_b;
     vec_t f = {fx_b * cs - fy_b * sn, fx_b * sn + fy_b * cs};
+    if (c->terrain) {
+        f.x = fx_b * cs - fy_b * sn + gx;
+        f.y = fx_b * sn + fy_b * cs + gy;
+    }
     ((set_vec_fn)c->set_force)(c->body, f);
     ((set_f_fn)c->set_torque)(c->body, torque_cog);
     space_step(c, lone, dt);
