@@ -10,7 +10,7 @@ import random
 import time
 
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import wcdrive
@@ -139,3 +139,21 @@ def test_a_reset_mid_drive_keeps_the_pose_and_tells_the_subscribers() -> None:
         stamps = [e.board_time or 0.0 for e in events if isinstance(e, wcdrive.Telemetry)]
         assert all(b > a for a, b in itertools.pairwise(stamps))
         assert not math.isnan(after.pose.theta)
+
+
+@settings(max_examples=50)
+@given(seed=st.integers(0, 2**32 - 1), speed=st.sampled_from([0.5, 1.0, 4.0, 10.0]))
+def test_stamps_only_go_forward_however_the_lines_arrive(seed: int, speed: float) -> None:
+    """Lines that arrive late, in bursts after a stall, or on time: every tick's host
+    stamp is later than the one before (the filter's fit moves back when a line shows a
+    lower latency floor; the stamps must not). Red without the forward rule: the fit
+    alone goes back on most such runs."""
+    rng = random.Random(seed)
+    clock = BoardClock()
+    arrival, last = 0.0, -math.inf
+    for i in range(300):
+        due = i * 0.05 / speed
+        arrival = max(arrival, due + rng.choice([0.0, 0.001, 0.002, rng.uniform(0.0, 0.3)]))
+        sample = clock.update(arrival, i * 50)
+        assert sample.host > last, (i, last, sample)
+        last = sample.host

@@ -6,14 +6,17 @@ A ``TLM:`` line carries the board's ``millis()`` at its control tick. ``BoardClo
 * unwraps it (``millis()`` is a 32-bit count that wraps after 49.7 days) and keeps it
   continuous over board resets: a ``millis`` that goes back (not a wrap) is a reset, and
   board time then carries on from where it was, advanced by the host time that passed
-  (converted at the estimated rate), so a subscriber's stamps never go back;
+  (converted at the estimated rate);
 * without ``TLM:`` (a protocol-v1 board), counts one ``tick_period`` per feedback line;
 * maps board time to host time with a filter that tracks the offset and the drift of
   the two clocks (``ClockFilter``): a straight line fitted by least squares with
   exponential forgetting to (board, host arrival) pairs, lowered by the smallest
   residual of the recent lines, so that the mapped stamp is the earliest the host could
   have seen the tick (the transport's latency and the host's scheduling only ever add
-  delay).
+  delay);
+* keeps the stamps strictly increasing: each tick's host stamp is at least
+  ``MIN_STAMP_STEP`` past the one before, even when the fit moves back, so a
+  subscriber's stamps never go back.
 
 A simulated board faster than the wall clock (``sim://?speed=4``) shows a rate of 0.25
 host seconds per board second; one run as fast as simavr can, whatever rate it reaches.
@@ -29,6 +32,10 @@ from wcdrive.protocol.spec import integer
 #: The control tick (s): the v1 boards' only clock, one feedback line per tick.
 TICK_PERIOD = integer("CONTROL_PERIOD_MS") / 1000.0
 _WRAP_MS = 1 << 32
+#: The least a tick's host stamp moves past the one before (s): when the filter's fit
+#: moves back (a lower latency floor, a new rate), the mapped time of the next tick can
+#: be earlier than the last stamp; the stamp is then the last one plus this.
+MIN_STAMP_STEP = 1e-6
 #: A millis that goes back by less than this is a wrap only near the top of the range.
 _WRAP_GUARD_MS = 60_000
 
@@ -142,7 +149,11 @@ class BoardClock:
             self._last_millis = millis
             board = self._epoch + self._unwrapped / 1000.0
         self.filter.add(board, arrival)
-        sample = ClockSample(board, self.filter.to_host(board), arrival, reset)
+        host = self.filter.to_host(board)
+        if self._last is not None and host < self._last.host + MIN_STAMP_STEP:
+            # the fit moved back (a new latency floor, a new rate): stamps still go forward
+            host = self._last.host + MIN_STAMP_STEP
+        sample = ClockSample(board, host, arrival, reset)
         self._last = sample
         return sample
 
