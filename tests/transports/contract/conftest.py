@@ -95,6 +95,9 @@ class Backend:
     #: on, and pyserial flushes the input at open) nor over CAN (the gateway's chair
     #: runs on).
     boots_on_open: bool = True
+    #: The BOOT line it opens with: the simulated boards' power-on; a real board reset by
+    #: DTR names its own cause (EXTERNAL, or NONE behind a bootloader that clears MCUSR).
+    boot: re.Pattern[bytes] = re.compile(re.escape(BOOT))
     #: ``write`` takes any bytes, a line split across writes included. Not so the CAN
     #: host end: each write must hold complete protocol lines that have a CAN form.
     byte_stream_writes: bool = True
@@ -180,6 +183,7 @@ def _make(name: str, request: pytest.FixtureRequest) -> Backend:
     if name == "device":
         path = request.config.getoption("--device")
         return Backend(name, lambda timeout: serial.Serial(path, 115200, timeout=timeout),
+                       boot=re.compile(rb"BOOT:final_control,[A-Z_]+\r\n"),
                        close_wakes_with=(serial.SerialException, OSError, TypeError),
                        in_waiting_closed_raises=(serial.SerialException, OSError, TypeError))
     raise ValueError(name)
@@ -321,7 +325,7 @@ def wait_alive(backend: Backend, port: Port) -> bytes:
     data = read_until(port, n_feedback(2))
     lines, _ = split_lines(data)
     if backend.boots_on_open:
-        assert data.startswith(BOOT), data[:100]
+        assert backend.boot.match(data), data[:100]
     else:
         lines = lines[1:]            # may begin in the middle of a line
     assert_well_formed(lines)
