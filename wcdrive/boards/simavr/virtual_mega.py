@@ -62,8 +62,7 @@ VARIABLE_FORMATS = {
           "lastTravel", "pendingL", "pendingR", "kpL", "kiL", "kdL", "kpR", "kiR", "kdR",
           "maxWheel", "maxAccel", "estopDecel", "effortSpeedL", "effortSpeedR", "effortSetpointL",
           "effortSetpointR"),
-    "i": ("encoderValueL", "encoderValueR", "encTickL", "encTickR", "prevEncL", "prevEncR", "holdRefL",
-          "holdRefR", "holdStepL", "holdStepR"),
+    "i": ("encoderValueL", "encoderValueR", "encTickL", "encTickR", "prevEncL", "prevEncR"),
     "I": ("illegalL", "illegalR", "lastControlTime", "tickCount", "lastCmdTime", "rejectedCount",
           "errSuppressed", "txDropped", "timer0_millis", "timer0_overflow_count", "illTickL",
           "illTickR", "rxCount", "crcRejected", "txRingFull", "rxGaps", "rxLost", "rxLostTick",
@@ -75,8 +74,7 @@ VARIABLE_FORMATS = {
           "timer0_fract", "estopLatched", "tlmEnabled", "unframedLine", "stormTickL", "stormTickR",
           "stallTicksL", "stallTicksR", "reverseTicksL", "reverseTicksR", "runawayTicksL",
           "runawayTicksR", "stormL", "stormR",
-          "resetCause", "effortPwmL", "effortPwmR", "effortTicksL", "effortTicksR", "eeNext", "eeBusy",
-          "holding", "holdRollaway"),
+          "resetCause", "effortPwmL", "effortPwmR", "effortTicksL", "effortTicksR", "eeNext", "eeBusy"),
 }
 _FORMAT_OF = {name: fmt for fmt, names in VARIABLE_FORMATS.items() for name in names}
 
