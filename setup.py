@@ -85,7 +85,8 @@ class OptionalBuildExt(build_ext):
                 self.copy_file(regular + ".sha256", inplace + ".sha256", level=self.verbose)
 
     def get_outputs(self) -> list[str]:
-        return [*super().get_outputs(), *(o + ".sha256" for o in super().get_outputs())]
+        built = super().get_outputs()
+        return [*built, *(o + ".sha256" for o in built)]
 
     @staticmethod
     def _skipped(what: str, exc: Exception) -> None:

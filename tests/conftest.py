@@ -39,7 +39,7 @@ settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "default"))
 
 
 def pytest_report_header(config: pytest.Config) -> str:
-    profile = getattr(settings, "_current_profile", "?")
+    profile = settings.get_current_profile_name()
     how = "derandomized" if settings().derandomize else "random examples (replay: --hypothesis-seed)"
     return f"hypothesis profile: {profile} ({settings().max_examples} examples, {how})"
 

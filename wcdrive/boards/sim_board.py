@@ -52,7 +52,11 @@ class SimulatedBoard(ThreadedBoard):
         self.plant = Plant(self.params)
         # a live board runs for hours: its gyro keeps the newest 10 s of samples
         self.loop = PortLoop(self.plant, Gyro(self.params, seed, history=GYRO_HISTORY))
-        self.speed = speed
+
+    @property
+    def speed(self) -> float:
+        """Simulated seconds per wall-clock second (the pacing clock's)."""
+        return self.clock.speed
 
     @property
     def time(self) -> float:

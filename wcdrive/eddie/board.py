@@ -19,7 +19,8 @@ from collections.abc import Sequence
 
 from wcdrive.boards.threaded import ThreadedBoard, WallClock
 from wcdrive.eddie.firmware import DIVISOR, MAX_ON_TIME, EddieFirmware
-from wcdrive.eddie.plant import RangeSensors, add_wall, eddie_params, positions
+from wcdrive.eddie.geometry import positions
+from wcdrive.eddie.plant import RangeSensors, add_wall, eddie_params
 from wcdrive.plant import ChairParams, Plant
 
 BYTE_S = 10.0 / 115200.0
@@ -110,7 +111,11 @@ class EddieSimBoard(ThreadedBoard):
         super().__init__("wceddie")
         self.loop = EddieLoop(params, walls=walls, start=start, seed=seed, eol=eol)
         self.plant = self.loop.plant
-        self.speed = speed
+
+    @property
+    def speed(self) -> float:
+        """Simulated seconds per wall-clock second (the pacing clock's)."""
+        return self.clock.speed
 
     @property
     def time(self) -> float:

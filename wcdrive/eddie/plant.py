@@ -39,7 +39,6 @@ from wcdrive.eddie.geometry import (
     ADC_VREF,
     IR_MOUNTS,
     IR_NOISE_V,
-    IR_RANGE,
     PING_HALF_ANGLE,
     PING_MOUNTS,
     PING_RANGE,
@@ -47,17 +46,10 @@ from wcdrive.eddie.geometry import (
     WHEEL_RADIUS,
     WHEEL_SEPARATION,
     Mount,
-    ir_distance,
     ir_volts,
-    positions,
 )
 from wcdrive.plant.params import ChairParams
 
-__all__ = [
-    "ADC_VREF", "IR_MOUNTS", "IR_NOISE_V", "IR_RANGE", "PING_HALF_ANGLE", "PING_MOUNTS", "PING_RANGE",
-    "POSITIONS_PER_REV", "WHEEL_RADIUS", "WHEEL_SEPARATION", "Mount", "RangeSensors", "add_wall",
-    "eddie_params", "ir_distance", "ir_volts", "positions",
-]
 
 def eddie_params(wheel_separation: float = WHEEL_SEPARATION, **changes: Any) -> ChairParams:
     """Eddie's figures in the chair model's parameters (module docstring)."""
