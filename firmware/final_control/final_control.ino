@@ -230,7 +230,16 @@ uint32_t lastCmdTime = 0;                   // millis() of the tick that saw the
 bool emergencyStop = false;                 // ramp down at WC_EMERGENCY_DECEL
 bool ppmLost = false;
 uint8_t stillTicks = 0;
-volatile bool parked = true;                       // motors held at zero with integrators reset
+volatile bool parked = true;                       // PID off, integrators reset: the hold, or a fault's duty 0
+
+// The hold (parked without a fault): each wheel driven back toward the count it came to
+// rest at (holdRef*), by holdMotor(). While a wheel still slows after parking, its
+// reference follows its count (holdStep*: the count step of its last tick, 0 once the
+// reference is fixed), so a chair that coasts to a stop on the level holds where it stopped.
+bool holding = false;                      // parked without a fault: the hold is on
+int32_t holdRefL = 0, holdRefR = 0;
+int32_t holdStepL = 0, holdStepR = 0;
+bool holdRollaway = false;                 // EVT:ROLLAWAY sent for this hold
 
 bool estopLatched = false;                  // e-stop: motion refused until "reset"
 
@@ -469,6 +478,48 @@ static void setMotor(uint8_t pwmPin, uint8_t dirPin, float output, uint8_t& pwm,
   dir = output >= 0.0f ? HIGH : LOW;
   digitalWrite(dirPin, dir);
   pwm = (uint8_t)(int)(fabs(output) * WC_PWM_SCALE);
+  analogWrite(pwmPin, pwm);
+}
+
+// The hold's reference follows a wheel that still slows (a step of the same sign, no
+// larger than the last), then stays. Returns the wheel's count error from it.
+static int32_t holdError(int32_t count, int32_t delta, int32_t& ref, int32_t& step) {
+  if (step != 0) {
+    bool slowing = delta != 0 && (delta > 0) == (step > 0) &&
+                   (delta > 0 ? delta <= step : delta >= step);
+    if (slowing) {
+      ref = count;
+      step = delta;
+    } else {
+      step = 0;
+    }
+  }
+  return (int32_t)((uint32_t)count - (uint32_t)ref);
+}
+
+// The hold's duty for a count error: WC_HOLD_GAIN per count beyond WC_HOLD_DEADBAND_COUNTS,
+// at most WC_HOLD_PWM_MAX; after a rollaway, WC_HOLD_PWM_MAX beyond the deadband.
+static uint8_t holdDuty(int32_t error) {
+  uint32_t size = error < 0 ? (uint32_t)0 - (uint32_t)error : (uint32_t)error;
+  if (size <= WC_HOLD_DEADBAND_COUNTS) return 0;
+  uint32_t over = size - WC_HOLD_DEADBAND_COUNTS;
+  if (holdRollaway || over >= (uint32_t)WC_HOLD_PWM_MAX / WC_HOLD_GAIN) return WC_HOLD_PWM_MAX;
+  return (uint8_t)(over * WC_HOLD_GAIN);
+}
+
+// Drives one held wheel against its count error: holdDuty() toward the reference,
+// aheadDir being the DIR level that turns the wheel back when its count has run ahead
+// (LOW on the right, whose counts rise forward; HIGH on the mirrored left). At duty 0,
+// DIR HIGH: what setMotor() writes for an output of 0.
+static void holdMotor(uint8_t pwmPin, uint8_t dirPin, int32_t error, uint8_t aheadDir,
+                      uint8_t& pwm, uint8_t& dir) {
+  pwm = holdDuty(error);
+  if (pwm == 0) {
+    dir = HIGH;
+  } else {
+    dir = error > 0 ? aheadDir : (aheadDir == HIGH ? LOW : HIGH);
+  }
+  digitalWrite(dirPin, dir);
   analogWrite(pwmPin, pwm);
 }
 
@@ -729,10 +780,14 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
   bool atRest = targetL == 0.0f && targetR == 0.0f && setpointL == 0.0f && setpointR == 0.0f;
   // Park: at rest and still for a few ticks. An emergency ramp (watchdog, PPM loss,
   // e-stop) keeps braking under closed loop until both wheels are slower than
-  // WC_BRAKE_DONE_SPEED, then parks at once. A fault parks at once: its encoders are
+  // WC_BRAKE_DONE_SPEED, then parks at once. Parked, the hold (below) keeps the chair
+  // where it stops. A fault parks at once with the motors at duty 0: its encoders are
   // not to be trusted, the driver brakes the motors.
   bool braked = fabs(filtVelL) < WC_BRAKE_DONE_SPEED && fabs(filtVelR) < WC_BRAKE_DONE_SPEED;
-  if (faultFlags != 0 || (atRest && (stillTicks >= WC_STILL_TICKS || (emergencyStop && braked)))) {
+  // Once the hold is on, the chair stays parked while at rest, moving or not: the hold
+  // (below) keeps it where it stopped.
+  if (faultFlags != 0 ||
+      (atRest && (holding || stillTicks >= WC_STILL_TICKS || (emergencyStop && braked)))) {
     parked = true;
     integralL = integralR = 0.0f;
     prevMeasL = filtVelL;
@@ -748,8 +803,30 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
       outputR = computePID(setpointR, filtVelR, integralR, prevMeasR, kpR, kiR, kdR, dt);
     }
   }
-  setMotor(WC_PIN_PWM_L, WC_PIN_DIR_L, outputL, pwmL, dirL);
-  setMotor(WC_PIN_PWM_R, WC_PIN_DIR_R, outputR, pwmR, dirR);
+  if (parked && faultFlags == 0) {
+    if (!holding) {   // the hold starts: from this tick's counts, following a wheel still moving
+      holdRefL = encTickL;
+      holdRefR = encTickR;
+      holdStepL = deltaL;
+      holdStepR = deltaR;
+      holdRollaway = false;
+    }
+    int32_t errL = holdError(encTickL, deltaL, holdRefL, holdStepL);
+    int32_t errR = holdError(encTickR, deltaR, holdRefR, holdStepR);
+    bool rolled = errL > WC_ROLLAWAY_COUNTS || errL < -WC_ROLLAWAY_COUNTS ||
+                  errR > WC_ROLLAWAY_COUNTS || errR < -WC_ROLLAWAY_COUNTS;
+    if (rolled && !holdRollaway) {
+      holdRollaway = true;
+      sendEvent(F("ROLLAWAY"));
+    }
+    holdMotor(WC_PIN_PWM_L, WC_PIN_DIR_L, errL, HIGH, pwmL, dirL);
+    holdMotor(WC_PIN_PWM_R, WC_PIN_DIR_R, errR, LOW, pwmR, dirR);
+    holding = true;
+  } else {
+    setMotor(WC_PIN_PWM_L, WC_PIN_DIR_L, outputL, pwmL, dirL);
+    setMotor(WC_PIN_PWM_R, WC_PIN_DIR_R, outputR, pwmR, dirR);
+    holding = false;
+  }
 
   bool slow = fabs(filtVelL) < WC_PIVOT_START_SPEED && fabs(filtVelR) < WC_PIVOT_START_SPEED;
   if (pivotPhase == PIVOT_STOPPING && setpointL == 0.0f && setpointR == 0.0f && slow) {

@@ -93,6 +93,12 @@
 #define WC_HW_WATCHDOG 3           // AVR watchdog period (avr/wdt.h WDTO_120MS): a loop() pass that hangs longer resets the board
 #define WC_BRAKE_DONE_SPEED 0.3f   // rad/s: an emergency stop keeps braking until both wheels are slower
 
+// ---- Hill hold and rollaway (parked without a fault; protocol/PROTOCOL.md) ---
+#define WC_HOLD_DEADBAND_COUNTS 10 // encoder counts (1 mm of travel) a held wheel may be off the count it stopped at before the hold drives it back
+#define WC_HOLD_GAIN 1             // hold duty per count of error beyond HOLD_DEADBAND_COUNTS
+#define WC_HOLD_PWM_MAX 64         // the hold's largest duty (25 %): past the driver's 13 A current limit at a standstill (duty 42), so the brake is the hardest the driver gives
+#define WC_ROLLAWAY_COUNTS 209     // encoder counts (2 cm of travel: 0.02 m / (2 pi WHEEL_RADIUS) x CPR) a held wheel may be pushed off its count before EVT:ROLLAWAY
+
 // ---- Modes (printed as MODE:WHEEL / CMDVEL / PPM) --------------------------
 #define WC_MODE_WHEEL 0
 #define WC_MODE_CMDVEL 1

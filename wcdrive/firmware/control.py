@@ -177,6 +177,65 @@ def _i32(x: int) -> int:
     return (x + 2**31) % 2**32 - 2**31
 
 
+def hold_error(count: int, delta: int, ref: int, step: int) -> tuple[int, int, int]:
+    """``holdError``: ``(count error, reference, step)``. The reference follows a wheel
+    that still slows (a step of the same sign as the last and no larger), then stays."""
+    if step != 0:
+        slowing = delta != 0 and (delta > 0) == (step > 0) and (delta <= step if delta > 0 else delta >= step)
+        if slowing:
+            ref, step = count, delta
+        else:
+            step = 0
+    return _i32(count - ref), ref, step
+
+
+def hold_duty(error: int, rollaway: int) -> int:
+    """``holdDuty``: HOLD_GAIN per count of ``error`` beyond HOLD_DEADBAND_COUNTS, at most
+    HOLD_PWM_MAX; after a rollaway (``holdRollaway``), HOLD_PWM_MAX beyond the deadband."""
+    size = abs(error)
+    if size <= C.HOLD_DEADBAND_COUNTS:
+        return 0
+    over = size - C.HOLD_DEADBAND_COUNTS
+    if rollaway or over >= C.HOLD_PWM_MAX // C.HOLD_GAIN:
+        return C.HOLD_PWM_MAX
+    return over * C.HOLD_GAIN
+
+
+def hold_motor(error: int, ahead_dir: int, rollaway: int) -> tuple[int, int]:
+    """``holdMotor``: ``(duty, DIR)`` of a held wheel; ``ahead_dir`` turns it back when its
+    count ran ahead of the reference. At duty 0, DIR HIGH (``set_motor(0.0)``)."""
+    duty = hold_duty(error, rollaway)
+    if duty == 0:
+        return 0, C.HIGH
+    if error > 0:
+        return duty, ahead_dir
+    return duty, C.LOW if ahead_dir == C.HIGH else C.HIGH
+
+
+def _motors(s: FirmwareState, delta_l: int, delta_r: int, out: bytearray) -> None:
+    """Both motors' duty and DIR: the hold's for a chair parked without a fault
+    (``holding``; ``EVT:ROLLAWAY`` once per hold when a wheel is pushed ROLLAWAY_COUNTS
+    off its reference, and from then on HOLD_PWM_MAX beyond the deadband), else
+    ``set_motor`` of the outputs."""
+    if not (s.parked and not s.faultFlags):
+        s.pwmL, s.dirL = set_motor(s.outputL)
+        s.pwmR, s.dirR = set_motor(s.outputR)
+        s.holding = 0
+        return
+    if not s.holding:
+        s.holdRefL, s.holdRefR = s.encTickL, s.encTickR
+        s.holdStepL, s.holdStepR = delta_l, delta_r
+        s.holdRollaway = 0
+    err_l, s.holdRefL, s.holdStepL = hold_error(s.encTickL, delta_l, s.holdRefL, s.holdStepL)
+    err_r, s.holdRefR, s.holdStepR = hold_error(s.encTickR, delta_r, s.holdRefR, s.holdStepR)
+    if (abs(err_l) > C.ROLLAWAY_COUNTS or abs(err_r) > C.ROLLAWAY_COUNTS) and not s.holdRollaway:
+        s.holdRollaway = 1
+        send(s, send_event("ROLLAWAY"), out)
+    s.pwmL, s.dirL = hold_motor(err_l, C.HIGH, s.holdRollaway)
+    s.pwmR, s.dirR = hold_motor(err_r, C.LOW, s.holdRollaway)
+    s.holding = 1
+
+
 def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: bytearray,
                  illegal_l: int = 0, illegal_r: int = 0, storm_l: int = 0, storm_r: int = 0,
                  rx_lost: int = 0) -> None:
@@ -235,7 +294,9 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
         s.stillTicks += 1
     at_rest = s.targetL == 0.0 and s.targetR == 0.0 and s.setpointL == 0.0 and s.setpointR == 0.0
     braked = abs(s.filtVelL) < C.BRAKE_DONE_SPEED and abs(s.filtVelR) < C.BRAKE_DONE_SPEED
-    if s.faultFlags or (at_rest and (s.stillTicks >= C.STILL_TICKS or (s.emergencyStop and braked))):
+    # Once the hold is on, the chair stays parked while at rest: the hold keeps it there.
+    if s.faultFlags or (at_rest and (s.holding or s.stillTicks >= C.STILL_TICKS
+                                     or (s.emergencyStop and braked))):
         s.parked = 1
         s.integralL = s.integralR = 0.0
         s.prevMeasL = s.filtVelL
@@ -252,8 +313,7 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
             s.outputR, s.integralR = compute_pid(s.setpointR, s.filtVelR, s.integralR, s.prevMeasR,
                                                  s.kpR, s.kiR, s.kdR, dt)
             s.prevMeasR = s.filtVelR
-    s.pwmL, s.dirL = set_motor(s.outputL)
-    s.pwmR, s.dirR = set_motor(s.outputR)
+    _motors(s, delta_l, delta_r, out)
 
     pivot_step(s)
 

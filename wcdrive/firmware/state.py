@@ -38,7 +38,7 @@ INT_FIELDS = (
     "effortPwmR",
     "effortTicksL", "effortTicksR", "txDropped", "txRingFull", "txCredit", "rxGaps", "rxLostTick",
     "lastTickTime", "lateTicks",
-    "eeNext", "eeBusy",
+    "eeNext", "eeBusy", "holding", "holdRefL", "holdRefR", "holdStepL", "holdStepR", "holdRollaway",
 )
 
 #: Globals the tick takes as inputs rather than computes (loop() measures them).
@@ -113,6 +113,15 @@ class FirmwareState:
     ppmLost: int = 0
     stillTicks: int = 0
     parked: int = 1
+    #: The hold (``holdError``, ``holdMotor``): on while parked without a fault; each
+    #: wheel's reference count and the step it follows while the wheel still slows (0 once
+    #: fixed); whether this hold sent ``EVT:ROLLAWAY``.
+    holding: int = 0
+    holdRefL: int = 0
+    holdRefR: int = 0
+    holdStepL: int = 0
+    holdStepR: int = 0
+    holdRollaway: int = 0
     estopLatched: int = 0
     faultFlags: int = 0
     stallTicksL: int = 0

@@ -62,7 +62,8 @@ VARIABLE_FORMATS = {
           "lastTravel", "pendingL", "pendingR", "kpL", "kiL", "kdL", "kpR", "kiR", "kdR",
           "maxWheel", "maxAccel", "estopDecel", "effortSpeedL", "effortSpeedR", "effortSetpointL",
           "effortSetpointR"),
-    "i": ("encoderValueL", "encoderValueR", "encTickL", "encTickR", "prevEncL", "prevEncR"),
+    "i": ("encoderValueL", "encoderValueR", "encTickL", "encTickR", "prevEncL", "prevEncR", "holdRefL",
+          "holdRefR", "holdStepL", "holdStepR"),
     "I": ("illegalL", "illegalR", "lastControlTime", "tickCount", "lastCmdTime", "rejectedCount",
           "errSuppressed", "txDropped", "timer0_millis", "timer0_overflow_count", "illTickL",
           "illTickR", "rxCount", "crcRejected", "txRingFull", "rxGaps", "rxLost", "rxLostTick",
@@ -74,7 +75,8 @@ VARIABLE_FORMATS = {
           "timer0_fract", "estopLatched", "tlmEnabled", "unframedLine", "stormTickL", "stormTickR",
           "stallTicksL", "stallTicksR", "reverseTicksL", "reverseTicksR", "runawayTicksL",
           "runawayTicksR", "stormL", "stormR",
-          "resetCause", "effortPwmL", "effortPwmR", "effortTicksL", "effortTicksR", "eeNext", "eeBusy"),
+          "resetCause", "effortPwmL", "effortPwmR", "effortTicksL", "effortTicksR", "eeNext", "eeBusy",
+          "holding", "holdRollaway"),
 }
 _FORMAT_OF = {name: fmt for fmt, names in VARIABLE_FORMATS.items() for name in names}
 

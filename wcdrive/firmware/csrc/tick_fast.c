@@ -84,7 +84,8 @@ static double f_from_int(int64_t n) { return rnd((double)n); }   /* |n| < 2**53 
     X(integralL) X(integralR) X(outputL) X(outputR) X(kpL) X(kiL) X(kdL) X(kpR) X(kiR) \
     X(kdR) X(pivotPhase) X(pivotTicksLeft) X(pendingL) X(pendingR) X(mode) X(txDropped) \
     X(tlmEnabled) X(errLinesThisTick) X(rxCount) X(lastSeq) X(estopLatched) X(ppmLost) \
-    X(rejectedCount) X(crcRejected) X(freeRam)
+    X(rejectedCount) X(crcRejected) X(freeRam) \
+    X(holding) X(holdRefL) X(holdRefR) X(holdStepL) X(holdStepR)
 
 #define ENUM(name) F_##name,
 enum { FIELDS(ENUM) N_FIELDS };
@@ -146,6 +147,7 @@ static struct {
         pivot_speed, rounding2;
     int64_t control_period_ms, tx_credit_max, tx_credit_per_ms, stall_pwm, stall_ticks,
         reverse_ticks, runaway_pwm, runaway_ticks, effort_pwm, effort_ticks, illegal_per_tick, still_ticks, pivot_ticks,
+        hold_deadband,
         high, low, pivot_none, pivot_stopping, pivot_rotating;
 } K;
 static PyObject *mode_names;      /* dict: mode -> bytes */
@@ -445,7 +447,24 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
         SETI(stillTicks, I(stillTicks) + 1);
     int at_rest = D(targetL) == 0.0 && D(targetR) == 0.0 && D(setpointL) == 0.0 && D(setpointR) == 0.0;
     int braked = fabs(D(filtVelL)) < K.brake_done_speed && fabs(D(filtVelR)) < K.brake_done_speed;
-    if (I(faultFlags) || (at_rest && (I(stillTicks) >= K.still_ticks || (I(emergencyStop) && braked)))) {
+    int park = I(faultFlags)
+               || (at_rest && (I(holding) || I(stillTicks) >= K.still_ticks || (I(emergencyStop) && braked)));
+    /* The hold: only its quiet case here, both wheels within the deadband of fixed
+     * references (duty 0, as parked). Its start and end, a reference that still follows
+     * its wheel, a duty or a rollaway go to the Python tick. */
+    int hold = park && !I(faultFlags);
+    if (hold != (I(holding) != 0))
+        Py_RETURN_NONE;
+    if (hold) {
+        int64_t err_l = i32(I(encTickL) - I(holdRefL)), err_r = i32(I(encTickR) - I(holdRefR));
+        if (I(holdStepL) != 0 || I(holdStepR) != 0 || llabs(err_l) > K.hold_deadband
+            || llabs(err_r) > K.hold_deadband)
+            Py_RETURN_NONE;
+        SETI(holdRefL, I(holdRefL)); SETI(holdStepL, 0);
+        SETI(holdRefR, I(holdRefR)); SETI(holdStepR, 0);
+    }
+    SETI(holding, hold);
+    if (park) {
         SETI(parked, 1);
         SETF(integralL, 0.0);
         SETF(integralR, 0.0);
@@ -629,6 +648,7 @@ static PyObject *bind(PyObject *self, PyObject *args) {
           && const_int(consts, "FAULT_EFFORT_TICKS", &k.effort_ticks)
           && const_int(consts, "FAULT_ILLEGAL_PER_TICK", &k.illegal_per_tick)
           && const_int(consts, "STILL_TICKS", &k.still_ticks)
+          && const_int(consts, "HOLD_DEADBAND_COUNTS", &k.hold_deadband)
           && const_int(consts, "PIVOT_TICKS", &k.pivot_ticks)
           && const_int(consts, "HIGH", &k.high) && const_int(consts, "LOW", &k.low)
           && const_int(consts, "PIVOT_NONE", &k.pivot_none)
