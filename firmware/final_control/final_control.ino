@@ -236,10 +236,13 @@ volatile bool parked = true;                       // PID off, integrators reset
 // rest at (holdRef*), by holdMotor(). While a wheel still slows after parking, its
 // reference follows its count (holdStep*: the count step of its last tick, 0 once the
 // reference is fixed), so a chair that coasts to a stop on the level holds where it stopped.
-bool holding = false;                      // parked without a fault: the hold is on
+bool holding = true;                       // parked without a fault: the hold is on (from power-on)
 int32_t holdRefL = 0, holdRefR = 0;
 int32_t holdStepL = 0, holdStepR = 0;
-bool holdRollaway = false;                 // EVT:ROLLAWAY sent for this hold
+bool holdRollaway = false;                 // EVT:ROLLAWAY sent for this hold, or it began braking hardest
+bool brakeReleased = false;                // WC_PIN_BRAKE HIGH: only while the PID drives the motors
+uint8_t overspeedTicksL = 0, overspeedTicksR = 0;   // ticks in a row overspeeding (overspeeding)
+bool limitLatched = false;                 // the chair's limit halted it: motion refused (ERR:limit) until a stop
 
 bool estopLatched = false;                  // e-stop: motion refused until "reset"
 
@@ -590,6 +593,27 @@ static bool runsAway(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, flo
          fabs(measured) - fabs(prevMeasured) >= WC_FAULT_RUNAWAY_GAIN;
 }
 
+// Overspeeding: moving the way of its setpoint (or with none), WC_OVERSPEED_MARGIN or
+// more beyond it, braked at WC_OVERSPEED_PWM or more against the motion, and no slower
+// than prevMeasured (what the PID last ran on): gravity beats the motors. (The duty says
+// little of the braking: at speed the driver's current limit binds at a low duty.)
+static bool overspeeding(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, float measured,
+                         float prevMeasured) {
+  bool forward = measured > 0.0f;
+  float beyond = forward ? measured - setpoint : setpoint - measured;
+  bool along = setpoint == 0.0f || (setpoint > 0.0f) == forward;
+  return along && appliedPwm >= WC_OVERSPEED_PWM && (appliedDir == HIGH) != forward &&
+         beyond >= WC_OVERSPEED_MARGIN && fabs(measured) >= fabs(prevMeasured);
+}
+
+// Straining: driven at WC_GRADE_PWM or more toward a setpoint it runs short of (slower
+// than WC_FAULT_EFFORT_SHORTFALL of it that way, or against it).
+static bool straining(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, float measured) {
+  float progress = setpoint > 0.0f ? measured : -measured;
+  return setpoint != 0.0f && (appliedDir == HIGH) == (setpoint > 0.0f) &&
+         appliedPwm >= WC_GRADE_PWM && progress < WC_FAULT_EFFORT_SHORTFALL * fabs(setpoint);
+}
+
 static uint8_t checkWheel(int32_t delta, uint32_t illegal, uint8_t storm, uint8_t appliedPwm,
                           uint8_t appliedDir, float setpoint, float measured, uint8_t& stallTicks,
                           uint8_t& reverseTicks, uint8_t& runawayTicks, uint8_t& effortPwm,
@@ -613,6 +637,16 @@ static uint8_t checkWheel(int32_t delta, uint32_t illegal, uint8_t storm, uint8_
     return WHEEL_NO_EFFECT;
   }
   return (stalled || against) ? WHEEL_SUSPECT : WHEEL_OK;
+}
+
+// A wheel at the chair's limit rather than faulty: its check found no effect or a reversal
+// (check) while the other wheel shows the same load: it strains toward its setpoint
+// (straining), or its reversed or effort count runs too. One wheel alone is a fault; both
+// at once are the world (a grade, a command beyond the chair).
+static bool atLimit(uint8_t check, bool otherStrains, uint8_t otherReverse, uint8_t otherRunaway,
+                    uint8_t otherEffort) {
+  return (check == WHEEL_NO_EFFECT || check == WHEEL_REVERSED) &&
+         (otherStrains || otherReverse != 0 || otherRunaway != 0 || otherEffort != 0);
 }
 
 // The fault bits of one wheel's check (its stall, reversed, implausible and motor bits).
@@ -730,14 +764,25 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
   filtVelR = WC_ALPHA * rawVelR + (1.0f - WC_ALPHA) * filtVelR;
 
   // Faults: checked until one latches. A new one stops the chair (motors off below).
+  // The chair's limits are not faults: they park it (halt) under the hold, braking hardest
+  // (hardest) on an overspeed.
   uint8_t checkL = WHEEL_OK, checkR = WHEEL_OK;
+  bool halt = false, hardest = false;
   if (faultFlags == 0) {
+    bool strainL = straining(pwmL, dirL, setpointL, filtVelL);
+    bool strainR = straining(pwmR, dirR, setpointR, filtVelR);
     checkL = checkWheel(deltaL, illDeltaL, stormTickL, pwmL, dirL, setpointL, filtVelL, stallTicksL,
                         reverseTicksL, runawayTicksL, effortPwmL, effortSpeedL, effortSetpointL,
                         effortTicksL, prevMeasL);
     checkR = checkWheel(deltaR, illDeltaR, stormTickR, pwmR, dirR, setpointR, filtVelR, stallTicksR,
                         reverseTicksR, runawayTicksR, effortPwmR, effortSpeedR, effortSetpointR,
                         effortTicksR, prevMeasR);
+    bool limitL = atLimit(checkL, strainR, reverseTicksR, runawayTicksR, effortTicksR);
+    bool limitR = atLimit(checkR, strainL, reverseTicksL, runawayTicksL, effortTicksL);
+    if (limitL) checkL = WHEEL_OK;
+    if (limitR) checkR = WHEEL_OK;
+    overspeedTicksL = !holding && overspeeding(pwmL, dirL, setpointL, filtVelL, prevMeasL) ? overspeedTicksL + 1 : 0;
+    overspeedTicksR = !holding && overspeeding(pwmR, dirR, setpointR, filtVelR, prevMeasR) ? overspeedTicksR + 1 : 0;
     uint16_t faults;
     if (checkL == WHEEL_STALLED && checkR == WHEEL_STALLED) {
       faults = FAULT_DRIVER;   // both wheels driven, neither turns: the driver or its supply
@@ -753,6 +798,22 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
       stallTicksL = stallTicksR = reverseTicksL = reverseTicksR = 0;
       runawayTicksL = runawayTicksR = 0;
       sendFaultEvents(faults);
+    } else if (overspeedTicksL >= WC_OVERSPEED_TICKS || overspeedTicksR >= WC_OVERSPEED_TICKS) {
+      halt = hardest = true;
+      sendEvent(F("OVERSPEED"));
+    } else if (limitL || limitR) {
+      halt = true;
+      hardest = holding;   // held and still pushed off: braking hardest already, no new event
+      if (!holding) sendEvent(F("STALLED_ON_GRADE"));
+    }
+    if (halt) {
+      limitLatched = true;
+      emergencyHalt();
+      setpointL = setpointR = 0.0f;
+      stallTicksL = stallTicksR = reverseTicksL = reverseTicksR = 0;
+      runawayTicksL = runawayTicksR = 0;
+      effortTicksL = effortTicksR = 0;
+      overspeedTicksL = overspeedTicksR = 0;
     }
   }
 
@@ -786,7 +847,7 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
   bool braked = fabs(filtVelL) < WC_BRAKE_DONE_SPEED && fabs(filtVelR) < WC_BRAKE_DONE_SPEED;
   // Once the hold is on, the chair stays parked while at rest, moving or not: the hold
   // (below) keeps it where it stopped.
-  if (faultFlags != 0 ||
+  if (faultFlags != 0 || halt ||
       (atRest && (holding || stillTicks >= WC_STILL_TICKS || (emergencyStop && braked)))) {
     parked = true;
     integralL = integralR = 0.0f;
@@ -811,6 +872,7 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
       holdStepR = deltaR;
       holdRollaway = false;
     }
+    if (hardest) holdRollaway = true;
     int32_t errL = holdError(encTickL, deltaL, holdRefL, holdStepL);
     int32_t errR = holdError(encTickR, deltaR, holdRefR, holdStepR);
     bool rolled = errL > WC_ROLLAWAY_COUNTS || errL < -WC_ROLLAWAY_COUNTS ||
@@ -827,6 +889,9 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
     setMotor(WC_PIN_PWM_R, WC_PIN_DIR_R, outputR, pwmR, dirR);
     holding = false;
   }
+  // The parking brake holds whenever the PID does not drive the motors.
+  brakeReleased = !parked;
+  digitalWrite(WC_PIN_BRAKE, brakeReleased ? HIGH : LOW);
 
   bool slow = fabs(filtVelL) < WC_PIVOT_START_SPEED && fabs(filtVelR) < WC_PIVOT_START_SPEED;
   if (pivotPhase == PIVOT_STOPPING && setpointL == 0.0f && setpointR == 0.0f && slow) {
@@ -861,7 +926,7 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
 // ---------------------------------------------------------------------------
 enum ParseResult : uint8_t {
   PARSE_OK, ERR_SYNTAX, ERR_NUMBER, ERR_RANGE, ERR_FIELDS, ERR_OVERLONG, ERR_CHECKSUM, ERR_ESTOP,
-  ERR_BUSY, ERR_PARAM, ERR_UNFRAMED, ERR_FAULT, ERR_OVERRUN
+  ERR_BUSY, ERR_PARAM, ERR_UNFRAMED, ERR_FAULT, ERR_OVERRUN, ERR_LIMIT
 };
 // What a command answers besides ACK/ERR.
 enum DataReply : uint8_t { DATA_NONE, DATA_HELLO, DATA_PARAM };
@@ -890,9 +955,10 @@ static const char R_PARAM[] PROGMEM = "param";
 static const char R_UNFRAMED[] PROGMEM = "unframed";
 static const char R_FAULT[] PROGMEM = "fault";
 static const char R_OVERRUN[] PROGMEM = "overrun";
+static const char R_LIMIT[] PROGMEM = "limit";
 static const char* const REASONS[] = {
   R_SYNTAX, R_SYNTAX, R_NUMBER, R_RANGE, R_FIELDS, R_OVERLONG, R_CHECKSUM, R_ESTOP, R_BUSY,
-  R_PARAM, R_UNFRAMED, R_FAULT, R_OVERRUN,
+  R_PARAM, R_UNFRAMED, R_FAULT, R_OVERRUN, R_LIMIT,
 };
 
 // Runtime parameters: name, variable, range. watchdog_ms (the last) is an integer.
@@ -1057,6 +1123,10 @@ static ParseResult moveTo(uint8_t newMode, float right, float left) {
   if (refusedUnframed(right, left)) return ERR_UNFRAMED;
   if (estopLatched) return right == 0.0f && left == 0.0f ? PARSE_OK : ERR_ESTOP;
   if (faultFlags != 0) return right == 0.0f && left == 0.0f ? PARSE_OK : ERR_FAULT;
+  if (limitLatched) {
+    if (right != 0.0f || left != 0.0f) return ERR_LIMIT;
+    limitLatched = false;   // a stop: the host has seen the limit, and what it sends next drives
+  }
   acceptCommand(newMode, right, left);
   return PARSE_OK;
 }
@@ -1135,6 +1205,10 @@ static ParseResult parsePpm() {
   if (refusedUnframed(right, left)) return ERR_UNFRAMED;
   if (estopLatched) return right == 0.0f && left == 0.0f ? PARSE_OK : ERR_ESTOP;
   if (faultFlags != 0) return right == 0.0f && left == 0.0f ? PARSE_OK : ERR_FAULT;
+  if (limitLatched) {
+    if (right != 0.0f || left != 0.0f) return ERR_LIMIT;
+    limitLatched = false;   // a stop: the host has seen the limit, and what it sends next drives
+  }
   ppmLost = false;
   acceptCommand(WC_MODE_PPM, right, left);
   return PARSE_OK;
@@ -1504,6 +1578,8 @@ static const __FlashStringHelper* resetCauseName(uint8_t mcusr) {
 void setup() {
   pinMode(WC_PIN_RELAY, OUTPUT);
   digitalWrite(WC_PIN_RELAY, LOW);
+  pinMode(WC_PIN_BRAKE, OUTPUT);
+  digitalWrite(WC_PIN_BRAKE, LOW);
   pinMode(WC_PIN_DIR_L, OUTPUT);
   pinMode(WC_PIN_DIR_R, OUTPUT);
   pinMode(WC_PIN_PWM_L, OUTPUT);

@@ -76,7 +76,8 @@ VARIABLE_FORMATS = {
           "stallTicksL", "stallTicksR", "reverseTicksL", "reverseTicksR", "runawayTicksL",
           "runawayTicksR", "stormL", "stormR",
           "resetCause", "effortPwmL", "effortPwmR", "effortTicksL", "effortTicksR", "eeNext", "eeBusy",
-          "holding", "holdRollaway"),
+          "holding", "holdRollaway", "brakeReleased", "overspeedTicksL", "overspeedTicksR",
+          "limitLatched"),
 }
 _FORMAT_OF = {name: fmt for fmt, names in VARIABLE_FORMATS.items() for name in names}
 
