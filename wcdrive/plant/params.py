@@ -51,9 +51,14 @@ class ChairParams:
     caster_friction: float = 0.6
     rolling_resistance: float = 0.015  # drive wheels
     caster_rolling_resistance: float = 0.03
-    tyre_stiffness: float = 100000.0   # N per m/s of longitudinal slip (regularised Coulomb)
-    lateral_stiffness: float = 20000.0  # N per m/s of lateral slip
-    caster_stiffness: float = 20000.0  # N per m/s of caster side slip
+    tyre_stiffness: float = 100000.0   # N per m/s of longitudinal slip: the contact patch's damping
+    lateral_stiffness: float = 20000.0  # N per m/s of lateral slip (damping, likewise)
+    caster_stiffness: float = 20000.0  # N per m/s of caster side slip (regularised Coulomb)
+    # The drive tyres' contact patch as a spring (the plant's static grip): N per m of
+    # deflection, longitudinal and lateral. A small pneumatic tyre's carcass and tread:
+    # 0.4 mm of deflection for the 77 N each wheel holds parked on 1:12 (assumed).
+    tyre_contact_stiffness: float = 200000.0
+    lateral_contact_stiffness: float = 100000.0
 
     # --- drive train (assumed) ---
     gear_ratio: float = 18.0
