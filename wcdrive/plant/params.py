@@ -60,6 +60,18 @@ class ChairParams:
     tyre_contact_stiffness: float = 200000.0
     lateral_contact_stiffness: float = 100000.0
 
+    # --- parking brake (assumed) ---
+    parking_brake: bool = False        # an electromagnetic brake on each drive wheel (the seed chair: none)
+    # N m at each wheel while engaged, holding and slipping alike. 33.7 N m each holds the
+    # heaviest chair (110 kg with a 150 kg occupant) on 10 degrees (m g sin(10 deg) r / 2);
+    # 50 N m holds it up to 14.9 degrees, 1.48 times what 10 degrees takes (where each dry
+    # tyre, facing down, is asked 221 N of the 560 N it grips). The motors (14.6 N m each
+    # at the wheel at the current limit) cannot turn it; engaged at speed it stops the
+    # 190 kg chair at 3.2 m/s^2.
+    brake_torque: float = 50.0
+    brake_engage_delay: float = 0.05   # s from the pin going low to the brake holding (assumed)
+    brake_release_delay: float = 0.05  # s from the pin going high to the brake letting go (assumed)
+
     # --- drive train (assumed) ---
     gear_ratio: float = 18.0
     gear_efficiency: float = 0.85
