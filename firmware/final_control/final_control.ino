@@ -240,7 +240,7 @@ bool holding = true;                       // parked without a fault: the hold i
 int32_t holdRefL = 0, holdRefR = 0;
 int32_t holdStepL = 0, holdStepR = 0;
 bool holdRollaway = false;                 // EVT:ROLLAWAY sent for this hold, or it began braking hardest
-bool brakeReleased = false;                // WC_PIN_BRAKE HIGH: only while the PID drives the motors
+volatile bool brakeReleased = false;       // WC_PIN_BRAKE HIGH: only while the PID drives the motors (volatile: kept for the harness)
 uint8_t overspeedTicksL = 0, overspeedTicksR = 0;   // ticks in a row overspeeding (overspeeding)
 bool limitLatched = false;                 // the chair's limit halted it: motion refused (ERR:limit) until a stop
 
@@ -777,8 +777,10 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
     checkR = checkWheel(deltaR, illDeltaR, stormTickR, pwmR, dirR, setpointR, filtVelR, stallTicksR,
                         reverseTicksR, runawayTicksR, effortPwmR, effortSpeedR, effortSetpointR,
                         effortTicksR, prevMeasR);
-    bool limitL = atLimit(checkL, strainR, reverseTicksR, runawayTicksR, effortTicksR);
-    bool limitR = atLimit(checkR, strainL, reverseTicksL, runawayTicksL, effortTicksL);
+    // Driving only: a held wheel that runs away is a fault (a reversed encoder turns the
+    // hold into positive feedback), whatever the other wheel does.
+    bool limitL = !holding && atLimit(checkL, strainR, reverseTicksR, runawayTicksR, effortTicksR);
+    bool limitR = !holding && atLimit(checkR, strainL, reverseTicksL, runawayTicksL, effortTicksL);
     if (limitL) checkL = WHEEL_OK;
     if (limitR) checkR = WHEEL_OK;
     overspeedTicksL = !holding && overspeeding(pwmL, dirL, setpointL, filtVelL, prevMeasL) ? overspeedTicksL + 1 : 0;
@@ -798,13 +800,14 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
       stallTicksL = stallTicksR = reverseTicksL = reverseTicksR = 0;
       runawayTicksL = runawayTicksR = 0;
       sendFaultEvents(faults);
-    } else if (overspeedTicksL >= WC_OVERSPEED_TICKS || overspeedTicksR >= WC_OVERSPEED_TICKS) {
+    } else if (overspeedTicksL >= WC_OVERSPEED_TICKS && overspeedTicksR >= WC_OVERSPEED_TICKS) {
+      // both wheels: gravity on the whole chair (one alone is a wheel's fault, left to the
+      // runaway rule)
       halt = hardest = true;
       sendEvent(F("OVERSPEED"));
     } else if (limitL || limitR) {
       halt = true;
-      hardest = holding;   // held and still pushed off: braking hardest already, no new event
-      if (!holding) sendEvent(F("STALLED_ON_GRADE"));
+      sendEvent(F("STALLED_ON_GRADE"));
     }
     if (halt) {
       limitLatched = true;

@@ -31,7 +31,7 @@ def _ticks(s: FirmwareState, rights: list[int], lefts: list[int] | None = None) 
 
 def _coasting() -> FirmwareState:
     """Braked after an emergency ramp: parks at its first tick (slower than BRAKE_DONE_SPEED)."""
-    return FirmwareState(emergencyStop=1, parked=0, lastControlTime=0)
+    return FirmwareState(emergencyStop=1, parked=0, holding=0, lastControlTime=0)
 
 
 def test_the_reference_follows_a_wheel_still_slowing() -> None:

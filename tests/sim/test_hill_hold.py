@@ -4,9 +4,8 @@ A chair parked without a fault holds each wheel at the count it stopped at (PROT
 "Hold and rollaway"). Driven up a 1:12 or a 1:20 grade and stopped, by a zero command
 or by the watchdog, its wheels roll less than 2 cm over the next 60 s; on the level it
 stands at duty 0. The chassis's own travel is held to that of a chair whose wheels are
-locked (a perfect parking brake) plus those 2 cm: the plant's tyre law is regularised
-Coulomb friction (no static friction), so even locked wheels slide a little under the
-grade's pull (4.6 cm in 60 s on 1:12, ``test_locked_wheels_slide_on_the_plant_s_tyres``).
+locked (a perfect parking brake) plus those 2 cm: the tyres' contact patches deflect
+under the grade's pull (0.4 mm on 1:12, tests/plant/test_grip.py).
 Pushed harder than the hold can carry (one motor open circuit on 1:12) the chair rolls:
 ``EVT:ROLLAWAY`` at the first tick at which a wheel is ROLLAWAY_COUNTS (2 cm) off its
 count, and the hold keeps braking at HOLD_PWM_MAX. The compiled firmware gives the same bits as the port on
@@ -100,14 +99,6 @@ def _locked_slide(slope: float) -> float:
     plant.advance(round(HOLD_S * 1000))
     x, y, _ = plant.pose
     return math.hypot(x - x0, y - y0)
-
-
-def test_locked_wheels_slide_on_the_plant_s_tyres() -> None:
-    """The plant's tyres carry a steady force by slipping at ``force / tyre_stiffness``:
-    the grade's pull on the drive wheels slides even a locked chair."""
-    p = ChairParams()
-    pull = p.mass * 9.81 * math.sin(math.radians(ONE_IN_12))
-    assert _locked_slide(ONE_IN_12) == pytest.approx(HOLD_S * pull / (2 * p.tyre_stiffness), rel=0.05)
 
 
 @pytest.mark.parametrize("backend", BACKENDS)

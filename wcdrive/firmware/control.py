@@ -174,8 +174,8 @@ def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_
                   out: bytearray) -> tuple[int, int, bool, bool]:
     """The tick's fault checks (until one latches); a new fault halts the chair and
     sends its events. The chair's limits are not faults: an overspeed
-    (``EVT:OVERSPEED``) or both wheels at their limit (``EVT:STALLED_ON_GRADE``, unless
-    already held) park it under the hold. Returns both wheels' verdicts, whether to park
+    (``EVT:OVERSPEED``) or, driving, both wheels at their limit (``EVT:STALLED_ON_GRADE``)
+    park it under the hold. Returns both wheels' verdicts, whether to park
     (halt) and whether the hold brakes hardest from the start."""
     if s.faultFlags:
         return WHEEL_OK, WHEEL_OK, False, False
@@ -191,8 +191,12 @@ def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_
         s.reverseTicksR, s.runawayTicksR, (s.effortPwmR, s.effortSpeedR, s.effortSetpointR,
                                            s.effortTicksR), s.prevMeasR)
     s.effortPwmR, s.effortSpeedR, s.effortSetpointR, s.effortTicksR = effort_r
-    limit_l = at_limit(check_l, strain_r, s.reverseTicksR, s.runawayTicksR, s.effortTicksR)
-    limit_r = at_limit(check_r, strain_l, s.reverseTicksL, s.runawayTicksL, s.effortTicksL)
+    # Driving only: a held wheel that runs away is a fault (a reversed encoder turns the
+    # hold into positive feedback), whatever the other wheel does.
+    limit_l = not s.holding and at_limit(check_l, strain_r, s.reverseTicksR, s.runawayTicksR,
+                                         s.effortTicksR)
+    limit_r = not s.holding and at_limit(check_r, strain_l, s.reverseTicksL, s.runawayTicksL,
+                                         s.effortTicksL)
     if limit_l:
         check_l = WHEEL_OK
     if limit_r:
@@ -217,14 +221,13 @@ def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_
         send_fault_events(s, faults, out)
         return check_l, check_r, False, False
     halt = hardest = False
-    if s.overspeedTicksL >= C.OVERSPEED_TICKS or s.overspeedTicksR >= C.OVERSPEED_TICKS:
+    # both wheels: gravity on the whole chair (one alone is a wheel's fault: runs_away)
+    if s.overspeedTicksL >= C.OVERSPEED_TICKS and s.overspeedTicksR >= C.OVERSPEED_TICKS:
         halt = hardest = True
         send(s, send_event("OVERSPEED"), out)
     elif limit_l or limit_r:
         halt = True
-        hardest = bool(s.holding)      # held and still pushed off: hardest, no new event
-        if not s.holding:
-            send(s, send_event("STALLED_ON_GRADE"), out)
+        send(s, send_event("STALLED_ON_GRADE"), out)
     if halt:
         s.limitLatched = 1
         emergency_halt(s)

@@ -444,7 +444,7 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
         int over_r = !I(holding) && overspeeding(I(pwmR), I(dirR), D(setpointR), D(filtVelR), D(prevMeasR));
         int64_t os_l = over_l ? ((I(overspeedTicksL) + 1) & 0xFF) : 0;
         int64_t os_r = over_r ? ((I(overspeedTicksR) + 1) & 0xFF) : 0;
-        if (os_l >= K.overspeed_ticks || os_r >= K.overspeed_ticks)
+        if (os_l >= K.overspeed_ticks && os_r >= K.overspeed_ticks)
             Py_RETURN_NONE;       /* an overspeed parks the chair: the Python tick */
         SETI(overspeedTicksL, os_l); SETI(overspeedTicksR, os_r);
     }
