@@ -230,7 +230,19 @@ uint32_t lastCmdTime = 0;                   // millis() of the tick that saw the
 bool emergencyStop = false;                 // ramp down at WC_EMERGENCY_DECEL
 bool ppmLost = false;
 uint8_t stillTicks = 0;
-volatile bool parked = true;                       // motors held at zero with integrators reset
+volatile bool parked = true;                       // PID off, integrators reset: the hold, or a fault's duty 0
+
+// The hold (parked without a fault): each wheel driven back toward the count it came to
+// rest at (holdRef*), by holdMotor(). While a wheel still slows after parking, its
+// reference follows its count (holdStep*: the count step of its last tick, 0 once the
+// reference is fixed), so a chair that coasts to a stop on the level holds where it stopped.
+bool holding = true;                       // parked without a fault: the hold is on (from power-on)
+int32_t holdRefL = 0, holdRefR = 0;
+int32_t holdStepL = 0, holdStepR = 0;
+bool holdRollaway = false;                 // EVT:ROLLAWAY sent for this hold, or it began braking hardest
+volatile bool brakeReleased = false;       // WC_PIN_BRAKE HIGH: only while the PID drives the motors (volatile: kept for the harness)
+uint8_t overspeedTicksL = 0, overspeedTicksR = 0;   // ticks in a row overspeeding (overspeeding)
+bool limitLatched = false;                 // the chair's limit halted it: motion refused (ERR:limit) until a stop
 
 bool estopLatched = false;                  // e-stop: motion refused until "reset"
 
@@ -472,6 +484,48 @@ static void setMotor(uint8_t pwmPin, uint8_t dirPin, float output, uint8_t& pwm,
   analogWrite(pwmPin, pwm);
 }
 
+// The hold's reference follows a wheel that still slows (a step of the same sign, no
+// larger than the last), then stays. Returns the wheel's count error from it.
+static int32_t holdError(int32_t count, int32_t delta, int32_t& ref, int32_t& step) {
+  if (step != 0) {
+    bool slowing = delta != 0 && (delta > 0) == (step > 0) &&
+                   (delta > 0 ? delta <= step : delta >= step);
+    if (slowing) {
+      ref = count;
+      step = delta;
+    } else {
+      step = 0;
+    }
+  }
+  return (int32_t)((uint32_t)count - (uint32_t)ref);
+}
+
+// The hold's duty for a count error: WC_HOLD_GAIN per count beyond WC_HOLD_DEADBAND_COUNTS,
+// at most WC_HOLD_PWM_MAX; after a rollaway, WC_HOLD_PWM_MAX beyond the deadband.
+static uint8_t holdDuty(int32_t error) {
+  uint32_t size = error < 0 ? (uint32_t)0 - (uint32_t)error : (uint32_t)error;
+  if (size <= WC_HOLD_DEADBAND_COUNTS) return 0;
+  uint32_t over = size - WC_HOLD_DEADBAND_COUNTS;
+  if (holdRollaway || over >= (uint32_t)WC_HOLD_PWM_MAX / WC_HOLD_GAIN) return WC_HOLD_PWM_MAX;
+  return (uint8_t)(over * WC_HOLD_GAIN);
+}
+
+// Drives one held wheel against its count error: holdDuty() toward the reference,
+// aheadDir being the DIR level that turns the wheel back when its count has run ahead
+// (LOW on the right, whose counts rise forward; HIGH on the mirrored left). At duty 0,
+// DIR HIGH: what setMotor() writes for an output of 0.
+static void holdMotor(uint8_t pwmPin, uint8_t dirPin, int32_t error, uint8_t aheadDir,
+                      uint8_t& pwm, uint8_t& dir) {
+  pwm = holdDuty(error);
+  if (pwm == 0) {
+    dir = HIGH;
+  } else {
+    dir = error > 0 ? aheadDir : (aheadDir == HIGH ? LOW : HIGH);
+  }
+  digitalWrite(dirPin, dir);
+  analogWrite(pwmPin, pwm);
+}
+
 // Targets to zero; the ramp brings the setpoints down at the emergency rate and the
 // PID brakes the wheels along it. Its integrators start from zero: what they held to
 // keep the chair rolling would push against the brake.
@@ -539,6 +593,27 @@ static bool runsAway(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, flo
          fabs(measured) - fabs(prevMeasured) >= WC_FAULT_RUNAWAY_GAIN;
 }
 
+// Overspeeding: moving the way of its setpoint (or with none), WC_OVERSPEED_MARGIN or
+// more beyond it, braked at WC_OVERSPEED_PWM or more against the motion, and no slower
+// than prevMeasured (what the PID last ran on): gravity beats the motors. (The duty says
+// little of the braking: at speed the driver's current limit binds at a low duty.)
+static bool overspeeding(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, float measured,
+                         float prevMeasured) {
+  bool forward = measured > 0.0f;
+  float beyond = forward ? measured - setpoint : setpoint - measured;
+  bool along = setpoint == 0.0f || (setpoint > 0.0f) == forward;
+  return along && appliedPwm >= WC_OVERSPEED_PWM && (appliedDir == HIGH) != forward &&
+         beyond >= WC_OVERSPEED_MARGIN && fabs(measured) >= fabs(prevMeasured);
+}
+
+// Straining: driven at WC_GRADE_PWM or more toward a setpoint it runs short of (slower
+// than WC_FAULT_EFFORT_SHORTFALL of it that way, or against it).
+static bool straining(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, float measured) {
+  float progress = setpoint > 0.0f ? measured : -measured;
+  return setpoint != 0.0f && (appliedDir == HIGH) == (setpoint > 0.0f) &&
+         appliedPwm >= WC_GRADE_PWM && progress < WC_FAULT_EFFORT_SHORTFALL * fabs(setpoint);
+}
+
 static uint8_t checkWheel(int32_t delta, uint32_t illegal, uint8_t storm, uint8_t appliedPwm,
                           uint8_t appliedDir, float setpoint, float measured, uint8_t& stallTicks,
                           uint8_t& reverseTicks, uint8_t& runawayTicks, uint8_t& effortPwm,
@@ -562,6 +637,16 @@ static uint8_t checkWheel(int32_t delta, uint32_t illegal, uint8_t storm, uint8_
     return WHEEL_NO_EFFECT;
   }
   return (stalled || against) ? WHEEL_SUSPECT : WHEEL_OK;
+}
+
+// A wheel at the chair's limit rather than faulty: its check found no effect or a reversal
+// (check) while the other wheel shows the same load: it strains toward its setpoint
+// (straining), or its reversed or effort count runs too. One wheel alone is a fault; both
+// at once are the world (a grade, a command beyond the chair).
+static bool atLimit(uint8_t check, bool otherStrains, uint8_t otherReverse, uint8_t otherRunaway,
+                    uint8_t otherEffort) {
+  return (check == WHEEL_NO_EFFECT || check == WHEEL_REVERSED) &&
+         (otherStrains || otherReverse != 0 || otherRunaway != 0 || otherEffort != 0);
 }
 
 // The fault bits of one wheel's check (its stall, reversed, implausible and motor bits).
@@ -679,14 +764,27 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
   filtVelR = WC_ALPHA * rawVelR + (1.0f - WC_ALPHA) * filtVelR;
 
   // Faults: checked until one latches. A new one stops the chair (motors off below).
+  // The chair's limits are not faults: they park it (halt) under the hold, braking hardest
+  // (hardest) on an overspeed.
   uint8_t checkL = WHEEL_OK, checkR = WHEEL_OK;
+  bool halt = false, hardest = false;
   if (faultFlags == 0) {
+    bool strainL = straining(pwmL, dirL, setpointL, filtVelL);
+    bool strainR = straining(pwmR, dirR, setpointR, filtVelR);
     checkL = checkWheel(deltaL, illDeltaL, stormTickL, pwmL, dirL, setpointL, filtVelL, stallTicksL,
                         reverseTicksL, runawayTicksL, effortPwmL, effortSpeedL, effortSetpointL,
                         effortTicksL, prevMeasL);
     checkR = checkWheel(deltaR, illDeltaR, stormTickR, pwmR, dirR, setpointR, filtVelR, stallTicksR,
                         reverseTicksR, runawayTicksR, effortPwmR, effortSpeedR, effortSetpointR,
                         effortTicksR, prevMeasR);
+    // Driving only: a held wheel that runs away is a fault (a reversed encoder turns the
+    // hold into positive feedback), whatever the other wheel does.
+    bool limitL = !holding && atLimit(checkL, strainR, reverseTicksR, runawayTicksR, effortTicksR);
+    bool limitR = !holding && atLimit(checkR, strainL, reverseTicksL, runawayTicksL, effortTicksL);
+    if (limitL) checkL = WHEEL_OK;
+    if (limitR) checkR = WHEEL_OK;
+    overspeedTicksL = !holding && overspeeding(pwmL, dirL, setpointL, filtVelL, prevMeasL) ? overspeedTicksL + 1 : 0;
+    overspeedTicksR = !holding && overspeeding(pwmR, dirR, setpointR, filtVelR, prevMeasR) ? overspeedTicksR + 1 : 0;
     uint16_t faults;
     if (checkL == WHEEL_STALLED && checkR == WHEEL_STALLED) {
       faults = FAULT_DRIVER;   // both wheels driven, neither turns: the driver or its supply
@@ -702,6 +800,23 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
       stallTicksL = stallTicksR = reverseTicksL = reverseTicksR = 0;
       runawayTicksL = runawayTicksR = 0;
       sendFaultEvents(faults);
+    } else if (overspeedTicksL >= WC_OVERSPEED_TICKS && overspeedTicksR >= WC_OVERSPEED_TICKS) {
+      // both wheels: gravity on the whole chair (one alone is a wheel's fault, left to the
+      // runaway rule)
+      halt = hardest = true;
+      sendEvent(F("OVERSPEED"));
+    } else if (limitL || limitR) {
+      halt = true;
+      sendEvent(F("STALLED_ON_GRADE"));
+    }
+    if (halt) {
+      limitLatched = true;
+      emergencyHalt();
+      setpointL = setpointR = 0.0f;
+      stallTicksL = stallTicksR = reverseTicksL = reverseTicksR = 0;
+      runawayTicksL = runawayTicksR = 0;
+      effortTicksL = effortTicksR = 0;
+      overspeedTicksL = overspeedTicksR = 0;
     }
   }
 
@@ -729,10 +844,14 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
   bool atRest = targetL == 0.0f && targetR == 0.0f && setpointL == 0.0f && setpointR == 0.0f;
   // Park: at rest and still for a few ticks. An emergency ramp (watchdog, PPM loss,
   // e-stop) keeps braking under closed loop until both wheels are slower than
-  // WC_BRAKE_DONE_SPEED, then parks at once. A fault parks at once: its encoders are
+  // WC_BRAKE_DONE_SPEED, then parks at once. Parked, the hold (below) keeps the chair
+  // where it stops. A fault parks at once with the motors at duty 0: its encoders are
   // not to be trusted, the driver brakes the motors.
   bool braked = fabs(filtVelL) < WC_BRAKE_DONE_SPEED && fabs(filtVelR) < WC_BRAKE_DONE_SPEED;
-  if (faultFlags != 0 || (atRest && (stillTicks >= WC_STILL_TICKS || (emergencyStop && braked)))) {
+  // Once the hold is on, the chair stays parked while at rest, moving or not: the hold
+  // (below) keeps it where it stopped.
+  if (faultFlags != 0 || halt ||
+      (atRest && (holding || stillTicks >= WC_STILL_TICKS || (emergencyStop && braked)))) {
     parked = true;
     integralL = integralR = 0.0f;
     prevMeasL = filtVelL;
@@ -748,8 +867,34 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
       outputR = computePID(setpointR, filtVelR, integralR, prevMeasR, kpR, kiR, kdR, dt);
     }
   }
-  setMotor(WC_PIN_PWM_L, WC_PIN_DIR_L, outputL, pwmL, dirL);
-  setMotor(WC_PIN_PWM_R, WC_PIN_DIR_R, outputR, pwmR, dirR);
+  if (parked && faultFlags == 0) {
+    if (!holding) {   // the hold starts: from this tick's counts, following a wheel still moving
+      holdRefL = encTickL;
+      holdRefR = encTickR;
+      holdStepL = deltaL;
+      holdStepR = deltaR;
+      holdRollaway = false;
+    }
+    if (hardest) holdRollaway = true;
+    int32_t errL = holdError(encTickL, deltaL, holdRefL, holdStepL);
+    int32_t errR = holdError(encTickR, deltaR, holdRefR, holdStepR);
+    bool rolled = errL > WC_ROLLAWAY_COUNTS || errL < -WC_ROLLAWAY_COUNTS ||
+                  errR > WC_ROLLAWAY_COUNTS || errR < -WC_ROLLAWAY_COUNTS;
+    if (rolled && !holdRollaway) {
+      holdRollaway = true;
+      sendEvent(F("ROLLAWAY"));
+    }
+    holdMotor(WC_PIN_PWM_L, WC_PIN_DIR_L, errL, HIGH, pwmL, dirL);
+    holdMotor(WC_PIN_PWM_R, WC_PIN_DIR_R, errR, LOW, pwmR, dirR);
+    holding = true;
+  } else {
+    setMotor(WC_PIN_PWM_L, WC_PIN_DIR_L, outputL, pwmL, dirL);
+    setMotor(WC_PIN_PWM_R, WC_PIN_DIR_R, outputR, pwmR, dirR);
+    holding = false;
+  }
+  // The parking brake holds whenever the PID does not drive the motors.
+  brakeReleased = !parked;
+  digitalWrite(WC_PIN_BRAKE, brakeReleased ? HIGH : LOW);
 
   bool slow = fabs(filtVelL) < WC_PIVOT_START_SPEED && fabs(filtVelR) < WC_PIVOT_START_SPEED;
   if (pivotPhase == PIVOT_STOPPING && setpointL == 0.0f && setpointR == 0.0f && slow) {
@@ -784,7 +929,7 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
 // ---------------------------------------------------------------------------
 enum ParseResult : uint8_t {
   PARSE_OK, ERR_SYNTAX, ERR_NUMBER, ERR_RANGE, ERR_FIELDS, ERR_OVERLONG, ERR_CHECKSUM, ERR_ESTOP,
-  ERR_BUSY, ERR_PARAM, ERR_UNFRAMED, ERR_FAULT, ERR_OVERRUN
+  ERR_BUSY, ERR_PARAM, ERR_UNFRAMED, ERR_FAULT, ERR_OVERRUN, ERR_LIMIT
 };
 // What a command answers besides ACK/ERR.
 enum DataReply : uint8_t { DATA_NONE, DATA_HELLO, DATA_PARAM };
@@ -813,9 +958,10 @@ static const char R_PARAM[] PROGMEM = "param";
 static const char R_UNFRAMED[] PROGMEM = "unframed";
 static const char R_FAULT[] PROGMEM = "fault";
 static const char R_OVERRUN[] PROGMEM = "overrun";
+static const char R_LIMIT[] PROGMEM = "limit";
 static const char* const REASONS[] = {
   R_SYNTAX, R_SYNTAX, R_NUMBER, R_RANGE, R_FIELDS, R_OVERLONG, R_CHECKSUM, R_ESTOP, R_BUSY,
-  R_PARAM, R_UNFRAMED, R_FAULT, R_OVERRUN,
+  R_PARAM, R_UNFRAMED, R_FAULT, R_OVERRUN, R_LIMIT,
 };
 
 // Runtime parameters: name, variable, range. watchdog_ms (the last) is an integer.
@@ -980,6 +1126,10 @@ static ParseResult moveTo(uint8_t newMode, float right, float left) {
   if (refusedUnframed(right, left)) return ERR_UNFRAMED;
   if (estopLatched) return right == 0.0f && left == 0.0f ? PARSE_OK : ERR_ESTOP;
   if (faultFlags != 0) return right == 0.0f && left == 0.0f ? PARSE_OK : ERR_FAULT;
+  if (limitLatched) {
+    if (right != 0.0f || left != 0.0f) return ERR_LIMIT;
+    limitLatched = false;   // a stop: the host has seen the limit, and what it sends next drives
+  }
   acceptCommand(newMode, right, left);
   return PARSE_OK;
 }
@@ -1058,6 +1208,10 @@ static ParseResult parsePpm() {
   if (refusedUnframed(right, left)) return ERR_UNFRAMED;
   if (estopLatched) return right == 0.0f && left == 0.0f ? PARSE_OK : ERR_ESTOP;
   if (faultFlags != 0) return right == 0.0f && left == 0.0f ? PARSE_OK : ERR_FAULT;
+  if (limitLatched) {
+    if (right != 0.0f || left != 0.0f) return ERR_LIMIT;
+    limitLatched = false;   // a stop: the host has seen the limit, and what it sends next drives
+  }
   ppmLost = false;
   acceptCommand(WC_MODE_PPM, right, left);
   return PARSE_OK;
@@ -1427,6 +1581,8 @@ static const __FlashStringHelper* resetCauseName(uint8_t mcusr) {
 void setup() {
   pinMode(WC_PIN_RELAY, OUTPUT);
   digitalWrite(WC_PIN_RELAY, LOW);
+  pinMode(WC_PIN_BRAKE, OUTPUT);
+  digitalWrite(WC_PIN_BRAKE, LOW);
   pinMode(WC_PIN_DIR_L, OUTPUT);
   pinMode(WC_PIN_DIR_R, OUTPUT);
   pinMode(WC_PIN_PWM_L, OUTPUT);

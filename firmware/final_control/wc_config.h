@@ -74,6 +74,7 @@
 #define WC_PIN_DIR_L 8             // PH5
 #define WC_PIN_DIR_R 11            // PB5
 #define WC_PIN_RELAY 7             // PH4, powers the SmartDriveDuo
+#define WC_PIN_BRAKE 22            // PA0, the parking brake: HIGH releases it; LOW, or an input (at reset: the driver's pull-down), engages it
 
 // ---- Fault detection (EVT:FAULT; docs/safety.md) ---------------------------
 #define WC_FAULT_STALL_PWM 26      // duty (10 %) at or above which a wheel must show encoder counts
@@ -92,6 +93,16 @@
 #define WC_STORM_COMPARE 128       // OCR0A: the Timer0 count at which each storm window starts
 #define WC_HW_WATCHDOG 3           // AVR watchdog period (avr/wdt.h WDTO_120MS): a loop() pass that hangs longer resets the board
 #define WC_BRAKE_DONE_SPEED 0.3f   // rad/s: an emergency stop keeps braking until both wheels are slower
+
+// ---- Hill hold and rollaway (parked without a fault; protocol/PROTOCOL.md) ---
+#define WC_HOLD_DEADBAND_COUNTS 10 // encoder counts (1 mm of travel) a held wheel may be off the count it stopped at before the hold drives it back
+#define WC_HOLD_GAIN 1             // hold duty per count of error beyond HOLD_DEADBAND_COUNTS
+#define WC_HOLD_PWM_MAX 64         // the hold's largest duty (25 %): past the driver's 13 A current limit at a standstill (duty 42), so the brake is the hardest the driver gives
+#define WC_OVERSPEED_PWM 26        // duty (10 %) at or above which a wheel driven against its motion is braking it (at speed the current limit binds at a low duty)
+#define WC_OVERSPEED_MARGIN 1.0f   // rad/s a wheel braked at OVERSPEED_PWM may run beyond its setpoint before it counts as overspeeding
+#define WC_OVERSPEED_TICKS 2       // ticks in a row overspeeding (0.1 s): EVT:OVERSPEED, the chair parks braking hardest
+#define WC_GRADE_PWM 128           // duty (50 %) toward its setpoint at or above which a wheel short of it is straining: both straining is the chair's limit (a grade), not a fault
+#define WC_ROLLAWAY_COUNTS 209     // encoder counts (2 cm of travel: 0.02 m / (2 pi WHEEL_RADIUS) x CPR) a held wheel may be pushed off its count before EVT:ROLLAWAY
 
 // ---- Modes (printed as MODE:WHEEL / CMDVEL / PPM) --------------------------
 #define WC_MODE_WHEEL 0

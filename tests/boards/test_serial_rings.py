@@ -186,7 +186,7 @@ def test_the_worst_tick_fits_the_refill() -> None:
     answer(FirmwareState(buildId="ffffffff"), None, -1, DATA_HELLO, 0, out)
     data_lines.append(len(out))
     answers = C.ERR_LINES_PER_TICK * (max(data_lines) + len(b"NAK:65535,overrun\r\n"))
-    events = len(send_event("PPM_LOST")) + len(send_event("ESTOP"))
+    events = len(send_event("PPM_LOST")) + len(send_event("ESTOP")) + len(send_event("ROLLAWAY"))
     assert tick + answers + events <= C.CONTROL_PERIOD_MS * C.TX_CREDIT_PER_MS <= C.TX_CREDIT_MAX
 
 

@@ -134,7 +134,8 @@ def test_random_ordinary_ticks_take_the_c_path() -> None:
         inputs = (left, right, 0, 0, 0, 0, 0)
         taken += agree(s, now, inputs)
         python_tick(s, now, *inputs)            # the trajectory goes on in Python
-        s.faultFlags = 0                        # (random counts would latch faults)
+        s.faultFlags = 0                        # (random counts would latch faults,
+        s.overspeedTicksL = s.overspeedTicksR = 0   # and overspeeds)
     assert taken > 15_000, taken
 
 
@@ -162,8 +163,10 @@ def test_an_unexpected_field_type_goes_to_the_python_tick() -> None:
 
 
 def test_the_firmware_ticks_in_c() -> None:
-    """``Firmware.tick`` takes the C path; on a corridor run the one tick refused is
-    the one whose watchdog fires at the end."""
+    """``Firmware.tick`` takes the C path; on a corridor run the ticks refused are the
+    one whose hold (on from power-on) ends as the first command drives, the one whose
+    watchdog fires at the end, the one whose hold starts once the chair has braked, and
+    the one whose hold reference still follows the last of the coast."""
     assert final_control._fast_tick is tick_fast.fast.tick
     calls = refused = 0
     real = final_control._fast_tick
@@ -182,7 +185,7 @@ def test_the_firmware_ticks_in_c() -> None:
         final_control._fast_tick = real
     stops = [line for _, line in result.link.events if line.startswith(("EVT:WATCHDOG", "EVT:FAULT"))]
     assert stops == ["EVT:WATCHDOG"]
-    assert calls > 2000 and refused == 1, (calls, refused)
+    assert calls > 2000 and refused == 4, (calls, refused)
 
 
 SCENARIOS = ["corridor_closed", "fault_encoder_reversed", "fault_motor_dead", "fault_wheel_locked",
@@ -240,8 +243,11 @@ def test_a_bind_that_fails_leaves_the_python_tick(monkeypatch, caplog) -> None:
 # ---- the twin rule: a change to the tick touches control.py and tick_fast.c alike ----
 #: Fields only the Python tick writes: those of the ticks the C tick declines (a fault
 #: latches, whose emergency halt sets faultFlags and emergencyStop and forgets
-#: lastTravel). Any other field the Python tick writes, the C tick must write too.
-PYTHON_ONLY = {"emergencyStop", "faultFlags", "lastTravel"}
+#: lastTravel), and a hold's start or rollaway, which set holdRollaway (the C tick takes only
+#: a hold already on, its wheels within the deadband), and a halt at the chair's limit
+#: (an overspeed, both wheels at their limit), which sets limitLatched. Any other field
+#: the Python tick writes, the C tick must write too.
+PYTHON_ONLY = {"emergencyStop", "faultFlags", "lastTravel", "holdRollaway", "limitLatched"}
 _FIRMWARE = Path(tick_fast.__file__).resolve().parent
 
 

@@ -37,7 +37,9 @@ def _hash(value: object) -> str:
 #: that ``SimResult`` had before it was grouped into records.
 FIELDS = {
     "scenario": "scenario", "backend": "backend", "duration": "duration", "ticks": "ticks",
-    "faults": "faults", "fault_at": "fault_at",
+    "faults": "faults", "fault_at": "fault_at", "stop_at": "stop_at",
+    "slope_deg": "terrain.slope_deg", "downhill_heading_deg": "terrain.downhill_heading_deg",
+    "ramps": "terrain.ramps",
     "tick_time": "board.tick_time", "tick_cycles": "board.tick_cycles", "setpoint": "board.setpoint",
     "measured": "board.measured", "pwm": "board.pwm", "counts": "board.counts",
     "truth": "truth.pose", "wheel_speed": "truth.wheel_speed", "caster": "truth.caster",

@@ -357,6 +357,7 @@ class PortLoop:
                       int(dl.storm), int(dr.storm))
         s = fw.state
         self.plant.set_drive(s.pwmL, s.dirL, s.pwmR, s.dirR)
+        self.plant.set_brake(bool(s.brakeReleased))
         self.output.append((overflow, out))
         self.last_tick_cycle = overflow
         if on_tick:
@@ -405,6 +406,7 @@ class PortLoop:
             enc.reboot(count)
         s = self.fw.state
         self.plant.set_drive(s.pwmL, s.dirL, s.pwmR, s.dirR)
+        self.plant.set_brake(bool(s.brakeReleased))
         self.output.append((now, self.fw.boot_output()))
 
     def encoder_counts(self) -> tuple[int, int]:

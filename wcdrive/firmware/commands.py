@@ -316,6 +316,10 @@ def move_to(s: FirmwareState, body: bytes, out: bytearray) -> str | None:
         if result is None or (result[1] == 0.0 and result[2] == 0.0):
             return None
         return "estop" if s.estopLatched else "fault"
+    if s.limitLatched and result is not None:   # halted at the chair's limit: only a stop
+        if result[1] != 0.0 or result[2] != 0.0:
+            return "limit"
+        s.limitLatched = 0
     if result is None:                       # PPM: signal lost
         s.mode = C.MODE_PPM
         s.cmdSinceTick = 1

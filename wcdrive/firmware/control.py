@@ -89,6 +89,36 @@ def runs_away(applied_pwm: int, applied_dir: int, setpoint: float, measured: flo
             and sub(abs(measured), abs(prev_measured)) >= C.FAULT_RUNAWAY_GAIN)
 
 
+def overspeeding(applied_pwm: int, applied_dir: int, setpoint: float, measured: float,
+                 prev_measured: float) -> bool:
+    """``overspeeding``: moving the way of its setpoint (or with none), OVERSPEED_MARGIN
+    or more beyond it, braked at OVERSPEED_PWM or more against the motion, and no slower
+    than ``prev_measured`` (the speed the PID last ran on): gravity beats the motors."""
+    forward = measured > 0.0
+    beyond = sub(measured, setpoint) if forward else sub(setpoint, measured)
+    along = setpoint == 0.0 or (setpoint > 0.0) == forward
+    return (along and applied_pwm >= C.OVERSPEED_PWM and (applied_dir == C.HIGH) != forward
+            and beyond >= C.OVERSPEED_MARGIN and abs(measured) >= abs(prev_measured))
+
+
+def straining(applied_pwm: int, applied_dir: int, setpoint: float, measured: float) -> bool:
+    """``straining``: driven at GRADE_PWM or more toward a setpoint it runs short of
+    (slower than FAULT_EFFORT_SHORTFALL of it that way, or against it)."""
+    progress = measured if setpoint > 0.0 else -measured
+    return (setpoint != 0.0 and (applied_dir == C.HIGH) == (setpoint > 0.0)
+            and applied_pwm >= C.GRADE_PWM
+            and progress < mul(C.FAULT_EFFORT_SHORTFALL, abs(setpoint)))
+
+
+def at_limit(check: int, other_strains: bool, other_reverse: int, other_runaway: int,
+             other_effort: int) -> bool:
+    """``atLimit``: a wheel whose check found no effect or a reversal while the other
+    wheel shows the same load (it strains, or its reversed or effort count runs): the
+    chair's limit (a grade, a command beyond it), not a fault."""
+    return (check in (WHEEL_NO_EFFECT, WHEEL_REVERSED)
+            and (other_strains or other_reverse != 0 or other_runaway != 0 or other_effort != 0))
+
+
 def check_wheel(delta: int, illegal: int, storm: int, applied_pwm: int, applied_dir: int,
                 setpoint: float, measured: float, stall_ticks: int, reverse_ticks: int,
                 runaway_ticks: int, effort: Effort, prev_measured: float
@@ -141,11 +171,16 @@ def wheel_faults(check: int, stall: int, reversed_: int, implausible: int, motor
 
 
 def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_r: int,
-                  out: bytearray) -> tuple[int, int]:
+                  out: bytearray) -> tuple[int, int, bool, bool]:
     """The tick's fault checks (until one latches); a new fault halts the chair and
-    sends its events. Returns both wheels' verdicts."""
+    sends its events. The chair's limits are not faults: an overspeed
+    (``EVT:OVERSPEED``) or, driving, both wheels at their limit (``EVT:STALLED_ON_GRADE``)
+    park it under the hold. Returns both wheels' verdicts, whether to park
+    (halt) and whether the hold brakes hardest from the start."""
     if s.faultFlags:
-        return WHEEL_OK, WHEEL_OK
+        return WHEEL_OK, WHEEL_OK, False, False
+    strain_l = straining(s.pwmL, s.dirL, s.setpointL, s.filtVelL)
+    strain_r = straining(s.pwmR, s.dirR, s.setpointR, s.filtVelR)
     check_l, s.stallTicksL, s.reverseTicksL, s.runawayTicksL, effort_l = check_wheel(
         delta_l, ill_l, s.stormTickL, s.pwmL, s.dirL, s.setpointL, s.filtVelL, s.stallTicksL,
         s.reverseTicksL, s.runawayTicksL, (s.effortPwmL, s.effortSpeedL, s.effortSetpointL,
@@ -156,6 +191,20 @@ def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_
         s.reverseTicksR, s.runawayTicksR, (s.effortPwmR, s.effortSpeedR, s.effortSetpointR,
                                            s.effortTicksR), s.prevMeasR)
     s.effortPwmR, s.effortSpeedR, s.effortSetpointR, s.effortTicksR = effort_r
+    # Driving only: a held wheel that runs away is a fault (a reversed encoder turns the
+    # hold into positive feedback), whatever the other wheel does.
+    limit_l = not s.holding and at_limit(check_l, strain_r, s.reverseTicksR, s.runawayTicksR,
+                                         s.effortTicksR)
+    limit_r = not s.holding and at_limit(check_r, strain_l, s.reverseTicksL, s.runawayTicksL,
+                                         s.effortTicksL)
+    if limit_l:
+        check_l = WHEEL_OK
+    if limit_r:
+        check_r = WHEEL_OK
+    over_l = not s.holding and overspeeding(s.pwmL, s.dirL, s.setpointL, s.filtVelL, s.prevMeasL)
+    over_r = not s.holding and overspeeding(s.pwmR, s.dirR, s.setpointR, s.filtVelR, s.prevMeasR)
+    s.overspeedTicksL = (s.overspeedTicksL + 1) & 0xFF if over_l else 0
+    s.overspeedTicksR = (s.overspeedTicksR + 1) & 0xFF if over_r else 0
     if check_l == WHEEL_STALLED and check_r == WHEEL_STALLED:
         faults = FAULT_DRIVER
     else:
@@ -170,11 +219,89 @@ def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_
         s.stallTicksL = s.stallTicksR = s.reverseTicksL = s.reverseTicksR = 0
         s.runawayTicksL = s.runawayTicksR = 0
         send_fault_events(s, faults, out)
-    return check_l, check_r
+        return check_l, check_r, False, False
+    halt = hardest = False
+    # both wheels: gravity on the whole chair (one alone is a wheel's fault: runs_away)
+    if s.overspeedTicksL >= C.OVERSPEED_TICKS and s.overspeedTicksR >= C.OVERSPEED_TICKS:
+        halt = hardest = True
+        send(s, send_event("OVERSPEED"), out)
+    elif limit_l or limit_r:
+        halt = True
+        send(s, send_event("STALLED_ON_GRADE"), out)
+    if halt:
+        s.limitLatched = 1
+        emergency_halt(s)
+        s.setpointL = s.setpointR = 0.0
+        s.stallTicksL = s.stallTicksR = s.reverseTicksL = s.reverseTicksR = 0
+        s.runawayTicksL = s.runawayTicksR = 0
+        s.effortTicksL = s.effortTicksR = 0
+        s.overspeedTicksL = s.overspeedTicksR = 0
+    return check_l, check_r, halt, hardest
 
 
 def _i32(x: int) -> int:
     return (x + 2**31) % 2**32 - 2**31
+
+
+def hold_error(count: int, delta: int, ref: int, step: int) -> tuple[int, int, int]:
+    """``holdError``: ``(count error, reference, step)``. The reference follows a wheel
+    that still slows (a step of the same sign as the last and no larger), then stays."""
+    if step != 0:
+        slowing = delta != 0 and (delta > 0) == (step > 0) and (delta <= step if delta > 0 else delta >= step)
+        if slowing:
+            ref, step = count, delta
+        else:
+            step = 0
+    return _i32(count - ref), ref, step
+
+
+def hold_duty(error: int, rollaway: int) -> int:
+    """``holdDuty``: HOLD_GAIN per count of ``error`` beyond HOLD_DEADBAND_COUNTS, at most
+    HOLD_PWM_MAX; after a rollaway (``holdRollaway``), HOLD_PWM_MAX beyond the deadband."""
+    size = abs(error)
+    if size <= C.HOLD_DEADBAND_COUNTS:
+        return 0
+    over = size - C.HOLD_DEADBAND_COUNTS
+    if rollaway or over >= C.HOLD_PWM_MAX // C.HOLD_GAIN:
+        return C.HOLD_PWM_MAX
+    return over * C.HOLD_GAIN
+
+
+def hold_motor(error: int, ahead_dir: int, rollaway: int) -> tuple[int, int]:
+    """``holdMotor``: ``(duty, DIR)`` of a held wheel; ``ahead_dir`` turns it back when its
+    count ran ahead of the reference. At duty 0, DIR HIGH (``set_motor(0.0)``)."""
+    duty = hold_duty(error, rollaway)
+    if duty == 0:
+        return 0, C.HIGH
+    if error > 0:
+        return duty, ahead_dir
+    return duty, C.LOW if ahead_dir == C.HIGH else C.HIGH
+
+
+def _motors(s: FirmwareState, delta_l: int, delta_r: int, hardest: bool, out: bytearray) -> None:
+    """Both motors' duty and DIR: the hold's for a chair parked without a fault
+    (``holding``; ``EVT:ROLLAWAY`` once per hold when a wheel is pushed ROLLAWAY_COUNTS
+    off its reference, and from then on HOLD_PWM_MAX beyond the deadband), else
+    ``set_motor`` of the outputs."""
+    if not (s.parked and not s.faultFlags):
+        s.pwmL, s.dirL = set_motor(s.outputL)
+        s.pwmR, s.dirR = set_motor(s.outputR)
+        s.holding = 0
+        return
+    if not s.holding:
+        s.holdRefL, s.holdRefR = s.encTickL, s.encTickR
+        s.holdStepL, s.holdStepR = delta_l, delta_r
+        s.holdRollaway = 0
+    if hardest:
+        s.holdRollaway = 1
+    err_l, s.holdRefL, s.holdStepL = hold_error(s.encTickL, delta_l, s.holdRefL, s.holdStepL)
+    err_r, s.holdRefR, s.holdStepR = hold_error(s.encTickR, delta_r, s.holdRefR, s.holdStepR)
+    if (abs(err_l) > C.ROLLAWAY_COUNTS or abs(err_r) > C.ROLLAWAY_COUNTS) and not s.holdRollaway:
+        s.holdRollaway = 1
+        send(s, send_event("ROLLAWAY"), out)
+    s.pwmL, s.dirL = hold_motor(err_l, C.HIGH, s.holdRollaway)
+    s.pwmR, s.dirR = hold_motor(err_r, C.LOW, s.holdRollaway)
+    s.holding = 1
 
 
 def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: bytearray,
@@ -213,7 +340,7 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
     s.filtVelL = add(mul(C.ALPHA, s.rawVelL), mul(C.ONE_MINUS_ALPHA, s.filtVelL))
     s.filtVelR = add(mul(C.ALPHA, s.rawVelR), mul(C.ONE_MINUS_ALPHA, s.filtVelR))
 
-    check_l, check_r = _check_faults(s, delta_l, delta_r, ill_l, ill_r, out)
+    check_l, check_r, halt, hardest = _check_faults(s, delta_l, delta_r, ill_l, ill_r, out)
 
     if s.cmdSinceTick:
         s.cmdSinceTick = 0
@@ -235,7 +362,9 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
         s.stillTicks += 1
     at_rest = s.targetL == 0.0 and s.targetR == 0.0 and s.setpointL == 0.0 and s.setpointR == 0.0
     braked = abs(s.filtVelL) < C.BRAKE_DONE_SPEED and abs(s.filtVelR) < C.BRAKE_DONE_SPEED
-    if s.faultFlags or (at_rest and (s.stillTicks >= C.STILL_TICKS or (s.emergencyStop and braked))):
+    # Once the hold is on, the chair stays parked while at rest: the hold keeps it there.
+    if s.faultFlags or halt or (at_rest and (s.holding or s.stillTicks >= C.STILL_TICKS
+                                             or (s.emergencyStop and braked))):
         s.parked = 1
         s.integralL = s.integralR = 0.0
         s.prevMeasL = s.filtVelL
@@ -252,8 +381,8 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
             s.outputR, s.integralR = compute_pid(s.setpointR, s.filtVelR, s.integralR, s.prevMeasR,
                                                  s.kpR, s.kiR, s.kdR, dt)
             s.prevMeasR = s.filtVelR
-    s.pwmL, s.dirL = set_motor(s.outputL)
-    s.pwmR, s.dirR = set_motor(s.outputR)
+    _motors(s, delta_l, delta_r, hardest, out)
+    s.brakeReleased = 0 if s.parked else 1      # the brake holds unless the PID drives
 
     pivot_step(s)
 

@@ -38,7 +38,8 @@ INT_FIELDS = (
     "effortPwmR",
     "effortTicksL", "effortTicksR", "txDropped", "txRingFull", "txCredit", "rxGaps", "rxLostTick",
     "lastTickTime", "lateTicks",
-    "eeNext", "eeBusy",
+    "eeNext", "eeBusy", "holding", "holdRefL", "holdRefR", "holdStepL", "holdStepR", "holdRollaway",
+    "brakeReleased", "overspeedTicksL", "overspeedTicksR", "limitLatched",
 )
 
 #: Globals the tick takes as inputs rather than computes (loop() measures them).
@@ -113,6 +114,23 @@ class FirmwareState:
     ppmLost: int = 0
     stillTicks: int = 0
     parked: int = 1
+    #: The hold (``holdError``, ``holdMotor``): on while parked without a fault; each
+    #: wheel's reference count and the step it follows while the wheel still slows (0 once
+    #: fixed); whether this hold sent ``EVT:ROLLAWAY`` or began braking hardest (an
+    #: overspeed, or pushed off while held at the chair's limit).
+    holding: int = 1
+    holdRefL: int = 0
+    holdRefR: int = 0
+    holdStepL: int = 0
+    holdStepR: int = 0
+    holdRollaway: int = 0
+    #: The parking brake's pin (``WC_PIN_BRAKE``): HIGH, released, only while the PID drives.
+    brakeReleased: int = 0
+    overspeedTicksL: int = 0
+    overspeedTicksR: int = 0
+    #: Halted at the chair's limit (``EVT:OVERSPEED``, ``EVT:STALLED_ON_GRADE``): motion
+    #: refused with ``ERR:limit`` until a stop.
+    limitLatched: int = 0
     estopLatched: int = 0
     faultFlags: int = 0
     stallTicksL: int = 0

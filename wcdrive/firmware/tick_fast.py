@@ -31,11 +31,12 @@ _SOURCE = Path(__file__).resolve().parent / "csrc" / "tick_fast.c"
 #: The constants the C tick uses, by name (``_bind`` checks each is there and typed).
 _FLOATS = ("ALPHA", "ONE_MINUS_ALPHA", "CPR", "TWO_PI", "PID_OUT_MAX", "PWM_SCALE", "STILL_SPEED",
            "BRAKE_DONE_SPEED", "FAULT_REVERSE_SPEED", "FAULT_REVERSE_APPROACH", "FAULT_RUNAWAY_GAIN",
-           "FAULT_EFFORT_SHORTFALL", "PIVOT_START_SPEED", "PIVOT_SPEED")
+           "FAULT_EFFORT_SHORTFALL", "PIVOT_START_SPEED", "PIVOT_SPEED", "OVERSPEED_MARGIN")
 _INTS = ("CONTROL_PERIOD_MS", "TX_CREDIT_MAX", "TX_CREDIT_PER_MS", "FAULT_STALL_PWM", "FAULT_STALL_TICKS",
          "FAULT_REVERSE_TICKS", "FAULT_RUNAWAY_PWM", "FAULT_RUNAWAY_TICKS", "FAULT_EFFORT_PWM",
          "FAULT_EFFORT_TICKS", "FAULT_ILLEGAL_PER_TICK",
-         "STILL_TICKS", "PIVOT_TICKS", "HIGH", "LOW")
+         "STILL_TICKS", "PIVOT_TICKS", "HIGH", "LOW", "HOLD_DEADBAND_COUNTS", "OVERSPEED_PWM",
+         "OVERSPEED_TICKS")
 
 
 def _constants() -> dict[str, float | int]:

@@ -7,9 +7,26 @@ dt)`` several:
   torque is ``Kt (V - Ke G w)/R`` through the gearbox (efficiency, ratio G), limited
   by the driver's current limit, less viscous gear friction.
 * Drive wheels: spin dynamics with the wheel and reflected rotor inertia, solved
-  implicitly together with the tyre's longitudinal force (regularised Coulomb
-  friction: stiff below ``mu N``, sliding at ``mu N``); lateral tyre force likewise,
-  within the friction circle. So wheels slip when asked for more than the floor gives.
+  implicitly together with the tyre's longitudinal force. The tyre's contact patch is
+  a spring and a damper in parallel behind a Coulomb slider: the reset-integrator
+  friction model (D. A. Haessig and B. Friedland, "On the modeling and simulation of
+  friction", ASME J. Dyn. Sys. Meas. Control 113(3), 1991; the elastic bristle of the
+  LuGre and brush tyre models, without their Stribeck and velocity terms). The patch's
+  deflection ``z`` integrates the slip ``s`` (tyre surface minus ground, m/s); the force
+  is ``k z + c s`` (``tyre_contact_stiffness`` N/m, ``tyre_stiffness`` N per m/s); where
+  that would pass ``mu N`` the patch slides at ``mu N``, its deflection held at
+  ``mu N / k``. So a wheel that stands still on a grade holds with the deflection
+  ``F / k`` (0.39 mm for each wheel's 77 N parked on 1:12) and does not creep; at speed
+  the tyre is the regularised Coulomb law it would be without the spring, but for the
+  steady slip ``F / c`` (a fraction of a mm/s) that the spring takes over within
+  ``c / k`` (0.5 s). The lateral force likewise (``lateral_contact_stiffness``,
+  ``lateral_stiffness``), within what the friction circle leaves. Each step takes the
+  deflection at its end, so the force is linear in the step's slip and solved with the
+  wheel (backward Euler); the chassis's speed under the tyre is the step's start's
+  (pymunk's explicit step), so a wheel held still is stable while ``2 (c + k dt) dt / m``
+  stays below 2: 1.05 at 1 ms for the default chair, 1.82 for the empty one (110 kg);
+  a 2 ms step is too long for a locked wheel, spring or not. So wheels slip when asked
+  for more than the floor gives, and hold when not.
 * Casters: a trailing contact patch behind each swivel pivot. The caster swings so its
   patch rolls without side slip, as fast as ``caster_max_swivel_rate`` allows; beyond
   that the patch scrubs sideways against ``mu N``. Swinging takes the bearing's
@@ -18,7 +35,10 @@ dt)`` several:
   by sliding, at ``force / caster_stiffness`` (the tyre's law), or at its excess speed
   once at ``mu N``: that sliding is the scrub (``caster_scrub_energy``, the force times
   the sliding speed), which a pivot makes and straight driving does not. Driving forward keeps the
-  casters trailing; reversing makes them swing round (an unstable equilibrium).
+  casters trailing; reversing makes them swing round (an unstable equilibrium). At rest
+  a caster carries no force (its rolling resistance and swivel friction fade below
+  1 cm/s and 0.2 rad/s, as the drive wheels' rolling resistance does): a parked chair
+  stands on its drive tyres' grip, and the casters neither hold nor creep.
 * The floor (``terrain``, a ``wcdrive.plant.terrain.Terrain``; flat by default): on a
   grade ``t`` under the axle midpoint the floor's share of gravity, ``m g sin(t)``
   toward the downhill heading, pulls the chassis at its centre of gravity, and the
@@ -37,8 +57,22 @@ checks that both give the same trajectory. Without a C compiler the Python path 
 
 The body's position is the drive axle's midpoint, the odometry reference point.
 
+The parking brake (``ChairParams.parking_brake``; off on the seed's chair): an
+electromagnetic brake on each drive wheel, released while the firmware drives its pin
+high (``set_brake(True)``) and engaged otherwise, as the driver's pull-down holds it with
+the pin an input from reset: a new plant's brake is engaged. The brake takes the pin's
+state once ``brake_release_delay`` (high) or ``brake_engage_delay`` (low) has passed
+since the pin changed, at the end of the step in which that runs out (``brake_engaged``
+reads it from then on, and the next step has it); a pin that changes back sooner leaves
+the brake as it was. Engaged, it is Coulomb friction on the wheel, up to
+``brake_torque``: each step the wheel stays still when the torque that takes (the
+tyre's, the motor's at stall, the wheel's own momentum) is within ``brake_torque``, else
+it turns against ``brake_torque``, so a moving wheel is slowed by it. It sums with the
+motor's torque, and so with a shorted motor's back-EMF braking at duty 0 (``-k2 w``,
+nothing at rest: the brake is what holds).
+
 Faults (``set_wheel_locked``, ``set_motor_dead``; scheduled by ``wcdrive.plant.faults``):
-a locked wheel does not turn at all, its tyre slides on the floor within ``mu N``; a
+a locked wheel does not turn at all, its tyre holds or slides on the floor within ``mu N``; a
 dead motor is an open circuit: no torque, no current, no back-EMF braking, the wheel
 rolls freely against its gear friction. ``start_motion_log`` records the chassis's
 motion after every step (``take_motion_log``), the ground truth of the fault metrics.
@@ -87,12 +121,19 @@ class ChairStruct(ctypes.Structure):
                                   "slope_sin", "slope_cos")]
     _fields_ += [(n, _D * MAX_RAMPS) for n in ("ramp_from", "ramp_to", "ramp_sin", "ramp_cos")]
     _fields_ += [("get_position", _P)]
+    _fields_ += [(n, _D) for n in ("k_long", "k_lat", "inv_k_long", "inv_k_lat")]
+    _fields_ += [(n, _D * 2) for n in ("defl", "defl_lat")]
+    _fields_ += [(n, _D) for n in ("brake_torque", "brake_wait")]
+    _fields_ += [(n, ctypes.c_int32) for n in ("has_brake", "brake_pin", "brake_engaged")]
 
 
 #: rad/s: the swivel friction torque is regularised as ``T tanh(rate / scale)``.
 SWIVEL_RATE_SCALE = 0.2
 #: m/s: a caster patch sliding sideways faster than this counts as scrubbing.
 SCRUB_SLIP = 1e-4
+#: s: the brake follows its pin once what is left of its delay is within this (the
+#: delay counted down a step at a time ends near 0, either side).
+BRAKE_SLACK = 1e-9
 
 _KERNEL_SOURCE = Path(__file__).resolve().parent / "csrc" / "chair_kernel.c"
 _kernel: ctypes.CDLL | bool | None = None
@@ -191,6 +232,9 @@ class Plant:
         s.n_caster = p.caster_load
         s.crr, s.crr_c = p.rolling_resistance, p.caster_rolling_resistance
         s.c_long, s.c_lat, s.c_caster = p.tyre_stiffness, p.lateral_stiffness, p.caster_stiffness
+        s.k_long, s.k_lat = p.tyre_contact_stiffness, p.lateral_contact_stiffness
+        s.inv_k_long = 1.0 / s.k_long if s.k_long > 0.0 else 0.0
+        s.inv_k_lat = 1.0 / s.k_lat if s.k_lat > 0.0 else 0.0
         s.j = p.wheel_total_inertia
         s.b = p.viscous_friction
         s.ke_g = k * p.gear_ratio
@@ -199,6 +243,9 @@ class Plant:
         s.tau_max = p.gear_ratio * p.gear_efficiency * k * p.current_limit
         s.i_max_r = p.current_limit * p.armature_resistance
         s.res = p.armature_resistance
+        s.has_brake = 1 if p.parking_brake else 0
+        s.brake_engaged = s.has_brake                 # the pin an input, pulled down
+        s.brake_torque = p.brake_torque
         s.caster_heading[0] = heading + p.caster_initial_offsets[0]
         s.caster_heading[1] = heading + p.caster_initial_offsets[1]
         self._set_terrain()
@@ -311,9 +358,30 @@ class Plant:
         self.s.volts[0] = v * pwm_left * (1.0 if dir_left else -1.0)
         self.s.volts[1] = v * pwm_right * (1.0 if dir_right else -1.0)
 
+    def set_brake(self, released: bool) -> None:
+        """The level of the firmware's brake pin: true (driven high) releases the parking
+        brake; false (low, or an input: the driver's pull-down) engages it. The brake
+        follows after its delay (module docstring). No effect without
+        ``ChairParams.parking_brake``."""
+        s = self.s
+        pin = 1 if released else 0
+        if not s.has_brake or pin == s.brake_pin:
+            return
+        s.brake_pin = pin
+        s.brake_wait = self.p.brake_release_delay if pin else self.p.brake_engage_delay
+        if s.brake_wait <= BRAKE_SLACK:
+            s.brake_engaged = 1 - pin
+
+    @property
+    def brake_engaged(self) -> bool:
+        """Whether the parking brake holds the wheels now (it follows its pin after the
+        delay); False for a chair without one."""
+        return bool(self.s.brake_engaged)
+
     def set_wheel_locked(self, side: str, locked: bool = True) -> None:
-        """Locks the ``"left"`` or ``"right"`` drive wheel (a jammed gearbox, a brake
-        on): it no longer turns and its tyre slides; ``False`` frees it again."""
+        """Locks the ``"left"`` or ``"right"`` drive wheel (a jammed gearbox: no torque
+        turns it, unlike the parking brake): it no longer turns and its tyre holds or
+        slides; ``False`` frees it again."""
         self.s.locked[_side_index(side)] = 1 if locked else 0
 
     def set_motor_dead(self, side: str, dead: bool = True) -> None:
@@ -504,49 +572,64 @@ class Plant:
 
     def _wheel(self, i: int, ground: float, dt: float) -> float:
         """Implicit step of one wheel against the ground speed under it; returns the
-        forward force on the chassis less rolling resistance."""
+        forward force on the chassis less rolling resistance.
+
+        The tyre's force is its patch's, ``k z + c s`` (``_deflect``), with the deflection
+        at the step's end, ``z + s dt``: linear in the slip ``s = r w - ground``, so
+        ``f0 + ce s`` with ``f0 = k z`` and ``ce = c + k dt``, solved with the wheel. An
+        engaged brake first asks what holding the wheel still takes, ``tb``: with the
+        wheel at rest its equation, ``j (w - speed) / dt = motor - r F + tb``, at the
+        tyre's and the stalled motor's torques; within ``brake_torque`` the wheel stands
+        still (as a locked one), else the brake's ``brake_torque`` with that sign joins
+        the wheel's torques."""
         s = self.s
-        r, k, j_dt, b = s.r, s.c_long, s.j / dt, s.b
+        r, c, j_dt, b = s.r, s.c_long, s.j / dt, s.b
+        k = s.k_long
+        ce = c + k * dt
+        f0 = k * s.defl[i]
         volts, speed = s.volts[i], s.speed[i]
         fmax = s.mu[i] * s.n_drive
         if s.locked[i]:
-            # The wheel stands still; the tyre slides (stiff below mu N); a stalled motor.
-            force = _clamp(-k * ground, -fmax, fmax)
-            s.speed[i] = 0.0
-            s.current[i] = _clamp(volts / s.res, -s.i_max_r / s.res, s.i_max_r / s.res)
-            s.slip[i] = -ground
-            s.force[i] = force
-            return force
+            return self._stand_still(i, _clamp(f0 + ce * -ground, -fmax, fmax), ground, fmax, dt)
+        tb = 0.0
+        if s.brake_engaged:
+            hold = _clamp(f0 + ce * -ground, -fmax, fmax)
+            stall = 0.0 if s.dead[i] else _clamp(s.k1 * volts, -s.tau_max, s.tau_max)
+            tb = r * hold - j_dt * speed - stall
+            if abs(tb) <= s.brake_torque:
+                return self._stand_still(i, hold, ground, fmax, dt)
+            tb = math.copysign(s.brake_torque, tb)
         rr = s.crr * s.n_drive * math.tanh(ground / 0.01)
         if s.dead[i]:
             # Open circuit: no torque, no current, so no back-EMF term either.
-            w = (j_dt * speed + r * k * ground) / (j_dt + b + r * r * k)
-            force = k * (r * w - ground)
+            w = (j_dt * speed + r * ce * ground - r * f0 + tb) / (j_dt + b + r * r * ce)
+            force = f0 + ce * (r * w - ground)
             if abs(force) > fmax:
                 force = math.copysign(fmax, force)
-                w = (j_dt * speed - r * force) / (j_dt + b)
+                w = (j_dt * speed - r * force + tb) / (j_dt + b)
             s.speed[i] = w
             s.angle[i] += w * dt
             s.current[i] = 0.0
             s.slip[i] = r * w - ground
             s.force[i] = force
+            s.defl[i] = _deflect(s.defl[i], s.slip[i], fmax * s.inv_k_long, dt)
             return force - rr
         k1v, tau = s.k1 * volts, 0.0
-        w = (j_dt * speed + k1v + r * k * ground) / (j_dt + s.k2 + b + r * r * k)
+        w = (j_dt * speed + k1v + r * ce * ground - r * f0 + tb) / (j_dt + s.k2 + b + r * r * ce)
         limited = abs(volts - s.ke_g * w) > s.i_max_r
         if limited:
             tau = math.copysign(s.tau_max, volts - s.ke_g * w)
-            w = (j_dt * speed + tau + r * k * ground) / (j_dt + b + r * r * k)
-        force = k * (r * w - ground)
+            w = (j_dt * speed + tau + r * ce * ground - r * f0 + tb) / (j_dt + b + r * r * ce)
+        force = f0 + ce * (r * w - ground)
         if abs(force) > fmax:
             force = math.copysign(fmax, force)
             if limited:
-                w = (j_dt * speed + tau - r * force) / (j_dt + b)
+                w = (j_dt * speed + tau - r * force + tb) / (j_dt + b)
             else:
-                w = (j_dt * speed + k1v - r * force) / (j_dt + s.k2 + b)
+                w = (j_dt * speed + k1v - r * force + tb) / (j_dt + s.k2 + b)
                 if abs(volts - s.ke_g * w) > s.i_max_r:
                     tau = math.copysign(s.tau_max, volts - s.ke_g * w)
-                    w = (j_dt * speed + tau - r * force) / (j_dt + b)
+                    w = (j_dt * speed + tau - r * force + tb) / (j_dt + b)
         s.speed[i] = w
         s.angle[i] += w * dt
         s.current[i] = (volts - s.ke_g * w) / s.res
@@ -554,7 +637,20 @@ class Plant:
             s.current[i] = math.copysign(s.i_max_r / s.res, volts - s.ke_g * w)
         s.slip[i] = r * w - ground
         s.force[i] = force
+        s.defl[i] = _deflect(s.defl[i], s.slip[i], fmax * s.inv_k_long, dt)
         return force - rr
+
+    def _stand_still(self, i: int, force: float, ground: float, fmax: float, dt: float) -> float:
+        """The wheel stands still over the step (locked, or held by the brake): its patch
+        holds or slides with ``force`` against the ground speed under it; its motor is
+        stalled (no current when dead). Returns the force (no rolling resistance)."""
+        s = self.s
+        s.speed[i] = 0.0
+        s.current[i] = 0.0 if s.dead[i] else _clamp(s.volts[i] / s.res, -s.i_max_r / s.res, s.i_max_r / s.res)
+        s.slip[i] = -ground
+        s.force[i] = force
+        s.defl[i] = _deflect(s.defl[i], -ground, fmax * s.inv_k_long, dt)
+        return force
 
     def _python_step(self, dt: float) -> None:
         s = self.s
@@ -574,10 +670,14 @@ class Plant:
         f_right = self._wheel(1, u + w * half, dt)
         fx_b, fy_b = f_left + f_right, 0.0
         torque_axle = (f_right - f_left) * half
+        k_lat = s.k_lat
+        ce_lat = s.c_lat + k_lat * dt
         for i in range(2):
+            # the patch sideways as along (_wheel), within what the friction circle leaves
             lim = s.mu[i] * s.n_drive
             room = math.sqrt(max(0.0, lim * lim - s.force[i] * s.force[i]))
-            fy_b += _clamp(-s.c_lat * lat, -room, room)
+            fy_b += _clamp(k_lat * s.defl_lat[i] + ce_lat * -lat, -room, room)
+            s.defl_lat[i] = _deflect(s.defl_lat[i], -lat, room * s.inv_k_lat, dt)
         xc, d, n_c = s.caster_x, s.trail, s.n_caster
         scrubbing = False
         for i in range(2):
@@ -618,6 +718,11 @@ class Plant:
         b.torque = torque_axle - xg * fy_b
         self.space.step(dt)
         s.time += dt
+        if s.has_brake and s.brake_engaged == s.brake_pin:
+            # the brake is yet to follow its pin (released is pin 1, engaged 0)
+            s.brake_wait -= dt
+            if s.brake_wait <= BRAKE_SLACK:
+                s.brake_engaged = 1 - s.brake_pin
 
 
 _NONE = np.empty(0)
@@ -645,3 +750,10 @@ def _side_index(side: str) -> int:
 
 def _clamp(v: float, lo: float, hi: float) -> float:
     return hi if v > hi else (lo if v < lo else v)
+
+
+def _deflect(z: float, slip: float, most: float, dt: float) -> float:
+    """A tyre patch's deflection ``z`` (m) after a step of ``dt`` at ``slip`` (m/s): it
+    integrates the slip, held within ``most`` (the friction limit over the spring's
+    stiffness), where the patch slides instead."""
+    return _clamp(z + slip * dt, -most, most)

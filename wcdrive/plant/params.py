@@ -51,9 +51,26 @@ class ChairParams:
     caster_friction: float = 0.6
     rolling_resistance: float = 0.015  # drive wheels
     caster_rolling_resistance: float = 0.03
-    tyre_stiffness: float = 100000.0   # N per m/s of longitudinal slip (regularised Coulomb)
-    lateral_stiffness: float = 20000.0  # N per m/s of lateral slip
-    caster_stiffness: float = 20000.0  # N per m/s of caster side slip
+    tyre_stiffness: float = 100000.0   # N per m/s of longitudinal slip: the contact patch's damping
+    lateral_stiffness: float = 20000.0  # N per m/s of lateral slip (damping, likewise)
+    caster_stiffness: float = 20000.0  # N per m/s of caster side slip (regularised Coulomb)
+    # The drive tyres' contact patch as a spring (the plant's static grip): N per m of
+    # deflection, longitudinal and lateral. A small pneumatic tyre's carcass and tread:
+    # 0.4 mm of deflection for the 77 N each wheel holds parked on 1:12 (assumed).
+    tyre_contact_stiffness: float = 200000.0
+    lateral_contact_stiffness: float = 100000.0
+
+    # --- parking brake (assumed) ---
+    parking_brake: bool = False        # an electromagnetic brake on each drive wheel (the seed chair: none)
+    # N m at each wheel while engaged, holding and slipping alike. 33.7 N m each holds the
+    # heaviest chair (110 kg with a 150 kg occupant) on 10 degrees (m g sin(10 deg) r / 2);
+    # 50 N m holds it up to 14.9 degrees, 1.48 times what 10 degrees takes (where each dry
+    # tyre, facing down, is asked 221 N of the 560 N it grips). The motors (14.6 N m each
+    # at the wheel at the current limit) cannot turn it; engaged at speed it stops the
+    # 190 kg chair at 3.2 m/s^2.
+    brake_torque: float = 50.0
+    brake_engage_delay: float = 0.05   # s from the pin going low to the brake holding (assumed)
+    brake_release_delay: float = 0.05  # s from the pin going high to the brake letting go (assumed)
 
     # --- drive train (assumed) ---
     gear_ratio: float = 18.0

@@ -133,7 +133,8 @@ class Error:
 
 @dataclass(frozen=True, slots=True)
 class Event:
-    """``EVT:<name>``: ``WATCHDOG``, ``PPM_LOST``, ``ESTOP``, ``FAULT,<fault>`` (a latched
+    """``EVT:<name>``: ``WATCHDOG``, ``PPM_LOST``, ``ESTOP``; on a grade ``ROLLAWAY``,
+    ``OVERSPEED``, ``STALLED_ON_GRADE`` (the chair's limits, not faults); ``FAULT,<fault>`` (a latched
     fault: ``ENC_STALL_L``, ``ENC_REVERSED_R``, ``DRIVER_DEAD``, ...; PROTOCOL.md), or at
     boot ``PARAMS_LOADED`` / ``PARAMS_DEFAULT,<why>`` (the parameters saved in EEPROM)."""
 

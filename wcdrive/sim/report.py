@@ -11,8 +11,9 @@ from wcdrive.sim.result import SimResult
 
 def table(result: SimResult) -> str:
     """What ``wcdrive sim`` prints for a run: ground truth against the three odometries,
-    tracking error, caster work, the board's line counts and (simavr backend) the
-    differences between the port and the firmware."""
+    tracking error, caster work, the board's line counts, (simavr backend) the
+    differences between the port and the firmware, the floor when it is not level, the
+    figures after a fault and after the last stop, and the board's events."""
     m = result.metrics()
     rows = [
         ("", "x (m)", "y (m)", "heading (deg)", "pos. error (m)", "heading error (deg)"),
@@ -65,6 +66,20 @@ def table(result: SimResult) -> str:
                      f"{secs('pwm_zero_after_fault_s')}, standstill after "
                      f"{secs('standstill_after_fault_s')}, travel {m['travel_after_fault_m']:.3f} m, "
                      f"peak {m['peak_speed_after_fault_mps']:.3f} m/s")
+    terrain = result.terrain
+    if not terrain.flat:
+        floor = f"{terrain.slope_deg:g} deg toward {terrain.downhill_heading_deg:g} deg"
+        floor += "".join(f", {r.slope_deg:g} deg from {r.from_x:g} to {r.to_x:g} m" for r in terrain.ramps)
+        lines.append(f"  floor: {floor}")
+    stop = result.stop_metrics()
+    if stop["stop_at_s"] is not None:
+        drift = stop["drift_parked_m"]
+        rest = "never at rest" if stop["rest_at_s"] is None else (
+            f"at rest after {stop['stopping_time_s']:.3f} s and {stop['stopping_distance_m']:.3f} m")
+        lines.append(f"  after the stop ({stop['stop_at_s']:.3f} s): {rest}, top speed "
+                     f"{stop['max_speed_after_stop_mps']:.3f} m/s, travel "
+                     f"{stop['travel_after_stop_m']:.3f} m, parked drift "
+                     + ("-" if drift is None else f"{drift:.3f} m"))
     for t, line in result.link.boots[1:] + result.link.events:
         lines.append(f"  {t:8.3f} s  {line}")
     return "\n".join(lines)
@@ -76,6 +91,8 @@ def to_json(results: list[SimResult]) -> str:
     def clean(v):
         if isinstance(v, (list, tuple)):
             return [clean(x) for x in v]
+        if isinstance(v, dict):
+            return {k: clean(x) for k, x in v.items()}
         if hasattr(v, "item"):
             v = v.item()
         if isinstance(v, float):

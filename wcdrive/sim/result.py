@@ -3,10 +3,12 @@ ground truth, the board's state at every control tick, the serial link both ways
 host's odometries, and, where they apply, the closed loop's goal and the comparison of
 the compiled firmware with the port.
 
-The fault figures (``SimResult.fault_metrics``) come from the ground truth of the
-plant's motion after every physics step: the chair's speed is that of the faster of its
-two drive-wheel contact points (so a chair spinning on the spot is not "still"), and its
-travel the longer of their two paths.
+The fault figures (``SimResult.fault_metrics``) and the stop figures
+(``SimResult.stop_metrics``) come from the ground truth of the plant's motion after every
+physics step: the chair's speed is that of the faster of its two drive-wheel contact
+points (so a chair spinning on the spot is not "still"), and its travel the longer of
+their two paths. The drift of a parked chair is the axle midpoint's distance from where
+it came to rest, by its pose at every control tick.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ import numpy as np
 
 from wcdrive.boards.port_loop import F_CPU
 from wcdrive.plant.faults import Fault
+from wcdrive.plant.terrain import Terrain
 
 #: m/s: the chair is at a standstill once its speed stays below this.
 STANDSTILL_SPEED = 0.01
@@ -131,6 +134,11 @@ class SimResult:
     fault_at: float | None = None
     goal: Goal | None = None
     lockstep: Lockstep | None = None
+    #: ``stop_metrics``: when the run's last stop began (``wcdrive.sim.runner.stop_time``;
+    #: None: the run ends without one).
+    stop_at: float | None = None
+    #: The floor the chair stood on (the scenario's ``[world]``).
+    terrain: Terrain = field(default_factory=Terrain)
 
     @property
     def ticks(self) -> int:
@@ -169,11 +177,10 @@ class SimResult:
             return out
         at = self.fault_at
         t = truth.step_time
-        dt = float(t[1] - t[0]) if t.size > 1 else float(t[0])
+        dt = _step(t)
         after = t > at + 1e-12
-        out["travel_after_fault_m"] = float(np.max(np.sum(truth.step_contact_speed[after], axis=0)) * dt) \
-            if after.any() else 0.0
-        out["peak_speed_after_fault_mps"] = float(truth.step_speed[after].max()) if after.any() else 0.0
+        out["travel_after_fault_m"] = _travel(truth, after, dt)
+        out["peak_speed_after_fault_mps"] = _peak(truth, after)
         powered = np.flatnonzero(np.any(truth.step_volts != 0.0, axis=1))
         if not powered.size or powered[-1] < t.size - 1:
             # the step after the last powered one is the first unpowered for good
@@ -185,6 +192,72 @@ class SimResult:
             out["standstill_after_fault_s"] = max(0.0, float(still_from) - at)
         return out
 
+    def stop_metrics(self, parked_s: float | None = None) -> dict[str, float | None]:
+        """The stop figures, counted from ``stop_at`` (the start of the run's last stop:
+        a stop command, the last byte before a silence or a link cut, a fault; see
+        ``wcdrive.sim.runner.stop_time``), by the plant's ground truth (module
+        docstring):
+
+        * ``stop_at_s``;
+        * ``max_speed_after_stop_mps``: the chair's largest speed after it;
+        * ``rest_at_s``: the first moment after it at which the chair's speed is below
+          ``STANDSTILL_SPEED``: there the chair came to rest;
+        * ``stopping_time_s``, ``stopping_distance_m``: from the stop to that rest;
+        * ``travel_after_stop_m``: from the stop to the end of the run;
+        * ``drift_parked_m``: the largest distance the axle midpoint moves from where it
+          came to rest, over the rest of the run (or over the ``parked_s`` seconds
+          after it), by its pose at every control tick (where it came to rest
+          interpolated between two). Counted from the first rest, so that a chair that
+          rests, rolls and rests again shows the roll.
+
+        Every figure is None where there is no stop; those from the rest on are None
+        where the chair never came to rest."""
+        out: dict[str, float | None] = dict.fromkeys(
+            ("stop_at_s", "max_speed_after_stop_mps", "rest_at_s", "stopping_time_s", "stopping_distance_m",
+             "travel_after_stop_m", "drift_parked_m"))
+        truth, at = self.truth, self.stop_at
+        if at is None or truth.step_time.size == 0:
+            return out
+        t = truth.step_time
+        dt = _step(t)
+        after = t > at + 1e-12
+        out["stop_at_s"] = at
+        out["max_speed_after_stop_mps"] = _peak(truth, after)
+        out["travel_after_stop_m"] = _travel(truth, after, dt)
+        resting = np.flatnonzero(after & (truth.step_speed < STANDSTILL_SPEED))
+        if not resting.size:
+            return out
+        rest = float(t[resting[0]])
+        out["rest_at_s"] = rest
+        out["stopping_time_s"] = rest - at
+        out["stopping_distance_m"] = _travel(truth, after & (t <= rest + 1e-12), dt)
+        ticks, pose = self.board.tick_time, truth.pose
+        until = math.inf if parked_s is None else rest + parked_s + 1e-12
+        parked = (ticks >= rest - 1e-12) & (ticks <= until)
+        # where it came to rest: between two ticks, interpolated (before the first, the first)
+        x0, y0 = (float(np.interp(rest, ticks, pose[:, i])) for i in (0, 1))
+        where = pose[parked, :2]
+        out["drift_parked_m"] = float(np.max(np.hypot(where[:, 0] - x0, where[:, 1] - y0))) \
+            if where.size else 0.0
+        return out
+
+    def slope_by_time(self) -> list[list[float]]:
+        """The grade of the floor under the axle midpoint over the run, as ranges
+        ``[from_s, to_s, slope_deg]``, by the pose at every control tick: each from the
+        first tick on that grade to the first on the next (the first range from 0, the
+        last to the end of the run); one range on a uniform floor."""
+        ticks, pose = self.board.tick_time, self.truth.pose
+        if self.ticks == 0:
+            return [[0.0, self.duration, self.terrain.slope_deg]]
+        grades = [self.terrain.grade_at(x, y)[0] for x, y in pose[:, :2]]
+        out: list[list[float]] = []
+        for k, grade in enumerate(grades):
+            if not out or grade != grades[k - 1]:
+                if out:
+                    out[-1][1] = float(ticks[k])
+                out.append([float(ticks[k]) if out else 0.0, self.duration, math.degrees(grade)])
+        return out
+
     @property
     def real_time_factor(self) -> float:
         """Simulated seconds per wall second."""
@@ -193,8 +266,15 @@ class SimResult:
     def metrics(self) -> dict[str, object]:
         """The run's figures by name: the final pose of the ground truth and of each
         odometry with its errors, the tracking error, the caster totals, the
-        port-vs-firmware differences, the line counts, the board's events and the fault
-        figures (``fault_metrics``)."""
+        port-vs-firmware differences, the line counts, the board's events (``events``:
+        ``[s, line]`` for every ``EVT:`` line), the fault figures (``fault_metrics``), the
+        floor and the stop figures (``stop_metrics``).
+
+        The floor: ``slope_deg`` and ``downhill_heading_deg`` (the ``[world]`` table's
+        uniform grade and the heading it falls toward, degrees), ``ramps`` (its bands,
+        ``{"from_x", "to_x", "slope_deg"}`` each; empty on a uniform floor) and
+        ``slope_by_time`` (the grade the chair stood on, ``[from_s, to_s, slope_deg]``
+        ranges: ``slope_by_time``)."""
         truth, odometry, link = self.truth, self.odometry, self.link
         tx, ty, tth = truth.pose[-1]
         out: dict[str, object] = {
@@ -224,6 +304,12 @@ class SimResult:
         out["events"] = [[t, line] for t, line in link.events]
         out["boots"] = [[t, line] for t, line in link.boots]
         out.update(self.fault_metrics())
+        terrain = self.terrain
+        out["slope_deg"] = terrain.slope_deg
+        out["downhill_heading_deg"] = terrain.downhill_heading_deg
+        out["ramps"] = [{"from_x": r.from_x, "to_x": r.to_x, "slope_deg": r.slope_deg} for r in terrain.ramps]
+        out["slope_by_time"] = self.slope_by_time()
+        out.update(self.stop_metrics())
         out["closed_loop"] = self.goal is not None
         if self.goal is not None:
             goal = self.goal
@@ -234,6 +320,21 @@ class SimResult:
                        goal_within_tolerance=goal.reached_s is not None
                        and error <= (goal.tolerance or 0.0))
         return out
+
+
+def _step(t: np.ndarray) -> float:
+    """s: the physics step of the motion log whose step end times are ``t``."""
+    return float(t[1] - t[0]) if t.size > 1 else float(t[0])
+
+
+def _travel(truth: GroundTruth, steps: np.ndarray, dt: float) -> float:
+    """m: the longer of the two contact points' paths over the ``steps`` (a mask)."""
+    return float(np.max(np.sum(truth.step_contact_speed[steps], axis=0)) * dt) if steps.any() else 0.0
+
+
+def _peak(truth: GroundTruth, steps: np.ndarray) -> float:
+    """m/s: the chair's largest speed over the ``steps`` (a mask); 0 for none."""
+    return float(truth.step_speed[steps].max()) if steps.any() else 0.0
 
 
 def _wrap(a: float) -> float:

@@ -58,11 +58,11 @@ from wcdrive.sim.result import (
     Odometry,
     SimResult,
 )
-from wcdrive.sim.scenario import Scenario
+from wcdrive.sim.scenario import Scenario, Segment
 
 __all__ = ["STANDSTILL_SPEED", "Backend", "BackendRun", "LineLog", "PortBackend", "Rig", "SimResult",
            "SimavrBackend", "TickLog", "WireSchedule", "cyclic_gc_paused", "fault_time", "run",
-           "wire_schedule"]
+           "stop_time", "wire_schedule"]
 
 
 #: The tick log's columns and their widths, in the order ``TickLog.add`` writes them.
@@ -224,8 +224,68 @@ def fault_time(scenario: Scenario, wire: WireSchedule) -> float | None:
     if not triggers:
         return None
     at, by_last_byte = min(triggers)
-    if not by_last_byte:
-        return at
+    return _last_byte_before(wire, at) if by_last_byte else at
+
+
+def stop_time(scenario: Scenario, wire: WireSchedule, events: list[tuple[float, str]],
+              done_at: float | None = None) -> float | None:
+    """When the stop figures count from (``SimResult.stop_metrics``): the start of the
+    run's last stop, the earliest of
+
+    * in open loop, the start of the stretch of segments at the end that command no
+      motion (``stop`` and ``silence`` segments, a ``cmdvel`` or ``wheel`` of zeros, and
+      the stop the host sends after the last segment): its first segment's start, or,
+      for a ``silence``, the time the last byte before it reached the board (as for
+      the fault figures, ``fault_time``); 0 when no segment commands motion (the chair
+      is parked from the start); in closed loop, ``done_at`` (s), when the pilot
+      reached its goal and stopped;
+    * a ``link_cut`` that lasts past the last segment: the last byte before it;
+    * the board's first ``EVT:FAULT`` line (a latched fault refuses motion until
+      reset): from the latest fault at or before it (a ``link_cut``'s from the last byte
+      before it), or from the line itself when the fault was none of the scenario's.
+
+    None when there is none before the run's end (``scenario.duration``)."""
+    candidates: list[float] = []
+    if scenario.closed_loop:
+        if done_at is not None:
+            candidates.append(done_at)
+    else:
+        t0 = 0.02
+        start: float | None = 0.0
+        for seg in scenario.segments:
+            if _commands_motion(seg):
+                start = None
+            elif start is None:
+                start = _last_byte_before(wire, t0) if seg.kind == "silence" else t0
+            t0 += seg.duration
+        candidates.append(t0 if start is None else start)
+    end_of_segments = 0.02 + sum(seg.duration for seg in scenario.segments)
+    for f in scenario.faults:
+        if f.kind == "link_cut" and (f.duration is None or f.at + f.duration >= end_of_segments):
+            candidates.append(_last_byte_before(wire, f.at))
+    latched = [t for t, line in events if line.startswith("EVT:FAULT,")]
+    if latched:
+        before = [f for f in scenario.faults if f.at <= latched[0] + 1e-9]
+        if not before:
+            candidates.append(latched[0])
+        else:
+            fault = max(before, key=lambda f: f.at)
+            candidates.append(_last_byte_before(wire, fault.at) if fault.kind == "link_cut" else fault.at)
+    at = min(candidates, default=None)
+    return at if at is not None and at < scenario.duration else None
+
+
+def _commands_motion(seg: Segment) -> bool:
+    """Whether the segment asks the chair to move (a ``cmdvel`` or ``wheel`` of zeros
+    does not; a PPM frame is taken to)."""
+    if seg.kind in ("stop", "silence"):
+        return False
+    return seg.kind == "ppm" or any(v != 0.0 for v in seg.values)
+
+
+def _last_byte_before(wire: WireSchedule, at: float) -> float:
+    """s: when the last byte whose transmission started before ``at`` reached the
+    board (0 if none did)."""
     before = np.flatnonzero(wire.received_start < round(at * F_CPU))
     return float(wire.received[before[-1]]) / F_CPU if before.size else 0.0
 
@@ -477,10 +537,11 @@ def run(scenario: Scenario, *, backend: str | Backend = "port", seed: int = 0, d
                         gyro_time=np.array(gyro.times), gyro_rate=np.array(gyro.rates))
     lines = rig.lines
     link = LinkLog(lines.all, lines.events, lines.boots, dict(host.line_counts), _cmd_vel(commands))
+    stop_at = stop_time(scenario, wire, lines.events, None if goal is None else goal.reached_s)
     return SimResult(scenario=scenario.name, backend=chosen.name, duration=ran.end_cycle / F_CPU,
                      wall_time=wall, truth=truth, board=board, odometry=odometry, link=link,
                      faults=scenario.faults, fault_at=fault_time(scenario, wire), goal=goal,
-                     lockstep=ran.lockstep)
+                     lockstep=ran.lockstep, stop_at=stop_at, terrain=scenario.terrain)
 
 
 def _cmd_vel(commands: list[tuple[int, bytes]]) -> list[tuple[float, float, float]]:

@@ -23,10 +23,10 @@ A spec is TOML::
 ``LocalCluster`` on this machine by default, or ``--scheduler tcp://HOST:8786``
 (``--serial`` runs them in this process, without Dask). Each row has the run's index,
 its inputs (``scenario``, ``backend``, ``seed``, ``param.<name>``, ``chair.<name>``)
-and the metrics of ``wcdrive sim --json`` (the board's events as a JSON string), or
-``error`` for a run that raised. Rows are written as CSV or Parquet (``--out``, by its
-suffix), sorted by run index. Ctrl-C cancels the runs not done and writes the finished
-ones.
+and the metrics of ``wcdrive sim --json`` (those that are lists, the board's events
+among them, as JSON strings), or ``error`` for a run that raised. Rows are written as
+CSV or Parquet (``--out``, by its suffix), sorted by run index. Ctrl-C cancels the runs
+not done and writes the finished ones.
 """
 
 from __future__ import annotations
@@ -191,8 +191,9 @@ def run_one(point: dict[str, Any]) -> dict[str, Any]:
         return row
     for key in ("scenario", "backend"):
         metrics.pop(key, None)
-    for key in ("events", "boots"):
-        metrics[key] = json.dumps(metrics.get(key, []))
+    for key, value in metrics.items():
+        if isinstance(value, list):                    # events, boots, ramps, slope_by_time
+            metrics[key] = json.dumps(value)
     row.update(metrics)
     row["error"] = ""
     row["wall_s"] = round(time.perf_counter() - wall0, 3)

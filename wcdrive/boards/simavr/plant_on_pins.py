@@ -81,4 +81,5 @@ class PlantOnPins:
         run(c1)
         self.plant.set_drive(self.mega.pwm("left"), self.mega.direction("left"),
                              self.mega.pwm("right"), self.mega.direction("right"))
+        self.plant.set_brake(bool(self.mega.brake_released()))
         return trains

@@ -38,7 +38,7 @@ SRAM_OFFSET = 0x800000
 #: The Mega 2560's Arduino pin numbers (variants/mega/pins_arduino.h) as (port letter,
 #: bit), for the pins the spec assigns.
 MEGA_PORT_BIT = {2: ("E", 4), 3: ("E", 5), 7: ("H", 4), 8: ("H", 5), 9: ("H", 6), 10: ("B", 4),
-                 11: ("B", 5), 18: ("D", 3), 19: ("D", 2)}
+                 11: ("B", 5), 18: ("D", 3), 19: ("D", 2), 22: ("A", 0)}
 
 
 def _pin(name: str) -> tuple[str, int]:
@@ -50,10 +50,12 @@ ENCODER_PINS = {"left": (_pin("PIN_ENC_L_A"), _pin("PIN_ENC_L_B")),
                 "right": (_pin("PIN_ENC_R_A"), _pin("PIN_ENC_R_B"))}
 DIR_PINS = {"left": _pin("PIN_DIR_L"), "right": _pin("PIN_DIR_R")}
 RELAY_PIN = _pin("PIN_RELAY")
+BRAKE_PIN = _pin("PIN_BRAKE")
 # PWM: pin 9 = OC2B on PH6, pin 10 = OC2A on PB4 (Timer2, phase-correct).
 _TCCR2A, _OCR2A, _OCR2B = 0xB0, 0xB3, 0xB4
 _PWM = {"left": (_OCR2B, 1 << 5, _pin("PIN_PWM_L")), "right": (_OCR2A, 1 << 7, _pin("PIN_PWM_R"))}
-_PORT_REG = {"B": 0x25, "D": 0x2B, "E": 0x2E, "H": 0x102}
+_PORT_REG = {"A": 0x22, "B": 0x25, "D": 0x2B, "E": 0x2E, "H": 0x102}
+_DDR_REG = {port: address - 1 for port, address in _PORT_REG.items()}
 
 #: C types of the controller globals, for ``read(name)``.
 VARIABLE_FORMATS = {
@@ -62,7 +64,8 @@ VARIABLE_FORMATS = {
           "lastTravel", "pendingL", "pendingR", "kpL", "kiL", "kdL", "kpR", "kiR", "kdR",
           "maxWheel", "maxAccel", "estopDecel", "effortSpeedL", "effortSpeedR", "effortSetpointL",
           "effortSetpointR"),
-    "i": ("encoderValueL", "encoderValueR", "encTickL", "encTickR", "prevEncL", "prevEncR"),
+    "i": ("encoderValueL", "encoderValueR", "encTickL", "encTickR", "prevEncL", "prevEncR", "holdRefL",
+          "holdRefR", "holdStepL", "holdStepR"),
     "I": ("illegalL", "illegalR", "lastControlTime", "tickCount", "lastCmdTime", "rejectedCount",
           "errSuppressed", "txDropped", "timer0_millis", "timer0_overflow_count", "illTickL",
           "illTickR", "rxCount", "crcRejected", "txRingFull", "rxGaps", "rxLost", "rxLostTick",
@@ -74,7 +77,9 @@ VARIABLE_FORMATS = {
           "timer0_fract", "estopLatched", "tlmEnabled", "unframedLine", "stormTickL", "stormTickR",
           "stallTicksL", "stallTicksR", "reverseTicksL", "reverseTicksR", "runawayTicksL",
           "runawayTicksR", "stormL", "stormR",
-          "resetCause", "effortPwmL", "effortPwmR", "effortTicksL", "effortTicksR", "eeNext", "eeBusy"),
+          "resetCause", "effortPwmL", "effortPwmR", "effortTicksL", "effortTicksR", "eeNext", "eeBusy",
+          "holding", "holdRollaway", "brakeReleased", "overspeedTicksL", "overspeedTicksR",
+          "limitLatched"),
 }
 _FORMAT_OF = {name: fmt for fmt, names in VARIABLE_FORMATS.items() for name in names}
 
@@ -625,6 +630,14 @@ class VirtualMega:
         """The relay pin that powers the motor driver."""
         return self.pin_output(RELAY_PIN)
 
+    def brake_released(self) -> int:
+        """1 while the firmware drives the parking brake's pin HIGH as an output (the
+        brake released); 0 when it drives it LOW or leaves it an input (at reset: the
+        driver's pull-down engages the brake)."""
+        port, bit = BRAKE_PIN
+        ddr = (self.read_bytes(_DDR_REG[port], 1)[0] >> bit) & 1
+        return ddr & self.pin_output(BRAKE_PIN)
+
     def stack_pointer(self) -> int:
         """The AVR's stack pointer now."""
         return int(self._c.wcsim_sp(self._s))
@@ -639,6 +652,6 @@ class VirtualMega:
         return {
             "enc_l_a": ENCODER_PINS["left"][0], "enc_l_b": ENCODER_PINS["left"][1],
             "enc_r_a": ENCODER_PINS["right"][0], "enc_r_b": ENCODER_PINS["right"][1],
-            "dir_l": DIR_PINS["left"], "dir_r": DIR_PINS["right"], "relay": RELAY_PIN,
+            "dir_l": DIR_PINS["left"], "dir_r": DIR_PINS["right"], "relay": RELAY_PIN, "brake": BRAKE_PIN,
             "pwm_l_pin": _PWM["left"][2], "pwm_r_pin": _PWM["right"][2],
         }

@@ -13,8 +13,9 @@
  *   - any binary32 operation whose result is not an ordinary one (NaN, an infinity, a
  *     product below 2**-126, a quotient below 2**-125, a division by zero): the cases
  *     wcdrive.avr.f32 computes with avr-libc's own bit-level rules;
- *   - a tick in which a fault latches or the watchdog fires (they send events and
- *     halt);
+ *   - a tick in which a fault latches, a wheel's check trips at all (a fault or the
+ *     chair's limit), an overspeed parks the chair or the watchdog fires (they send
+ *     events and halt);
  *   - a mode that MODE_NAMES does not name.
  * Each binary32 operation is one IEEE double operation rounded once to binary32, as
  * f32.py (and f32_fast.c) computes the ordinary case. The whole tick is computed into
@@ -84,7 +85,9 @@ static double f_from_int(int64_t n) { return rnd((double)n); }   /* |n| < 2**53 
     X(integralL) X(integralR) X(outputL) X(outputR) X(kpL) X(kiL) X(kdL) X(kpR) X(kiR) \
     X(kdR) X(pivotPhase) X(pivotTicksLeft) X(pendingL) X(pendingR) X(mode) X(txDropped) \
     X(tlmEnabled) X(errLinesThisTick) X(rxCount) X(lastSeq) X(estopLatched) X(ppmLost) \
-    X(rejectedCount) X(crcRejected) X(freeRam)
+    X(rejectedCount) X(crcRejected) X(freeRam) \
+    X(holding) X(holdRefL) X(holdRefR) X(holdStepL) X(holdStepR) \
+    X(brakeReleased) X(overspeedTicksL) X(overspeedTicksR)
 
 #define ENUM(name) F_##name,
 enum { FIELDS(ENUM) N_FIELDS };
@@ -142,10 +145,12 @@ static int arg_int(PyObject *o, int64_t *out) {
 static struct {
     double alpha, one_minus_alpha, cpr, two_pi, pid_out_max, pwm_scale, still_speed,
         brake_done_speed, reverse_speed, reverse_approach, runaway_gain, effort_shortfall,
+        overspeed_margin,
         pivot_start_speed,
         pivot_speed, rounding2;
     int64_t control_period_ms, tx_credit_max, tx_credit_per_ms, stall_pwm, stall_ticks,
         reverse_ticks, runaway_pwm, runaway_ticks, effort_pwm, effort_ticks, illegal_per_tick, still_ticks, pivot_ticks,
+        hold_deadband, overspeed_pwm, overspeed_ticks,
         high, low, pivot_none, pivot_stopping, pivot_rotating;
 } K;
 static PyObject *mode_names;      /* dict: mode -> bytes */
@@ -239,6 +244,17 @@ static int runs_away(int64_t pwm, int64_t dir, double setpoint, double measured,
     return pwm >= K.runaway_pwm && ((dir == K.high) != forward)
            && fabs(measured) >= K.reverse_speed && beyond >= K.reverse_speed
            && f_sub(fabs(measured), fabs(prev_measured)) >= K.runaway_gain;
+}
+
+/* overspeeding: braked at OVERSPEED_PWM against its motion, OVERSPEED_MARGIN beyond its
+ * setpoint */
+static int overspeeding(int64_t pwm, int64_t dir, double setpoint, double measured,
+                        double prev_measured) {
+    int forward = measured > 0.0;
+    double beyond = forward ? f_sub(measured, setpoint) : f_sub(setpoint, measured);
+    int along = setpoint == 0.0 || ((setpoint > 0.0) == forward);
+    return along && pwm >= K.overspeed_pwm && ((dir == K.high) != forward)
+           && beyond >= K.overspeed_margin && fabs(measured) >= fabs(prev_measured);
 }
 
 /* check_wheel: WHEEL_OK, WHEEL_SUSPECT or WHEEL_FAULT (any fault: the Python tick
@@ -424,6 +440,13 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
         SETF(effortSetpointL, el.setpoint); SETI(effortTicksL, el.ticks);
         SETI(effortPwmR, er.pwm); SETF(effortSpeedR, er.speed);
         SETF(effortSetpointR, er.setpoint); SETI(effortTicksR, er.ticks);
+        int over_l = !I(holding) && overspeeding(I(pwmL), I(dirL), D(setpointL), D(filtVelL), D(prevMeasL));
+        int over_r = !I(holding) && overspeeding(I(pwmR), I(dirR), D(setpointR), D(filtVelR), D(prevMeasR));
+        int64_t os_l = over_l ? ((I(overspeedTicksL) + 1) & 0xFF) : 0;
+        int64_t os_r = over_r ? ((I(overspeedTicksR) + 1) & 0xFF) : 0;
+        if (os_l >= K.overspeed_ticks && os_r >= K.overspeed_ticks)
+            Py_RETURN_NONE;       /* an overspeed parks the chair: the Python tick */
+        SETI(overspeedTicksL, os_l); SETI(overspeedTicksR, os_r);
     }
 
     if (I(cmdSinceTick)) {
@@ -445,7 +468,25 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
         SETI(stillTicks, I(stillTicks) + 1);
     int at_rest = D(targetL) == 0.0 && D(targetR) == 0.0 && D(setpointL) == 0.0 && D(setpointR) == 0.0;
     int braked = fabs(D(filtVelL)) < K.brake_done_speed && fabs(D(filtVelR)) < K.brake_done_speed;
-    if (I(faultFlags) || (at_rest && (I(stillTicks) >= K.still_ticks || (I(emergencyStop) && braked)))) {
+    int park = I(faultFlags)
+               || (at_rest && (I(holding) || I(stillTicks) >= K.still_ticks || (I(emergencyStop) && braked)));
+    /* The hold: only its quiet case here, both wheels within the deadband of fixed
+     * references (duty 0, as parked). Its start and end, a reference that still follows
+     * its wheel, a duty or a rollaway go to the Python tick. */
+    int hold = park && !I(faultFlags);
+    if (hold != (I(holding) != 0))
+        Py_RETURN_NONE;
+    if (hold) {
+        int64_t err_l = i32(I(encTickL) - I(holdRefL)), err_r = i32(I(encTickR) - I(holdRefR));
+        if (I(holdStepL) != 0 || I(holdStepR) != 0 || llabs(err_l) > K.hold_deadband
+            || llabs(err_r) > K.hold_deadband)
+            Py_RETURN_NONE;
+        SETI(holdRefL, I(holdRefL)); SETI(holdStepL, 0);
+        SETI(holdRefR, I(holdRefR)); SETI(holdStepR, 0);
+    }
+    SETI(holding, hold);
+    SETI(brakeReleased, park ? 0 : 1);
+    if (park) {
         SETI(parked, 1);
         SETF(integralL, 0.0);
         SETF(integralR, 0.0);
@@ -629,6 +670,10 @@ static PyObject *bind(PyObject *self, PyObject *args) {
           && const_int(consts, "FAULT_EFFORT_TICKS", &k.effort_ticks)
           && const_int(consts, "FAULT_ILLEGAL_PER_TICK", &k.illegal_per_tick)
           && const_int(consts, "STILL_TICKS", &k.still_ticks)
+          && const_int(consts, "HOLD_DEADBAND_COUNTS", &k.hold_deadband)
+          && const_double(consts, "OVERSPEED_MARGIN", &k.overspeed_margin)
+          && const_int(consts, "OVERSPEED_PWM", &k.overspeed_pwm)
+          && const_int(consts, "OVERSPEED_TICKS", &k.overspeed_ticks)
           && const_int(consts, "PIVOT_TICKS", &k.pivot_ticks)
           && const_int(consts, "HIGH", &k.high) && const_int(consts, "LOW", &k.low)
           && const_int(consts, "PIVOT_NONE", &k.pivot_none)

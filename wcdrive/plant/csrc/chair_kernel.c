@@ -26,6 +26,7 @@
 #define SWIVEL_RATE_SCALE 0.2   /* rad/s, as in chair.py */
 #define SCRUB_SLIP 1e-4         /* m/s, as in chair.py */
 #define MAX_RAMPS 8             /* wcdrive.plant.terrain.MAX_RAMPS */
+#define BRAKE_SLACK 1e-9        /* s, as in chair.py */
 
 typedef struct { double x, y; } vec_t;
 typedef vec_t (*get_vec_fn)(const void *);
@@ -62,6 +63,14 @@ typedef struct {
     double mass_g, cog_h, n_drive0, n_caster0, down_c, down_s, slope_sin, slope_cos;
     double ramp_from[MAX_RAMPS], ramp_to[MAX_RAMPS], ramp_sin[MAX_RAMPS], ramp_cos[MAX_RAMPS];
     void *get_position;
+    /* the drive tyres' patches as springs (Plant._wheel, _deflect): stiffness along and
+     * sideways, their inverses (0 for no spring), each wheel's deflections */
+    double k_long, k_lat, inv_k_long, inv_k_lat;
+    double defl[2], defl_lat[2];
+    /* the parking brake (Plant.set_brake): its torque, what is left of its delay, whether
+     * the chair has one, the pin (1 high: release) and the brake's state */
+    double brake_torque, brake_wait;
+    int32_t has_brake, brake_pin, brake_engaged;
 } chair_t;
 
 typedef struct { int n; void *last; } count_t;
@@ -105,53 +114,74 @@ static void space_step(chair_t *c, int lone, double dt) {
 
 static double clampd(double v, double lo, double hi) { return v > hi ? hi : (v < lo ? lo : v); }
 
+/* chair.py's _deflect: the patch's deflection after a step at this slip, within most */
+static double deflect(double z, double slip, double most, double dt) { return clampd(z + slip * dt, -most, most); }
+
+/* Plant._stand_still: the wheel stands still over the step (locked, or held by the
+ * brake), its patch holding or sliding with force; a stalled motor (no current when dead) */
+static double stand_still(chair_t *c, int i, double force, double ground, double fmax, double dt) {
+    double imax = c->i_max_r / c->res;
+    c->speed[i] = 0.0;
+    c->current[i] = c->dead[i] ? 0.0 : clampd(c->volts[i] / c->res, -imax, imax);
+    c->slip[i] = -ground;
+    c->force[i] = force;
+    c->defl[i] = deflect(c->defl[i], -ground, fmax * c->inv_k_long, dt);
+    return force;
+}
+
 static double wheel(chair_t *c, int i, double ground, double dt) {
-    double r = c->r, k = c->c_long, j_dt = c->j / dt, b = c->b;
+    double r = c->r, cd = c->c_long, j_dt = c->j / dt, b = c->b;
+    double k = c->k_long;
+    double ce = cd + k * dt;
+    double f0 = k * c->defl[i];
     double volts = c->volts[i], speed = c->speed[i];
     double fmax = c->mu[i] * c->n_drive;
-    if (c->locked[i]) {
-        /* the wheel stands still; the tyre slides (stiff below mu N); a stalled motor */
-        double force = clampd(-k * ground, -fmax, fmax);
-        double imax = c->i_max_r / c->res;
-        c->speed[i] = 0.0;
-        c->current[i] = clampd(volts / c->res, -imax, imax);
-        c->slip[i] = -ground;
-        c->force[i] = force;
-        return force;
+    if (c->locked[i])
+        return stand_still(c, i, clampd(f0 + ce * -ground, -fmax, fmax), ground, fmax, dt);
+    double tb = 0.0;
+    if (c->brake_engaged) {
+        /* what holding the wheel still takes (Plant._wheel) */
+        double hold = clampd(f0 + ce * -ground, -fmax, fmax);
+        double stall = c->dead[i] ? 0.0 : clampd(c->k1 * volts, -c->tau_max, c->tau_max);
+        tb = r * hold - j_dt * speed - stall;
+        if (fabs(tb) <= c->brake_torque)
+            return stand_still(c, i, hold, ground, fmax, dt);
+        tb = copysign(c->brake_torque, tb);
     }
     double rr = c->crr * c->n_drive * tanh(ground / 0.01);
     if (c->dead[i]) {
         /* open circuit: no torque, no current, so no back-EMF term either */
-        double w = (j_dt * speed + r * k * ground) / (j_dt + b + r * r * k);
-        double force = k * (r * w - ground);
+        double w = (j_dt * speed + r * ce * ground - r * f0 + tb) / (j_dt + b + r * r * ce);
+        double force = f0 + ce * (r * w - ground);
         if (fabs(force) > fmax) {
             force = copysign(fmax, force);
-            w = (j_dt * speed - r * force) / (j_dt + b);
+            w = (j_dt * speed - r * force + tb) / (j_dt + b);
         }
         c->speed[i] = w;
         c->angle[i] += w * dt;
         c->current[i] = 0.0;
         c->slip[i] = r * w - ground;
         c->force[i] = force;
+        c->defl[i] = deflect(c->defl[i], c->slip[i], fmax * c->inv_k_long, dt);
         return force - rr;
     }
     double k1v = c->k1 * volts, tau = 0.0;
-    double w = (j_dt * speed + k1v + r * k * ground) / (j_dt + c->k2 + b + r * r * k);
+    double w = (j_dt * speed + k1v + r * ce * ground - r * f0 + tb) / (j_dt + c->k2 + b + r * r * ce);
     int limited = fabs(volts - c->ke_g * w) > c->i_max_r;
     if (limited) {
         tau = copysign(c->tau_max, volts - c->ke_g * w);
-        w = (j_dt * speed + tau + r * k * ground) / (j_dt + b + r * r * k);
+        w = (j_dt * speed + tau + r * ce * ground - r * f0 + tb) / (j_dt + b + r * r * ce);
     }
-    double force = k * (r * w - ground);
+    double force = f0 + ce * (r * w - ground);
     if (fabs(force) > fmax) {
         force = copysign(fmax, force);
         if (limited) {
-            w = (j_dt * speed + tau - r * force) / (j_dt + b);
+            w = (j_dt * speed + tau - r * force + tb) / (j_dt + b);
         } else {
-            w = (j_dt * speed + k1v - r * force) / (j_dt + c->k2 + b);
+            w = (j_dt * speed + k1v - r * force + tb) / (j_dt + c->k2 + b);
             if (fabs(volts - c->ke_g * w) > c->i_max_r) {
                 tau = copysign(c->tau_max, volts - c->ke_g * w);
-                w = (j_dt * speed + tau - r * force) / (j_dt + b);
+                w = (j_dt * speed + tau - r * force + tb) / (j_dt + b);
             }
         }
     }
@@ -162,6 +192,7 @@ static double wheel(chair_t *c, int i, double ground, double dt) {
         c->current[i] = copysign(c->i_max_r / c->res, volts - c->ke_g * w);
     c->slip[i] = r * w - ground;
     c->force[i] = force;
+    c->defl[i] = deflect(c->defl[i], c->slip[i], fmax * c->inv_k_long, dt);
     return force - rr;
 }
 
@@ -212,10 +243,14 @@ static void step(chair_t *c, int lone, double dt) {
     double f_right = wheel(c, 1, u + w * half, dt);
     double fx_b = f_left + f_right, fy_b = 0.0;
     double torque_axle = (f_right - f_left) * half;
+    double k_lat = c->k_lat;
+    double ce_lat = c->c_lat + k_lat * dt;
     for (int i = 0; i < 2; i++) {
+        /* the patch sideways as along (wheel()), within what the friction circle leaves */
         double lim = c->mu[i] * c->n_drive;
         double room = sqrt(fmax(0.0, lim * lim - c->force[i] * c->force[i]));
-        fy_b += clampd(-c->c_lat * lat, -room, room);
+        fy_b += clampd(k_lat * c->defl_lat[i] + ce_lat * -lat, -room, room);
+        c->defl_lat[i] = deflect(c->defl_lat[i], -lat, room * c->inv_k_lat, dt);
     }
     double xc = c->caster_x, d = c->trail, n_c = c->n_caster;
     int scrubbing = 0;
@@ -258,6 +293,12 @@ static void step(chair_t *c, int lone, double dt) {
     ((set_f_fn)c->set_torque)(c->body, torque_cog);
     space_step(c, lone, dt);
     c->time += dt;
+    if (c->has_brake && c->brake_engaged == c->brake_pin) {
+        /* the brake is yet to follow its pin (released is pin 1, engaged 0) */
+        c->brake_wait -= dt;
+        if (c->brake_wait <= BRAKE_SLACK)
+            c->brake_engaged = 1 - c->brake_pin;
+    }
 }
 
 /* n steps; after each, the wheel angles (left, right) and the yaw rate are stored

@@ -1,0 +1,86 @@
+"""The hold's rules on the port, tick by tick (PROTOCOL.md, "Hold and rollaway"): the
+law, the reference that follows a wheel still slowing, the latch, EVT:ROLLAWAY once
+per hold and the hardest brake after it. The compiled firmware is held to the same
+bits by the lock-step runs (``wcdrive verify``'s traces reach the hold, its duties
+and rollaways) and by tests/sim/test_hill_hold.py."""
+
+from __future__ import annotations
+
+from wcdrive.firmware import constants as C
+from wcdrive.firmware.control import control_tick, hold_duty
+from wcdrive.firmware.state import FirmwareState
+
+
+def test_the_law() -> None:
+    db, top = C.HOLD_DEADBAND_COUNTS, C.HOLD_PWM_MAX
+    assert [hold_duty(e, 0) for e in (0, db, -db)] == [0, 0, 0]
+    assert hold_duty(db + 1, 0) == hold_duty(-db - 1, 0) == C.HOLD_GAIN
+    assert hold_duty(db + 33, 0) == 33 * C.HOLD_GAIN
+    assert hold_duty(db + top // C.HOLD_GAIN, 0) == top == hold_duty(2**31 - 1, 0) == hold_duty(-2**31, 0)
+    assert hold_duty(db + 1, 1) == top and hold_duty(db, 1) == 0     # after a rollaway
+
+
+def _ticks(s: FirmwareState, rights: list[int], lefts: list[int] | None = None) -> list[bytes]:
+    outs = []
+    for k, right in enumerate(rights):
+        out = bytearray()
+        control_tick(s, 50 * (k + 1), 0 if lefts is None else lefts[k], right, out)
+        outs.append(bytes(out))
+    return outs
+
+
+def _coasting() -> FirmwareState:
+    """Braked after an emergency ramp: parks at its first tick (slower than BRAKE_DONE_SPEED)."""
+    return FirmwareState(emergencyStop=1, parked=0, holding=0, lastControlTime=0)
+
+
+def test_the_reference_follows_a_wheel_still_slowing() -> None:
+    """A wheel that parks still coasting (20, 15, 10, 5, 2 counts a tick) is held where
+    it stops: duty 0 throughout."""
+    s = _coasting()
+    _ticks(s, [20, 35, 45, 50, 52, 52, 52])
+    assert s.parked and s.holding and s.holdRefR == 52 and s.holdStepR == 0
+    assert s.pwmR == 0
+
+
+def test_the_reference_stays_once_the_wheel_speeds_up() -> None:
+    """A wheel that speeds up after parking (a grade) is held where it began to: the
+    reference stops following, the duty grows with the error, against it."""
+    s = _coasting()
+    _ticks(s, [20, 35, 65])
+    assert s.holdRefR == 35 and s.holdStepR == 0
+    assert (s.pwmR, s.dirR) == (30 - C.HOLD_DEADBAND_COUNTS, C.LOW)        # right: counts rise forward
+
+
+def test_the_left_wheel_is_driven_the_mirrored_way() -> None:
+    """The left wheel's counts fall going forward: pushed forward 40 counts, it is
+    driven backward (DIR LOW), as the right one is pushed forward (counts rising)."""
+    s = _coasting()
+    _ticks(s, [0, 0, 0], lefts=[0, 0, -40])
+    assert (s.pwmL, s.dirL) == (40 - C.HOLD_DEADBAND_COUNTS, C.LOW)
+    assert (s.pwmR, s.dirR) == (0, C.HIGH)
+
+
+def test_a_held_chair_stays_parked_when_pushed() -> None:
+    """Moving faster than STILL_SPEED does not unpark a holding chair; a motion command does."""
+    s = _coasting()
+    _ticks(s, [0, 0, 0, 100, 200])
+    assert s.parked and s.holding and s.stillTicks == 0
+
+
+def test_rollaway_once_per_hold_then_the_hardest_brake() -> None:
+    s = _coasting()
+    outs = _ticks(s, [0, 0, C.ROLLAWAY_COUNTS, C.ROLLAWAY_COUNTS + 1, C.ROLLAWAY_COUNTS + 500, 40])
+    events = [k for k, out in enumerate(outs) if b"EVT:ROLLAWAY\r\n" in out]
+    assert events == [3]
+    assert s.holdRollaway and (s.pwmR, s.dirR) == (C.HOLD_PWM_MAX, C.LOW)   # 40 counts off: still the hardest
+    assert not outs[2].count(b"EVT:")
+
+
+def test_a_fault_parks_at_duty_zero_without_the_hold() -> None:
+    s = _coasting()
+    _ticks(s, [0, 0, 100])
+    assert s.pwmR > 0
+    s.faultFlags = 1
+    _ticks(s, [150])
+    assert s.parked and not s.holding and (s.pwmR, s.pwmL) == (0, 0)

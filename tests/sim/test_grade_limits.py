@@ -1,0 +1,123 @@
+"""The chair's limits on a grade are not faults, watched from the plant, on both backends.
+
+Beyond what the motors can climb, both wheels strain at once: ``EVT:STALLED_ON_GRADE``
+and the hold, never a latched ``MOTOR`` or ``ENC_REVERSED`` fault and unpowered motors.
+Downhill beyond what they can brake, ``EVT:OVERSPEED`` within 0.2 s of the plant's wheel
+running away from its setpoint under braking, and the hold braking hardest. A dragged
+wheel in a spin faster than the chair can follow is the same limit (PROTOCOL.md, "The
+chair's limits"). Each run on simavr gives the same bits as the port.
+"""
+
+from __future__ import annotations
+
+import math
+from functools import cache
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from wcdrive.firmware import constants as C
+from wcdrive.sim import runner, scenario
+
+BACKENDS = ("port", pytest.param("simavr", marks=pytest.mark.simavr))
+ONE_IN_8 = math.degrees(math.atan(1 / 8))       # 7.13 degrees, a kerb cut
+ONE_IN_12 = math.degrees(math.atan(1 / 12))     # 4.76 degrees
+
+
+def _events(r: runner.SimResult, prefix: str) -> list[float]:
+    return [t for t, line in r.link.events if line.startswith(prefix)]
+
+
+@cache
+def _run(name: str, slope: float, downhill: float, segments: tuple[tuple[str, str, float], ...],
+         chair: str, backend: str) -> runner.SimResult:
+    text = (f'name = "{name}"\nsettle_s = 0.5\nhost_rate_hz = 10\n'
+            f"[world]\nslope_deg = {slope}\ndownhill_heading_deg = {downhill}\n")
+    if chair:
+        text += f"[chair]\n{chair}\n"
+    for kind, value, duration in segments:
+        text += f"[[segment]]\n{kind} = {value}\nduration = {duration}\n"
+    tmp = Path(f"/tmp/wcdrive-grade-{backend}")
+    tmp.mkdir(exist_ok=True)
+    path = tmp / f"{name}.toml"
+    path.write_text(text)
+    r = runner.run(scenario.load(str(path)), backend=backend)
+    if backend == "simavr":
+        assert r.lockstep is not None and r.firmware_differences == 0
+    return r
+
+
+UP = (("cmdvel", "[0.5, 0.0]", 3.0), ("cmdvel", "[0.0, 0.0]", 2.0))
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize(("slope", "chair"), [(ONE_IN_8, ""), (ONE_IN_12, "occupant_mass = 150.0")],
+                         ids=["1:8", "1:12-150kg"])
+def test_a_climb_beyond_the_motors_stalls_and_holds_without_a_fault(slope: float, chair: str,
+                                                                    backend: str) -> None:
+    r = _run(f"climb_{slope:.2f}_{bool(chair)}", slope, 180.0, UP, chair, backend)
+    assert _events(r, "EVT:STALLED_ON_GRADE")
+    assert not _events(r, "EVT:FAULT")
+    # it stalled while driving up, and the plant's chair was then slower than asked
+    first = _events(r, "EVT:STALLED_ON_GRADE")[0]
+    assert first < 3.5
+    t = r.board.tick_time
+    i = int(np.searchsorted(t, first))
+    assert np.all(r.truth.wheel_speed[i] < 0.8 * (0.5 / C.WHEEL_RADIUS))
+    # after the stop the motors hold (or brake) the chair: never unpowered while it moves
+    after = (t > 3.6) & (np.abs(r.truth.wheel_speed).max(axis=1) > 0.5)
+    assert np.all(np.abs(r.board.pwm[after]) > 0)
+
+
+DOWN = (("cmdvel", "[1.0, 0.0]", 3.0),)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_downhill_beyond_the_brakes_is_an_overspeed_within_0_2_s(backend: str) -> None:
+    r = _run("down_10", 10.0, 0.0, DOWN, "", backend)
+    assert not _events(r, "EVT:FAULT")
+    overs = _events(r, "EVT:OVERSPEED")
+    assert overs
+    t = r.board.tick_time
+    true_speed = r.truth.wheel_speed.min(axis=1)          # both wheels run away forward
+    setpoint = r.board.setpoint.max(axis=1)
+    braking = r.board.pwm.max(axis=1) <= -C.OVERSPEED_PWM
+    rising = np.r_[False, np.diff(true_speed) > 0]
+    physics = (true_speed > setpoint + C.OVERSPEED_MARGIN) & braking & rising
+    assert physics.any()
+    assert overs[0] - t[int(np.argmax(physics))] <= 0.2
+    # from the event on, the hold brakes hardest
+    j = int(np.searchsorted(t, overs[0] + 0.06))
+    assert np.all(r.board.pwm[j:j + 3] == -C.HOLD_PWM_MAX)
+
+
+SPIN = (("cmdvel", "[0.0, 3.0]", 2.0), ("wheel", "[17.0, -17.0]", 3.0), ("cmdvel", "[0.0, 0.0]", 1.0))
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_spin_the_chair_cannot_follow_is_its_limit_not_a_reversed_encoder(backend: str) -> None:
+    """The left wheel, at full reverse and its current limit, is dragged forward by the
+    chassis while the right one strains short of +17 rad/s: not ENC_REVERSED_L."""
+    r = _run("spin", 0.0, 0.0, SPIN, "", backend)
+    assert not _events(r, "EVT:FAULT")
+    assert _events(r, "EVT:STALLED_ON_GRADE")
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_parked_from_power_on_beyond_the_hold_rolls_away_braked_hardest(backend: str) -> None:
+    """Held from the first tick; beyond what the hold carries the chair rolls:
+    EVT:ROLLAWAY and the hardest hold, until the held wheels' runaway (speeding up while
+    braked) latches ENC_REVERSED, as a reversed encoder would (a known limit:
+    docs/safety.md)."""
+    r = _run("park_10", 10.0, 180.0, (("cmdvel", "[0.0, 0.0]", 2.0),), "", backend)
+    assert not _events(r, "EVT:OVERSPEED")
+    rolls = _events(r, "EVT:ROLLAWAY")
+    assert len(rolls) == 1
+    faults = _events(r, "EVT:FAULT,ENC_REVERSED")
+    assert faults and faults[0] > rolls[0]
+    t = r.board.tick_time
+    # held from the first tick: the hold's duty, never the PID's
+    assert np.all(r.board.pwm[t <= rolls[0]] <= C.HOLD_PWM_MAX)
+    between = (t > rolls[0] + 0.06) & (t < faults[0])
+    assert between.any() and np.all(r.board.pwm[between] == C.HOLD_PWM_MAX)
