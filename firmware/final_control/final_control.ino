@@ -236,7 +236,7 @@ volatile bool parked = true;                       // PID off, integrators reset
 // rest at (holdRef*), by holdMotor(). While a wheel still slows after parking, its
 // reference follows its count (holdStep*: the count step of its last tick, 0 once the
 // reference is fixed), so a chair that coasts to a stop on the level holds where it stopped.
-bool holding = true;                       // parked without a fault: the hold is on (from power-on)
+bool holding = false;                      // parked without a fault: the hold is on
 int32_t holdRefL = 0, holdRefR = 0;
 int32_t holdStepL = 0, holdStepR = 0;
 bool holdRollaway = false;                 // EVT:ROLLAWAY sent for this hold, or it began braking hardest
@@ -485,7 +485,9 @@ static void setMotor(uint8_t pwmPin, uint8_t dirPin, float output, uint8_t& pwm,
 }
 
 // The hold's reference follows a wheel that still slows (a step of the same sign, no
-// larger than the last), then stays. Returns the wheel's count error from it.
+// larger than the last), then stays, and is never more than WC_ROLLAWAY_COUNTS + 1 behind
+// the wheel: a chair pushed farther is braked, not driven back. Returns the wheel's count
+// error from it.
 static int32_t holdError(int32_t count, int32_t delta, int32_t& ref, int32_t& step) {
   if (step != 0) {
     bool slowing = delta != 0 && (delta > 0) == (step > 0) &&
@@ -497,7 +499,12 @@ static int32_t holdError(int32_t count, int32_t delta, int32_t& ref, int32_t& st
       step = 0;
     }
   }
-  return (int32_t)((uint32_t)count - (uint32_t)ref);
+  int32_t error = (int32_t)((uint32_t)count - (uint32_t)ref);
+  if (error > WC_ROLLAWAY_COUNTS + 1 || error < -(WC_ROLLAWAY_COUNTS + 1)) {
+    error = error > 0 ? WC_ROLLAWAY_COUNTS + 1 : -(WC_ROLLAWAY_COUNTS + 1);
+    ref = (int32_t)((uint32_t)count - (uint32_t)error);
+  }
+  return error;
 }
 
 // The hold's duty for a count error: WC_HOLD_GAIN per count beyond WC_HOLD_DEADBAND_COUNTS,
@@ -594,16 +601,19 @@ static bool runsAway(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, flo
 }
 
 // Overspeeding: moving the way of its setpoint (or with none), WC_OVERSPEED_MARGIN or
-// more beyond it, braked at WC_OVERSPEED_PWM or more against the motion, and no slower
-// than prevMeasured (what the PID last ran on): gravity beats the motors. (The duty says
+// more beyond it and beyond its target (faster than commanded, not a ramp behind), braked at WC_OVERSPEED_PWM or more against the motion, and
+// WC_OVERSPEED_GAIN or more faster than prevMeasured (what the PID last ran on): gravity
+// beats the motors; within its rated grade a braked chair slows. (The duty says
 // little of the braking: at speed the driver's current limit binds at a low duty.)
-static bool overspeeding(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, float measured,
-                         float prevMeasured) {
+static bool overspeeding(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, float target,
+                         float measured, float prevMeasured) {
   bool forward = measured > 0.0f;
   float beyond = forward ? measured - setpoint : setpoint - measured;
+  float beyondTarget = forward ? measured - target : target - measured;
   bool along = setpoint == 0.0f || (setpoint > 0.0f) == forward;
   return along && appliedPwm >= WC_OVERSPEED_PWM && (appliedDir == HIGH) != forward &&
-         beyond >= WC_OVERSPEED_MARGIN && fabs(measured) >= fabs(prevMeasured);
+         beyond >= WC_OVERSPEED_MARGIN && beyondTarget >= WC_OVERSPEED_MARGIN &&
+         fabs(measured) - fabs(prevMeasured) >= WC_OVERSPEED_GAIN;
 }
 
 // Straining: driven at WC_GRADE_PWM or more toward a setpoint it runs short of (slower
@@ -783,8 +793,8 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
     bool limitR = !holding && atLimit(checkR, strainL, reverseTicksL, runawayTicksL, effortTicksL);
     if (limitL) checkL = WHEEL_OK;
     if (limitR) checkR = WHEEL_OK;
-    overspeedTicksL = !holding && overspeeding(pwmL, dirL, setpointL, filtVelL, prevMeasL) ? overspeedTicksL + 1 : 0;
-    overspeedTicksR = !holding && overspeeding(pwmR, dirR, setpointR, filtVelR, prevMeasR) ? overspeedTicksR + 1 : 0;
+    overspeedTicksL = !holding && overspeeding(pwmL, dirL, setpointL, targetL, filtVelL, prevMeasL) ? overspeedTicksL + 1 : 0;
+    overspeedTicksR = !holding && overspeeding(pwmR, dirR, setpointR, targetR, filtVelR, prevMeasR) ? overspeedTicksR + 1 : 0;
     uint16_t faults;
     if (checkL == WHEEL_STALLED && checkR == WHEEL_STALLED) {
       faults = FAULT_DRIVER;   // both wheels driven, neither turns: the driver or its supply
@@ -851,7 +861,7 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
   // Once the hold is on, the chair stays parked while at rest, moving or not: the hold
   // (below) keeps it where it stopped.
   if (faultFlags != 0 || halt ||
-      (atRest && (holding || stillTicks >= WC_STILL_TICKS || (emergencyStop && braked)))) {
+      (atRest && (holding || braked))) {
     parked = true;
     integralL = integralR = 0.0f;
     prevMeasL = filtVelL;

@@ -100,6 +100,7 @@
 #define WC_HOLD_PWM_MAX 64         // the hold's largest duty (25 %): past the driver's 13 A current limit at a standstill (duty 42), so the brake is the hardest the driver gives
 #define WC_OVERSPEED_PWM 26        // duty (10 %) at or above which a wheel driven against its motion is braking it (at speed the current limit binds at a low duty)
 #define WC_OVERSPEED_MARGIN 1.0f   // rad/s a wheel braked at OVERSPEED_PWM may run beyond its setpoint before it counts as overspeeding
+#define WC_OVERSPEED_GAIN 0.02f    // rad/s a wheel overspeeding must gain over a tick (0.4 rad/s^2): gravity beats the brakes (within its rated grade a braked chair slows, however slowly)
 #define WC_OVERSPEED_TICKS 2       // ticks in a row overspeeding (0.1 s): EVT:OVERSPEED, the chair parks braking hardest
 #define WC_GRADE_PWM 128           // duty (50 %) toward its setpoint at or above which a wheel short of it is straining: both straining is the chair's limit (a grade), not a fault
 #define WC_ROLLAWAY_COUNTS 209     // encoder counts (2 cm of travel: 0.02 m / (2 pi WHEEL_RADIUS) x CPR) a held wheel may be pushed off its count before EVT:ROLLAWAY
@@ -122,7 +123,7 @@
 #define WC_GAIN_D_MAX 0.2f         // kd_l, kd_r in [0, GAIN_D_MAX]
 #define WC_MAX_WHEEL_MIN 0.1f      // max_wheel in [MAX_WHEEL_MIN, MAX_WHEEL_SPEED] rad/s
 #define WC_ACCEL_MIN 0.5f          // max_accel in [ACCEL_MIN, ACCEL_MAX] rad/s^2
-#define WC_ACCEL_MAX 20.0f
+#define WC_ACCEL_MAX 7.0f          // the largest ramp the chair can follow: the motors' braking limit (ChairParams.max_braking, 198 N) gives 7.37 rad/s^2 for the modelled chair with an 80 kg occupant (tests/firmware/test_gain_safety.py)
 #define WC_DECEL_MIN 5.0f          // estop_decel in [DECEL_MIN, DECEL_MAX] rad/s^2
 #define WC_DECEL_MAX 50.0f
 #define WC_WATCHDOG_MIN_MS 100     // watchdog_ms in [WATCHDOG_MIN_MS, WATCHDOG_MAX_MS]

@@ -198,11 +198,13 @@ def test_a_flood_at_top_speed_is_accounted_for_byte_by_byte() -> None:
     it, no TX line is dropped and the TX ring never fills."""
     bodies = [b"set:kp_l=1.2345678901234567890123", b"set:estop_decel=12.345678901234567890",
               b"get:kp_r"]
-    data = frame(b"hello", 0) + b"".join(frame(bodies[k % 3], k) for k in range(1, 400))
+    # driven at top speed, so each tick runs the PID (a parked chair's hold is lighter)
+    data = frame(b"hello", 0) + frame(b"rp17.5,lp17.5", 1) + b"".join(
+        frame(bodies[k % 3], k) for k in range(2, 400))
     top = 28_000
     encoders = {side: edges_from_trajectory(np.array([0.0, 0.02, 2.2]),
-                                            np.array([0.5, 0.5, 0.5 + top * 2.18]))
-                for side in ("left", "right")}
+                                            sign * np.array([0.5, 0.5, 0.5 + top * 2.18]))
+                for side, sign in (("left", -1.0), ("right", 1.0))}   # the left is mirrored
     rec = record(Trace(duration=2.2, serial=[(0.02, data)], encoders=encoders))
     report = compare(rec)
     assert [str(m) for m in report.mismatches] == []

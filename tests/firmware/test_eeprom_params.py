@@ -21,8 +21,8 @@ from wcdrive.protocol.codec import Event, frame, parse_line
 pytestmark = pytest.mark.simavr
 
 TUNED = [b"set:kp_l=3.5", b"set:ki_r=0.25", b"set:kd_l=0.0625", b"set:max_wheel=9.75",
-         b"set:max_accel=12.5", b"set:estop_decel=40", b"set:watchdog_ms=250"]
-TUNED_VALUES = {"kpL": 3.5, "kiR": 0.25, "kdL": 0.0625, "maxWheel": 9.75, "maxAccel": 12.5,
+         b"set:max_accel=6.5", b"set:estop_decel=40", b"set:watchdog_ms=250"]
+TUNED_VALUES = {"kpL": 3.5, "kiR": 0.25, "kdL": 0.0625, "maxWheel": 9.75, "maxAccel": 6.5,
                 "estopDecel": 40.0, "watchdogMs": 250}
 
 

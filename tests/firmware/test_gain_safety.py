@@ -26,7 +26,7 @@ The property, on each wheel, from the TRUE wheel speed ``w`` (``plant.left.speed
   wheel has come within ``SETTLE_BAND * |w*| + THRESHOLD`` of its target, or
   ``RISE_MAX_S`` has passed since the ramp arrived, if it never comes that close (so a
   limit cycle that never reaches the target is still watched). Waiting for the wheel
-  keeps the rise out of the window: at ``max_accel`` 20 rad/s^2 the ramp arrives long
+  keeps the rise out of the window: at ``max_accel`` 7 rad/s^2 the ramp arrives
   before the wheel, whose acceleration the driver's current limit bounds, and the
   casters swinging round at the start of a reverse jolt the wheels;
 * a reversal is a turn of ``w`` by at least ``THRESHOLD`` (a zigzag filter: after
@@ -69,12 +69,13 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from wcdrive.avr.f32 import f32
+from wcdrive.firmware import constants as C
 from wcdrive.boards.port_loop import F_CPU, PortLoop
 from wcdrive.firmware.final_control import Firmware
 from wcdrive.firmware.params import PARAMS, Param
 from wcdrive.plant import Plant
 from wcdrive.plant.params import ChairParams
-from wcdrive.protocol.codec import encode_cmdvel, frame
+from wcdrive.protocol.codec import encode_cmdvel, encode_set, frame
 
 #: rad/s: how far the wheel speed must move back from an extreme to count a reversal.
 THRESHOLD = 0.1
@@ -420,8 +421,7 @@ def test_no_accepted_combination_oscillates(values: dict[str, float], speed: flo
 #: The fastest setpoint ramp the chair can follow (rad/s^2 at the wheel): its hardest
 #: change of speed at the driver's current limit (``ChairParams.max_braking``, 1.12
 #: m/s^2, over the wheel's radius: 7.37). The board accepts ``max_accel`` up to
-#: ``ACCEL_MAX`` (20); a ramp faster than the chair can follow is a known defect, pinned
-#: by ``test_a_ramp_faster_than_the_chair_can_follow_trips_the_motor_check``.
+#: ``ACCEL_MAX`` (7), within it (``test_a_ramp_faster_than_the_chair_can_follow_is_refused``).
 FOLLOWABLE_ACCEL = ChairParams().max_braking / ChairParams().wheel_radius
 
 MATCHED_SETS = PARAMETER_SETS.map(
@@ -438,15 +438,14 @@ def test_no_accepted_combination_with_wheels_tuned_alike_trips_a_fault(values: d
     assert not run.faults(), run.describe()
 
 
-@pytest.mark.xfail(strict=True, reason="known defect: a setpoint ramp faster than the chair can "
-                   "follow (max_accel 20, accepted) latches MOTOR_R on a healthy chair's reverse step; "
-                   "the board should refuse such a ramp or the motor check tell it from a dead motor "
-                   "(docs/safety.md)")
-def test_a_ramp_faster_than_the_chair_can_follow_trips_the_motor_check() -> None:
-    """kp 1, ki 10, kd 0 on both wheels, max_accel 20 rad/s^2, a -2.0 m/s step: the ramp
-    outruns the wheels (current-limited, the casters swinging round), the PID's duty rises
-    without a gain in speed, and the effort rule takes the right motor for dead."""
+def test_a_ramp_faster_than_the_chair_can_follow_is_refused() -> None:
+    """ACCEL_MAX is within what the chair can follow; at 20 rad/s^2 (accepted once) kp 1,
+    ki 10, kd 0 and a -2.0 m/s step latched MOTOR_R on a healthy chair. Now 20 is refused,
+    and the same step at ACCEL_MAX latches nothing."""
+    assert C.ACCEL_MAX <= FOLLOWABLE_ACCEL
+    with pytest.raises(ValueError):
+        encode_set("max_accel", 20.0)
     values = {**accepted({"kp_l": 1.0, "ki_l": 10.0, "kd_l": 0.0, "kp_r": 1.0, "ki_r": 10.0,
-                          "kd_r": 0.0}), "max_accel": 20.0}
+                          "kd_r": 0.0}), "max_accel": float(C.ACCEL_MAX)}
     run = run_step(values, -2.0)
     assert not run.faults(), run.describe()

@@ -70,11 +70,23 @@ def test_a_held_chair_stays_parked_when_pushed() -> None:
 
 def test_rollaway_once_per_hold_then_the_hardest_brake() -> None:
     s = _coasting()
-    outs = _ticks(s, [0, 0, C.ROLLAWAY_COUNTS, C.ROLLAWAY_COUNTS + 1, C.ROLLAWAY_COUNTS + 500, 40])
+    outs = _ticks(s, [0, 0, C.ROLLAWAY_COUNTS, C.ROLLAWAY_COUNTS + 1, C.ROLLAWAY_COUNTS + 500,
+                      C.ROLLAWAY_COUNTS + 500 - 170])
     events = [k for k, out in enumerate(outs) if b"EVT:ROLLAWAY\r\n" in out]
     assert events == [3]
-    assert s.holdRollaway and (s.pwmR, s.dirR) == (C.HOLD_PWM_MAX, C.LOW)   # 40 counts off: still the hardest
+    # 40 counts off the trailing reference: still the hardest
+    assert s.holdRollaway and (s.pwmR, s.dirR) == (C.HOLD_PWM_MAX, C.LOW)
     assert not outs[2].count(b"EVT:")
+
+
+def test_a_chair_pushed_far_is_braked_not_driven_back() -> None:
+    """Pushed 5 cm (500 counts) past where it was held, the reference trails the wheel by
+    ROLLAWAY_COUNTS + 1: let go, the hold drives it back at most that far (2 cm)."""
+    s = _coasting()
+    _ticks(s, [0, 0, 100, 300, 500])
+    assert s.holdRefR == 500 - (C.ROLLAWAY_COUNTS + 1)
+    _ticks(s, [500, 500])
+    assert s.holdRefR == 500 - (C.ROLLAWAY_COUNTS + 1)
 
 
 def test_a_fault_parks_at_duty_zero_without_the_hold() -> None:

@@ -89,16 +89,19 @@ def runs_away(applied_pwm: int, applied_dir: int, setpoint: float, measured: flo
             and sub(abs(measured), abs(prev_measured)) >= C.FAULT_RUNAWAY_GAIN)
 
 
-def overspeeding(applied_pwm: int, applied_dir: int, setpoint: float, measured: float,
-                 prev_measured: float) -> bool:
+def overspeeding(applied_pwm: int, applied_dir: int, setpoint: float, target: float,
+                 measured: float, prev_measured: float) -> bool:
     """``overspeeding``: moving the way of its setpoint (or with none), OVERSPEED_MARGIN
-    or more beyond it, braked at OVERSPEED_PWM or more against the motion, and no slower
-    than ``prev_measured`` (the speed the PID last ran on): gravity beats the motors."""
+    or more beyond it and beyond its target (faster than commanded), braked at OVERSPEED_PWM or more against the motion, and
+    OVERSPEED_GAIN or more faster than ``prev_measured`` (the speed the PID last ran on):
+    gravity beats the motors."""
     forward = measured > 0.0
     beyond = sub(measured, setpoint) if forward else sub(setpoint, measured)
+    beyond_target = sub(measured, target) if forward else sub(target, measured)
     along = setpoint == 0.0 or (setpoint > 0.0) == forward
     return (along and applied_pwm >= C.OVERSPEED_PWM and (applied_dir == C.HIGH) != forward
-            and beyond >= C.OVERSPEED_MARGIN and abs(measured) >= abs(prev_measured))
+            and beyond >= C.OVERSPEED_MARGIN and beyond_target >= C.OVERSPEED_MARGIN
+            and sub(abs(measured), abs(prev_measured)) >= C.OVERSPEED_GAIN)
 
 
 def straining(applied_pwm: int, applied_dir: int, setpoint: float, measured: float) -> bool:
@@ -201,8 +204,10 @@ def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_
         check_l = WHEEL_OK
     if limit_r:
         check_r = WHEEL_OK
-    over_l = not s.holding and overspeeding(s.pwmL, s.dirL, s.setpointL, s.filtVelL, s.prevMeasL)
-    over_r = not s.holding and overspeeding(s.pwmR, s.dirR, s.setpointR, s.filtVelR, s.prevMeasR)
+    over_l = not s.holding and overspeeding(s.pwmL, s.dirL, s.setpointL, s.targetL, s.filtVelL,
+                                               s.prevMeasL)
+    over_r = not s.holding and overspeeding(s.pwmR, s.dirR, s.setpointR, s.targetR, s.filtVelR,
+                                               s.prevMeasR)
     s.overspeedTicksL = (s.overspeedTicksL + 1) & 0xFF if over_l else 0
     s.overspeedTicksR = (s.overspeedTicksR + 1) & 0xFF if over_r else 0
     if check_l == WHEEL_STALLED and check_r == WHEEL_STALLED:
@@ -245,14 +250,21 @@ def _i32(x: int) -> int:
 
 def hold_error(count: int, delta: int, ref: int, step: int) -> tuple[int, int, int]:
     """``holdError``: ``(count error, reference, step)``. The reference follows a wheel
-    that still slows (a step of the same sign as the last and no larger), then stays."""
+    that still slows (a step of the same sign as the last and no larger), then stays, and
+    is never more than ROLLAWAY_COUNTS + 1 behind the wheel (pushed farther, the chair is
+    braked, not driven back)."""
     if step != 0:
         slowing = delta != 0 and (delta > 0) == (step > 0) and (delta <= step if delta > 0 else delta >= step)
         if slowing:
             ref, step = count, delta
         else:
             step = 0
-    return _i32(count - ref), ref, step
+    error = _i32(count - ref)
+    most = C.ROLLAWAY_COUNTS + 1
+    if abs(error) > most:
+        error = most if error > 0 else -most
+        ref = _i32(count - error)
+    return error, ref, step
 
 
 def hold_duty(error: int, rollaway: int) -> int:
@@ -363,8 +375,7 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
     at_rest = s.targetL == 0.0 and s.targetR == 0.0 and s.setpointL == 0.0 and s.setpointR == 0.0
     braked = abs(s.filtVelL) < C.BRAKE_DONE_SPEED and abs(s.filtVelR) < C.BRAKE_DONE_SPEED
     # Once the hold is on, the chair stays parked while at rest: the hold keeps it there.
-    if s.faultFlags or halt or (at_rest and (s.holding or s.stillTicks >= C.STILL_TICKS
-                                             or (s.emergencyStop and braked))):
+    if s.faultFlags or halt or (at_rest and (s.holding or braked)):
         s.parked = 1
         s.integralL = s.integralR = 0.0
         s.prevMeasL = s.filtVelL

@@ -118,7 +118,7 @@ class FirmwareState:
     #: wheel's reference count and the step it follows while the wheel still slows (0 once
     #: fixed); whether this hold sent ``EVT:ROLLAWAY`` or began braking hardest (an
     #: overspeed, or pushed off while held at the chair's limit).
-    holding: int = 1
+    holding: int = 0
     holdRefL: int = 0
     holdRefR: int = 0
     holdStepL: int = 0

@@ -145,7 +145,7 @@ static int arg_int(PyObject *o, int64_t *out) {
 static struct {
     double alpha, one_minus_alpha, cpr, two_pi, pid_out_max, pwm_scale, still_speed,
         brake_done_speed, reverse_speed, reverse_approach, runaway_gain, effort_shortfall,
-        overspeed_margin,
+        overspeed_margin, overspeed_gain,
         pivot_start_speed,
         pivot_speed, rounding2;
     int64_t control_period_ms, tx_credit_max, tx_credit_per_ms, stall_pwm, stall_ticks,
@@ -248,13 +248,15 @@ static int runs_away(int64_t pwm, int64_t dir, double setpoint, double measured,
 
 /* overspeeding: braked at OVERSPEED_PWM against its motion, OVERSPEED_MARGIN beyond its
  * setpoint */
-static int overspeeding(int64_t pwm, int64_t dir, double setpoint, double measured,
+static int overspeeding(int64_t pwm, int64_t dir, double setpoint, double target, double measured,
                         double prev_measured) {
     int forward = measured > 0.0;
     double beyond = forward ? f_sub(measured, setpoint) : f_sub(setpoint, measured);
+    double beyond_target = forward ? f_sub(measured, target) : f_sub(target, measured);
     int along = setpoint == 0.0 || ((setpoint > 0.0) == forward);
     return along && pwm >= K.overspeed_pwm && ((dir == K.high) != forward)
-           && beyond >= K.overspeed_margin && fabs(measured) >= fabs(prev_measured);
+           && beyond >= K.overspeed_margin && beyond_target >= K.overspeed_margin
+           && f_sub(fabs(measured), fabs(prev_measured)) >= K.overspeed_gain;
 }
 
 /* check_wheel: WHEEL_OK, WHEEL_SUSPECT or WHEEL_FAULT (any fault: the Python tick
@@ -440,8 +442,8 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
         SETF(effortSetpointL, el.setpoint); SETI(effortTicksL, el.ticks);
         SETI(effortPwmR, er.pwm); SETF(effortSpeedR, er.speed);
         SETF(effortSetpointR, er.setpoint); SETI(effortTicksR, er.ticks);
-        int over_l = !I(holding) && overspeeding(I(pwmL), I(dirL), D(setpointL), D(filtVelL), D(prevMeasL));
-        int over_r = !I(holding) && overspeeding(I(pwmR), I(dirR), D(setpointR), D(filtVelR), D(prevMeasR));
+        int over_l = !I(holding) && overspeeding(I(pwmL), I(dirL), D(setpointL), D(targetL), D(filtVelL), D(prevMeasL));
+        int over_r = !I(holding) && overspeeding(I(pwmR), I(dirR), D(setpointR), D(targetR), D(filtVelR), D(prevMeasR));
         int64_t os_l = over_l ? ((I(overspeedTicksL) + 1) & 0xFF) : 0;
         int64_t os_r = over_r ? ((I(overspeedTicksR) + 1) & 0xFF) : 0;
         if (os_l >= K.overspeed_ticks && os_r >= K.overspeed_ticks)
@@ -469,7 +471,7 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
     int at_rest = D(targetL) == 0.0 && D(targetR) == 0.0 && D(setpointL) == 0.0 && D(setpointR) == 0.0;
     int braked = fabs(D(filtVelL)) < K.brake_done_speed && fabs(D(filtVelR)) < K.brake_done_speed;
     int park = I(faultFlags)
-               || (at_rest && (I(holding) || I(stillTicks) >= K.still_ticks || (I(emergencyStop) && braked)));
+               || (at_rest && (I(holding) || braked));
     /* The hold: only its quiet case here, both wheels within the deadband of fixed
      * references (duty 0, as parked). Its start and end, a reference that still follows
      * its wheel, a duty or a rollaway go to the Python tick. */
@@ -672,6 +674,7 @@ static PyObject *bind(PyObject *self, PyObject *args) {
           && const_int(consts, "STILL_TICKS", &k.still_ticks)
           && const_int(consts, "HOLD_DEADBAND_COUNTS", &k.hold_deadband)
           && const_double(consts, "OVERSPEED_MARGIN", &k.overspeed_margin)
+          && const_double(consts, "OVERSPEED_GAIN", &k.overspeed_gain)
           && const_int(consts, "OVERSPEED_PWM", &k.overspeed_pwm)
           && const_int(consts, "OVERSPEED_TICKS", &k.overspeed_ticks)
           && const_int(consts, "PIVOT_TICKS", &k.pivot_ticks)
