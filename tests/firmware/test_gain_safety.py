@@ -69,8 +69,8 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from wcdrive.avr.f32 import f32
-from wcdrive.firmware import constants as C
 from wcdrive.boards.port_loop import F_CPU, PortLoop
+from wcdrive.firmware import constants as C
 from wcdrive.firmware.final_control import Firmware
 from wcdrive.firmware.params import PARAMS, Param
 from wcdrive.plant import Plant

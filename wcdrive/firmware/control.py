@@ -92,9 +92,9 @@ def runs_away(applied_pwm: int, applied_dir: int, setpoint: float, measured: flo
 def overspeeding(applied_pwm: int, applied_dir: int, setpoint: float, target: float,
                  measured: float, prev_measured: float) -> bool:
     """``overspeeding``: moving the way of its setpoint (or with none), OVERSPEED_MARGIN
-    or more beyond it and beyond its target (faster than commanded), braked at OVERSPEED_PWM or more against the motion, and
-    OVERSPEED_GAIN or more faster than ``prev_measured`` (the speed the PID last ran on):
-    gravity beats the motors."""
+    or more beyond it and beyond its target (faster than commanded), braked at
+    OVERSPEED_PWM or more against the motion, and OVERSPEED_GAIN or more faster than
+    ``prev_measured`` (the speed the PID last ran on): gravity beats the motors."""
     forward = measured > 0.0
     beyond = sub(measured, setpoint) if forward else sub(setpoint, measured)
     beyond_target = sub(measured, target) if forward else sub(target, measured)
