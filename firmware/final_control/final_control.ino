@@ -601,10 +601,11 @@ static bool runsAway(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, flo
 }
 
 // Overspeeding: moving the way of its setpoint (or with none), WC_OVERSPEED_MARGIN or
-// more beyond it and beyond its target (faster than commanded, not a ramp behind), braked at WC_OVERSPEED_PWM or more against the motion, and
-// WC_OVERSPEED_GAIN or more faster than prevMeasured (what the PID last ran on): gravity
-// beats the motors; within its rated grade a braked chair slows. (The duty says
-// little of the braking: at speed the driver's current limit binds at a low duty.)
+// more beyond it and beyond its target (faster than commanded, not a ramp behind),
+// braked at WC_OVERSPEED_PWM or more against the motion, and WC_OVERSPEED_GAIN or more
+// faster than prevMeasured (what the PID last ran on): gravity beats the motors; within
+// its rated grade a braked chair slows. (The duty says little of the braking: at speed
+// the driver's current limit binds at a low duty.)
 static bool overspeeding(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, float target,
                          float measured, float prevMeasured) {
   bool forward = measured > 0.0f;
