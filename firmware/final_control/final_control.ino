@@ -845,6 +845,19 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
   float maxChange = (emergencyStop ? estopDecel : maxAccel) * dt;
   setpointL = rampToward(setpointL, targetL, maxChange);
   setpointR = rampToward(setpointR, targetR, maxChange);
+  // Stopped (target and setpoint zero, no pivot under way), an integral that drives a
+  // wheel the way it still turns is dropped: it held the chair up a grade and would carry
+  // it on past the stop.
+  if (pivotPhase == PIVOT_NONE) {
+    if (targetL == 0.0f && setpointL == 0.0f && integralL != 0.0f &&
+        (integralL > 0.0f) == (filtVelL > 0.0f)) {
+      integralL = 0.0f;
+    }
+    if (targetR == 0.0f && setpointR == 0.0f && integralR != 0.0f &&
+        (integralR > 0.0f) == (filtVelR > 0.0f)) {
+      integralR = 0.0f;
+    }
+  }
 
   bool still = fabs(filtVelL) < WC_STILL_SPEED && fabs(filtVelR) < WC_STILL_SPEED;
   if (!still) {

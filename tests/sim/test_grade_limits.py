@@ -23,6 +23,7 @@ from wcdrive.sim import runner, scenario
 BACKENDS = ("port", pytest.param("simavr", marks=pytest.mark.simavr))
 ONE_IN_8 = math.degrees(math.atan(1 / 8))       # 7.13 degrees, a kerb cut
 ONE_IN_12 = math.degrees(math.atan(1 / 12))     # 4.76 degrees
+ALARMS = ("EVT:FAULT", "EVT:ROLLAWAY", "EVT:OVERSPEED", "EVT:STALLED_ON_GRADE")
 
 
 def _events(r: runner.SimResult, prefix: str) -> list[float]:
@@ -126,3 +127,39 @@ def test_parked_from_power_on_beyond_the_hold_rolls_away_braked_hardest(backend:
     assert np.all(r.board.pwm[t <= rolls[0]] <= C.HOLD_PWM_MAX)
     between = (t > rolls[0] + 0.06) & (t < faults[0])
     assert between.any() and np.all(r.board.pwm[between] == C.HOLD_PWM_MAX)
+
+
+ONE_IN_20 = math.degrees(math.atan(1 / 20))     # 2.86 degrees
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize(("slope", "speed"), [(ONE_IN_20, 0.5), (ONE_IN_12, 0.5), (ONE_IN_12, 1.0)],
+                         ids=["1:20-0.5", "1:12-0.5", "1:12-1.0"])
+def test_a_stop_climbing_comes_to_rest_and_stays(slope: float, speed: float, backend: str) -> None:
+    """Climbing, the stop command brings the chair to rest within the level floor's
+    stopping distance from the same speed (the grade only helps it stop; scaled by the
+    square of the speeds at the stop where the chair climbed faster), and it stays
+    there: the integral that carried it up does not carry it on past the stop. (On 1:12
+    the default chair crawls, near its rated grade: the stop must still come within the
+    bound.)"""
+    segments = (("cmdvel", f"[{speed}, 0.0]", 4.0), ("cmdvel", "[0.0, 0.0]", 8.0))
+    climb = _run(f"stop_up_{slope:.2f}_{speed}", slope, 180.0, segments, "", backend)
+    up = climb.stop_metrics()
+    level = _run(f"stop_level_{speed}", 0.0, 180.0, segments, "", backend).stop_metrics()
+    assert not [line for _, line in climb.link.events if line.startswith(ALARMS)]
+    assert up["stopping_distance_m"] is not None and level["stopping_distance_m"] is not None
+    assert up["max_speed_after_stop_mps"] is not None and level["max_speed_after_stop_mps"] is not None
+    scale = (up["max_speed_after_stop_mps"] / level["max_speed_after_stop_mps"]) ** 2
+    assert up["stopping_distance_m"] <= level["stopping_distance_m"] * max(1.0, scale)
+    assert up["drift_parked_m"] is not None and up["drift_parked_m"] <= 0.02
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("speed", [0.5, 1.0])
+def test_a_stop_on_the_level_rests_within_a_second_of_the_setpoint(speed: float, backend: str) -> None:
+    """The setpoint ramps to zero at ACCEL_MAX; the chair, lagging it, comes to rest
+    within a second more: an integral left from the drive does not carry it on."""
+    segments = (("cmdvel", f"[{speed}, 0.0]", 4.0), ("cmdvel", "[0.0, 0.0]", 8.0))
+    stop = _run(f"stop_level_{speed}", 0.0, 180.0, segments, "", backend).stop_metrics()
+    ramp = speed / C.WHEEL_RADIUS / C.ACCEL_MAX
+    assert stop["stopping_time_s"] is not None and stop["stopping_time_s"] <= ramp + 1.0

@@ -119,7 +119,8 @@ def test_a_chair_parked_on_the_level_stands_at_duty_zero(backend: str) -> None:
     after = slice(i + 1, None)
     assert np.all(r.board.pwm[after] == 0)
     settled = r.board.tick_time > r.board.tick_time[i] + 1.0
-    assert np.all(r.board.counts[settled] == r.board.counts[-1])
+    # still: a wheel resting on a quadrature edge may flicker one count across it
+    assert np.all(np.abs(r.board.counts[settled] - r.board.counts[-1]) <= 1)
     # parked below BRAKE_DONE_SPEED, the hold follows the last of the coast (duty 0)
     rolled, moved = _drift(r, "zero")
     assert rolled <= 0.01 and moved < 0.01

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from wcdrive.avr.f32 import add, div, from_int, mul, neg, sub, to_int_trunc
 from wcdrive.firmware import constants as C
-from wcdrive.firmware.motion import emergency_halt, pivot_step
+from wcdrive.firmware.motion import PIVOT_NONE, emergency_halt, pivot_step
 from wcdrive.firmware.output import (
     feedback_line,
     refill_credit,
@@ -366,6 +366,16 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
     max_change = mul(s.estopDecel if s.emergencyStop else s.maxAccel, dt)
     s.setpointL = ramp_toward(s.setpointL, s.targetL, max_change)
     s.setpointR = ramp_toward(s.setpointR, s.targetR, max_change)
+    # Stopped (target and setpoint zero, no pivot under way), an integral that drives a
+    # wheel the way it still turns is dropped: it held the chair up a grade and would carry
+    # it on past the stop.
+    if s.pivotPhase == PIVOT_NONE:
+        if (s.targetL == 0.0 and s.setpointL == 0.0 and s.integralL != 0.0
+                and (s.integralL > 0.0) == (s.filtVelL > 0.0)):
+            s.integralL = 0.0
+        if (s.targetR == 0.0 and s.setpointR == 0.0 and s.integralR != 0.0
+                and (s.integralR > 0.0) == (s.filtVelR > 0.0)):
+            s.integralR = 0.0
 
     still = abs(s.filtVelL) < C.STILL_SPEED and abs(s.filtVelR) < C.STILL_SPEED
     if not still:

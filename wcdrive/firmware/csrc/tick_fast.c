@@ -462,6 +462,15 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
     double max_change = f_mul(I(emergencyStop) ? D(estopDecel) : D(maxAccel), dt);
     SETF(setpointL, ramp_toward(D(setpointL), D(targetL), max_change));
     SETF(setpointR, ramp_toward(D(setpointR), D(targetR), max_change));
+    /* stopped, no pivot: an integral driving a wheel the way it still turns is dropped */
+    if (I(pivotPhase) == K.pivot_none) {
+        if (D(targetL) == 0.0 && D(setpointL) == 0.0 && D(integralL) != 0.0
+            && ((D(integralL) > 0.0) == (D(filtVelL) > 0.0)))
+            SETF(integralL, 0.0);
+        if (D(targetR) == 0.0 && D(setpointR) == 0.0 && D(integralR) != 0.0
+            && ((D(integralR) > 0.0) == (D(filtVelR) > 0.0)))
+            SETF(integralR, 0.0);
+    }
 
     int still = fabs(D(filtVelL)) < K.still_speed && fabs(D(filtVelR)) < K.still_speed;
     if (!still)
