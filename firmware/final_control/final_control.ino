@@ -230,13 +230,14 @@ uint32_t lastCmdTime = 0;                   // millis() of the tick that saw the
 bool emergencyStop = false;                 // ramp down at WC_EMERGENCY_DECEL
 bool ppmLost = false;
 uint8_t stillTicks = 0;
-volatile bool parked = true;                       // PID off, integrators reset: the hold, or a fault's duty 0
+volatile bool parked = true;                       // PID off, integrators reset: the hold (duty 0 after a fault that leaves it no encoder)
 
-// The hold (parked without a fault): each wheel driven back toward the count it came to
-// rest at (holdRef*), by holdMotor(). While a wheel still slows after parking, its
-// reference follows its count (holdStep*: the count step of its last tick, 0 once the
-// reference is fixed), so a chair that coasts to a stop on the level holds where it stopped.
-bool holding = false;                      // parked without a fault: the hold is on
+// The hold (parked; after a fault, on the healthy wheel's counts): each wheel driven back
+// toward the count it came to rest at (holdRef*), by holdMotor(). While a wheel still
+// slows after parking, its reference follows its count (holdStep*: the count step of its
+// last tick, 0 once the reference is fixed), so a chair that coasts to a stop on the
+// level holds where it stopped.
+bool holding = false;                      // parked, the hold drives a wheel (both without a fault)
 int32_t holdRefL = 0, holdRefR = 0;
 int32_t holdStepL = 0, holdStepR = 0;
 bool holdRollaway = false;                 // EVT:ROLLAWAY sent for this hold, or it began braking hardest
@@ -256,6 +257,9 @@ bool estopLatched = false;                  // e-stop: motion refused until "res
 #define FAULT_DRIVER 0x40
 #define FAULT_MOTOR_L 0x80
 #define FAULT_MOTOR_R 0x100
+// The faults after which a wheel's encoder is no longer trusted: its own, and the driver's.
+#define FAULTS_UNTRUSTED_L (FAULT_STALL_L | FAULT_REVERSED_L | FAULT_IMPLAUSIBLE_L | FAULT_MOTOR_L | FAULT_DRIVER)
+#define FAULTS_UNTRUSTED_R (FAULT_STALL_R | FAULT_REVERSED_R | FAULT_IMPLAUSIBLE_R | FAULT_MOTOR_R | FAULT_DRIVER)
 uint16_t faultFlags = 0;
 uint8_t stallTicksL = 0, stallTicksR = 0;   // ticks driven without a count
 uint8_t reverseTicksL = 0, reverseTicksR = 0;   // ticks measured against the setpoint
@@ -866,15 +870,19 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
     stillTicks++;
   }
   bool atRest = targetL == 0.0f && targetR == 0.0f && setpointL == 0.0f && setpointR == 0.0f;
-  // Park: at rest and still for a few ticks. An emergency ramp (watchdog, PPM loss,
-  // e-stop) keeps braking under closed loop until both wheels are slower than
-  // WC_BRAKE_DONE_SPEED, then parks at once. Parked, the hold (below) keeps the chair
-  // where it stops. A fault parks at once with the motors at duty 0: its encoders are
-  // not to be trusted, the driver brakes the motors.
-  bool braked = fabs(filtVelL) < WC_BRAKE_DONE_SPEED && fabs(filtVelR) < WC_BRAKE_DONE_SPEED;
+  // A wheel's encoder is trusted until a fault of its own, or the driver's, latches.
+  bool trustedL = (faultFlags & FAULTS_UNTRUSTED_L) == 0;
+  bool trustedR = (faultFlags & FAULTS_UNTRUSTED_R) == 0;
+  // Park: at rest and both trusted wheels slower than WC_BRAKE_DONE_SPEED. An emergency
+  // ramp (watchdog, PPM loss, e-stop, a fault) keeps braking under closed loop until
+  // then, and parks at once. Parked, the hold (below) keeps the chair where it stops.
+  // A fault that leaves no encoder trusted (both wheels', or the driver's) parks at once
+  // at duty 0: no closed loop is left, the driver brakes the motors.
+  bool braked = (!trustedL || fabs(filtVelL) < WC_BRAKE_DONE_SPEED) &&
+                (!trustedR || fabs(filtVelR) < WC_BRAKE_DONE_SPEED);
   // Once the hold is on, the chair stays parked while at rest, moving or not: the hold
   // (below) keeps it where it stopped.
-  if (faultFlags != 0 || halt ||
+  if ((!trustedL && !trustedR) || halt ||
       (atRest && (holding || braked))) {
     parked = true;
     integralL = integralR = 0.0f;
@@ -884,14 +892,22 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
   } else {
     parked = false;
     // A suspect wheel keeps its output: no count is no reason to push harder.
-    if (checkL != WHEEL_SUSPECT) {
+    if (trustedL && checkL != WHEEL_SUSPECT) {
       outputL = computePID(setpointL, filtVelL, integralL, prevMeasL, kpL, kiL, kdL, dt);
     }
-    if (checkR != WHEEL_SUSPECT) {
+    if (trustedR && checkR != WHEEL_SUSPECT) {
       outputR = computePID(setpointR, filtVelR, integralR, prevMeasR, kpR, kiR, kdR, dt);
     }
+    // After a fault, the faulty wheel at duty 0: the driver brakes it whichever way it
+    // turns (the healthy one's output would drive it on in a turn).
+    if (!trustedL) outputL = 0.0f;
+    if (!trustedR) outputR = 0.0f;
   }
-  if (parked && faultFlags == 0) {
+  // Parked, the hold drives each wheel whose encoder is trusted, and a faulty wheel
+  // mirrors the healthy one's hold, open loop.
+  bool heldL = parked && trustedL;
+  bool heldR = parked && trustedR;
+  if (heldL || heldR) {
     if (!holding) {   // the hold starts: from this tick's counts, following a wheel still moving
       holdRefL = encTickL;
       holdRefR = encTickR;
@@ -900,24 +916,26 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
       holdRollaway = false;
     }
     if (hardest) holdRollaway = true;
-    int32_t errL = holdError(encTickL, deltaL, holdRefL, holdStepL);
-    int32_t errR = holdError(encTickR, deltaR, holdRefR, holdStepR);
+    int32_t errL = heldL ? holdError(encTickL, deltaL, holdRefL, holdStepL) : 0;
+    int32_t errR = heldR ? holdError(encTickR, deltaR, holdRefR, holdStepR) : 0;
     bool rolled = errL > WC_ROLLAWAY_COUNTS || errL < -WC_ROLLAWAY_COUNTS ||
                   errR > WC_ROLLAWAY_COUNTS || errR < -WC_ROLLAWAY_COUNTS;
     if (rolled && !holdRollaway) {
       holdRollaway = true;
       sendEvent(F("ROLLAWAY"));
     }
-    holdMotor(WC_PIN_PWM_L, WC_PIN_DIR_L, errL, HIGH, pwmL, dirL);
-    holdMotor(WC_PIN_PWM_R, WC_PIN_DIR_R, errR, LOW, pwmR, dirR);
+    // A wheel whose encoder is not trusted mirrors the healthy wheel's hold, open loop
+    // (the same duty against the same motion): on a grade both carry half the chair.
+    holdMotor(WC_PIN_PWM_L, WC_PIN_DIR_L, heldL ? errL : -errR, HIGH, pwmL, dirL);
+    holdMotor(WC_PIN_PWM_R, WC_PIN_DIR_R, heldR ? errR : -errL, LOW, pwmR, dirR);
     holding = true;
   } else {
     setMotor(WC_PIN_PWM_L, WC_PIN_DIR_L, outputL, pwmL, dirL);
     setMotor(WC_PIN_PWM_R, WC_PIN_DIR_R, outputR, pwmR, dirR);
     holding = false;
   }
-  // The parking brake holds whenever the PID does not drive the motors.
-  brakeReleased = !parked;
+  // The parking brake holds whenever the PID does not drive the motors, and from a fault on.
+  brakeReleased = !parked && faultFlags == 0;
   digitalWrite(WC_PIN_BRAKE, brakeReleased ? HIGH : LOW);
 
   bool slow = fabs(filtVelL) < WC_PIVOT_START_SPEED && fabs(filtVelR) < WC_PIVOT_START_SPEED;
@@ -1256,6 +1274,7 @@ static ParseResult latchEstop() {
 static ParseResult resetEstop() {
   if ((estopLatched || faultFlags != 0) && !parked) return ERR_BUSY;
   estopLatched = false;
+  if (faultFlags != 0) holding = false;   // the hold restarts with both wheels, where they are
   faultFlags = 0;
   unmaskEncoders();
   return PARSE_OK;

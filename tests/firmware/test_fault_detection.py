@@ -61,7 +61,9 @@ def _fault_tick(recording: Recording) -> tuple[int, float]:
 
 def test_a_wheel_driven_without_counts_latches_a_stall_and_parks() -> None:
     """Left encoder cut (no edges) while the right wheel turns: ENC_STALL_L within
-    FAULT_STALL_TICKS ticks of the duty reaching FAULT_STALL_PWM, both motors parked."""
+    FAULT_STALL_TICKS ticks of the duty reaching FAULT_STALL_PWM; the left motor at
+    duty 0, the right one, still turning, braked by its PID (not parked), the brake
+    engaged."""
     trace = Trace(duration=1.5, serial=_commands(b"rp3.0,lp3.0,", 0.02, 1.5),
                   encoders={"right": _wheel(3.0, 0.02, 1.5)})
     recording, tx = _run(trace)
@@ -69,7 +71,8 @@ def test_a_wheel_driven_without_counts_latches_a_stall_and_parks() -> None:
     faults, _ = _fault_tick(recording)
     assert faults == 0x01
     last = recording.events[-1].after
-    assert last["parked"] == 1 and recording.events[-1].pwm == (0, 0)
+    assert last["parked"] == 0 and last["brakeReleased"] == 0
+    assert recording.events[-1].pwm[0] == 0 and last["pwmR"] > 0 and last["dirR"] == C.LOW
     assert last["faultFlags"] == 0x01 and last["targetR"] == 0.0
     # Commands after the fault are refused: ERR:fault, counted.
     assert tx.count(b"ERR:fault\r\n") >= 3

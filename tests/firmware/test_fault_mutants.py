@@ -179,8 +179,8 @@ def test_a_suspect_tick_holds_the_wheels_output() -> None:
 def test_effort_without_progress_latches_a_motor_fault() -> None:
     """The left wheel is only dragged along at 0.5 rad/s toward a steady 3 rad/s
     setpoint: its duty climbs FAULT_EFFORT_PWM above its lowest and stays there for
-    FAULT_EFFORT_TICKS ticks with no gain in speed: MOTOR_L, and both motors off (kills
-    ``noEffect`` never tripping)."""
+    FAULT_EFFORT_TICKS ticks with no gain in speed: MOTOR_L, the left motor off and the
+    right one, still turning, braked (kills ``noEffect`` never tripping)."""
     trace = Trace(duration=1.5, serial=_commands(b"rp3.0,lp3.0,", 0.02, 1.5),
                   encoders={"left": _steady(0.5, 0.02, 1.5, mirrored=True),
                             "right": _steady(3.0, 0.02, 1.5)})
@@ -195,7 +195,7 @@ def test_effort_without_progress_latches_a_motor_fault() -> None:
     duties = [b["pwmL"] for b, _, _ in ticks[at - C.FAULT_EFFORT_TICKS + 1:at + 1]]
     assert min(duties) >= ticks[at][1]["effortPwmL"] + C.FAULT_EFFORT_PWM, duties
     last = recording.events[-1]
-    assert last.after["parked"] == 1 and last.pwm == (0, 0)
+    assert last.pwm[0] == 0 and last.after["dirR"] == C.LOW and last.after["brakeReleased"] == 0
 
 
 # -- emergencyHalt: the integrators start from zero ----------------------------------------

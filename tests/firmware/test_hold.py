@@ -7,7 +7,7 @@ and rollaways) and by tests/sim/test_hill_hold.py."""
 from __future__ import annotations
 
 from wcdrive.firmware import constants as C
-from wcdrive.firmware.control import control_tick, hold_duty
+from wcdrive.firmware.control import FAULT_DRIVER, FAULT_STALL_L, control_tick, hold_duty
 from wcdrive.firmware.state import FirmwareState
 
 
@@ -89,10 +89,30 @@ def test_a_chair_pushed_far_is_braked_not_driven_back() -> None:
     assert s.holdRefR == 500 - (C.ROLLAWAY_COUNTS + 1)
 
 
-def test_a_fault_parks_at_duty_zero_without_the_hold() -> None:
+def test_a_fault_that_leaves_no_encoder_parks_at_duty_zero_without_the_hold() -> None:
     s = _coasting()
     _ticks(s, [0, 0, 100])
     assert s.pwmR > 0
-    s.faultFlags = 1
+    s.faultFlags = FAULT_DRIVER
     _ticks(s, [150])
     assert s.parked and not s.holding and (s.pwmR, s.pwmL) == (0, 0)
+
+
+def test_after_a_fault_the_healthy_wheel_brakes_and_holds_and_the_faulty_one_mirrors_it() -> None:
+    """ENC_STALL_L latched while the right wheel turns at 7.3 rad/s (300 counts a tick):
+    the right wheel's PID brakes it along the emergency ramp, the left motor at duty 0;
+    at rest the right wheel is held and the left mirrors its hold."""
+    s = FirmwareState(emergencyStop=1, parked=0, holding=0, lastControlTime=0, filtVelR=7.3)
+    s.faultFlags = FAULT_STALL_L
+    rights = [300, 600, 900]
+    _ticks(s, rights)
+    assert not s.parked and not s.brakeReleased
+    assert s.pwmR > 0 and s.dirR == C.LOW                     # braking the forward roll
+    assert (s.pwmL, s.dirL) == (0, C.HIGH)
+    # the wheel stops: parked, held; pushed on, both are driven back alike
+    for k in range(12):
+        control_tick(s, 50 * (4 + k), 0, 900, bytearray())
+    assert s.parked and s.holding
+    control_tick(s, 50 * 16, 0, 940, bytearray())
+    assert (s.pwmR, s.dirR) == (40 - C.HOLD_DEADBAND_COUNTS, C.LOW)
+    assert (s.pwmL, s.dirL) == (s.pwmR, s.dirR)

@@ -352,11 +352,14 @@ def latch_estop(s: FirmwareState, out: bytearray) -> None:
 
 
 def reset_estop(s: FirmwareState) -> str | None:
-    """``resetEstop``: releases the e-stop and any fault once the chair has parked, and
-    (``unmaskEncoders``) clears the ISRs' storm flags: a masked encoder counts again."""
+    """``resetEstop``: releases the e-stop and any fault once the chair has parked (after
+    a fault, the hold restarts from where both wheels are), and (``unmaskEncoders``)
+    clears the ISRs' storm flags: a masked encoder counts again."""
     if (s.estopLatched or s.faultFlags) and not s.parked:
         return "busy"
     s.estopLatched = 0
+    if s.faultFlags:
+        s.holding = 0        # the hold restarts with both wheels, where they are
     s.faultFlags = 0
     unmask_encoders(s)
     return None

@@ -56,6 +56,9 @@ WHEEL_OK, WHEEL_SUSPECT, WHEEL_STALLED, WHEEL_REVERSED, WHEEL_IMPLAUSIBLE, WHEEL
 FAULT_STALL_L, FAULT_STALL_R, FAULT_REVERSED_L, FAULT_REVERSED_R = 0x01, 0x02, 0x04, 0x08
 FAULT_IMPLAUSIBLE_L, FAULT_IMPLAUSIBLE_R, FAULT_DRIVER = 0x10, 0x20, 0x40
 FAULT_MOTOR_L, FAULT_MOTOR_R = 0x80, 0x100
+#: The faults after which a wheel's encoder is no longer trusted: its own, and the driver's.
+FAULTS_UNTRUSTED_L = FAULT_STALL_L | FAULT_REVERSED_L | FAULT_IMPLAUSIBLE_L | FAULT_MOTOR_L | FAULT_DRIVER
+FAULTS_UNTRUSTED_R = FAULT_STALL_R | FAULT_REVERSED_R | FAULT_IMPLAUSIBLE_R | FAULT_MOTOR_R | FAULT_DRIVER
 
 
 Effort = tuple[int, float, float, int]
@@ -291,11 +294,15 @@ def hold_motor(error: int, ahead_dir: int, rollaway: int) -> tuple[int, int]:
 
 
 def _motors(s: FirmwareState, delta_l: int, delta_r: int, hardest: bool, out: bytearray) -> None:
-    """Both motors' duty and DIR: the hold's for a chair parked without a fault
-    (``holding``; ``EVT:ROLLAWAY`` once per hold when a wheel is pushed ROLLAWAY_COUNTS
-    off its reference, and from then on HOLD_PWM_MAX beyond the deadband), else
-    ``set_motor`` of the outputs."""
-    if not (s.parked and not s.faultFlags):
+    """Both motors' duty and DIR: parked, the hold's for each wheel whose encoder is
+    trusted (both without a fault; after one, the healthy wheel, and the faulty one
+    mirrors it, open loop: the same duty against the same motion; ``holding``;
+    ``EVT:ROLLAWAY`` once per hold when a held wheel is pushed ROLLAWAY_COUNTS off its
+    reference, and from then on HOLD_PWM_MAX beyond the deadband), else ``set_motor``
+    of the outputs."""
+    held_l = bool(s.parked) and not s.faultFlags & FAULTS_UNTRUSTED_L
+    held_r = bool(s.parked) and not s.faultFlags & FAULTS_UNTRUSTED_R
+    if not (held_l or held_r):
         s.pwmL, s.dirL = set_motor(s.outputL)
         s.pwmR, s.dirR = set_motor(s.outputR)
         s.holding = 0
@@ -306,13 +313,16 @@ def _motors(s: FirmwareState, delta_l: int, delta_r: int, hardest: bool, out: by
         s.holdRollaway = 0
     if hardest:
         s.holdRollaway = 1
-    err_l, s.holdRefL, s.holdStepL = hold_error(s.encTickL, delta_l, s.holdRefL, s.holdStepL)
-    err_r, s.holdRefR, s.holdStepR = hold_error(s.encTickR, delta_r, s.holdRefR, s.holdStepR)
+    err_l = err_r = 0
+    if held_l:
+        err_l, s.holdRefL, s.holdStepL = hold_error(s.encTickL, delta_l, s.holdRefL, s.holdStepL)
+    if held_r:
+        err_r, s.holdRefR, s.holdStepR = hold_error(s.encTickR, delta_r, s.holdRefR, s.holdStepR)
     if (abs(err_l) > C.ROLLAWAY_COUNTS or abs(err_r) > C.ROLLAWAY_COUNTS) and not s.holdRollaway:
         s.holdRollaway = 1
         send(s, send_event("ROLLAWAY"), out)
-    s.pwmL, s.dirL = hold_motor(err_l, C.HIGH, s.holdRollaway)
-    s.pwmR, s.dirR = hold_motor(err_r, C.LOW, s.holdRollaway)
+    s.pwmL, s.dirL = hold_motor(err_l if held_l else -err_r, C.HIGH, s.holdRollaway)
+    s.pwmR, s.dirR = hold_motor(err_r if held_r else -err_l, C.LOW, s.holdRollaway)
     s.holding = 1
 
 
@@ -383,9 +393,14 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
     elif s.stillTicks < 255:
         s.stillTicks += 1
     at_rest = s.targetL == 0.0 and s.targetR == 0.0 and s.setpointL == 0.0 and s.setpointR == 0.0
-    braked = abs(s.filtVelL) < C.BRAKE_DONE_SPEED and abs(s.filtVelR) < C.BRAKE_DONE_SPEED
+    # A wheel's encoder is trusted until a fault of its own, or the driver's, latches.
+    trusted_l = not s.faultFlags & FAULTS_UNTRUSTED_L
+    trusted_r = not s.faultFlags & FAULTS_UNTRUSTED_R
+    braked = ((not trusted_l or abs(s.filtVelL) < C.BRAKE_DONE_SPEED)
+              and (not trusted_r or abs(s.filtVelR) < C.BRAKE_DONE_SPEED))
     # Once the hold is on, the chair stays parked while at rest: the hold keeps it there.
-    if s.faultFlags or halt or (at_rest and (s.holding or braked)):
+    # A fault that leaves no encoder trusted parks at once, at duty 0.
+    if (not trusted_l and not trusted_r) or halt or (at_rest and (s.holding or braked)):
         s.parked = 1
         s.integralL = s.integralR = 0.0
         s.prevMeasL = s.filtVelL
@@ -394,16 +409,22 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
     else:
         s.parked = 0
         # A suspect wheel keeps its output: no count is no reason to push harder.
-        if check_l != WHEEL_SUSPECT:
+        if trusted_l and check_l != WHEEL_SUSPECT:
             s.outputL, s.integralL = compute_pid(s.setpointL, s.filtVelL, s.integralL, s.prevMeasL,
                                                  s.kpL, s.kiL, s.kdL, dt)
             s.prevMeasL = s.filtVelL
-        if check_r != WHEEL_SUSPECT:
+        if trusted_r and check_r != WHEEL_SUSPECT:
             s.outputR, s.integralR = compute_pid(s.setpointR, s.filtVelR, s.integralR, s.prevMeasR,
                                                  s.kpR, s.kiR, s.kdR, dt)
             s.prevMeasR = s.filtVelR
+        # after a fault the faulty wheel at duty 0: the driver brakes it whichever way it turns
+        if not trusted_l:
+            s.outputL = 0.0
+        if not trusted_r:
+            s.outputR = 0.0
     _motors(s, delta_l, delta_r, hardest, out)
-    s.brakeReleased = 0 if s.parked else 1      # the brake holds unless the PID drives
+    # the brake holds unless the PID drives, and from a fault on
+    s.brakeReleased = 0 if s.parked or s.faultFlags else 1
 
     pivot_step(s)
 

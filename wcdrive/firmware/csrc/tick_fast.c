@@ -151,7 +151,7 @@ static struct {
     int64_t control_period_ms, tx_credit_max, tx_credit_per_ms, stall_pwm, stall_ticks,
         reverse_ticks, runaway_pwm, runaway_ticks, effort_pwm, effort_ticks, illegal_per_tick, still_ticks, pivot_ticks,
         hold_deadband, overspeed_pwm, overspeed_ticks,
-        high, low, pivot_none, pivot_stopping, pivot_rotating;
+        high, low, pivot_none, pivot_stopping, pivot_rotating, untrusted_l, untrusted_r;
 } K;
 static PyObject *mode_names;      /* dict: mode -> bytes */
 static int bound;
@@ -478,25 +478,30 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
     else if (I(stillTicks) < 255)
         SETI(stillTicks, I(stillTicks) + 1);
     int at_rest = D(targetL) == 0.0 && D(targetR) == 0.0 && D(setpointL) == 0.0 && D(setpointR) == 0.0;
-    int braked = fabs(D(filtVelL)) < K.brake_done_speed && fabs(D(filtVelR)) < K.brake_done_speed;
-    int park = I(faultFlags)
+    int trusted_l = !(I(faultFlags) & K.untrusted_l), trusted_r = !(I(faultFlags) & K.untrusted_r);
+    int braked = (!trusted_l || fabs(D(filtVelL)) < K.brake_done_speed)
+                 && (!trusted_r || fabs(D(filtVelR)) < K.brake_done_speed);
+    int park = (!trusted_l && !trusted_r)
                || (at_rest && (I(holding) || braked));
-    /* The hold: only its quiet case here, both wheels within the deadband of fixed
-     * references (duty 0, as parked). Its start and end, a reference that still follows
-     * its wheel, a duty or a rollaway go to the Python tick. */
-    int hold = park && !I(faultFlags);
+    /* The hold: only its quiet case here, each held wheel within the deadband of a fixed
+     * reference (duty 0; a faulty wheel mirrors it). Its start and end, a reference that still
+     * follows its wheel, a duty or a rollaway go to the Python tick. */
+    int held_l = park && trusted_l, held_r = park && trusted_r;
+    int hold = held_l || held_r;
     if (hold != (I(holding) != 0))
         Py_RETURN_NONE;
-    if (hold) {
-        int64_t err_l = i32(I(encTickL) - I(holdRefL)), err_r = i32(I(encTickR) - I(holdRefR));
-        if (I(holdStepL) != 0 || I(holdStepR) != 0 || llabs(err_l) > K.hold_deadband
-            || llabs(err_r) > K.hold_deadband)
+    if (held_l) {
+        if (I(holdStepL) != 0 || llabs(i32(I(encTickL) - I(holdRefL))) > K.hold_deadband)
             Py_RETURN_NONE;
         SETI(holdRefL, I(holdRefL)); SETI(holdStepL, 0);
+    }
+    if (held_r) {
+        if (I(holdStepR) != 0 || llabs(i32(I(encTickR) - I(holdRefR))) > K.hold_deadband)
+            Py_RETURN_NONE;
         SETI(holdRefR, I(holdRefR)); SETI(holdStepR, 0);
     }
     SETI(holding, hold);
-    SETI(brakeReleased, park ? 0 : 1);
+    SETI(brakeReleased, park || I(faultFlags) ? 0 : 1);
     if (park) {
         SETI(parked, 1);
         SETF(integralL, 0.0);
@@ -507,20 +512,25 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
         SETF(outputR, 0.0);
     } else {
         SETI(parked, 0);
-        if (check_l != WHEEL_SUSPECT) {
+        if (trusted_l && check_l != WHEEL_SUSPECT) {
             double in = D(integralL);
             SETF(outputL, compute_pid(D(setpointL), D(filtVelL), &in, D(prevMeasL), D(kpL), D(kiL),
                                       D(kdL), dt));
             SETF(integralL, in);
             SETF(prevMeasL, D(filtVelL));
         }
-        if (check_r != WHEEL_SUSPECT) {
+        if (trusted_r && check_r != WHEEL_SUSPECT) {
             double in = D(integralR);
             SETF(outputR, compute_pid(D(setpointR), D(filtVelR), &in, D(prevMeasR), D(kpR), D(kiR),
                                       D(kdR), dt));
             SETF(integralR, in);
             SETF(prevMeasR, D(filtVelR));
         }
+        /* after a fault the faulty wheel at duty 0: the driver brakes it whichever way it turns */
+        if (!trusted_l)
+            SETF(outputL, 0.0);
+        if (!trusted_r)
+            SETF(outputR, 0.0);
     }
     int64_t pwm, dir;
     set_motor(D(outputL), &pwm, &dir);
@@ -690,7 +700,9 @@ static PyObject *bind(PyObject *self, PyObject *args) {
           && const_int(consts, "HIGH", &k.high) && const_int(consts, "LOW", &k.low)
           && const_int(consts, "PIVOT_NONE", &k.pivot_none)
           && const_int(consts, "PIVOT_STOPPING", &k.pivot_stopping)
-          && const_int(consts, "PIVOT_ROTATING", &k.pivot_rotating)))
+          && const_int(consts, "PIVOT_ROTATING", &k.pivot_rotating)
+          && const_int(consts, "FAULTS_UNTRUSTED_L", &k.untrusted_l)
+          && const_int(consts, "FAULTS_UNTRUSTED_R", &k.untrusted_r)))
         return NULL;
     if (k.tx_credit_per_ms <= 0) {
         PyErr_SetString(PyExc_ValueError, "_bind: TX_CREDIT_PER_MS must be positive");
