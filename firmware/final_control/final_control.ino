@@ -243,6 +243,7 @@ int32_t holdStepL = 0, holdStepR = 0;
 bool holdRollaway = false;                 // EVT:ROLLAWAY sent for this hold, or it began braking hardest
 volatile bool brakeReleased = false;       // WC_PIN_BRAKE HIGH: only while the PID drives the motors (volatile: kept for the harness)
 uint8_t overspeedTicksL = 0, overspeedTicksR = 0;   // ticks in a row overspeeding (overspeeding)
+float overspeedFromL = 0.0f, overspeedFromR = 0.0f; // the speed the PID ran on before that run began
 bool limitLatched = false;                 // the chair's limit halted it: motion refused (ERR:limit) until a stop
 
 bool estopLatched = false;                  // e-stop: motion refused until "reset"
@@ -605,20 +606,33 @@ static bool runsAway(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, flo
 }
 
 // Overspeeding: moving the way of its setpoint (or with none), WC_OVERSPEED_MARGIN or
-// more beyond it and beyond its target (faster than commanded, not a ramp behind),
-// braked at WC_OVERSPEED_PWM or more against the motion, and WC_OVERSPEED_GAIN or more
-// faster than prevMeasured (what the PID last ran on): gravity beats the motors; within
-// its rated grade a braked chair slows. (The duty says little of the braking: at speed
-// the driver's current limit binds at a low duty.)
+// more beyond it and beyond its target (faster than commanded, not a ramp behind), and
+// braked at WC_OVERSPEED_PWM or more against the motion. (The duty says little of the
+// braking: at speed the driver's current limit binds at a low duty.) Whether gravity
+// beats the motors is the speed gained over the run of such ticks (overspeedRun).
 static bool overspeeding(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, float target,
-                         float measured, float prevMeasured) {
+                         float measured) {
   bool forward = measured > 0.0f;
   float beyond = forward ? measured - setpoint : setpoint - measured;
   float beyondTarget = forward ? measured - target : target - measured;
   bool along = setpoint == 0.0f || (setpoint > 0.0f) == forward;
   return along && appliedPwm >= WC_OVERSPEED_PWM && (appliedDir == HIGH) != forward &&
-         beyond >= WC_OVERSPEED_MARGIN && beyondTarget >= WC_OVERSPEED_MARGIN &&
-         fabs(measured) - fabs(prevMeasured) >= WC_OVERSPEED_GAIN;
+         beyond >= WC_OVERSPEED_MARGIN && beyondTarget >= WC_OVERSPEED_MARGIN;
+}
+
+// Counts a run of overspeeding ticks (ticks, wrapping at 256), from the speed the PID ran
+// on before its first (from); true once the run is WC_OVERSPEED_TICKS long and the wheel
+// WC_OVERSPEED_GAIN faster than that: gravity beats the motors. Within its rated grade a
+// braked chair slows, however slowly; over a run the tick-to-tick jitter of the measured
+// speed (about 0.2 rad/s at top speed) does not add up.
+static bool overspeedRun(bool over, float measured, float prevMeasured, uint8_t& ticks, float& from) {
+  if (!over) {
+    ticks = 0;
+    return false;
+  }
+  if (ticks == 0) from = fabs(prevMeasured);
+  ticks++;
+  return ticks >= WC_OVERSPEED_TICKS && fabs(measured) - from >= WC_OVERSPEED_GAIN;
 }
 
 // Straining: driven at WC_GRADE_PWM or more toward a setpoint it runs short of (slower
@@ -798,8 +812,10 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
     bool limitR = !holding && atLimit(checkR, strainL, reverseTicksL, runawayTicksL, effortTicksL);
     if (limitL) checkL = WHEEL_OK;
     if (limitR) checkR = WHEEL_OK;
-    overspeedTicksL = !holding && overspeeding(pwmL, dirL, setpointL, targetL, filtVelL, prevMeasL) ? overspeedTicksL + 1 : 0;
-    overspeedTicksR = !holding && overspeeding(pwmR, dirR, setpointR, targetR, filtVelR, prevMeasR) ? overspeedTicksR + 1 : 0;
+    bool overL = overspeedRun(!holding && overspeeding(pwmL, dirL, setpointL, targetL, filtVelL),
+                              filtVelL, prevMeasL, overspeedTicksL, overspeedFromL);
+    bool overR = overspeedRun(!holding && overspeeding(pwmR, dirR, setpointR, targetR, filtVelR),
+                              filtVelR, prevMeasR, overspeedTicksR, overspeedFromR);
     uint16_t faults;
     if (checkL == WHEEL_STALLED && checkR == WHEEL_STALLED) {
       faults = FAULT_DRIVER;   // both wheels driven, neither turns: the driver or its supply
@@ -815,7 +831,7 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
       stallTicksL = stallTicksR = reverseTicksL = reverseTicksR = 0;
       runawayTicksL = runawayTicksR = 0;
       sendFaultEvents(faults);
-    } else if (overspeedTicksL >= WC_OVERSPEED_TICKS && overspeedTicksR >= WC_OVERSPEED_TICKS) {
+    } else if (overL && overR) {
       // both wheels: gravity on the whole chair (one alone is a wheel's fault, left to the
       // runaway rule)
       halt = hardest = true;

@@ -100,8 +100,8 @@
 #define WC_HOLD_PWM_MAX 64         // the hold's largest duty (25 %): past the driver's 13 A current limit at a standstill (duty 42), so the brake is the hardest the driver gives
 #define WC_OVERSPEED_PWM 26        // duty (10 %) at or above which a wheel driven against its motion is braking it (at speed the current limit binds at a low duty)
 #define WC_OVERSPEED_MARGIN 1.0f   // rad/s a wheel braked at OVERSPEED_PWM may run beyond its setpoint before it counts as overspeeding
-#define WC_OVERSPEED_GAIN 0.02f    // rad/s a wheel overspeeding must gain over a tick (0.4 rad/s^2): gravity beats the brakes (within its rated grade a braked chair slows, however slowly)
-#define WC_OVERSPEED_TICKS 2       // ticks in a row overspeeding (0.1 s): EVT:OVERSPEED, the chair parks braking hardest
+#define WC_OVERSPEED_GAIN 0.3f     // rad/s a wheel must gain over a run of overspeeding ticks, from the speed before its first: gravity beats the brakes (within its rated grade a braked chair slows, however slowly)
+#define WC_OVERSPEED_TICKS 2       // ticks in a row overspeeding (0.1 s) at least, with OVERSPEED_GAIN gained over them: EVT:OVERSPEED, the chair parks braking hardest
 #define WC_GRADE_PWM 128           // duty (50 %) toward its setpoint at or above which a wheel short of it is straining: both straining is the chair's limit (a grade), not a fault
 #define WC_ROLLAWAY_COUNTS 209     // encoder counts (2 cm of travel: 0.02 m / (2 pi WHEEL_RADIUS) x CPR) a held wheel may be pushed off its count before EVT:ROLLAWAY
 

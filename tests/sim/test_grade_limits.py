@@ -163,3 +163,17 @@ def test_a_stop_on_the_level_rests_within_a_second_of_the_setpoint(speed: float,
     stop = _run(f"stop_level_{speed}", 0.0, 180.0, segments, "", backend).stop_metrics()
     ramp = speed / C.WHEEL_RADIUS / C.ACCEL_MAX
     assert stop["stopping_time_s"] is not None and stop["stopping_time_s"] <= ramp + 1.0
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_stop_from_top_speed_down_1_in_12_is_no_overspeed(backend: str) -> None:
+    """Down 1:12 at the full-speed command (2.64 m/s), then a stop: the chair, braked at
+    the driver's limit, slows slowly (about 0.13 rad/s a tick, the measured speed
+    swinging by up to 0.3 rad/s tick to tick) and comes to rest; no OVERSPEED, no other
+    alarm (a one-tick gain rule sent OVERSPEED 0.6 s into this stop)."""
+    segments = (("cmdvel", "[2.68, 0.0]", 8.0), ("cmdvel", "[0.0, 0.0]", 10.0))
+    r = _run("stop_top_down_1in12", ONE_IN_12, 0.0, segments, "", backend)
+    assert not [line for _, line in r.link.events if line.startswith(ALARMS)]
+    stop = r.stop_metrics()
+    assert stop["max_speed_after_stop_mps"] is not None and stop["max_speed_after_stop_mps"] > 2.5
+    assert stop["drift_parked_m"] is not None and stop["drift_parked_m"] <= 0.02

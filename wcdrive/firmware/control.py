@@ -93,18 +93,29 @@ def runs_away(applied_pwm: int, applied_dir: int, setpoint: float, measured: flo
 
 
 def overspeeding(applied_pwm: int, applied_dir: int, setpoint: float, target: float,
-                 measured: float, prev_measured: float) -> bool:
+                 measured: float) -> bool:
     """``overspeeding``: moving the way of its setpoint (or with none), OVERSPEED_MARGIN
-    or more beyond it and beyond its target (faster than commanded), braked at
-    OVERSPEED_PWM or more against the motion, and OVERSPEED_GAIN or more faster than
-    ``prev_measured`` (the speed the PID last ran on): gravity beats the motors."""
+    or more beyond it and beyond its target (faster than commanded), and braked at
+    OVERSPEED_PWM or more against the motion."""
     forward = measured > 0.0
     beyond = sub(measured, setpoint) if forward else sub(setpoint, measured)
     beyond_target = sub(measured, target) if forward else sub(target, measured)
     along = setpoint == 0.0 or (setpoint > 0.0) == forward
     return (along and applied_pwm >= C.OVERSPEED_PWM and (applied_dir == C.HIGH) != forward
-            and beyond >= C.OVERSPEED_MARGIN and beyond_target >= C.OVERSPEED_MARGIN
-            and sub(abs(measured), abs(prev_measured)) >= C.OVERSPEED_GAIN)
+            and beyond >= C.OVERSPEED_MARGIN and beyond_target >= C.OVERSPEED_MARGIN)
+
+
+def overspeed_run(over: bool, measured: float, prev_measured: float, ticks: int,
+                  start: float) -> tuple[bool, int, float]:
+    """``overspeedRun``: ``(gravity beats the motors, ticks, from)``. Counts a run of
+    overspeeding ticks (wrapping at 256) from the speed the PID ran on before its first;
+    true once the run is OVERSPEED_TICKS long and the wheel OVERSPEED_GAIN faster than that."""
+    if not over:
+        return False, 0, start
+    if ticks == 0:
+        start = abs(prev_measured)
+    ticks = (ticks + 1) & 0xFF
+    return ticks >= C.OVERSPEED_TICKS and sub(abs(measured), start) >= C.OVERSPEED_GAIN, ticks, start
 
 
 def straining(applied_pwm: int, applied_dir: int, setpoint: float, measured: float) -> bool:
@@ -207,12 +218,12 @@ def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_
         check_l = WHEEL_OK
     if limit_r:
         check_r = WHEEL_OK
-    over_l = not s.holding and overspeeding(s.pwmL, s.dirL, s.setpointL, s.targetL, s.filtVelL,
-                                               s.prevMeasL)
-    over_r = not s.holding and overspeeding(s.pwmR, s.dirR, s.setpointR, s.targetR, s.filtVelR,
-                                               s.prevMeasR)
-    s.overspeedTicksL = (s.overspeedTicksL + 1) & 0xFF if over_l else 0
-    s.overspeedTicksR = (s.overspeedTicksR + 1) & 0xFF if over_r else 0
+    over_l, s.overspeedTicksL, s.overspeedFromL = overspeed_run(
+        not s.holding and overspeeding(s.pwmL, s.dirL, s.setpointL, s.targetL, s.filtVelL),
+        s.filtVelL, s.prevMeasL, s.overspeedTicksL, s.overspeedFromL)
+    over_r, s.overspeedTicksR, s.overspeedFromR = overspeed_run(
+        not s.holding and overspeeding(s.pwmR, s.dirR, s.setpointR, s.targetR, s.filtVelR),
+        s.filtVelR, s.prevMeasR, s.overspeedTicksR, s.overspeedFromR)
     if check_l == WHEEL_STALLED and check_r == WHEEL_STALLED:
         faults = FAULT_DRIVER
     else:
@@ -230,7 +241,7 @@ def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_
         return check_l, check_r, False, False
     halt = hardest = False
     # both wheels: gravity on the whole chair (one alone is a wheel's fault: runs_away)
-    if s.overspeedTicksL >= C.OVERSPEED_TICKS and s.overspeedTicksR >= C.OVERSPEED_TICKS:
+    if over_l and over_r:
         halt = hardest = True
         send(s, send_event("OVERSPEED"), out)
     elif limit_l or limit_r:

@@ -23,7 +23,7 @@ FLOAT_FIELDS = (
     "targetL", "targetR", "setpointL", "setpointR", "rawVelL", "rawVelR", "filtVelL",
     "filtVelR", "integralL", "integralR", "prevMeasL", "prevMeasR", "outputL", "outputR",
     "lastTravel", "pendingL", "pendingR", "effortSpeedL", "effortSpeedR", "effortSetpointL",
-    "effortSetpointR",
+    "effortSetpointR", "overspeedFromL", "overspeedFromR",
     "kpL", "kiL", "kdL", "kpR", "kiR", "kdR", "maxWheel", "maxAccel", "estopDecel",
 )
 #: Integer and flag globals compared exactly.
@@ -128,6 +128,9 @@ class FirmwareState:
     brakeReleased: int = 0
     overspeedTicksL: int = 0
     overspeedTicksR: int = 0
+    #: ``|prevMeas|`` before the current run of overspeeding ticks began (``overspeedRun``).
+    overspeedFromL: float = 0.0
+    overspeedFromR: float = 0.0
     #: Halted at the chair's limit (``EVT:OVERSPEED``, ``EVT:STALLED_ON_GRADE``): motion
     #: refused with ``ERR:limit`` until a stop.
     limitLatched: int = 0

@@ -63,7 +63,7 @@ VARIABLE_FORMATS = {
           "filtVelR", "integralL", "integralR", "prevMeasL", "prevMeasR", "outputL", "outputR",
           "lastTravel", "pendingL", "pendingR", "kpL", "kiL", "kdL", "kpR", "kiR", "kdR",
           "maxWheel", "maxAccel", "estopDecel", "effortSpeedL", "effortSpeedR", "effortSetpointL",
-          "effortSetpointR"),
+          "effortSetpointR", "overspeedFromL", "overspeedFromR"),
     "i": ("encoderValueL", "encoderValueR", "encTickL", "encTickR", "prevEncL", "prevEncR", "holdRefL",
           "holdRefR", "holdStepL", "holdStepR"),
     "I": ("illegalL", "illegalR", "lastControlTime", "tickCount", "lastCmdTime", "rejectedCount",

@@ -87,7 +87,7 @@ static double f_from_int(int64_t n) { return rnd((double)n); }   /* |n| < 2**53 
     X(tlmEnabled) X(errLinesThisTick) X(rxCount) X(lastSeq) X(estopLatched) X(ppmLost) \
     X(rejectedCount) X(crcRejected) X(freeRam) \
     X(holding) X(holdRefL) X(holdRefR) X(holdStepL) X(holdStepR) \
-    X(brakeReleased) X(overspeedTicksL) X(overspeedTicksR)
+    X(brakeReleased) X(overspeedTicksL) X(overspeedTicksR) X(overspeedFromL) X(overspeedFromR)
 
 #define ENUM(name) F_##name,
 enum { FIELDS(ENUM) N_FIELDS };
@@ -248,15 +248,25 @@ static int runs_away(int64_t pwm, int64_t dir, double setpoint, double measured,
 
 /* overspeeding: braked at OVERSPEED_PWM against its motion, OVERSPEED_MARGIN beyond its
  * setpoint */
-static int overspeeding(int64_t pwm, int64_t dir, double setpoint, double target, double measured,
-                        double prev_measured) {
+static int overspeeding(int64_t pwm, int64_t dir, double setpoint, double target, double measured) {
     int forward = measured > 0.0;
     double beyond = forward ? f_sub(measured, setpoint) : f_sub(setpoint, measured);
     double beyond_target = forward ? f_sub(measured, target) : f_sub(target, measured);
     int along = setpoint == 0.0 || ((setpoint > 0.0) == forward);
     return along && pwm >= K.overspeed_pwm && ((dir == K.high) != forward)
-           && beyond >= K.overspeed_margin && beyond_target >= K.overspeed_margin
-           && f_sub(fabs(measured), fabs(prev_measured)) >= K.overspeed_gain;
+           && beyond >= K.overspeed_margin && beyond_target >= K.overspeed_margin;
+}
+
+/* overspeedRun: counts the run in *ticks (wrapping at 256) from *from; whether it fires */
+static int overspeed_run(int over, double measured, double prev_measured, int64_t *ticks, double *from) {
+    if (!over) {
+        *ticks = 0;
+        return 0;
+    }
+    if (*ticks == 0)
+        *from = fabs(prev_measured);
+    *ticks = (*ticks + 1) & 0xFF;
+    return *ticks >= K.overspeed_ticks && f_sub(fabs(measured), *from) >= K.overspeed_gain;
 }
 
 /* check_wheel: WHEEL_OK, WHEEL_SUSPECT or WHEEL_FAULT (any fault: the Python tick
@@ -336,6 +346,7 @@ static const int float_fields[] = {
     F_effortSpeedR, F_effortSetpointR, F_setpointL, F_setpointR, F_targetL, F_targetR,
     F_prevMeasL, F_prevMeasR, F_estopDecel, F_maxAccel, F_integralL, F_integralR, F_outputL,
     F_outputR, F_kpL, F_kiL, F_kdL, F_kpR, F_kiR, F_kdR, F_pendingL, F_pendingR,
+    F_overspeedFromL, F_overspeedFromR,
 };
 
 static unsigned char field_is_float[N_FIELDS];     /* set by _bind from float_fields */
@@ -442,13 +453,18 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
         SETF(effortSetpointL, el.setpoint); SETI(effortTicksL, el.ticks);
         SETI(effortPwmR, er.pwm); SETF(effortSpeedR, er.speed);
         SETF(effortSetpointR, er.setpoint); SETI(effortTicksR, er.ticks);
-        int over_l = !I(holding) && overspeeding(I(pwmL), I(dirL), D(setpointL), D(targetL), D(filtVelL), D(prevMeasL));
-        int over_r = !I(holding) && overspeeding(I(pwmR), I(dirR), D(setpointR), D(targetR), D(filtVelR), D(prevMeasR));
-        int64_t os_l = over_l ? ((I(overspeedTicksL) + 1) & 0xFF) : 0;
-        int64_t os_r = over_r ? ((I(overspeedTicksR) + 1) & 0xFF) : 0;
-        if (os_l >= K.overspeed_ticks && os_r >= K.overspeed_ticks)
+        int64_t os_l = I(overspeedTicksL), os_r = I(overspeedTicksR);
+        double from_l = D(overspeedFromL), from_r = D(overspeedFromR);
+        int fire_l = overspeed_run(!I(holding) && overspeeding(I(pwmL), I(dirL), D(setpointL), D(targetL),
+                                                               D(filtVelL)),
+                                   D(filtVelL), D(prevMeasL), &os_l, &from_l);
+        int fire_r = overspeed_run(!I(holding) && overspeeding(I(pwmR), I(dirR), D(setpointR), D(targetR),
+                                                               D(filtVelR)),
+                                   D(filtVelR), D(prevMeasR), &os_r, &from_r);
+        if (fire_l && fire_r)
             Py_RETURN_NONE;       /* an overspeed parks the chair: the Python tick */
         SETI(overspeedTicksL, os_l); SETI(overspeedTicksR, os_r);
+        SETF(overspeedFromL, from_l); SETF(overspeedFromR, from_r);
     }
 
     if (I(cmdSinceTick)) {
