@@ -10,25 +10,17 @@ rollaway"). With a parking brake, the brake engages at the fault.
 
 from __future__ import annotations
 
-from functools import cache
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from tests.support.grade import bundled
 from wcdrive.sim import runner, scenario
 from wcdrive.sim.result import STANDSTILL_SPEED
 
 BACKENDS = ("port", pytest.param("simavr", marks=pytest.mark.simavr))
 FAULTS = {"encoder_cut": "EVT:FAULT,ENC_STALL_L", "encoder_reversed": "EVT:FAULT,ENC_REVERSED_L"}
-
-
-@cache
-def _run(name: str, backend: str) -> runner.SimResult:
-    r = runner.run(scenario.load(name), backend=backend)
-    if backend == "simavr":
-        assert r.lockstep is not None and r.firmware_differences == 0
-    return r
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
@@ -39,7 +31,7 @@ def test_a_fault_down_1_in_12_comes_to_rest_and_stays(kind: str, brake: str, bac
     comes to rest within 4 s and 1.0 m of it and then moves at most 0.03 m over the rest
     of the run (0.005 m with a brake). Both motors at duty 0, as before the healthy wheel
     was kept braking, it never came to rest: 1.8 m down in 3 s, still rolling."""
-    r = _run(f"ramp_fault_{kind}_1in12{brake}", backend)
+    r = bundled(f"ramp_fault_{kind}_1in12{brake}", backend)
     faults = [t for t, line in r.link.events if line.startswith("EVT:FAULT")]
     assert [line for _, line in r.link.events if line.startswith("EVT:FAULT")] == [FAULTS[kind]]
     stop = r.stop_metrics()
@@ -55,7 +47,7 @@ def test_the_faulty_wheel_is_off_then_mirrors_the_healthy_wheels_hold(backend: s
     """From the fault until the chair parks, the faulty (left) motor at duty 0 and the
     healthy one braking (against the downhill roll); parked, both get the same duty in the
     same direction of travel, the hold's, non-zero on the grade."""
-    r = _run("ramp_fault_encoder_cut_1in12", backend)
+    r = bundled("ramp_fault_encoder_cut_1in12", backend)
     fault = next(t for t, line in r.link.events if line.startswith("EVT:FAULT"))
     t = r.board.tick_time
     after = np.flatnonzero(t > fault + 0.06)

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.support.grade import checked_run
 from wcdrive.firmware import constants as C
 from wcdrive.plant import ChairParams, Plant
 from wcdrive.plant.terrain import Terrain
@@ -57,10 +58,7 @@ def _run(slope: float, stop: str, backend: str, dead_at: float | None = None) ->
     tmp = Path(f"/tmp/wcdrive-hold-{backend}")
     tmp.mkdir(exist_ok=True)
     duration = HOLD_S + 10.0 if dead_at is None else dead_at + 5.0
-    r = runner.run(_scenario(tmp, slope, stop, dead_at, duration), backend=backend)
-    if backend == "simavr":
-        assert r.lockstep is not None and r.firmware_differences == 0
-    return r
+    return checked_run(_scenario(tmp, slope, stop, dead_at, duration), backend)
 
 
 def _park_tick(r: runner.SimResult, stop: str) -> int:

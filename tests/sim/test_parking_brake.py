@@ -10,31 +10,20 @@ chair rolled back in the brake's 50 ms: docs/safety.md, "Not safe yet".)
 
 from __future__ import annotations
 
-from functools import cache
-
 import numpy as np
 import pytest
 
-from wcdrive.sim import runner, scenario
+from tests.support.grade import alarms, bundled
 
 BACKENDS = ("port", pytest.param("simavr", marks=pytest.mark.simavr))
-ALARMS = ("EVT:FAULT", "EVT:ROLLAWAY", "EVT:OVERSPEED", "EVT:STALLED_ON_GRADE")
 STOPS = ((8.0, 9.0), (18.0, 19.0))       # each held stop ends at these (s)
-
-
-@cache
-def _run(name: str, backend: str) -> runner.SimResult:
-    r = runner.run(scenario.load(name), backend=backend)
-    if backend == "simavr":
-        assert r.lockstep is not None and r.firmware_differences == 0
-    return r
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_a_chair_with_a_brake_drives_and_parks_on_it(backend: str) -> None:
-    plain, braked = _run("ramp_up_down_1in20", backend), _run("ramp_up_down_1in20_brake", backend)
+    plain, braked = bundled("ramp_up_down_1in20", backend), bundled("ramp_up_down_1in20_brake", backend)
     for r in (plain, braked):
-        assert not [line for _, line in r.link.events if line.startswith(ALARMS)]
+        assert not alarms(r)
     t = braked.board.tick_time
     up = int(np.searchsorted(t, 4.0))
     # it climbs as far as the chair without a brake (the brake released while driving)
