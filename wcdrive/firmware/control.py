@@ -304,15 +304,16 @@ def hold_motor(error: int, ahead_dir: int, rollaway: int) -> tuple[int, int]:
     return duty, C.LOW if ahead_dir == C.HIGH else C.HIGH
 
 
-def _motors(s: FirmwareState, delta_l: int, delta_r: int, hardest: bool, out: bytearray) -> None:
+def _motors(s: FirmwareState, delta_l: int, delta_r: int, hardest: bool, trusted_l: bool, trusted_r: bool,
+            out: bytearray) -> None:
     """Both motors' duty and DIR: parked, the hold's for each wheel whose encoder is
     trusted (both without a fault; after one, the healthy wheel, and the faulty one
     mirrors it, open loop: the same duty against the same motion; ``holding``;
     ``EVT:ROLLAWAY`` once per hold when a held wheel is pushed ROLLAWAY_COUNTS off its
     reference, and from then on HOLD_PWM_MAX beyond the deadband), else ``set_motor``
     of the outputs."""
-    held_l = bool(s.parked) and not s.faultFlags & FAULTS_UNTRUSTED_L
-    held_r = bool(s.parked) and not s.faultFlags & FAULTS_UNTRUSTED_R
+    held_l = bool(s.parked) and trusted_l
+    held_r = bool(s.parked) and trusted_r
     if not (held_l or held_r):
         s.pwmL, s.dirL = set_motor(s.outputL)
         s.pwmR, s.dirR = set_motor(s.outputR)
@@ -433,7 +434,7 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
             s.outputL = 0.0
         if not trusted_r:
             s.outputR = 0.0
-    _motors(s, delta_l, delta_r, hardest, out)
+    _motors(s, delta_l, delta_r, hardest, trusted_l, trusted_r, out)
     # the brake holds unless the PID drives, and from a fault on
     s.brakeReleased = 0 if s.parked or s.faultFlags else 1
 
