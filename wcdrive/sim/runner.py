@@ -42,7 +42,7 @@ from wcdrive.avr.uart import UART_BYTE_CYCLES
 from wcdrive.boards.port_loop import F_CPU, PortLoop
 from wcdrive.boards.simavr.plant_on_pins import PlantOnPins
 from wcdrive.boards.simavr.virtual_mega import VirtualMega
-from wcdrive.hil.lockstep import Recorder, compare
+from wcdrive.hil.lockstep import Event, Recorder, compare
 from wcdrive.hil.traces import Trace
 from wcdrive.plant import Gyro, Plant
 from wcdrive.plant.encoders import EdgeTrain
@@ -70,6 +70,8 @@ _LOG_COLUMNS = (("tick_time", 1), ("truth", 3), ("odom_wheel", 3), ("odom_veloci
                 ("setpoint", 2), ("measured", 2), ("wheel_speed", 2), ("pwm", 2), ("caster", 2),
                 ("counts", 2), ("odom_ekf", 3), ("odom_ekf_vel", 3))
 _LOG_WIDTH = sum(width for _, width in _LOG_COLUMNS)
+#: Where each column starts in a row.
+_LOG_OFFSETS = {name: sum(w for _, w in _LOG_COLUMNS[:i]) for i, (name, _) in enumerate(_LOG_COLUMNS)}
 
 
 class TickLog:
@@ -93,6 +95,14 @@ class TickLog:
                            measured[0], measured[1], speed[0], speed[1], pwm[0], pwm[1], caster[0], caster[1],
                            counts[0], counts[1], *ekf, *ekf_vel))
         self.tick_cycles.append(cycle)
+
+    def board(self, row: int, setpoint, measured, pwm, counts) -> None:
+        """Rewrites the firmware's columns of ``row`` (the plant's and host's stay as
+        ``add`` took them): for a tick whose state was read before the tick had ended."""
+        at = row * _LOG_WIDTH
+        for name, pair in (("setpoint", setpoint), ("measured", measured), ("pwm", pwm), ("counts", counts)):
+            start = at + _LOG_OFFSETS[name]
+            self._flat[start:start + 2] = array("d", pair)
 
     def arrays(self) -> dict[str, np.ndarray]:
         """The columns (``_LOG_COLUMNS``) as arrays, a row per tick (one row of zeros
@@ -160,6 +170,15 @@ class LineLog:
                 start = i + 1
         if start < len(stamped):
             self._partial += bytes(b for _, b in stamped[start:])
+
+
+def _board_values(a: dict[str, float | int]) -> tuple[tuple[float, float], tuple[float, float],
+                                                     tuple[int, int], tuple[int, int]]:
+    """A tick's (setpoints, filtered speeds, signed duties, counts) from the firmware's
+    globals ``a``."""
+    return ((float(a["setpointL"]), float(a["setpointR"])), (float(a["filtVelL"]), float(a["filtVelR"])),
+            (_signed(int(a["pwmL"]), int(a["dirL"])), _signed(int(a["pwmR"]), int(a["dirR"]))),
+            (int(a["encTickL"]), int(a["encTickR"])))
 
 
 def _signed(pwm: int, direction: int) -> int:
@@ -431,6 +450,7 @@ class SimavrBackend:
         trains: dict[str, list[EdgeTrain]] = {"left": [], "right": []}
         tx_seen = 0
         n_events_logged = 0
+        open_tick: tuple[int, Event] | None = None
         runs = rig.wire.runs
         next_run = 0
         steps = end_cycle // step_cycles
@@ -458,14 +478,17 @@ class SimavrBackend:
                 host.receive(t1, bytes(b for _, b in fresh))
                 lines.feed_stamped(fresh)
                 tx_seen = len(mega.tx_log)
+            # A step can end inside a tick: its row's firmware columns are read again
+            # until a later event shows the tick has ended.
+            if open_tick is not None:
+                log.board(open_tick[0], *_board_values(open_tick[1].after))
+                if open_tick[1] is not recorder.events[-1]:
+                    open_tick = None
             for ev in recorder.events[n_events_logged:]:
                 if ev.kind == "tick" and ev.after:
-                    a = ev.after
-                    log.add(ev.cycle, plant, host, (a["setpointL"], a["setpointR"]),
-                            (a["filtVelL"], a["filtVelR"]),
-                            (_signed(int(a["pwmL"]), int(a["dirL"])),
-                             _signed(int(a["pwmR"]), int(a["dirR"]))),
-                            (int(a["encTickL"]), int(a["encTickR"])))
+                    log.add(ev.cycle, plant, host, *_board_values(ev.after))
+                    if ev is recorder.events[-1]:
+                        open_tick = (len(log.tick_cycles) - 1, ev)
             n_events_logged = len(recorder.events)
             if progress and k % 1000 == 0:
                 progress(k / steps)
