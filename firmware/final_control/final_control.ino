@@ -555,7 +555,10 @@ static void emergencyHalt() {
 // WHEEL_OK; WHEEL_SUSPECT (no count although driven toward a setpoint, or measured
 // against the setpoint: the PID must not push harder on it this tick); or a fault:
 // stalled or cut, reversed, implausible (storm or illegal transitions). Braking (a duty
-// against the setpoint, or toward a zero setpoint) ends with no count: not a stall.
+// against the setpoint, or toward a zero setpoint) ends with no count: not a stall. A
+// wheel turning round (what the PID last ran on, prevMeasured, against the setpoint)
+// stands while its duty builds to break it away: its stall takes
+// WC_FAULT_STALL_TICKS_TURNING ticks.
 // Measured against the setpoint does not count while the wheel came
 // WC_FAULT_REVERSE_APPROACH closer to it since prevMeasured (what the PID last ran on):
 // a healthy wheel lagging a reversal of its setpoint slows toward it; a reversed encoder
@@ -569,11 +572,14 @@ static void emergencyHalt() {
 #define WHEEL_NO_EFFECT 5
 // Effort without progress: toward a steady setpoint the duty has stayed
 // WC_FAULT_EFFORT_PWM above its lowest for WC_FAULT_EFFORT_TICKS ticks in a row while the
-// wheel gained no speed and turns slower than WC_FAULT_EFFORT_SHORTFALL of its setpoint
-// (a dead motor, a broken motor wire: the wheel is only dragged along). A new setpoint, a
-// duty away from it, or any gain in speed starts over.
+// wheel gained no speed, turns slower than WC_FAULT_EFFORT_SHORTFALL of its setpoint, and
+// leads the other wheel (other: its measured speed) by less than WC_FAULT_EFFORT_LEAD its
+// way (a dead motor, a broken motor wire: the wheel is only dragged along, and trails the
+// wheel that drags it, or stands when that one turns against it). A wheel that leads is
+// pulled by its own motor, at its current limit on a grade. A new setpoint, a duty away
+// from it, or any gain in speed starts over.
 static bool noEffect(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, float measured,
-                     uint8_t& effortPwm, float& effortSpeed, float& effortSetpoint,
+                     float other, uint8_t& effortPwm, float& effortSpeed, float& effortSetpoint,
                      uint8_t& effortTicks) {
   float progress = setpoint > 0.0f ? measured : -measured;
   bool toward = setpoint != 0.0f && (appliedDir == HIGH) == (setpoint > 0.0f);
@@ -586,7 +592,9 @@ static bool noEffect(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, flo
   }
   if (appliedPwm < effortPwm) effortPwm = appliedPwm;
   bool shortfall = fabs(measured) < WC_FAULT_EFFORT_SHORTFALL * fabs(setpoint);
-  effortTicks = shortfall && appliedPwm >= effortPwm + WC_FAULT_EFFORT_PWM ? effortTicks + 1 : 0;
+  float otherProgress = setpoint > 0.0f ? other : -other;
+  bool trails = progress < (otherProgress > 0.0f ? otherProgress : 0.0f) + WC_FAULT_EFFORT_LEAD;
+  effortTicks = shortfall && trails && appliedPwm >= effortPwm + WC_FAULT_EFFORT_PWM ? effortTicks + 1 : 0;
   return effortTicks >= WC_FAULT_EFFORT_TICKS;
 }
 
@@ -644,16 +652,18 @@ static bool straining(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, fl
 }
 
 static uint8_t checkWheel(int32_t delta, uint32_t illegal, uint8_t storm, uint8_t appliedPwm,
-                          uint8_t appliedDir, float setpoint, float measured, uint8_t& stallTicks,
-                          uint8_t& reverseTicks, uint8_t& runawayTicks, uint8_t& effortPwm,
-                          float& effortSpeed, float& effortSetpoint, uint8_t& effortTicks,
-                          float prevMeasured) {
+                          uint8_t appliedDir, float setpoint, float measured, float other,
+                          uint8_t& stallTicks, uint8_t& reverseTicks, uint8_t& runawayTicks,
+                          uint8_t& effortPwm, float& effortSpeed, float& effortSetpoint,
+                          uint8_t& effortTicks, float prevMeasured) {
   if (storm || illegal >= WC_FAULT_ILLEGAL_PER_TICK) return WHEEL_IMPLAUSIBLE;
   bool driven = appliedPwm >= WC_FAULT_STALL_PWM && setpoint != 0.0f &&
                 (appliedDir == HIGH) == (setpoint > 0.0f);
   bool stalled = driven && delta == 0;
   stallTicks = stalled ? stallTicks + 1 : 0;
-  if (stallTicks >= WC_FAULT_STALL_TICKS) return WHEEL_STALLED;
+  bool turning = prevMeasured != 0.0f && (prevMeasured > 0.0f) != (setpoint > 0.0f);
+  uint8_t stallLimit = turning ? WC_FAULT_STALL_TICKS_TURNING : WC_FAULT_STALL_TICKS;
+  if (stallTicks >= stallLimit) return WHEEL_STALLED;
   float approach = setpoint > 0.0f ? measured - prevMeasured : prevMeasured - measured;
   bool against = fabs(setpoint) >= WC_FAULT_REVERSE_SPEED && fabs(measured) >= WC_FAULT_REVERSE_SPEED &&
                  (setpoint > 0.0f) != (measured > 0.0f) && approach < WC_FAULT_REVERSE_APPROACH;
@@ -661,8 +671,8 @@ static uint8_t checkWheel(int32_t delta, uint32_t illegal, uint8_t storm, uint8_
   if (reverseTicks >= WC_FAULT_REVERSE_TICKS) return WHEEL_REVERSED;
   runawayTicks = runsAway(appliedPwm, appliedDir, setpoint, measured, prevMeasured) ? runawayTicks + 1 : 0;
   if (runawayTicks >= WC_FAULT_RUNAWAY_TICKS) return WHEEL_REVERSED;
-  if (noEffect(appliedPwm, appliedDir, setpoint, measured, effortPwm, effortSpeed, effortSetpoint,
-               effortTicks)) {
+  if (noEffect(appliedPwm, appliedDir, setpoint, measured, other, effortPwm, effortSpeed,
+               effortSetpoint, effortTicks)) {
     return WHEEL_NO_EFFECT;
   }
   return (stalled || against) ? WHEEL_SUSPECT : WHEEL_OK;
@@ -800,12 +810,12 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
   if (faultFlags == 0) {
     bool strainL = straining(pwmL, dirL, setpointL, filtVelL);
     bool strainR = straining(pwmR, dirR, setpointR, filtVelR);
-    checkL = checkWheel(deltaL, illDeltaL, stormTickL, pwmL, dirL, setpointL, filtVelL, stallTicksL,
-                        reverseTicksL, runawayTicksL, effortPwmL, effortSpeedL, effortSetpointL,
-                        effortTicksL, prevMeasL);
-    checkR = checkWheel(deltaR, illDeltaR, stormTickR, pwmR, dirR, setpointR, filtVelR, stallTicksR,
-                        reverseTicksR, runawayTicksR, effortPwmR, effortSpeedR, effortSetpointR,
-                        effortTicksR, prevMeasR);
+    checkL = checkWheel(deltaL, illDeltaL, stormTickL, pwmL, dirL, setpointL, filtVelL, filtVelR,
+                        stallTicksL, reverseTicksL, runawayTicksL, effortPwmL, effortSpeedL,
+                        effortSetpointL, effortTicksL, prevMeasL);
+    checkR = checkWheel(deltaR, illDeltaR, stormTickR, pwmR, dirR, setpointR, filtVelR, filtVelL,
+                        stallTicksR, reverseTicksR, runawayTicksR, effortPwmR, effortSpeedR,
+                        effortSetpointR, effortTicksR, prevMeasR);
     // Driving only: a held wheel that runs away is a fault (a reversed encoder turns the
     // hold into positive feedback), whatever the other wheel does.
     bool limitL = !holding && atLimit(checkL, strainR, reverseTicksR, runawayTicksR, effortTicksR);

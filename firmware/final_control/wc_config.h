@@ -79,6 +79,7 @@
 // ---- Fault detection (EVT:FAULT; docs/safety.md) ---------------------------
 #define WC_FAULT_STALL_PWM 26      // duty (10 %) at or above which a wheel must show encoder counts
 #define WC_FAULT_STALL_TICKS 2     // ticks driven at FAULT_STALL_PWM without a count: stalled or cut encoder
+#define WC_FAULT_STALL_TICKS_TURNING 4 // ...by a wheel whose last motion ran against its setpoint: one turning round stands while its duty builds to break it away
 #define WC_FAULT_REVERSE_SPEED 1.0f // rad/s: setpoint and measured speed both beyond it, opposite signs
 #define WC_FAULT_REVERSE_TICKS 3   // ticks of measured speed against the setpoint: reversed encoder
 #define WC_FAULT_REVERSE_APPROACH 0.1f // rad/s: a wheel against its setpoint that came this much closer to it since the PID last ran is slowing toward it (lagging a reversal of its setpoint): not counted
@@ -87,6 +88,7 @@
 #define WC_FAULT_RUNAWAY_TICKS 5   // ticks in a row running away: reversed encoder (the positive feedback of one whose reading flipped sign with its setpoint)
 #define WC_FAULT_EFFORT_PWM 20     // duty rise (8 %) toward a steady setpoint without any gain in speed: the motor does not respond
 #define WC_FAULT_EFFORT_SHORTFALL 0.8f // ...while the wheel turns slower than this fraction of its setpoint
+#define WC_FAULT_EFFORT_LEAD 0.5f  // rad/s: ...while turning its way no faster than this beyond the other wheel (or beyond standing, when the other turns against it): a dead motor's wheel is only dragged, and trails the wheel that drags it
 #define WC_FAULT_EFFORT_TICKS 4    // consecutive ticks of that effort without progress: the motor fault
 #define WC_FAULT_ILLEGAL_PER_TICK 4 // illegal transitions in one tick: implausible encoder
 #define WC_STORM_EDGES 80          // edges of one encoder in one Timer0 period (1.024 ms) that mask it: 78,000 edges/s, > 2.5x top speed, above the 70,000 every edge is counted at

@@ -64,10 +64,11 @@ FAULTS_UNTRUSTED_R = FAULT_STALL_R | FAULT_REVERSED_R | FAULT_IMPLAUSIBLE_R | FA
 Effort = tuple[int, float, float, int]
 
 
-def no_effect(applied_pwm: int, applied_dir: int, setpoint: float, measured: float,
+def no_effect(applied_pwm: int, applied_dir: int, setpoint: float, measured: float, other: float,
               effort: Effort) -> tuple[bool, Effort]:
-    """``noEffect``: effort without progress. ``effort`` is (lowest duty, speed toward
-    the setpoint, setpoint, ticks) of the reference; returns (tripped, the new one)."""
+    """``noEffect``: effort without progress, by a wheel that trails ``other`` (the other
+    wheel's measured speed), as a dragged one does. ``effort`` is (lowest duty, speed
+    toward the setpoint, setpoint, ticks) of the reference; returns (tripped, the new one)."""
     effort_pwm, effort_speed, effort_setpoint, ticks = effort
     progress = measured if setpoint > 0.0 else -measured
     toward = setpoint != 0.0 and (applied_dir == C.HIGH) == (setpoint > 0.0)
@@ -75,7 +76,10 @@ def no_effect(applied_pwm: int, applied_dir: int, setpoint: float, measured: flo
         return False, (applied_pwm, progress, setpoint, 0)
     effort_pwm = min(effort_pwm, applied_pwm)
     shortfall = abs(measured) < mul(C.FAULT_EFFORT_SHORTFALL, abs(setpoint))
-    ticks = (ticks + 1) & 0xFF if shortfall and applied_pwm >= effort_pwm + C.FAULT_EFFORT_PWM else 0
+    other_progress = other if setpoint > 0.0 else -other
+    trails = progress < add(max(other_progress, 0.0), C.FAULT_EFFORT_LEAD)
+    ticks = ((ticks + 1) & 0xFF if shortfall and trails and applied_pwm >= effort_pwm + C.FAULT_EFFORT_PWM
+             else 0)
     return ticks >= C.FAULT_EFFORT_TICKS, (effort_pwm, effort_speed, effort_setpoint, ticks)
 
 
@@ -137,13 +141,14 @@ def at_limit(check: int, other_strains: bool, other_reverse: int, other_runaway:
 
 
 def check_wheel(delta: int, illegal: int, storm: int, applied_pwm: int, applied_dir: int,
-                setpoint: float, measured: float, stall_ticks: int, reverse_ticks: int,
+                setpoint: float, measured: float, other: float, stall_ticks: int, reverse_ticks: int,
                 runaway_ticks: int, effort: Effort, prev_measured: float
                 ) -> tuple[int, int, int, int, Effort]:
     """``checkWheel``: ``(verdict, stall ticks, reverse ticks, runaway ticks, effort
     reference)`` for one wheel over the interval that ended: WHEEL_OK, WHEEL_SUSPECT
     (hold the output), or a fault. A stall is a duty toward a non-zero setpoint without
-    a count (braking ends with none). A measured speed against the setpoint counts
+    a count (braking ends with none), FAULT_STALL_TICKS_TURNING ticks long for a wheel
+    turning round (``prev_measured`` against the setpoint). A measured speed against the setpoint counts
     toward a reversed encoder unless the wheel came FAULT_REVERSE_APPROACH closer to the
     setpoint since ``prev_measured`` (the speed the PID last ran on): a healthy wheel
     lagging a reversal of its setpoint slows toward it, a reversed encoder shows it
@@ -155,7 +160,8 @@ def check_wheel(delta: int, illegal: int, storm: int, applied_pwm: int, applied_
               and (applied_dir == C.HIGH) == (setpoint > 0.0))
     stalled = driven and delta == 0
     stall_ticks = (stall_ticks + 1) & 0xFF if stalled else 0
-    if stall_ticks >= C.FAULT_STALL_TICKS:
+    turning = prev_measured != 0.0 and (prev_measured > 0.0) != (setpoint > 0.0)
+    if stall_ticks >= (C.FAULT_STALL_TICKS_TURNING if turning else C.FAULT_STALL_TICKS):
         return WHEEL_STALLED, stall_ticks, reverse_ticks, runaway_ticks, effort
     approach = sub(measured, prev_measured) if setpoint > 0.0 else sub(prev_measured, measured)
     against = (abs(setpoint) >= C.FAULT_REVERSE_SPEED and abs(measured) >= C.FAULT_REVERSE_SPEED
@@ -167,7 +173,7 @@ def check_wheel(delta: int, illegal: int, storm: int, applied_pwm: int, applied_
     runaway_ticks = (runaway_ticks + 1) & 0xFF if running else 0
     if runaway_ticks >= C.FAULT_RUNAWAY_TICKS:
         return WHEEL_REVERSED, stall_ticks, reverse_ticks, runaway_ticks, effort
-    tripped, effort = no_effect(applied_pwm, applied_dir, setpoint, measured, effort)
+    tripped, effort = no_effect(applied_pwm, applied_dir, setpoint, measured, other, effort)
     if tripped:
         return WHEEL_NO_EFFECT, stall_ticks, reverse_ticks, runaway_ticks, effort
     verdict = WHEEL_SUSPECT if stalled or against else WHEEL_OK
@@ -199,12 +205,14 @@ def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_
     strain_l = straining(s.pwmL, s.dirL, s.setpointL, s.filtVelL)
     strain_r = straining(s.pwmR, s.dirR, s.setpointR, s.filtVelR)
     check_l, s.stallTicksL, s.reverseTicksL, s.runawayTicksL, effort_l = check_wheel(
-        delta_l, ill_l, s.stormTickL, s.pwmL, s.dirL, s.setpointL, s.filtVelL, s.stallTicksL,
+        delta_l, ill_l, s.stormTickL, s.pwmL, s.dirL, s.setpointL, s.filtVelL, s.filtVelR,
+        s.stallTicksL,
         s.reverseTicksL, s.runawayTicksL, (s.effortPwmL, s.effortSpeedL, s.effortSetpointL,
                                            s.effortTicksL), s.prevMeasL)
     s.effortPwmL, s.effortSpeedL, s.effortSetpointL, s.effortTicksL = effort_l
     check_r, s.stallTicksR, s.reverseTicksR, s.runawayTicksR, effort_r = check_wheel(
-        delta_r, ill_r, s.stormTickR, s.pwmR, s.dirR, s.setpointR, s.filtVelR, s.stallTicksR,
+        delta_r, ill_r, s.stormTickR, s.pwmR, s.dirR, s.setpointR, s.filtVelR, s.filtVelL,
+        s.stallTicksR,
         s.reverseTicksR, s.runawayTicksR, (s.effortPwmR, s.effortSpeedR, s.effortSetpointR,
                                            s.effortTicksR), s.prevMeasR)
     s.effortPwmR, s.effortSpeedR, s.effortSetpointR, s.effortTicksR = effort_r

@@ -144,11 +144,11 @@ static int arg_int(PyObject *o, int64_t *out) {
 
 static struct {
     double alpha, one_minus_alpha, cpr, two_pi, pid_out_max, pwm_scale, still_speed,
-        brake_done_speed, reverse_speed, reverse_approach, runaway_gain, effort_shortfall,
+        brake_done_speed, reverse_speed, reverse_approach, runaway_gain, effort_shortfall, effort_lead,
         overspeed_margin, overspeed_gain,
         pivot_start_speed,
         pivot_speed, rounding2;
-    int64_t control_period_ms, tx_credit_max, tx_credit_per_ms, stall_pwm, stall_ticks,
+    int64_t control_period_ms, tx_credit_max, tx_credit_per_ms, stall_pwm, stall_ticks, stall_ticks_turning,
         reverse_ticks, runaway_pwm, runaway_ticks, effort_pwm, effort_ticks, illegal_per_tick, still_ticks, pivot_ticks,
         hold_deadband, overspeed_pwm, overspeed_ticks,
         high, low, pivot_none, pivot_stopping, pivot_rotating, untrusted_l, untrusted_r;
@@ -219,7 +219,8 @@ typedef struct {
 } Effort;
 
 /* no_effect: whether it tripped; *e the new reference */
-static int no_effect(int64_t pwm, int64_t dir, double setpoint, double measured, Effort *e) {
+static int no_effect(int64_t pwm, int64_t dir, double setpoint, double measured, double other,
+                     Effort *e) {
     double progress = setpoint > 0.0 ? measured : -measured;
     int toward = setpoint != 0.0 && ((dir == K.high) == (setpoint > 0.0));
     if (!toward || setpoint != e->setpoint || progress > e->speed) {
@@ -232,7 +233,9 @@ static int no_effect(int64_t pwm, int64_t dir, double setpoint, double measured,
     if (pwm < e->pwm)
         e->pwm = pwm;
     int shortfall = fabs(measured) < f_mul(K.effort_shortfall, fabs(setpoint));
-    e->ticks = (shortfall && pwm >= e->pwm + K.effort_pwm) ? ((e->ticks + 1) & 0xFF) : 0;
+    double other_progress = setpoint > 0.0 ? other : -other;
+    int trails = progress < f_add(other_progress > 0.0 ? other_progress : 0.0, K.effort_lead);
+    e->ticks = (shortfall && trails && pwm >= e->pwm + K.effort_pwm) ? ((e->ticks + 1) & 0xFF) : 0;
     return e->ticks >= K.effort_ticks;
 }
 
@@ -272,14 +275,15 @@ static int overspeed_run(int over, double measured, double prev_measured, int64_
 /* check_wheel: WHEEL_OK, WHEEL_SUSPECT or WHEEL_FAULT (any fault: the Python tick
  * latches it) */
 static int check_wheel(int64_t delta, int64_t illegal, int64_t storm, int64_t pwm, int64_t dir,
-                       double setpoint, double measured, int64_t *stall, int64_t *reverse,
+                       double setpoint, double measured, double other, int64_t *stall, int64_t *reverse,
                        int64_t *runaway, Effort *e, double prev_measured) {
     if (storm || illegal >= K.illegal_per_tick)
         return WHEEL_FAULT;
     int driven = pwm >= K.stall_pwm && setpoint != 0.0 && ((dir == K.high) == (setpoint > 0.0));
     int stalled = driven && delta == 0;
     *stall = stalled ? ((*stall + 1) & 0xFF) : 0;
-    if (*stall >= K.stall_ticks)
+    int turning = prev_measured != 0.0 && ((prev_measured > 0.0) != (setpoint > 0.0));
+    if (*stall >= (turning ? K.stall_ticks_turning : K.stall_ticks))
         return WHEEL_FAULT;
     double approach = setpoint > 0.0 ? f_sub(measured, prev_measured) : f_sub(prev_measured, measured);
     int against = fabs(setpoint) >= K.reverse_speed && fabs(measured) >= K.reverse_speed
@@ -290,7 +294,7 @@ static int check_wheel(int64_t delta, int64_t illegal, int64_t storm, int64_t pw
     *runaway = runs_away(pwm, dir, setpoint, measured, prev_measured) ? ((*runaway + 1) & 0xFF) : 0;
     if (*runaway >= K.runaway_ticks)
         return WHEEL_FAULT;
-    if (no_effect(pwm, dir, setpoint, measured, e))
+    if (no_effect(pwm, dir, setpoint, measured, other, e))
         return WHEEL_FAULT;
     return (stalled || against) ? WHEEL_SUSPECT : WHEEL_OK;
 }
@@ -441,9 +445,9 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
         Effort el = { I(effortPwmL), I(effortTicksL), D(effortSpeedL), D(effortSetpointL) };
         Effort er = { I(effortPwmR), I(effortTicksR), D(effortSpeedR), D(effortSetpointR) };
         check_l = check_wheel(delta_l, ill_l, I(stormTickL), I(pwmL), I(dirL), D(setpointL),
-                              D(filtVelL), &stall_l, &rev_l, &run_l, &el, D(prevMeasL));
+                              D(filtVelL), D(filtVelR), &stall_l, &rev_l, &run_l, &el, D(prevMeasL));
         check_r = check_wheel(delta_r, ill_r, I(stormTickR), I(pwmR), I(dirR), D(setpointR),
-                              D(filtVelR), &stall_r, &rev_r, &run_r, &er, D(prevMeasR));
+                              D(filtVelR), D(filtVelL), &stall_r, &rev_r, &run_r, &er, D(prevMeasR));
         if (check_l == WHEEL_FAULT || check_r == WHEEL_FAULT)
             Py_RETURN_NONE;
         SETI(stallTicksL, stall_l); SETI(reverseTicksL, rev_l);
@@ -692,6 +696,7 @@ static PyObject *bind(PyObject *self, PyObject *args) {
           && const_double(consts, "FAULT_REVERSE_APPROACH", &k.reverse_approach)
           && const_double(consts, "FAULT_RUNAWAY_GAIN", &k.runaway_gain)
           && const_double(consts, "FAULT_EFFORT_SHORTFALL", &k.effort_shortfall)
+          && const_double(consts, "FAULT_EFFORT_LEAD", &k.effort_lead)
           && const_double(consts, "PIVOT_START_SPEED", &k.pivot_start_speed)
           && const_double(consts, "PIVOT_SPEED", &k.pivot_speed)
           && const_double(consts, "ROUNDING_2", &k.rounding2)
@@ -700,6 +705,7 @@ static PyObject *bind(PyObject *self, PyObject *args) {
           && const_int(consts, "TX_CREDIT_PER_MS", &k.tx_credit_per_ms)
           && const_int(consts, "FAULT_STALL_PWM", &k.stall_pwm)
           && const_int(consts, "FAULT_STALL_TICKS", &k.stall_ticks)
+          && const_int(consts, "FAULT_STALL_TICKS_TURNING", &k.stall_ticks_turning)
           && const_int(consts, "FAULT_REVERSE_TICKS", &k.reverse_ticks)
           && const_int(consts, "FAULT_RUNAWAY_PWM", &k.runaway_pwm)
           && const_int(consts, "FAULT_RUNAWAY_TICKS", &k.runaway_ticks)

@@ -1,0 +1,87 @@
+"""The motor rule (``noEffect``) and the stall rule (``checkWheel``) on the port, tick
+by tick. The motor rule: effort without progress is a
+dead motor only while the wheel trails the other one its way (or stands, when the other
+turns against it). A dead motor's wheel is only dragged along, so it never leads the
+wheel that drags it; a wheel that leads is pulled by its own motor, at its current limit
+on a grade (the closed-loop case: tests/sim/test_grade_false_alarms.py).
+
+Each case feeds ``no_effect`` the duty rising one step a tick toward a steady setpoint
+with the speed flat and short of it, as the current limit gives, and counts the ticks
+to its verdict.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from wcdrive.firmware import constants as C
+from wcdrive.firmware.control import WHEEL_STALLED, check_wheel, no_effect
+
+SETPOINT = 2.85   # rad/s toward which the duty rises
+
+
+def _ticks_to_trip(measured: float, other: float, setpoint: float = SETPOINT, ticks: int = 40) -> int | None:
+    """The tick at which the rule trips, the duty rising 2 a tick from 80, or None."""
+    direction = C.HIGH if setpoint > 0.0 else C.LOW
+    effort = (0, 0.0, 0.0, 0)
+    for k in range(ticks):
+        tripped, effort = no_effect(80 + 2 * k, direction, setpoint, measured, other, effort)
+        if tripped:
+            return k
+    return None
+
+
+@pytest.mark.parametrize(("measured", "other"), [(1.45, 1.6), (1.45, 1.45), (1.45, 1.0), (0.4, 0.0),
+                                                 (0.4, -0.5)])
+def test_a_wheel_that_trails_the_other_is_a_dead_motor(measured: float, other: float) -> None:
+    """Short of its setpoint, behind (or no further ahead than FAULT_EFFORT_LEAD of) the
+    other wheel its way, or of standing when the other one turns against it: tripped
+    once the duty rose FAULT_EFFORT_PWM and the effort count ran."""
+    assert measured < max(other, 0.0) + C.FAULT_EFFORT_LEAD
+    assert _ticks_to_trip(measured, other) is not None
+
+
+def test_a_wheel_standing_while_the_other_turns_against_it_is_a_dead_motor() -> None:
+    """A spin about a dead wheel: the other drives back at 2 rad/s, this one stands.
+    Measured against standing, not against the other's speed, it trails."""
+    assert _ticks_to_trip(0.05, -2.0) is not None
+
+
+@pytest.mark.parametrize("other", [0.9, 0.5, 0.05, -1.0])
+def test_a_wheel_that_leads_the_other_is_pulled_by_its_motor(other: float) -> None:
+    """At 1.45 rad/s, more than FAULT_EFFORT_LEAD ahead of the other wheel its way (or of
+    standing): its motor works, whatever the duty does."""
+    assert 1.45 >= max(other, 0.0) + C.FAULT_EFFORT_LEAD
+    assert _ticks_to_trip(1.45, other) is None
+
+
+def test_the_lead_is_taken_the_way_of_the_setpoint() -> None:
+    """Driven backwards the same: leading the other wheel backwards is pulling."""
+    assert _ticks_to_trip(-1.45, -0.05, setpoint=-SETPOINT) is None
+    assert _ticks_to_trip(-1.45, -1.6, setpoint=-SETPOINT) is not None
+
+
+def _ticks_to_stall(prev_measured: float, setpoint: float = -0.89, ticks: int = 10) -> int | None:
+    """The tick count at which a wheel driven at duty 31 toward ``setpoint``, without a
+    count, is a stall, the PID having last run on ``prev_measured``."""
+    direction = C.HIGH if setpoint > 0.0 else C.LOW
+    stall = 0
+    for k in range(ticks):
+        verdict, stall, _, _, _ = check_wheel(0, 0, 0, 31, direction, setpoint, 0.0, 0.0, stall, 0, 0,
+                                              (0, 0.0, 0.0, 0), prev_measured)
+        if verdict == WHEEL_STALLED:
+            return k + 1
+    return None
+
+
+@pytest.mark.parametrize("prev_measured", [0.0, -0.3, -1e-30])
+def test_a_wheel_standing_or_turning_its_way_without_counts_stalls_at_once(prev_measured: float) -> None:
+    assert _ticks_to_stall(prev_measured) == C.FAULT_STALL_TICKS
+
+
+@pytest.mark.parametrize("prev_measured", [0.02, 1e-30, 0.7])
+def test_a_wheel_turning_round_without_counts_stalls_later(prev_measured: float) -> None:
+    """Last seen against its setpoint, however slowly (the filter's residue keeps the
+    sign): FAULT_STALL_TICKS_TURNING ticks, and no more."""
+    assert C.FAULT_STALL_TICKS < C.FAULT_STALL_TICKS_TURNING
+    assert _ticks_to_stall(prev_measured) == C.FAULT_STALL_TICKS_TURNING
