@@ -23,14 +23,13 @@ from wcdrive.firmware.final_control import Firmware
 from wcdrive.protocol.codec import crc16, frame
 
 LENGTH = 63                     # bytes: WC_CMD_MAX_LEN, the longest line the board takes
-BITS = 8 * LENGTH
 
 
-def syndromes(check: Callable[[bytes], int]) -> np.ndarray:
-    """``check`` of every single-bit error of a ``LENGTH``-byte message."""
-    out = np.zeros(BITS, dtype=np.int64)
-    for k in range(BITS):
-        e = bytearray(LENGTH)
+def syndromes(check: Callable[[bytes], int], length: int = LENGTH) -> np.ndarray:
+    """``check`` of every single-bit error of a ``length``-byte message."""
+    out = np.zeros(8 * length, dtype=np.int64)
+    for k in range(8 * length):
+        e = bytearray(length)
         e[k // 8] = 0x80 >> (k % 8)
         out[k] = check(bytes(e))
     return out
@@ -44,12 +43,14 @@ def xor_checksum(data: bytes) -> int:
     return value
 
 
-def undetected(check: Callable[[bytes], int]) -> dict[str, int]:
-    """How many errors of each kind pass ``check`` (linear, zero on zeros)."""
-    s = syndromes(check)
+def undetected(check: Callable[[bytes], int], length: int = LENGTH) -> dict[str, int]:
+    """How many errors of each kind pass ``check`` (linear, zero on zeros) in a message
+    of ``length`` bytes, and so in every shorter one."""
+    s = syndromes(check, length)
+    bits = 8 * length
     out = {"1 bit": int(np.count_nonzero(s == 0))}
     pairs = s[:, None] ^ s[None, :]
-    upper = np.triu(np.ones((BITS, BITS), dtype=bool), 1)
+    upper = np.triu(np.ones((bits, bits), dtype=bool), 1)
     out["2 bits"] = int(np.count_nonzero((pairs == 0) & upper))
     # 3 bits i < j < k pass when s[k] == s[i] ^ s[j]: count them through a table of
     # where each syndrome value stands.
@@ -57,7 +58,7 @@ def undetected(check: Callable[[bytes], int]) -> dict[str, int]:
     for k, v in enumerate(s.tolist()):
         where.setdefault(v, []).append(k)
     three = 0
-    for i in range(BITS):
+    for i in range(bits):
         row = (s[i] ^ s[i + 1:]).tolist()
         for offset, v in enumerate(row):
             j = i + 1 + offset
@@ -65,8 +66,8 @@ def undetected(check: Callable[[bytes], int]) -> dict[str, int]:
     out["3 bits"] = three
     # Bursts: every non-zero error inside a window of 16 bits, at every position.
     bursts = 0
-    for start in range(BITS):
-        width = min(16, BITS - start)
+    for start in range(bits):
+        width = min(16, bits - start)
         table = np.zeros(1 << width, dtype=np.int64)
         for j in range(width):
             table[1 << j: 1 << (j + 1)] = table[: 1 << j] ^ s[start + j]

@@ -51,6 +51,33 @@ def frame(command: bytes, seq: int) -> bytes:
     return b"$" + inner + b"*%04X\n" % crc16(inner)
 
 
+#: The line counter of a protocol v4 board line wraps at this.
+LINE_COUNTER_WRAP = 256
+
+
+def board_frame(text: bytes, counter: int) -> bytes:
+    """A protocol v4 board line: ``<text>#<NN>*<CCCC>\r\n``, NN the line counter
+    (0..255, two upper-case hex digits, one more for each line the board sends, wrapping)
+    and CCCC the CRC-16/XMODEM of everything before the ``*``, as a v3 frame's. The text
+    stays first, so that the line reads as before in a terminal; 8 bytes more a line."""
+    if not 0 <= counter < LINE_COUNTER_WRAP:
+        raise ValueError(f"line counter {counter} is outside 0..{LINE_COUNTER_WRAP - 1}")
+    inner = text + b"#%02X" % counter
+    return inner + b"*%04X\r\n" % crc16(inner)
+
+
+_BOARD_FRAME = re.compile(rb"(.*)#([0-9A-F]{2})\*([0-9A-F]{4})", re.DOTALL)
+
+
+def board_unframe(line: bytes) -> tuple[bytes, int] | None:
+    """``(text, counter)`` of a v4 board line without its ``\r\n``, or None when it is
+    not one or its CRC is wrong: a line the host must not believe."""
+    m = _BOARD_FRAME.fullmatch(line)
+    if m is None or crc16(line[:m.start(3) - 1]) != int(m[3], 16):
+        return None
+    return m[1], int(m[2], 16)
+
+
 HELLO = b"hello\n"
 ESTOP = b"estop\n"
 RESET = b"reset\n"
