@@ -38,6 +38,7 @@ import json
 import math
 import sys
 import time
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -321,26 +322,46 @@ def _cell(rows: list[Row], backend: str, grade: str, direction: str) -> Row | No
                  and r.start_mps == 1.0 and r.stop == "command"), None)
 
 
+def _measure(job: tuple[Grade, str, float, str, float, str, bool, str | None]) -> Figures:
+    return measure(*job)
+
+
+def _top_speed(job: tuple[Grade, str, str, float, str | None]) -> tuple[float, float, int | None]:
+    return top_speed(*job)
+
+
 def run(backend: str, chosen: list[Grade], speeds: tuple[float, ...], parked_s: float, quick: bool,
-        elf: str | None = None, log: bool = True) -> tuple[list[Row], list[TopSpeed]]:
+        elf: str | None = None, log: bool = True, jobs: int = 1) -> tuple[list[Row], list[TopSpeed]]:
     """The rows and the top-speed lines on ``backend`` (``quick``: on a grade, facing
-    downhill only); ``log`` prints each row's drift to stderr as it is measured."""
+    downhill only), the runs spread over ``jobs`` processes; ``log`` prints each row's
+    drift to stderr."""
+    cells = [(grade, direction, speed, stop) for grade in chosen
+             for direction in (("down",) if quick and grade.deg else grade.directions())
+             for speed in speeds for stop in STOPS]
+    brakes = (False, True) if HAS_BRAKE else (False,)
+    runs = [(g, d, v, s, parked_s, backend, b, elf) for g, d, v, s in cells for b in brakes]
+    climbs = [(g, d, backend, TOP_S, elf) for g in chosen
+              for d in (("up",) if g.deg == 0.0 else ("up", "down"))]
+    if jobs > 1:
+        with ProcessPoolExecutor(max_workers=jobs) as pool:
+            measured = list(pool.map(_measure, runs))
+            climbed = list(pool.map(_top_speed, climbs))
+    else:
+        measured = [_measure(job) for job in runs]
+        climbed = [_top_speed(job) for job in climbs]
     rows: list[Row] = []
+    for k, (grade, direction, speed, stop) in enumerate(cells):
+        plain = measured[k * len(brakes)]
+        braked = measured[k * len(brakes) + 1] if HAS_BRAKE else None
+        rows.append(Row(backend, grade.label, grade.deg, direction, speed, stop, plain, braked))
+        if log:
+            print(f"  {backend} {grade.label} {direction} {speed:g} m/s {stop}: "
+                  f"{_drift(plain, parked_s)} ({plain.wall_s:.1f} s)", file=sys.stderr, flush=True)
     tops: list[TopSpeed] = []
+    speeds_of = iter(climbed)
     for grade in chosen:
-        for direction in ("down",) if quick and grade.deg else grade.directions():
-            for speed in speeds:
-                for stop in STOPS:
-                    plain = measure(grade, direction, speed, stop, parked_s, backend, False, elf)
-                    braked = measure(grade, direction, speed, stop, parked_s, backend, True, elf) \
-                        if HAS_BRAKE else None
-                    rows.append(Row(backend, grade.label, grade.deg, direction, speed, stop, plain, braked))
-                    if log:
-                        print(f"  {backend} {grade.label} {direction} {speed:g} m/s {stop}: "
-                              f"{_drift(plain, parked_s)} ({plain.wall_s:.1f} s)", file=sys.stderr,
-                              flush=True)
-        up = top_speed(grade, "up", backend, TOP_S, elf)
-        down = up if grade.deg == 0.0 else top_speed(grade, "down", backend, TOP_S, elf)
+        up = next(speeds_of)
+        down = up if grade.deg == 0.0 else next(speeds_of)
         counts = [d for _, _, d in ((up,) if grade.deg == 0.0 else (up, down)) if d is not None]
         diffs = sum(counts) if counts else None
         tops.append(TopSpeed(backend, grade.label, TOP_S, *up[:2], *down[:2], diffs))
@@ -357,6 +378,7 @@ def main(argv: list[str] | None = None) -> int:
                     help="s parked after the stop (default 60; quick 10)")
     ap.add_argument("--elf", help="firmware ELF for the simavr backend (default: build the bundled one)")
     ap.add_argument("--json", action="store_true", help="print the rows as JSON")
+    ap.add_argument("--jobs", type=int, default=1, help="processes to spread the runs over (default 1)")
     args = ap.parse_args(argv)
     parked = args.parked if args.parked is not None else (10.0 if args.quick else 60.0)
     every = grades()
@@ -365,7 +387,7 @@ def main(argv: list[str] | None = None) -> int:
     rows: list[Row] = []
     tops: list[TopSpeed] = []
     for backend in ("port", "simavr") if args.backend == "both" else (args.backend,):
-        got = run(backend, chosen, speeds, parked, args.quick, args.elf, log=not args.json)
+        got = run(backend, chosen, speeds, parked, args.quick, args.elf, log=not args.json, jobs=args.jobs)
         rows += got[0]
         tops += got[1]
     if args.json:
