@@ -3,7 +3,7 @@
 - ``default``: fast, for development and ``bash scripts/test.sh`` on a person's
   machine; the differential suite runs 4 traces of 1.5 s.
 - ``ci``: thorough, what ``scripts/test.sh`` runs with ``CI=true``: 200 examples a
-  test, the differential suite 2 x 80 traces of 5 s.
+  test, the differential suite 2 x 60 traces of 5 s.
 - ``explore``: as thorough, with fresh random examples each run and hypothesis'
   example database, to look for new failures (docs/testing.md).
 

@@ -1,6 +1,6 @@
 """The differential proof: the port against the compiled firmware in simavr, on
 traces hypothesis generates. The ``ci`` profile runs
-2 x 80 traces of 5 simulated seconds (800 s; the summary line of a test run gives
+2 x 60 traces of 5 simulated seconds (600 s; the summary line of a test run gives
 the total over every lock-step comparison); the default profile a few short ones. The
 long run, outside the test command (it took 29 CPU minutes at 2 x 200):
 ``wcdrive verify --traces 400 --duration 5``."""
@@ -22,7 +22,7 @@ from wcdrive.testing.strategies import traces
 pytestmark = pytest.mark.simavr
 
 DURATION = 5.0 if thorough() else 1.5
-EXAMPLES = 80 if thorough() else 4
+EXAMPLES = 60 if thorough() else 4
 
 
 def _assert_same(trace: Trace, elf) -> None:
