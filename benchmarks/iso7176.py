@@ -39,6 +39,7 @@ import math
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
+from contextlib import nullcontext
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -322,14 +323,6 @@ def _cell(rows: list[Row], backend: str, grade: str, direction: str) -> Row | No
                  and r.start_mps == 1.0 and r.stop == "command"), None)
 
 
-def _measure(job: tuple[Grade, str, float, str, float, str, bool, str | None]) -> Figures:
-    return measure(*job)
-
-
-def _top_speed(job: tuple[Grade, str, str, float, str | None]) -> tuple[float, float, int | None]:
-    return top_speed(*job)
-
-
 def run(backend: str, chosen: list[Grade], speeds: tuple[float, ...], parked_s: float, quick: bool,
         elf: str | None = None, log: bool = True, jobs: int = 1) -> tuple[list[Row], list[TopSpeed]]:
     """The rows and the top-speed lines on ``backend`` (``quick``: on a grade, facing
@@ -342,13 +335,10 @@ def run(backend: str, chosen: list[Grade], speeds: tuple[float, ...], parked_s: 
     runs = [(g, d, v, s, parked_s, backend, b, elf) for g, d, v, s in cells for b in brakes]
     climbs = [(g, d, backend, TOP_S, elf) for g in chosen
               for d in (("up",) if g.deg == 0.0 else ("up", "down"))]
-    if jobs > 1:
-        with ProcessPoolExecutor(max_workers=jobs) as pool:
-            measured = list(pool.map(_measure, runs))
-            climbed = list(pool.map(_top_speed, climbs))
-    else:
-        measured = [_measure(job) for job in runs]
-        climbed = [_top_speed(job) for job in climbs]
+    with ProcessPoolExecutor(max_workers=jobs) if jobs > 1 else nullcontext() as pool:
+        each = map if pool is None else pool.map
+        measured = list(each(measure, *zip(*runs, strict=True)))
+        climbed = list(each(top_speed, *zip(*climbs, strict=True)))
     rows: list[Row] = []
     for k, (grade, direction, speed, stop) in enumerate(cells):
         plain = measured[k * len(brakes)]
