@@ -78,9 +78,10 @@ def test_a_turn_while_climbing_latches_no_fault(tmp_path: Path) -> None:
     assert not alarms(r)
 
 
-TURN_ACROSS = TURN_CLIMBING.replace("slope_deg = 4.0\ndownhill_heading_deg = 180.0",
-                                    "slope_deg = 0.5998898145857104\ndownhill_heading_deg = 0.0\n"
-                                    "[chair]\noccupant_mass = 150.0\nbattery_voltage = 21.0")
+TURN_ACROSS = TURN_CLIMBING.replace("duration = 3.0", "duration = 5.0", 1).replace(
+    "slope_deg = 4.0\ndownhill_heading_deg = 180.0",
+    "slope_deg = 0.5998898145857104\ndownhill_heading_deg = 0.0\n"
+    "[chair]\noccupant_mass = 150.0\nbattery_voltage = 21.0")
 
 
 def test_a_wheel_turning_round_on_a_grade_is_no_stall(tmp_path: Path) -> None:
@@ -89,6 +90,6 @@ def test_a_wheel_turning_round_on_a_grade_is_no_stall(tmp_path: Path) -> None:
     stands two ticks without a count while its duty builds; ENC_STALL_L latched
     (``checkWheel``: a wheel turning round has FAULT_STALL_TICKS_TURNING ticks)."""
     path = tmp_path / "across.toml"
-    path.write_text(TURN_ACROSS.replace("duration = 3.0", "duration = 5.0", 1))
+    path.write_text(TURN_ACROSS)
     r = runner.run(scenario.load(str(path)))
     assert not alarms(r)

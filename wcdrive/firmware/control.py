@@ -148,8 +148,8 @@ def check_wheel(delta: int, illegal: int, storm: int, applied_pwm: int, applied_
     reference)`` for one wheel over the interval that ended: WHEEL_OK, WHEEL_SUSPECT
     (hold the output), or a fault. A stall is a duty toward a non-zero setpoint without
     a count (braking ends with none), FAULT_STALL_TICKS_TURNING ticks long for a wheel
-    turning round (``prev_measured`` against the setpoint). A measured speed against the setpoint counts
-    toward a reversed encoder unless the wheel came FAULT_REVERSE_APPROACH closer to the
+    turning round (``prev_measured`` against the setpoint). A measured speed against the
+    setpoint counts toward a reversed encoder unless the wheel came FAULT_REVERSE_APPROACH closer to the
     setpoint since ``prev_measured`` (the speed the PID last ran on): a healthy wheel
     lagging a reversal of its setpoint slows toward it, a reversed encoder shows it
     moving away. A runaway (``runs_away``) for FAULT_RUNAWAY_TICKS ticks in a row is a
@@ -206,15 +206,13 @@ def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_
     strain_r = straining(s.pwmR, s.dirR, s.setpointR, s.filtVelR)
     check_l, s.stallTicksL, s.reverseTicksL, s.runawayTicksL, effort_l = check_wheel(
         delta_l, ill_l, s.stormTickL, s.pwmL, s.dirL, s.setpointL, s.filtVelL, s.filtVelR,
-        s.stallTicksL,
-        s.reverseTicksL, s.runawayTicksL, (s.effortPwmL, s.effortSpeedL, s.effortSetpointL,
-                                           s.effortTicksL), s.prevMeasL)
+        s.stallTicksL, s.reverseTicksL, s.runawayTicksL,
+        (s.effortPwmL, s.effortSpeedL, s.effortSetpointL, s.effortTicksL), s.prevMeasL)
     s.effortPwmL, s.effortSpeedL, s.effortSetpointL, s.effortTicksL = effort_l
     check_r, s.stallTicksR, s.reverseTicksR, s.runawayTicksR, effort_r = check_wheel(
         delta_r, ill_r, s.stormTickR, s.pwmR, s.dirR, s.setpointR, s.filtVelR, s.filtVelL,
-        s.stallTicksR,
-        s.reverseTicksR, s.runawayTicksR, (s.effortPwmR, s.effortSpeedR, s.effortSetpointR,
-                                           s.effortTicksR), s.prevMeasR)
+        s.stallTicksR, s.reverseTicksR, s.runawayTicksR,
+        (s.effortPwmR, s.effortSpeedR, s.effortSetpointR, s.effortTicksR), s.prevMeasR)
     s.effortPwmR, s.effortSpeedR, s.effortSetpointR, s.effortTicksR = effort_r
     # Driving only: a held wheel that runs away is a fault (a reversed encoder turns the
     # hold into positive feedback), whatever the other wheel does.
