@@ -9,13 +9,16 @@
 #define WC_BAUD 115200UL
 #define WC_CMD_MAX_LEN 63          // longest command (bytes before its terminator)
 #define WC_ERR_LINES_PER_TICK 3    // commands answered per 50 ms window (ERR, ACK/NAK, data); the rest are counted
-#define WC_PROTOCOL_VERSION 3      // sent in the HELLO reply
-#define WC_FIRMWARE_VERSION "3.0.0" // final_control's version, sent in the HELLO reply
+#define WC_PROTOCOL_VERSION 4      // sent in the HELLO reply to hello:4: every line the board sends is framed
+#define WC_PROTOCOL_VERSION_PLAIN 3 // sent in the HELLO reply to a plain hello: the board's lines stay unframed, as in v3
+#define WC_FIRMWARE_VERSION "4.0.0" // final_control's version, sent in the HELLO reply
 #define WC_SEQ_MAX 65535UL         // largest sequence number of a v3 frame
 #define WC_NUMBER_MAX_DIGITS 24    // most digits of a number before its exponent (leading zeros count): ERR:number past it
 #define WC_NUMBER_MAX_EXP_DIGITS 2 // most digits of a number's exponent: ERR:range past it
 #define WC_TX_CREDIT_MAX 480       // output budget: bytes the board may queue at once (its TX ring holds 511; 31 are kept for the BOOT line)
-#define WC_TX_CREDIT_PER_MS 8      // output budget: bytes added per millisecond between control ticks (the UART sends 10.7 a ms)
+#define WC_TX_CREDIT_PER_MS 10     // output budget: bytes added per millisecond between control ticks (the UART sends 10.7 a ms)
+#define WC_TX_LINE_MAX 136         // bytes of the longest line the board sends, its v4 suffix and line end included (LineBuffer's buffer)
+#define WC_LINE_COUNTER_WRAP 256   // a v4 board line's counter (#NN) counts the framed lines sent, modulo this
 
 // ---- Timing ----------------------------------------------------------------
 #define WC_CONTROL_PERIOD_MS 50UL  // control tick and feedback period

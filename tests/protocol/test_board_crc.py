@@ -13,11 +13,13 @@ import numpy as np
 import pytest
 
 from tests.protocol.test_crc import undetected, xor_checksum
+from wcdrive.firmware import constants as C
 from wcdrive.protocol.codec import LINE_COUNTER_WRAP, board_frame, board_unframe, crc16
 
-#: bytes: the board's line buffer (LineBuffer::buf_), the longest line it can send; the
-#: CRC covers less (not its ``*CCCC\r\n``), and the proof at this length covers that.
-LENGTH = 112
+#: bytes: the board's line buffer (LineBuffer::buf_, ``TX_LINE_MAX``), the longest line it
+#: can send; the CRC covers less (not its ``*CCCC\r\n``), and the proof at this length
+#: covers that.
+LENGTH = C.TX_LINE_MAX
 
 TLM = b"TLM:4294967295,4294967295,4294967295,65535,65535,65535,255,255,255,511,65535,65535,8191"
 ENC = b"ENC:-2147483648,2147483647,VEL:-17.59,17.59,MODE:CMDVEL"

@@ -14,6 +14,7 @@ from wcdrive.boards.simavr.virtual_mega import VirtualMega
 from wcdrive.firmware import constants as C
 from wcdrive.firmware.final_control import Firmware
 from wcdrive.protocol import spec as protocol_spec
+from wcdrive.protocol.codec import crc16
 
 VECTORS_FILE = Path(__file__).resolve().parents[2] / "protocol" / "vectors.toml"
 VECTORS = tomllib.loads(VECTORS_FILE.read_text())["vector"]
@@ -32,9 +33,12 @@ def test_python_constants_match_the_spec() -> None:
 
 
 def _expected(reply: list[str]) -> list[str]:
-    """A vector's reply lines with {version} and {build_id} filled in."""
-    return [line.replace("{version}", C.FIRMWARE_VERSION).replace("{build_id}", C.BUILD_ID)
-            for line in reply]
+    """A vector's reply lines with {version} and {build_id} filled in, then {crc}: the
+    CRC of a v4 line up to its '*'."""
+    lines = [line.replace("{version}", C.FIRMWARE_VERSION).replace("{build_id}", C.BUILD_ID)
+             for line in reply]
+    return [line.replace("*{crc}", f"*{crc16(line.partition('*')[0].encode()):04X}")
+            for line in lines]
 
 
 def _check(v: dict, reply_lines: list[str], mode: int, right: float, left: float,

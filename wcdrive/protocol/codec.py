@@ -23,6 +23,7 @@ MAX_ANGULAR = real("MAX_ANGULAR")
 MAX_WHEEL = real("MAX_WHEEL_SPEED")
 MAX_LINE = 256
 SEQ_MAX = integer("SEQ_MAX")
+PROTOCOL_VERSION_PLAIN = integer("PROTOCOL_VERSION_PLAIN")
 
 
 def _finite(name: str, value: float, limit: float) -> float:
@@ -52,7 +53,7 @@ def frame(command: bytes, seq: int) -> bytes:
 
 
 #: The line counter of a protocol v4 board line wraps at this.
-LINE_COUNTER_WRAP = 256
+LINE_COUNTER_WRAP = integer("LINE_COUNTER_WRAP")
 
 
 def board_frame(text: bytes, counter: int) -> bytes:
@@ -67,15 +68,26 @@ def board_frame(text: bytes, counter: int) -> bytes:
 
 
 _BOARD_FRAME = re.compile(rb"(.*)#([0-9A-F]{2})\*([0-9A-F]{4})", re.DOTALL)
+#: How a line that claims to be a v4 frame ends (no line of v3 has ``*`` or ``#``).
+_FRAME_END = re.compile(rb"[#*][^#*]{0,6}\Z")
+
+
+def _split_frame(line: bytes) -> tuple[bytes, int, bool] | None:
+    """``(text, counter, CRC good)`` of a line without its ``\r\n`` that has the shape
+    of a v4 board line, else None."""
+    m = _BOARD_FRAME.fullmatch(line) if _FRAME_END.search(line) else None
+    if m is None:
+        return None
+    return m[1], int(m[2], 16), crc16(line[:m.start(3) - 1]) == int(m[3], 16)
 
 
 def board_unframe(line: bytes) -> tuple[bytes, int] | None:
     """``(text, counter)`` of a v4 board line without its ``\r\n``, or None when it is
     not one or its CRC is wrong: a line the host must not believe."""
-    m = _BOARD_FRAME.fullmatch(line)
-    if m is None or crc16(line[:m.start(3) - 1]) != int(m[3], 16):
+    split = _split_frame(line)
+    if split is None or not split[2]:
         return None
-    return m[1], int(m[2], 16)
+    return split[0], split[1]
 
 
 HELLO = b"hello\n"
@@ -201,6 +213,17 @@ class Unknown:
     line: bytes
 
 
+@dataclass(frozen=True, slots=True)
+class Corrupt:
+    """A board line the host must not believe: a v4 frame whose CRC is wrong, or, once
+    the board frames its lines, one that is not a frame. ``spliced``: its frame ends
+    well but its counter is not the one expected next, as when the head of one line
+    met the tail of a later one (bytes lost between them)."""
+
+    line: bytes
+    spliced: bool = False
+
+
 #: The fault bits of ``TLM``'s last field and of ``EVT:FAULT,<name>``, bit 0 first
 #: (protocol/PROTOCOL.md, "Faults").
 FAULT_NAMES = ("ENC_STALL_L", "ENC_STALL_R", "ENC_REVERSED_L", "ENC_REVERSED_R",
@@ -288,6 +311,11 @@ class Hello:
     firmware_version: str = ""
     build_id: str = ""
 
+    @property
+    def lines_framed(self) -> bool:
+        """The board frames its lines from this one on (protocol v4 and later)."""
+        return self.version > PROTOCOL_VERSION_PLAIN
+
 
 @dataclass(frozen=True, slots=True)
 class Param:
@@ -313,7 +341,7 @@ class Nak:
 
 
 Message = (Feedback | ExtendedTelemetry | Error | Event | Boot | Hello | Param | Ack | Nak
-           | Unknown)
+           | Unknown | Corrupt)
 
 _NUMBER = rb"-?(?:\d+(?:\.\d*)?|nan|inf|ovf)"
 _FEEDBACK = re.compile(
@@ -338,7 +366,17 @@ _NAK = re.compile(rb"NAK:(\d+),(\w+)")
 
 
 def parse_line(line: bytes) -> Message:
-    """One line without its ``\\r\\n``."""
+    """One line without its ``\\r\\n``: a v4 frame's text when its CRC holds
+    (``Corrupt`` when not), else the line as it is."""
+    if _FRAME_END.search(line):
+        unframed = board_unframe(line)
+        if unframed is None:
+            return Corrupt(line)
+        line = unframed[0]
+    return _parse_text(line)
+
+
+def _parse_text(line: bytes) -> Message:
     m = _FEEDBACK.fullmatch(line)
     if m:
         left, right, vel_left, vel_right, mode = m.groups()
@@ -367,14 +405,51 @@ def parse_line(line: bytes) -> Message:
     return Unknown(line)
 
 
+@dataclass(slots=True)
+class LineStats:
+    """What a ``LineDecoder`` made of the board's lines: ``good`` (believed: unframed
+    before v4, v4 frames with a good CRC), ``bad_crc`` (``Corrupt``, not spliced),
+    ``spliced`` (``Corrupt`` with a counter out of turn) and ``lost`` (framed lines the
+    counter says were sent but never came, less the bad and spliced lines met in the
+    gap). With framed lines only, ``good + bad_crc + spliced + lost`` is the number of
+    lines the board sent, as long as no run of 256 lines or more went missing at once
+    and no line was cut in two."""
+
+    good: int = 0
+    bad_crc: int = 0
+    spliced: int = 0
+    lost: int = 0
+
+    @property
+    def total(self) -> int:
+        """``good + bad_crc + spliced + lost``."""
+        return self.good + self.bad_crc + self.spliced + self.lost
+
+
 class LineDecoder:
     """Incremental: feed bytes as they come, get the messages of complete lines.
     A line longer than ``MAX_LINE`` bytes is dropped (as ``Unknown``) to bound memory.
     A board that resets while it sends a line starts its ``BOOT:`` line where the cut
-    line stopped: the cut part is an ``Unknown``, the ``BOOT:`` line a ``Boot``."""
+    line stopped: the cut part is an ``Unknown``, the ``BOOT:`` line a ``Boot``.
 
-    def __init__(self) -> None:
+    Protocol v4: a framed line is unframed, or is a ``Corrupt`` when its CRC is wrong,
+    and its counter is followed (``stats``). Once ``framed`` is set (the board answered
+    ``hello:4``) every line must be a frame and any other is a ``Corrupt``, but for a
+    ``BOOT:`` line: the board has reset and frames nothing until the next hello, so
+    ``framed`` is cleared."""
+
+    def __init__(self, stats: LineStats | None = None) -> None:
         self._buf = bytearray()
+        self.stats = stats if stats is not None else LineStats()
+        self.framed = False
+        self._expected: int | None = None     # the counter of the next framed line
+        self._bad_since_good = 0              # bad lines since the last good framed one
+
+    def resync(self) -> None:
+        """Forgets the line counter: the next framed line starts the count (the board
+        has reset, or the link was reopened)."""
+        self._expected = None
+        self._bad_since_good = 0
 
     def feed(self, data: bytes) -> list[Message]:
         """Appends ``data``; returns the messages of the lines it completed (each ends
@@ -382,20 +457,59 @@ class LineDecoder:
         if (not self._buf and type(data) is bytes and data and data.find(b"\n") == len(data) - 1
                 and data.find(b"BOOT:", 1) < 0):
             # one whole line, nothing held: what the loop below makes of it, without the copies
-            return [parse_line(data[:-1].rstrip(b"\r"))]
+            return [self._line(data[:-1].rstrip(b"\r"))]
         self._buf += data
         out: list[Message] = []
         while True:
             i = self._buf.find(b"\n")
             if i < 0:
                 if len(self._buf) > MAX_LINE:
-                    out.append(Unknown(bytes(self._buf)))
+                    out.append(self._bad(Unknown(bytes(self._buf))))
                     self._buf.clear()
                 return out
             line = bytes(self._buf[:i]).rstrip(b"\r")
             del self._buf[:i + 1]
             boot = line.find(b"BOOT:", 1)
             if boot > 0:
-                out.append(Unknown(line[:boot]))
+                out.append(self._bad(Unknown(line[:boot])))
                 line = line[boot:]
-            out.append(parse_line(line))
+            out.append(self._line(line))
+
+    def _line(self, line: bytes) -> Message:
+        """One whole line: unframed, checked and counted."""
+        stats = self.stats
+        split = _split_frame(line)
+        if split is None:
+            msg = _parse_text(line)
+            if isinstance(msg, Boot):
+                self.framed = False
+                self.resync()
+            elif self.framed:
+                return self._bad(Corrupt(line))
+            stats.good += 1
+            return msg
+        text, counter, crc_good = split
+        if not crc_good:
+            spliced = self._expected is not None and counter != self._expected
+            self._bad_since_good += 1
+            if spliced:
+                stats.spliced += 1
+            else:
+                stats.bad_crc += 1
+            return Corrupt(line, spliced)
+        if self._expected is not None:
+            gap = (counter - self._expected) % LINE_COUNTER_WRAP
+            stats.lost += max(0, gap - self._bad_since_good)
+        self._expected = (counter + 1) % LINE_COUNTER_WRAP
+        self._bad_since_good = 0
+        stats.good += 1
+        return _parse_text(text)
+
+    def _bad(self, msg: Unknown | Corrupt) -> Message:
+        """A line that is no frame (cut short, overlong): a ``Corrupt`` once lines are
+        framed."""
+        if not self.framed:
+            return msg
+        self._bad_since_good += 1
+        self.stats.bad_crc += 1
+        return Corrupt(msg.line)
