@@ -256,7 +256,7 @@ def param_command(draw: Draw) -> bytes:
 
 
 def protocol_v2_command(draw: Draw) -> bytes:
-    """``hello``, ``estop``, ``reset``, a ``get:``/``set:`` (``param_command``), ``save``
+    """``hello`` or ``hello:4``, ``estop``, ``reset``, a ``get:``/``set:`` (``param_command``), ``save``
     or ``defaults``. (``RandomDraw``'s 0..11 takes 4 bits, as 0..9 did: a seed's trace
     changes only where it now draws 10 or 11.)"""
     kind = draw.integer(0, 11 if getattr(draw, "eeprom_commands", True) else 9)
@@ -265,7 +265,7 @@ def protocol_v2_command(draw: Draw) -> bytes:
     if kind == 11:
         return b"defaults"
     if kind == 0:
-        return b"hello"
+        return b"hello:4" if draw.boolean(0.5) else b"hello"
     if kind == 1:
         return b"estop"
     if kind <= 3:
@@ -460,7 +460,7 @@ def generate_trace(draw: Draw, duration: float) -> Trace:
 
 def flood(draw: Draw, serial: list[tuple[float, bytes]], duration: float
           ) -> tuple[list[tuple[float, bytes]], dict[str, EdgeTrain]]:
-    """The trace's last second or so a flood: ``hello``, then 100 to 250 long ``set:``
+    """The trace's last second or so a flood: ``hello:4``, then 100 to 250 long ``set:``
     and ``get:`` frames back to back on the wire, while both wheels turn at 25,000 edges/s
     or more from the start. loop() falls behind now and then (a tick formats its lines
     while a ``set:`` is parsed and answered) and the RX ring overflows: bytes lost,
@@ -468,7 +468,7 @@ def flood(draw: Draw, serial: list[tuple[float, bytes]], duration: float
     the interrupts got faster. Returns the serial writes before the flood and
     the flood, and the encoders' motion."""
     start = duration - draw.real(0.9, 1.4)
-    frames = [frame(b"hello", draw.integer(0, SEQ_MAX))]
+    frames = [frame(b"hello:4", draw.integer(0, SEQ_MAX))]
     floats = [p for p in PARAMS if not p.integer]
     for _ in range(draw.integer(100, 250)):
         p = draw.choice(floats)

@@ -272,6 +272,8 @@ uint8_t effortTicksL = 0, effortTicksR = 0;   // consecutive ticks of that effor
 float effortSpeedL = 0.0f, effortSpeedR = 0.0f;
 float effortSetpointL = 0.0f, effortSetpointR = 0.0f;
 bool tlmEnabled = false;                    // after "hello": TLM lines, and v3 frames only
+bool linesFramed = false;                   // after "hello:4": every line framed (protocol v4)
+uint8_t lineCounter = 0;                    // the next framed line's counter (#NN)
 bool unframedLine = false;                  // the line being parsed is not a v3 frame
 uint16_t lastSeq = 0;                       // sequence number of the last framed line
 uint32_t rxCount = 0;                       // bytes received (through processByte)
@@ -401,7 +403,10 @@ class LineBuffer : public Print {
   // control tick at WC_TX_CREDIT_PER_MS per elapsed millisecond, less than the UART
   // drains, so the TX ring never fills and which lines go is decided by the budget
   // alone (the port computes the same). The ring check stays as a second guard.
+  // After hello:4 the line is framed first (frameLine); the counter counts the lines
+  // that go.
   void send() {
+    if (linesFramed) frameLine();
     if (len_ > txCredit) {
       txDropped++;
     } else if (wcSerial.availableForWrite() < (int)len_) {
@@ -409,12 +414,33 @@ class LineBuffer : public Print {
     } else {
       txCredit -= len_;
       wcSerial.write(buf_, len_);
+      if (linesFramed) lineCounter++;
     }
     len_ = 0;
   }
 
  private:
-  uint8_t buf_[112];
+  // Protocol v4: the line's "\r\n" becomes "#NN*CCCC\r\n", NN the line counter and
+  // CCCC the CRC-16/XMODEM of everything before the '*' (protocol/PROTOCOL.md).
+  void frameLine() {
+    len_ -= 2;
+    write('#');
+    writeHex(lineCounter, 2);
+    uint16_t crc = 0;
+    for (uint8_t i = 0; i < len_; i++) crc = _crc_xmodem_update(crc, buf_[i]);
+    write('*');
+    writeHex(crc, 4);
+    write('\r');
+    write('\n');
+  }
+  void writeHex(uint16_t v, uint8_t digits) {
+    while (digits--) {
+      uint8_t d = (v >> (4 * digits)) & 0xF;
+      write((uint8_t)(d < 10 ? '0' + d : 'A' - 10 + d));
+    }
+  }
+
+  uint8_t buf_[WC_TX_LINE_MAX];
   uint8_t len_ = 0;
 };
 
@@ -1072,7 +1098,7 @@ static void answer(ParseResult r, int32_t seq, uint8_t data) {
   errLinesThisTick++;
   if (r == PARSE_OK && data == DATA_HELLO) {
     line.print(F("HELLO:"));
-    line.print(WC_PROTOCOL_VERSION);
+    line.print(linesFramed ? WC_PROTOCOL_VERSION : WC_PROTOCOL_VERSION_PLAIN);
     line.print(F(",final_control," WC_FIRMWARE_VERSION ","));
     line.println(F(WC_BUILD_ID));
     line.send();
@@ -1532,8 +1558,9 @@ static ParseResult dispatch(uint8_t& data) {
   if (cmdBuf[0] == 'r' && cmdBuf[1] != 'e') return parseWheel();
   if (cmdLen >= 4 && cmdBuf[0] == 'p' && cmdBuf[1] == 'p' && cmdBuf[2] == 'm') return parsePpm();
   if (unframedLine) return ERR_UNFRAMED;              // after hello, nothing else unframed
-  if (strcmp_P(cmdBuf, PSTR("hello")) == 0) {
+  if (strcmp_P(cmdBuf, PSTR("hello")) == 0 || strcmp_P(cmdBuf, PSTR("hello:4")) == 0) {
     tlmEnabled = true;      // TLM lines from now on, and v3 frames only until reset
+    linesFramed = cmdBuf[5] == ':';   // hello:4: protocol v4, the board's lines framed
     data = DATA_HELLO;
     return PARSE_OK;
   }

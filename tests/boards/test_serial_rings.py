@@ -26,6 +26,7 @@ from wcdrive.firmware.state import FirmwareState
 from wcdrive.hil.lockstep import Recording, compare, record
 from wcdrive.hil.traces import Trace
 from wcdrive.plant.encoders import EdgeTrain, edges_from_trajectory
+from wcdrive.protocol.can_frames import REASONS
 from wcdrive.protocol.codec import frame
 
 pytestmark = pytest.mark.simavr
@@ -149,49 +150,62 @@ def test_the_budget_refills_per_millisecond_and_caps() -> None:
     fw.state.txCredit = 10
     assert fw.feed(frame(b"hello", 1)) == b"ACK:1\r\n"       # HELLO (38 bytes) does not fit
     assert fw.state.txCredit == 3 and fw.state.txDropped == 1
-    out = fw.tick(50, 0, 0)                                 # + 50 ms x 8 bytes
+    fw.state.lastTickTime = 40
+    out = fw.tick(50, 0, 0)                                 # + 10 ms x 10 bytes
     assert out.startswith(b"ENC:") and b"TLM:" in out
-    assert fw.state.txCredit == 3 + 50 * C.TX_CREDIT_PER_MS - len(out)
+    assert fw.state.txCredit == 3 + 10 * C.TX_CREDIT_PER_MS - len(out)
     out = fw.tick(10_000, 0, 0)                             # a long pause: full, not more
     assert fw.state.txCredit == C.TX_CREDIT_MAX - len(out)
 
 
 def test_the_worst_tick_fits_the_refill() -> None:
     """The published budget (protocol/PROTOCOL.md, "Output budget"): the longest tick a
-    host can cause, every field at its widest, is less than one period's refill, so the
-    board drops no line however it is flooded; only a fault burst on top can."""
+    host can cause, every field at its widest and every line framed (v4), is no more
+    than what one period restores, so the board drops no line however it is flooded;
+    only a fault burst on top can. And the longest line fits ``LineBuffer``'s buffer."""
     s = FirmwareState(encTickL=-2**31, encTickR=-2**31, rawVelL=-1e30, rawVelR=-1e30,
-                      tlmEnabled=1, rxCount=2**32 - 1, lastSeq=65535, pwmL=255, pwmR=255,
-                      illTickL=2**32 - 1, illTickR=2**32 - 1, rejectedCount=2**32 - 1,
+                      tlmEnabled=1, linesFramed=1, rxCount=2**32 - 1, lastSeq=65535, pwmL=255,
+                      pwmR=255, illTickL=2**32 - 1, illTickR=2**32 - 1, rejectedCount=2**32 - 1,
                       crcRejected=2**32 - 1, freeRam=65535, faultFlags=511, rxLostTick=2**32 - 1,
-                      pivotPhase=2, estopLatched=1, emergencyStop=1, parked=1, watchdogArmed=1)
+                      lateTicks=2**32 - 1, pivotPhase=2, estopLatched=1, emergencyStop=1, parked=1,
+                      watchdogArmed=1)
     from wcdrive.firmware.output import (
         DATA_HELLO,
         DATA_PARAM,
         answer,
         feedback_line,
+        send,
         send_event,
         send_telemetry,
     )
     from wcdrive.firmware.params import PARAMS
-    tick = len(feedback_line(s)) + len(send_telemetry(s, 2**32 - 1)) + len(send_event("WATCHDOG"))
-    data_lines = []
-    for i, p in enumerate(PARAMS):                       # every parameter at its largest
-        big = FirmwareState(tlmEnabled=1)
+
+    def sent(line: bytes) -> int:
+        out = bytearray()
+        send(FirmwareState(linesFramed=1, lineCounter=255), line, out)
+        return len(out)
+
+    lines = [feedback_line(s), send_telemetry(s, 2**32 - 1), send_event("WATCHDOG")]
+    tick = sum(map(sent, lines))
+    answered = []                      # a data line comes only with an ACK
+    for i, p in enumerate(PARAMS):     # every parameter at its largest
+        big = FirmwareState(tlmEnabled=1, linesFramed=1)
         setattr(big, p.field, p.high)
         out = bytearray()
-        answer(big, None, -1, DATA_PARAM, i, out)
-        data_lines.append(len(out))
+        answer(big, None, 65535, DATA_PARAM, i, out)
+        answered.append(len(out))
     out = bytearray()
-    answer(FirmwareState(buildId="ffffffff"), None, -1, DATA_HELLO, 0, out)
-    data_lines.append(len(out))
-    answers = C.ERR_LINES_PER_TICK * (max(data_lines) + len(b"NAK:65535,overrun\r\n"))
-    events = len(send_event("PPM_LOST")) + len(send_event("ESTOP")) + len(send_event("ROLLAWAY"))
-    assert tick + answers + events <= C.CONTROL_PERIOD_MS * C.TX_CREDIT_PER_MS <= C.TX_CREDIT_MAX
+    answer(FirmwareState(buildId="ffffffff", linesFramed=1), None, 65535, DATA_HELLO, 0, out)
+    answered.append(len(out))
+    longest_nak = max(sent(b"NAK:65535,%s\r\n" % reason.encode()) for reason in REASONS)
+    answers = C.ERR_LINES_PER_TICK * max(*answered, longest_nak)
+    events = sum(sent(send_event(e)) for e in ("PPM_LOST", "ESTOP", "ROLLAWAY"))
+    assert tick + answers + events <= min(C.CONTROL_PERIOD_MS * C.TX_CREDIT_PER_MS, C.TX_CREDIT_MAX)
+    assert max(map(sent, lines)) <= C.TX_LINE_MAX
 
 
 def test_a_flood_at_top_speed_is_accounted_for_byte_by_byte() -> None:
-    """hello, then set: and get: frames back to back on the wire for 2 s with both
+    """hello:4, then set: and get: frames back to back on the wire for 2 s with both
     wheels at top speed (28,000 edges/s each): loop() falls behind now and then (the RX
     ring fills while a tick formats its lines and a set: is parsed and answered), so a
     few bytes are lost; every loss is marked, counted and answered as the port answers
@@ -199,7 +213,7 @@ def test_a_flood_at_top_speed_is_accounted_for_byte_by_byte() -> None:
     bodies = [b"set:kp_l=1.2345678901234567890123", b"set:estop_decel=12.345678901234567890",
               b"get:kp_r"]
     # driven at top speed, so each tick runs the PID (a parked chair's hold is lighter)
-    data = frame(b"hello", 0) + frame(b"rp17.5,lp17.5", 1) + b"".join(
+    data = frame(b"hello:4", 0) + frame(b"rp17.5,lp17.5", 1) + b"".join(
         frame(bodies[k % 3], k) for k in range(2, 400))
     top = 28_000
     encoders = {side: edges_from_trajectory(np.array([0.0, 0.02, 2.2]),
@@ -215,6 +229,8 @@ def test_a_flood_at_top_speed_is_accounted_for_byte_by_byte() -> None:
     gaps = [e for e in rec.events if e.kind == "gap"]
     assert sum(e.arg for e in gaps) == last["rxGaps"] <= last["rxLost"]
     assert rec.tx.count(b"ERR:overrun") + last["errSuppressed"] >= 1
+    framed = rec.tx[rec.tx.index(b"HELLO:4"):]
+    assert last["linesFramed"] == 1 and framed.count(b"\n") == framed.count(b"#") > 100
 
 
 def test_lines_over_the_budget_are_dropped_alike() -> None:

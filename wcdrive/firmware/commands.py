@@ -386,8 +386,9 @@ def dispatch(s: FirmwareState, body: bytes, out: bytearray) -> tuple[str | None,
                 or (len(body) >= 4 and body[:3] == b"ppm")):
             return move_to(s, body, out), DATA_NONE, 0
         return "unframed", DATA_NONE, 0
-    if body == b"hello":
+    if body == b"hello" or body == b"hello:4":
         s.tlmEnabled = 1
+        s.linesFramed = 1 if body == b"hello:4" else 0   # protocol v4: the board's lines framed
         return None, DATA_HELLO, 0
     if body == b"estop":
         latch_estop(s, out)

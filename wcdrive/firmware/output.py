@@ -14,25 +14,32 @@ from wcdrive.firmware.constants import (
     FIRMWARE_VERSION,
     MODE_NAMES,
     PROTOCOL_VERSION,
+    PROTOCOL_VERSION_PLAIN,
     TX_CREDIT_MAX,
     TX_CREDIT_PER_MS,
 )
 from wcdrive.firmware.params import PARAMS
 from wcdrive.firmware.state import FirmwareState
-from wcdrive.protocol.codec import FAULT_NAMES
+from wcdrive.protocol.codec import FAULT_NAMES, board_frame
 
 CRLF = b"\r\n"
 
 
 def send(s: FirmwareState, line: bytes, out: bytearray) -> None:
-    """``LineBuffer::send``: ``line`` goes out if the output budget has room for it,
-    else it is counted in ``txDropped``. (The sketch's second guard, a full TX ring,
-    ``txRingFull``, cannot happen within the budget; the differential runs check that.)"""
+    """``LineBuffer::send``: ``line`` (ending in ``\r\n``; framed first after
+    ``hello:4``, ``frameLine``) goes out if the output budget has room for it, else it is
+    counted in ``txDropped``; the line counter counts the framed lines that go. (The
+    sketch's second guard, a full TX ring, ``txRingFull``, cannot happen within the
+    budget; the differential runs check that.)"""
+    if s.linesFramed:
+        line = board_frame(line[:-2], s.lineCounter)
     if len(line) > s.txCredit:
         s.txDropped = (s.txDropped + 1) & 0xFFFFFFFF
     else:
         s.txCredit -= len(line)
         out += line
+        if s.linesFramed:
+            s.lineCounter = (s.lineCounter + 1) & 0xFF
 
 
 def refill_credit(s: FirmwareState, elapsed: int) -> None:
@@ -88,7 +95,8 @@ def answer(s: FirmwareState, reason: str | None, seq: int, data: int, param: int
         return
     s.errLinesThisTick += 1
     if reason is None and data == DATA_HELLO:
-        send(s, b"HELLO:%d,final_control,%s,%s\r\n" % (PROTOCOL_VERSION, FIRMWARE_VERSION.encode(),
+        version = PROTOCOL_VERSION if s.linesFramed else PROTOCOL_VERSION_PLAIN
+        send(s, b"HELLO:%d,final_control,%s,%s\r\n" % (version, FIRMWARE_VERSION.encode(),
                                                         s.buildId.encode()), out)
     elif reason is None and data == DATA_PARAM:
         p = PARAMS[param]

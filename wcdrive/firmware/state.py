@@ -32,7 +32,8 @@ INT_FIELDS = (
     "lastControlTime", "tickCount", "pivotPhase", "pivotTicksLeft", "cmdSinceTick", "watchdogArmed",
     "lastCmdTime", "emergencyStop", "ppmLost", "stillTicks", "parked", "rejectedCount",
     "errSuppressed", "errLinesThisTick", "cmdLen", "cmdCommas", "cmdDiscarding",
-    "illTickL", "illTickR", "watchdogMs", "estopLatched", "tlmEnabled", "unframedLine", "lastSeq",
+    "illTickL", "illTickR", "watchdogMs", "estopLatched", "tlmEnabled", "linesFramed", "lineCounter",
+    "unframedLine", "lastSeq",
     "rxCount", "crcRejected", "stormTickL", "stormTickR", "faultFlags", "stallTicksL",
     "stallTicksR", "reverseTicksL", "reverseTicksR", "runawayTicksL", "runawayTicksR", "effortPwmL",
     "effortPwmR",
@@ -151,6 +152,8 @@ class FirmwareState:
     effortSetpointL: float = 0.0
     effortSetpointR: float = 0.0
     tlmEnabled: int = 0
+    linesFramed: int = 0
+    lineCounter: int = 0
     unframedLine: int = 0
     lastSeq: int = 0
     rxCount: int = 0

@@ -84,7 +84,7 @@ static double f_from_int(int64_t n) { return rnd((double)n); }   /* |n| < 2**53 
     X(watchdogMs) X(emergencyStop) X(estopDecel) X(maxAccel) X(stillTicks) X(parked) \
     X(integralL) X(integralR) X(outputL) X(outputR) X(kpL) X(kiL) X(kdL) X(kpR) X(kiR) \
     X(kdR) X(pivotPhase) X(pivotTicksLeft) X(pendingL) X(pendingR) X(mode) X(txDropped) \
-    X(tlmEnabled) X(errLinesThisTick) X(rxCount) X(lastSeq) X(estopLatched) X(ppmLost) \
+    X(tlmEnabled) X(linesFramed) X(lineCounter) X(errLinesThisTick) X(rxCount) X(lastSeq) X(estopLatched) X(ppmLost) \
     X(rejectedCount) X(crcRejected) X(freeRam) \
     X(holding) X(holdRefL) X(holdRefR) X(holdStepL) X(holdStepR) \
     X(brakeReleased) X(overspeedTicksL) X(overspeedTicksR) X(overspeedFromL) X(overspeedFromR)
@@ -331,12 +331,38 @@ static void set_motor(double output, int64_t *pwm, int64_t *dir) {
     *pwm = (p != p || fabs(p) >= 2147483648.0) ? ((int64_t)INT32_MIN & 0xFF) : ((int64_t)p & 0xFF);
 }
 
+/* CRC-16/XMODEM, as avr-libc's _crc_xmodem_update */
+static unsigned crc_xmodem(const char *b, int n) {
+    unsigned crc = 0;
+    for (int k = 0; k < n; k++) {
+        crc ^= (unsigned)(unsigned char)b[k] << 8;
+        for (int bit = 0; bit < 8; bit++)
+            crc = (crc & 0x8000) ? ((crc << 1) ^ 0x1021) & 0xFFFF : (crc << 1) & 0xFFFF;
+    }
+    return crc;
+}
+
+/* send (LineBuffer::send): framed first after hello:4 ("<text>#NN*CCCC\r\n") */
 static void send(Vals *v, Buf *out, const Buf *line) {
+    Buf framed;
+    if (v->i[F_linesFramed]) {
+        int n = line->n - 2;
+        memcpy(framed.b, line->b, (size_t)n);
+        n += snprintf(framed.b + n, 4, "#%02X", (unsigned)(v->i[F_lineCounter] & 0xFF));
+        unsigned crc = crc_xmodem(framed.b, n);
+        n += snprintf(framed.b + n, 8, "*%04X\r\n", crc);
+        framed.n = n;
+        line = &framed;
+    }
     if (line->n > v->i[F_txCredit]) {
         v->i[F_txDropped] = (v->i[F_txDropped] + 1) & M32;
     } else {
         v->i[F_txCredit] -= line->n;
         put(out, line->b, line->n);
+        if (v->i[F_linesFramed]) {
+            v->i[F_lineCounter] = (v->i[F_lineCounter] + 1) & 0xFF;
+            v->written[F_lineCounter] = 1;
+        }
     }
 }
 
