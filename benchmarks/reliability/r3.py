@@ -33,7 +33,7 @@ PERIOD_S = integer("CONTROL_PERIOD_MS") / 1000
 HOST_PERIOD_S = 0.05            # the host's motion commands: 20 Hz
 STANDSTILL_MPS = 0.01
 RECOVERY_TIMEOUT_S = 5.0
-_ACK = re.compile(rb"ACK:(\d+)\r\n")
+_ACK = re.compile(rb"ACK:(\d+)(?:#[0-9A-F]{2}\*[0-9A-F]{4})?\r\n")   # plain (v3) or framed (v4)
 _BOOT = re.compile(rb"BOOT:[^,\r\n]*,([A-Z_]+)\r\n")
 
 Sample = tuple[int, int, int, float, float, float]      # cycle, PWM left, right, speed, x, y
@@ -327,7 +327,7 @@ def _r3_trial(rig: _Rig, kind: str, rng: random.Random) -> R3Trial:
     def ready() -> bool:
         hello_again = link.delivered.count(b"HELLO:") > hellos0
         trial.rehandshake = hello_again
-        return (chair.link_ok and chair.protocol_version == 3
+        return (chair.link_ok and chair.protocol_version == integer("PROTOCOL_VERSION")
                 and (kind == "link cut" or hello_again))
 
     t_fault = time.monotonic()

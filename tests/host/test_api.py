@@ -116,8 +116,8 @@ def test_errors_say_what_to_do(tmp_path) -> None:
         wcdrive.connect("ftp://chair")
 
 
-def test_handshake_finds_a_v3_board_and_telemetry_carries_tlm(chair) -> None:
-    assert chair.protocol_version == 3 and chair.firmware == "final_control"
+def test_handshake_finds_a_v4_board_and_telemetry_carries_tlm(chair) -> None:
+    assert chair.protocol_version == 4 and chair.firmware == "final_control"
     assert chair.firmware_version == spec.text("FIRMWARE_VERSION") and chair.build_id == spec.build_id()
     assert chair.link_ok
     t = next(t for t in chair.telemetry(timeout=5) if t.extended is not None)

@@ -104,5 +104,5 @@ def test_ten_minute_sim_session_holds_flat_memory() -> None:
     # 48 kB from 240 to 420 s, 10 kB from 420 to 600 s): 60 kB in all on a quiet machine,
     # 100 kB seen beside a loaded test run.
     assert growth < 200_000, f"memory grew by {growth / 1e3:.0f} kB over 360 simulated s"
-    assert any(m.startswith("connected, protocol v3") for m in handler.counts), handler.counts
+    assert any(m.startswith("connected, protocol v4") for m in handler.counts), handler.counts
     assert handler.counts["board event WATCHDOG"] >= 10, handler.counts

@@ -1,4 +1,4 @@
-"""The host side of protocol v3, end to end through ``wcdrive.connect`` and a
+"""The host side of protocol v3 and v4, end to end through ``wcdrive.connect`` and a
 real serial port: a ``SimulatedBoard`` behind a pseudo-terminal (``PtyBridge``), with a
 ``Tamper`` between the two that can garble what the host writes, rewrite or drop what
 the board answers, and freeze the board's output while the port stays open.
@@ -32,7 +32,7 @@ import wcdrive
 from wcdrive.boards.sim_board import SimulatedBoard
 from wcdrive.host.handshake import Handshake
 from wcdrive.host.requests import Request
-from wcdrive.protocol.codec import encode_cmdvel, encode_ppm
+from wcdrive.protocol.codec import board_frame, board_unframe, encode_cmdvel, encode_ppm
 from wcdrive.transports.faulty import FaultyPort
 from wcdrive.transports.pty_bridge import PtyBridge
 from wcdrive.transports.recording import RecordingPort
@@ -107,7 +107,7 @@ def test_every_line_the_host_writes_is_a_v3_frame(rig) -> None:
           and _frames(b"".join(tamper.written))[-1][1] == encode_cmdvel(0.0, 0.0), "the last stop")
     frames = _frames(b"".join(tamper.written))
     commands = [c for _, c in frames]
-    assert commands[0] == b"hello"                                  # the hello is framed too
+    assert commands[0] == b"hello:4"                                # the hello is framed too
     assert commands[-1] == encode_cmdvel(0.0, 0.0)                  # close() stops
     for expected in (b"x:0.300,t:0.100,", b"rp1.200,lp1.000,", b"set:max_accel=4", b"estop"):
         assert expected in commands, (expected, commands)
@@ -170,7 +170,7 @@ def _garble_hellos(count: int) -> Callable[[bytes], bytes]:
 
     def garble(data: bytes) -> bytes:
         for m in FRAME.finditer(data):
-            if m[2] == b"hello" and left[0] > 0:
+            if m[2] == b"hello:4" and left[0] > 0:
                 left[0] -= 1
                 at = m.end() - 1                                    # the last CRC digit
                 data = data[:at] + bytes([data[at] ^ 0x01]) + data[at + 1:]
@@ -185,9 +185,9 @@ def test_a_garbled_first_hello_is_retried(rig) -> None:
     start = time.monotonic()
     with wcdrive.connect(path) as chair:
         took = time.monotonic() - start
-        assert chair.protocol_version == 3 and chair.firmware == "final_control"
+        assert chair.protocol_version == 4 and chair.firmware == "final_control"
         assert "checksum" in chair.errors
-    hellos = re.findall(rb"\$\d+:hello\*[0-9A-F]{4}", b"".join(tamper.written))
+    hellos = re.findall(rb"\$\d+:hello:4\*[0-9A-F]{4}", b"".join(tamper.written))
     assert len(hellos) == 2 and hellos[0] != hellos[1]
     assert tamper.board.loop.fw.state.crcRejected == 1
     assert took < Handshake.HELLO_WAITS[0], took       # retried on its ERR, not after its wait
@@ -205,8 +205,8 @@ def test_a_lost_hello_answer_is_retried_after_a_wait(rig) -> None:
 
     tamper.rx.edit(lose_first_hello)
     with wcdrive.connect(path) as chair:
-        assert chair.protocol_version == 3 and dropped
-    assert b"".join(tamper.written).count(b":hello*") == 2
+        assert chair.protocol_version == 4 and dropped
+    assert b"".join(tamper.written).count(b":hello:4*") == 2
 
 
 def test_no_hello_answer_raises_unless_legacy(rig) -> None:
@@ -215,7 +215,7 @@ def test_no_hello_answer_raises_unless_legacy(rig) -> None:
     with pytest.raises(wcdrive.WcdriveProtocolError, match=f"{re.escape(path)} did not answer hello") as e:
         wcdrive.connect(path)
     assert "legacy=True" in str(e.value)
-    assert b"".join(tamper.written).count(b":hello*") == 3          # three tries, then no more
+    assert b"".join(tamper.written).count(b":hello:4*") == 3          # three tries, then no more
     assert tamper.board.loop.fw.state.targetR == 0.0
 
     with wcdrive.connect(path, legacy=True) as chair:
@@ -236,7 +236,11 @@ def test_no_hello_answer_raises_unless_legacy(rig) -> None:
 @pytest.mark.parametrize("legacy", [False, True])
 def test_an_unknown_protocol_version_raises(rig, legacy: bool) -> None:
     tamper, path = rig
-    tamper.rx.edit(lambda line: line.replace(b"HELLO:3,", b"HELLO:9,"))
+    def version_9(line: bytes) -> bytes:
+        text, counter = board_unframe(line.rstrip(b"\r\n")) or (line, 0)
+        return board_frame(text.replace(b"HELLO:4,", b"HELLO:9,"), counter)
+
+    tamper.rx.edit(version_9, match=rb"^HELLO:")
     with pytest.raises(wcdrive.WcdriveProtocolError, match=rf"{re.escape(path)} speaks protocol v9"):
         wcdrive.connect(path, legacy=legacy)
 
@@ -341,7 +345,7 @@ def test_a_board_that_resets_mid_session_is_handshaken_again(rig) -> None:
         _wait(lambda: "BOARD_RESET" in chair.events, "the host to notice the reset", timeout=2.0)
         _wait(lambda: state.tlmEnabled and state.estopLatched, "hello and the e-stop again",
               timeout=3.0)
-        assert chair.protocol_version == 3 and chair.estop_latched
+        assert chair.protocol_version == 4 and chair.estop_latched
         chair.reset_estop(timeout=10)
         _reset_board(tamper.board)
         state = tamper.board.loop.fw.state

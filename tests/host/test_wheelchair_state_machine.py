@@ -296,7 +296,7 @@ class WheelchairMachine(RuleBasedStateMachine):
         self.chair.on_link(self.link_events.append)
         # as wcdrive.connect does: the board boots, then the handshake
         self.chair.wait_for_telemetry(WALL_TIMEOUT)
-        assert self.chair.wait_for_handshake(WALL_TIMEOUT) == 3
+        assert self.chair.wait_for_handshake(WALL_TIMEOUT) == 4
         self._settle()
 
     def _open(self) -> Link:
@@ -386,7 +386,7 @@ class WheelchairMachine(RuleBasedStateMachine):
             elif body.startswith(b"set:"):
                 name, text = body[4:].decode().split("=")
                 self.params[name] = int(text) if BY_NAME[name].integer else strtod(text.encode())[0]
-            elif body.startswith(b"get:") or body == b"hello":
+            elif body.startswith(b"get:") or body in (b"hello", b"hello:4"):
                 pass
             else:
                 result = parse(body, self.params["max_wheel"])
@@ -656,15 +656,15 @@ class WheelchairMachine(RuleBasedStateMachine):
         _wait(lambda: chair.events.count("RECONNECTED") > reconnects, "the session to reopen the port")
         self._new_board_model()
         chair.wait_for_telemetry(WALL_TIMEOUT)
-        assert chair.wait_for_handshake(WALL_TIMEOUT) == 3
+        assert chair.wait_for_handshake(WALL_TIMEOUT) == 4
         assert chair.firmware == "final_control"
         _, lines = self._settle()
         # the new board hears hello first and, when the e-stop was latched, the e-stop
         # again; nothing else but a hello said again (one whose answer took longer than
         # the session's wait, as on a loaded machine: seen once in CI)
         bodies = [e.body for e in lines if e.accepted]
-        assert bodies[:1] == [b"hello"], lines
-        assert [b for b in bodies if b != b"hello"] == ([b"estop"] if self.latched else []), lines
+        assert bodies[:1] == [b"hello:4"], lines
+        assert [b for b in bodies if b != b"hello:4"] == ([b"estop"] if self.latched else []), lines
 
     # ---- invariants --------------------------------------------------------------------
     @invariant()
@@ -673,7 +673,7 @@ class WheelchairMachine(RuleBasedStateMachine):
             return
         chair = self.chair
         s, _ = self._settle()
-        assert chair.protocol_version == 3
+        assert chair.protocol_version == 4
         assert chair.link_ok, f"the link is down: {chair.since_last_line:.3f} s without a line"
         kinds = [type(e) for e in self.link_events]
         assert kinds == [LinkLost, LinkRestored] * (len(kinds) // 2), kinds

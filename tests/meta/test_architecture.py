@@ -322,7 +322,7 @@ def test_simavr_drives_the_chair_with_the_harness_blocked(elf: Path) -> None:
                 chair.set_wheels(3.0, 3.0)
                 time.sleep(0.1)
             last = chair.wait_for_telemetry()
-            assert chair.protocol_version == 3, chair.protocol_version
+            assert chair.protocol_version == 4, chair.protocol_version
             assert last.count_right - start.count_right > 100, (start, last)
             assert last.vel_right > 0.5, last
         assert not any(m.startswith("wcdrive.hil") for m in sys.modules)

@@ -28,7 +28,7 @@ def test_a_session_on_the_firmware_replays_through_the_port(simavr_recording) ->
     assert report.ticks > 10 and report.bytes_fed == len(simavr_recording.sent_bytes) - _unread_tail(
         simavr_recording)
     received = simavr_recording.received_bytes
-    assert b"HELLO:3,final_control," in received and b"TLM:" in received
+    assert b"HELLO:4,final_control," in received and b"TLM:" in received
     assert max(int(line.split(b",")[3]) for line in _lines(received)
                if line.startswith(b"TLM:")) > 50           # the motors were driven
 

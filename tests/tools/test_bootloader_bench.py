@@ -19,7 +19,7 @@ import serial
 
 from wcdrive.boards.simavr.bootloader_mega import BOOT_START, BOOTLOADER_HEX, BootloaderBoard, parse_ihex
 from wcdrive.boards.simavr.build import firmware_elf
-from wcdrive.protocol.spec import build_id
+from wcdrive.protocol.spec import build_id, text
 from wcdrive.tools import bench
 from wcdrive.tools.cli import main as wcdrive_main
 from wcdrive.transports.pty_bridge import PtyBridge
@@ -146,7 +146,8 @@ def test_avrdude_flashes_two_programs_through_the_real_bootloader_and_the_flash_
         assert "device signature = 0x1e9801" in done.stderr and "bytes of flash verified" in done.stderr
         print(f"avrdude final_control.hex: {took:.1f} s")
         t0 = time.monotonic()
-        assert bench.read_hello(pty.device) == f"HELLO:3,final_control,3.0.0,{build_id()}"
+        version = text("FIRMWARE_VERSION")
+        assert bench.read_hello(pty.device) == f"HELLO:3,final_control,{version},{build_id()}"
         print(f"hello after open: {time.monotonic() - t0:.1f} s")
         t0 = time.monotonic()
         done = avrdude(pty.device, tiny["atmega2560"])

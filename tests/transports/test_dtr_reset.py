@@ -112,7 +112,7 @@ def test_a_reset_mid_run_is_greeted_again_and_odometry_carries_on(elf, bootloade
                 assert "LINK_LOST" in chair.events
                 quiet_from = time.monotonic()
                 end = quiet_from + 60
-                while not ("BOARD_RESET" in chair.events and chair.protocol_version == 3) \
+                while not ("BOARD_RESET" in chair.events and chair.protocol_version == 4) \
                         and time.monotonic() < end:
                     time.sleep(0.05)                          # nothing to send: the link is down
                 back_sim = board.mega.time - reset_sim
@@ -121,7 +121,7 @@ def test_a_reset_mid_run_is_greeted_again_and_odometry_carries_on(elf, bootloade
                 assert 3.5 < back_sim < 8.0
                 assert [t for t in sent if reset_at + 0.3 < t < quiet_from] == []   # quiet while down
             _drive(chair, 1.5)
-            assert "BOARD_RESET" in chair.events and chair.protocol_version == 3
+            assert "BOARD_RESET" in chair.events and chair.protocol_version == 4
             after = chair.odometry.pose.x
             truth = board.pose()[0]
             # Counts from 0 again on the board; the pose went on forward (without the
@@ -150,10 +150,10 @@ def test_a_device_that_comes_back_is_reopened_reset_and_greeted_again(tmp_path) 
             board = SimulatedBoard()
             second = PtyBridge(board.start(), link=link, on_open=board.dtr).start()
             end = time.monotonic() + 20
-            while not ("RECONNECTED" in chair.events and chair.protocol_version == 3) \
+            while not ("RECONNECTED" in chair.events and chair.protocol_version == 4) \
                     and time.monotonic() < end:
                 time.sleep(0.05)
-            assert "RECONNECTED" in chair.events and chair.protocol_version == 3, chair.events
+            assert "RECONNECTED" in chair.events and chair.protocol_version == 4, chair.events
             assert second.opens == 1 and chair.reset_cause == "EXTERNAL"
             _drive(chair, 1.5)
             after = chair.odometry.pose.x

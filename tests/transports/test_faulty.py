@@ -219,7 +219,7 @@ def test_the_same_seed_gives_the_same_faults_under_a_session() -> None:
         rule = port.rx.flip(rate=0.1, match=rb"^ENC:", count=5)
         with wcdrive.Wheelchair(port, stop_on_signals=False) as chair:
             chair.wait_for_telemetry(10.0)
-            assert chair.wait_for_handshake(10.0) == 3
+            assert chair.wait_for_handshake(10.0) == 4
             while rule.count:
                 chair.wait_for_telemetry(10.0)
         hits.append([after for _, after in rule.hits])

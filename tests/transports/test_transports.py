@@ -90,7 +90,7 @@ def test_unplug_is_detected_and_the_device_reopened(tmp_path) -> None:
     first = PtyBridge(SimulatedBoard(speed=10).start(), link=link).start()
     chair = wcdrive.connect(str(link), reconnect_timeout=20)
     try:
-        assert chair.protocol_version == 3
+        assert chair.protocol_version == 4
         first.close()                                   # unplugged
         deadline = time.monotonic() + 5
         while "LINK_LOST" not in chair.events and time.monotonic() < deadline:
@@ -104,7 +104,7 @@ def test_unplug_is_detected_and_the_device_reopened(tmp_path) -> None:
             while "RECONNECTED" not in chair.events and time.monotonic() < deadline:
                 time.sleep(0.01)
             assert "RECONNECTED" in chair.events
-            assert chair.wait_for_handshake(10) == 3
+            assert chair.wait_for_handshake(10) == 4
             chair.set_wheels(1.0, 1.0)
             modes = set()
             deadline = time.monotonic() + 10

@@ -21,10 +21,12 @@ from wcdrive.errors import WcdriveConnectionError, WcdriveProtocolError
 from wcdrive.protocol.codec import Hello
 from wcdrive.protocol.spec import integer
 
-__all__ = ["PROTOCOL_VERSION", "Handshake"]
+__all__ = ["HELLO_COMMAND", "PROTOCOL_VERSION", "Handshake"]
 
 #: The protocol this host speaks, the spec's (``connect(url, legacy=True)`` also speaks v1).
 PROTOCOL_VERSION = integer("PROTOCOL_VERSION")
+#: The hello this host says: ``hello:4`` asks the board to frame its lines.
+HELLO_COMMAND = b"hello:%d" % PROTOCOL_VERSION
 
 _log = logging.getLogger("wcdrive.session")
 
@@ -56,7 +58,7 @@ class Handshake:
         self.lock = threading.Lock()
         #: Set once the handshake is over: answered, failed, or legacy.
         self.done = threading.Event()
-        #: The protocol the board speaks: 3 once it answered hello, 1 in legacy mode
+        #: The protocol the board speaks: 4 once it answered hello, 1 in legacy mode
         #: once three hellos went unanswered, 0 until then.
         self.protocol_version = 0
         self.firmware = ""
@@ -138,11 +140,20 @@ class Handshake:
             self._on_greeted()
         self.done.set()
 
-    def note_answer(self, now: float, nak_seq: int | None) -> None:
+    def note_answer(self, now: float, nak_seq: int | None, reason: str = "") -> None:
         """An ``ACK:`` or ``NAK:`` came; ``nak_seq``: the number of a ``NAK:`` no request
         claimed (None otherwise), which refuses the last hello when it is its number. A
-        refused hello goes out again as soon as it may."""
+        refused hello goes out again as soon as it may, but for one the board does not
+        know (``syntax``: its firmware is older than v4), which ends the handshake."""
         if nak_seq is not None and nak_seq == self._seq:
+            if reason == "syntax" and not self.done.is_set():
+                self.error = WcdriveProtocolError(
+                    f"{self.name} refused {HELLO_COMMAND.decode()} (NAK {reason}): its firmware "
+                    f"speaks protocol v3 or older, whose lines carry no CRC; this wcdrive speaks "
+                    f"v{PROTOCOL_VERSION}. Flash the firmware that comes with it (wcdrive bench "
+                    "flash)")
+                self.done.set()
+                return
             self._rejected = True
         if self._rejected:
             self.step(now)

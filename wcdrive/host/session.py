@@ -23,6 +23,7 @@ board resets, and re-latches the e-stop the host holds when the board lost it.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import threading
 import time
@@ -34,7 +35,7 @@ import serial
 from wcdrive._util.history import History
 from wcdrive.errors import WcdriveConnectionError, WcdriveError, WcdriveProtocolError, WcdriveTimeoutError
 from wcdrive.host.board_state import BoardState
-from wcdrive.host.handshake import PROTOCOL_VERSION, Handshake
+from wcdrive.host.handshake import HELLO_COMMAND, PROTOCOL_VERSION, Handshake
 from wcdrive.host.link_monitor import LinkMonitor
 from wcdrive.host.requests import Request
 from wcdrive.host.telemetry import LinkEvent
@@ -43,12 +44,14 @@ from wcdrive.host.wire import Wire
 from wcdrive.protocol.codec import (
     Ack,
     Boot,
+    Corrupt,
     Error,
     Event,
     ExtendedTelemetry,
     Feedback,
     Hello,
     LineDecoder,
+    LineStats,
     Nak,
     Param,
     Unknown,
@@ -111,7 +114,8 @@ class Session:
         self._deliver = on_feedback
         self._on_board_reset = on_board_reset
         self._reopen = reopen
-        self._decoder = LineDecoder()
+        self._line_stats = LineStats()
+        self._decoder = LineDecoder(self._line_stats)
         self.wire = Wire(port, self.name)
         #: Set once the session is closed.
         self.closed = self.wire.closed
@@ -128,13 +132,13 @@ class Session:
             pace=lambda now: self.handshake.step(now), bytes_waiting=self.wire.bytes_waiting)
         self.tracker = RequestTracker(self.name, self.wire.write, self.wire.lock,
                                       lambda: self.link.lost, self.errors)
-        self.handshake = Handshake(self.name, lambda: self.tracker.send_frame(b"hello"),
+        self.handshake = Handshake(self.name, lambda: self.tracker.send_frame(HELLO_COMMAND),
                                    self._greeted, legacy=legacy)
         self._dispatch: dict[type, Callable[[float, Any], None]] = {
             ExtendedTelemetry: self._on_telemetry, Feedback: self._on_feedback,
             Boot: self._on_boot, Hello: self._on_hello, Param: self._on_param,
             Ack: self._on_answer, Nak: self._on_answer, Error: self._on_error,
-            Event: self._on_event, Unknown: self._on_unknown}
+            Event: self._on_event, Unknown: self._on_unknown, Corrupt: self._on_corrupt}
         self._reader = threading.Thread(target=self._read_loop, name="wcdrive-reader", daemon=True)
         self._reader.start()
         self.link.start()
@@ -147,9 +151,16 @@ class Session:
 
     @property
     def protocol_version(self) -> int:
-        """The protocol the board speaks: 3 once it answered hello, 1 in legacy mode
+        """The protocol the board speaks: 4 once it answered hello, 1 in legacy mode
         once three hellos went unanswered, 0 until then."""
         return self.handshake.protocol_version
+
+    @property
+    def link_stats(self) -> LineStats:
+        """The board's lines so far (a copy): good, bad CRC, spliced and lost
+        (``LineStats``; protocol v4 frames every line, so only then are bad and lost
+        lines seen)."""
+        return dataclasses.replace(self._line_stats)
 
     @property
     def link_ok(self) -> bool:
@@ -218,7 +229,7 @@ class Session:
 
     # ---- handshake -------------------------------------------------------------------
     def wait_for_handshake(self, timeout: float = 5.0) -> int:
-        """Waits until the board answered hello; returns the protocol version (3, or 1
+        """Waits until the board answered hello; returns the protocol version (4, or 1
         in legacy mode after three hellos went unanswered). Raises
         ``WcdriveProtocolError`` when the board never answers hello (unless legacy) or
         answers with a version this host does not know, ``WcdriveTimeoutError`` when
@@ -252,7 +263,9 @@ class Session:
                 continue
             now = time.monotonic()
             messages = self._decoder.feed(data)
-            if messages:
+            # A line that fails its check is no sign of a working link: a run of them
+            # ends in LinkLost as silence does.
+            if any(type(msg) is not Corrupt for msg in messages):
                 self.link.heard(now)
             for msg in messages:
                 self._handle(now, msg)
@@ -297,6 +310,8 @@ class Session:
 
     def _on_hello(self, now: float, msg: Hello) -> None:
         self.handshake.answered(msg)
+        if msg.lines_framed:
+            self._decoder.framed = True         # from now on, only frames are believed
         self.tracker.note_data(msg)
 
     def _on_param(self, now: float, msg: Param) -> None:
@@ -304,7 +319,10 @@ class Session:
 
     def _on_answer(self, now: float, msg: Ack | Nak) -> None:
         claimed = self.tracker.note_answer(msg)
-        self.handshake.note_answer(now, msg.seq if isinstance(msg, Nak) and not claimed else None)
+        if isinstance(msg, Nak) and not claimed:
+            self.handshake.note_answer(now, msg.seq, msg.reason)
+        else:
+            self.handshake.note_answer(now, None)
 
     def _on_error(self, now: float, msg: Error) -> None:
         _log.warning("%s: the board refused a line: %s", self.name, msg.reason)
@@ -314,6 +332,10 @@ class Session:
     def _on_event(self, now: float, msg: Event) -> None:
         self.events.append(msg.name)
         self.board.note_event(msg)
+
+    def _on_corrupt(self, now: float, msg: Corrupt) -> None:
+        _log.debug("%s: dropped a board line that failed its check%s: %r", self.name,
+                   " (spliced)" if msg.spliced else "", msg.line[:80])
 
     def _on_unknown(self, now: float, msg: Unknown) -> None:
         _log.info("%s: dropped a line that is none of the board's formats: %r",
@@ -360,7 +382,7 @@ class Session:
         on open, so the handshake starts over."""
         if self._reopen is None or not self.wire.reopen(self._reopen, self.reconnect_timeout):
             return False
-        self._decoder = LineDecoder()
+        self._decoder = LineDecoder(self._line_stats)
         self.link.reopened()
         self._forget_board()
         self.wire.restored()
@@ -375,6 +397,8 @@ class Session:
         if self._on_board_reset is not None:
             self._on_board_reset()
         self._pending_feedback = None
+        self._decoder.framed = False
+        self._decoder.resync()
         self.tracker.forget_board()
         self.board.forget()
         self.handshake.forget()

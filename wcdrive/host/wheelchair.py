@@ -53,6 +53,7 @@ from wcdrive.protocol.codec import (
     MAX_LINEAR,
     MAX_WHEEL,
     ExtendedTelemetry,
+    LineStats,
     Param,
     encode_cmdvel,
     encode_wheel,
@@ -188,7 +189,7 @@ class Wheelchair:
 
     @property
     def protocol_version(self) -> int:
-        """The protocol the board speaks: 3 once it answered hello, 1 in legacy mode
+        """The protocol the board speaks: 4 once it answered hello, 1 in legacy mode
         after three hellos went unanswered, 0 until the handshake is over."""
         return self._session.protocol_version
 
@@ -253,6 +254,15 @@ class Wheelchair:
         """True while the board's lines arrive: the last less than ``link_timeout`` s
         ago (False before the first line, after ``close()``, while the device is gone)."""
         return self._session.link_ok
+
+    @property
+    def link_stats(self) -> LineStats:
+        """The board's lines so far (a copy): ``good`` (believed), ``bad_crc`` (failed
+        their check: dropped), ``spliced`` (two lines joined where bytes were lost:
+        dropped) and ``lost`` (sent, says the line counter, but never seen). Protocol v4
+        frames every line, so this counts every line the board sent since hello; a
+        dropped line never reaches the odometry, which then holds its last good count."""
+        return self._session.link_stats
 
     @property
     def link_timeout(self) -> float:

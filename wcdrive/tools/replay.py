@@ -201,11 +201,10 @@ def _replay_boot(segment: bytes, sent: bytes) -> ReplayReport:
     fw.state.lastControlTime = candidates[0]
     recorded = b"".join(lines[:tick_starts[-1] + (2 if tick_starts[-1] in tlm_of else 1)])
     pos = 0
-    event_lines = (b"EVT:WATCHDOG\r\n",)
     for k, i in enumerate(tick_starts):
         # Replies recorded before this tick's lines (the watchdog event belongs to the tick).
         start = tick_starts[k - 1] + (2 if tick_starts[k - 1] in tlm_of else 1) if k else int(bool(event))
-        end = i - 1 if i > 0 and lines[i - 1] in event_lines else i
+        end = i - 1 if i > 0 and lines[i - 1][:13] in (b"EVT:WATCHDOG\r", b"EVT:WATCHDOG#") else i
         between = b"".join(lines[start:end])
         if i in tlm_of:
             if tlm_of[i].rx_lost:
@@ -232,6 +231,10 @@ def _replay_boot(segment: bytes, sent: bytes) -> ReplayReport:
             report.mismatch = f"tick {k}: unreadable feedback line {lines[i]!r}"
             break
         tlm = tlm_of.get(i)
+        if tlm is None and k >= len(millis_pre):
+            following = lines[i + 1] if i + 1 < len(lines) else b""
+            report.mismatch = f"tick {k}: no readable TLM line after hello: {following!r}"
+            break
         now = tlm.millis if tlm else millis_pre[k]
         produced += fw.tick(now, enc.count_left, enc.count_right,
                             tlm.illegal_left if tlm else 0, tlm.illegal_right if tlm else 0,
