@@ -25,13 +25,14 @@ from wcdrive.protocol.codec import (
     ExtendedTelemetry,
     Feedback,
     LineDecoder,
+    board_unframe,
     encode_cmdvel,
     encode_set,
     encode_wheel,
     frame,
     parse_line,
 )
-from wcdrive.transports.can_link import CanGateway
+from wcdrive.transports.can_link import CanGateway, CanLink
 
 DBC = cantools.database.load_file(Path(__file__).resolve().parents[2] / "protocol" / "wcdrive.dbc")
 _channels = itertools.count()
@@ -200,7 +201,48 @@ def test_can_gateway_command_serves_a_host() -> None:
     gateway.start()
     try:
         with wcdrive.connect(f"can://virtual/{channel}") as chair:
-            assert chair.protocol_version == 3
+            assert chair.protocol_version == 4
             assert chair.set_param("max_accel", 2.5) == 2.5
     finally:
         gateway.join()
+
+
+def _lines_after(link: CanLink, marker: bytes, seconds: float = 10.0) -> list[bytes]:
+    """The lines the link gives from the one that starts with ``marker`` on (a few)."""
+    got, deadline = b"", time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        got += link.read(4096, 0.1)
+        lines = got.split(b"\r\n")[:-1]
+        at = [i for i, line in enumerate(lines) if line.startswith(marker)]
+        if at and len(lines) - at[0] >= 6:
+            return lines[at[0]:]
+    raise AssertionError(f"no {marker!r} line in {got[-300:]!r}")
+
+
+def test_the_host_end_speaks_v4_frames_only_after_a_hello_4_as_the_board_does() -> None:
+    """Plain lines before any hello; after ``hello:4`` the ``HELLO:4`` answer and every
+    line after it framed, counting from 00 without a gap; plain again after the board
+    resets (its ``BOOT:`` line) and after a plain ``hello`` (``HELLO:3``)."""
+    channel = f"wc-can-{next(_channels)}"
+    board = SimulatedBoard(speed=5).start()
+    with CanGateway(can.Bus(interface="virtual", channel=channel), board):
+        link = CanLink(can.Bus(interface="virtual", channel=channel))
+        try:
+            plain = _lines_after(link, b"ENC:")
+            assert all(board_unframe(line) is None for line in plain), plain
+            link.write(frame(b"hello:4", 1))
+            framed = [board_unframe(line) for line in _lines_after(link, b"HELLO:4")]
+            assert all(f is not None for f in framed), framed
+            assert [f[1] for f in framed if f] == list(range(len(framed)))
+            assert framed[0] and framed[0][0].startswith(b"HELLO:4,final_control,")
+            board.dtr()                                 # the board resets
+            after_boot = _lines_after(link, b"BOOT:")
+            assert all(board_unframe(line) is None for line in after_boot), after_boot
+            link.write(frame(b"hello:4", 2))
+            _lines_after(link, b"HELLO:4")
+            link.write(frame(b"hello", 3))
+            v3 = _lines_after(link, b"HELLO:3")
+            assert all(board_unframe(line) is None for line in v3), v3
+        finally:
+            link.close()
+    board.close()

@@ -54,7 +54,7 @@ REPLY = 0x316
 HOST_TO_CHAIR = (CMD_VEL, CMD_WHEELS, CONTROL, PARAM)
 CHAIR_TO_HOST = (FEEDBACK_ENC, FEEDBACK_VEL, STATUS_A, STATUS_B, STATUS_C, STATUS_D, REPLY)
 
-CONTROL_OPS = {1: b"hello", 2: b"estop", 3: b"reset", 4: b"save", 5: b"defaults"}
+CONTROL_OPS = {1: b"hello", 2: b"estop", 3: b"reset", 4: b"save", 5: b"defaults", 6: b"hello:4"}
 PARAM_NAMES = tuple(PARAM_RANGES)
 MODES = ("WHEEL", "CMDVEL", "PPM")
 REASONS = ("", "syntax", "number", "range", "fields", "overlong", "checksum", "estop", "busy",

@@ -24,6 +24,8 @@ from wcdrive.boards.receive_buffer import ReceiveBuffer
 from wcdrive.errors import WcdriveConnectionError
 from wcdrive.protocol.can_frames import (
     CHAIR_TO_HOST,
+    CONTROL,
+    CONTROL_OPS,
     HOST_TO_CHAIR,
     CanCodecError,
     TelemetryAssembler,
@@ -31,7 +33,7 @@ from wcdrive.protocol.can_frames import (
     frame_to_command,
     message_to_frames,
 )
-from wcdrive.protocol.codec import LineDecoder
+from wcdrive.protocol.codec import LINE_COUNTER_WRAP, Boot, Hello, LineDecoder, board_frame, parse_line
 
 
 def open_bus(interface: str, channel: str) -> can.BusABC:
@@ -45,10 +47,16 @@ def open_bus(interface: str, channel: str) -> can.BusABC:
 
 
 class CanLink:
-    """Host end: serial-like, over a bus."""
+    """Host end: serial-like, over a bus. The lines it rebuilds from frames speak the
+    board's protocol as the board would: plain until a ``HELLO:4`` (or later), protocol
+    v4 frames from that line on, with a counter of its own, plain again from a ``BOOT:``
+    line. The bus checked each CAN frame (its CRC-15), and the gateway the board's line
+    it came from (protocol/CAN.md)."""
 
     def __init__(self, bus: can.BusABC) -> None:
         self.bus = bus
+        self._counter = 0
+        self._framed = False
         self._lines = TelemetryAssembler()
         self._rx = ReceiveBuffer()
         self._stop = threading.Event()
@@ -105,7 +113,18 @@ class CanLink:
             if msg is None or msg.arbitration_id not in CHAIR_TO_HOST:
                 continue
             text = self._lines.feed(msg.arbitration_id, bytes(msg.data))
-            if text:
+            if not text:
+                continue
+            line = text.rstrip(b"\r\n")
+            message = parse_line(line)
+            if isinstance(message, Boot):
+                self._framed = False
+            elif isinstance(message, Hello):
+                self._framed, self._counter = message.lines_framed, 0
+            if self._framed:
+                self._rx.put(board_frame(line, self._counter))
+                self._counter = (self._counter + 1) % LINE_COUNTER_WRAP
+            else:
                 self._rx.put(text)
 
     def close(self) -> None:
@@ -131,6 +150,9 @@ class CanGateway:
         self.bus = bus
         self.port = port
         self.dropped = 0            # frames or lines with no counterpart
+        # the board's lines: frames only once it answered HELLO:4, plain from a BOOT: line
+        # or a plain hello on
+        self._decoder = LineDecoder()
         self._stop = threading.Event()
         self._threads = [threading.Thread(target=self._to_chair, name="can-gw-in", daemon=True),
                          threading.Thread(target=self._to_bus, name="can-gw-out", daemon=True)]
@@ -151,10 +173,12 @@ class CanGateway:
             except (CanCodecError, ValueError):
                 self.dropped += 1
                 continue
+            if msg.arbitration_id == CONTROL and CONTROL_OPS.get(msg.data[0]) == b"hello":
+                self._decoder.framed = False        # a plain hello: the board answers v3
             self.port.write(line)
 
     def _to_bus(self) -> None:
-        decoder = LineDecoder()
+        decoder = self._decoder
         while not self._stop.is_set():
             try:
                 data = self.port.read(256)
@@ -164,6 +188,8 @@ class CanGateway:
                 time.sleep(0.05)
                 continue
             for message in decoder.feed(data or b""):
+                if isinstance(message, Hello):
+                    decoder.framed = message.lines_framed   # v4: only frames from now on
                 frames = message_to_frames(message)
                 if not frames:
                     self.dropped += 1
