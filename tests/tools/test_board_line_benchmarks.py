@@ -1,0 +1,51 @@
+"""benchmarks/board_lines.py (R2, board to host) and benchmarks/soak.py in short runs:
+no corrupted line believed and every line accounted for; a soak's checks met. The full
+figures are in docs/benchmarks.md."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+from types import ModuleType
+
+import pytest
+
+BENCHMARKS = Path(__file__).resolve().parents[2] / "benchmarks"
+
+
+def _load(name: str) -> ModuleType:
+    spec = importlib.util.spec_from_file_location(f"wcdrive_bench_{name}", BENCHMARKS / f"{name}.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_no_corrupted_board_line_is_accepted_and_every_line_is_counted() -> None:
+    bench = _load("board_lines")
+    f = bench.run("port", bench.port_lines(20.0, 3), 20_000, 3)
+    assert f.corrupted > 5_000 and f.accepted == 0
+    assert f.lines.spliced > 0 and f.lines.bad_crc > 0 and f.lines.lost > 0
+    total = f.lines.total
+    assert f.sent <= total <= f.sent + f.cuts
+
+
+def test_the_benchmark_sees_a_host_that_skips_the_crc(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The break the note names: with ``crc16`` always 0, the frames the benchmark makes
+    carry ``*0000`` and the decoder takes every frame's text as good."""
+    bench = _load("board_lines")
+    lines = bench.port_lines(10.0, 4)
+    from wcdrive.protocol import codec
+
+    monkeypatch.setattr(codec, "crc16", lambda data: 0)
+    f = bench.run("port", lines, 5_000, 4)
+    assert f.accepted > 100
+
+
+def test_a_short_soak_meets_its_checks() -> None:
+    soak = _load("soak")
+    report = soak.soak("sim", 0.05, 20.0, 3)
+    assert report.failures == [], report.failures
+    assert report.sent_lines == report.lines.good > 5_000
