@@ -6,7 +6,7 @@ sides."""
 
 from __future__ import annotations
 
-from hypothesis import given
+from hypothesis import example, given
 from hypothesis import strategies as st
 
 from wcdrive.firmware import constants as C
@@ -31,29 +31,48 @@ def _drive(fw: Firmware, chunks: list[bytes], start: int) -> bytes:
     return bytes(out)
 
 
+def _outputs(fw: Firmware, chunks: list[bytes], start: int) -> list[tuple[bool, bool, int, bytes]]:
+    """Each chunk fed, then a tick 50 ms on, with the wheels turning: for each feed and
+    each tick, whether the board framed its lines before and after it, how many hellos
+    it was given, and what it sent."""
+    outputs = []
+    now = start
+    for i, chunk in enumerate(chunks):
+        for hellos, step in ((chunk.count(b"hello"), lambda c=chunk: fw.feed(c)),
+                             (0, lambda n=now + C.CONTROL_PERIOD_MS, i=i: fw.tick(n, 37 * i, -41 * i))):
+            before = bool(fw.state.linesFramed)
+            out = step()
+            outputs.append((before, bool(fw.state.linesFramed), hellos, out))
+        now += C.CONTROL_PERIOD_MS
+    return outputs
+
+
 @given(st.lists(byte_streams(), min_size=1, max_size=8))
+@example([frame(b"hello", 2), b"x:0.5,t:0.1,", frame(b"hello:4", 3), frame(b"get:kp", 4)])
 def test_after_hello4_every_line_is_a_frame_in_turn(chunks: list[bytes]) -> None:
-    """Whatever the host sends after hello:4 (frames, seed lines, garbage, a plain
-    hello among them), each line the board sends is a good frame with the next counter
-    until a plain hello, and a plain v3 line after it."""
+    """Whatever the host sends after hello:4 (frames, seed lines, garbage, plain hellos
+    and hello:4 among them), each line the board sends while it frames is a good frame
+    whose counter is one more than the last frame's (the counter runs on across a
+    plain spell); after a plain hello the lines are plain v3 until a hello:4 again.
+    A line the output budget drops takes no counter (test_a_line_over_budget_...)."""
     fw = Firmware()
     head = fw.feed(frame(b"hello:4", 1))
-    out = head + _drive(fw, chunks, 0)
+    assert board_unframe(_lines(head)[0]) == (_lines(head)[0][:-8], 0)
     expected = 0
-    framed = True
-    for line in _lines(out):
-        unframed = board_unframe(line)
-        if framed:
-            assert unframed is not None, line
-            text, counter = unframed
-            assert counter == expected, line
-            expected = (expected + 1) % LINE_COUNTER_WRAP
-            if text.startswith(b"HELLO:3"):
-                framed = False              # a plain hello got through: v3 from here
-        else:
-            assert unframed is None and b"#" not in line, line
-            if line.startswith(b"HELLO:4"):
-                raise AssertionError("hello:4 answered unframed")
+    for framed_before, framed_after, hellos, out in [(True, True, 0, head), *_outputs(fw, chunks, 0)]:
+        modes = []
+        for line in _lines(out):
+            unframed = board_unframe(line)
+            if unframed is not None:
+                assert framed_before or framed_after, line
+                assert unframed[1] == expected, line
+                expected = (expected + 1) % LINE_COUNTER_WRAP
+            else:
+                assert not (framed_before and framed_after) and b"#" not in line, line
+                assert not line.startswith(b"HELLO:4"), "hello:4 answered unframed"
+            if not modes or modes[-1] != (unframed is not None):
+                modes.append(unframed is not None)
+        assert len(modes) <= 1 + hellos, (modes, out)       # a mode changes only at a hello
     assert fw.state.lineCounter == expected
 
 
