@@ -1,4 +1,5 @@
-"""Protocol v4 on the host's side, end to end: a ``wcsim://`` board behind a
+"""Protocol v4 on the host's side, end to end: a board (``wcsim://``, the simulated
+board behind a pty, and the firmware in simavr, ``wcavr://``) behind a
 ``FaultyPort`` that corrupts what the board sends (1 to 3 flipped bits a line, lost
 lines, lines spliced where a run of bytes was lost). The host believes no corrupted
 line: every message it acts on is one the board sent; it counts what it dropped
@@ -6,23 +7,28 @@ line: every message it acts on is one the board sent; it counts what it dropped
 
 from __future__ import annotations
 
+import contextlib
 import random
 import time
+from collections.abc import Callable, Iterator
 
 import pytest
 import serial
 
 import wcdrive
+from wcdrive.boards.sim_board import SimulatedBoard
 from wcdrive.protocol.codec import Corrupt, LineDecoder, Message, Unknown
 from wcdrive.transports.faulty import FaultyPort
+from wcdrive.transports.pty_bridge import PtyBridge
 
 
 class Tap(FaultyPort):
-    """A ``FaultyPort`` over a ``wcsim://`` board that keeps every byte the board sent,
-    before the faults."""
+    """A ``FaultyPort`` over a board's port (``wcsim://`` unless given) that keeps every
+    byte the board sent, before the faults."""
 
-    def __init__(self, seed: int) -> None:
-        super().__init__(serial.serial_for_url("wcsim://?speed=1", timeout=0.05), seed=seed, lines=True)
+    def __init__(self, seed: int, port: serial.SerialBase | None = None) -> None:
+        super().__init__(port or serial.serial_for_url("wcsim://?speed=1", timeout=0.05), seed=seed,
+                         lines=True)
         self.sent = bytearray()
 
     def on_read(self, data: bytes) -> bytes:
@@ -50,15 +56,43 @@ def _believed(chair: wcdrive.Wheelchair) -> list[Message]:
     return got
 
 
-@pytest.mark.parametrize("seed", [1, 2])
-def test_no_corrupted_board_line_is_believed(seed: int) -> None:
+@contextlib.contextmanager
+def _board(backend: str, request: pytest.FixtureRequest
+           ) -> Iterator[tuple[serial.SerialBase, Callable[[], tuple[float, float, float]]]]:
+    """The board's port and its ground truth (the plant's pose)."""
+    if backend == "wcsim":
+        port = serial.serial_for_url("wcsim://?speed=1", timeout=0.05)
+        yield port, port.board.pose
+    elif backend == "pty":
+        board = SimulatedBoard(speed=1).start()
+        bridge = PtyBridge(board).start()
+        try:
+            yield serial.Serial(bridge.path, 115200, timeout=0.05), board.pose
+        finally:
+            bridge.close()
+            board.close()
+    else:
+        elf = request.getfixturevalue("elf")
+        port = serial.serial_for_url(f"wcavr://{elf}", timeout=0.05)
+        yield port, port.board.pose
+
+
+@pytest.mark.parametrize(("backend", "seed"), [
+    ("wcsim", 1), ("wcsim", 2), ("pty", 3), pytest.param("simavr", 4, marks=pytest.mark.simavr)])
+def test_no_corrupted_board_line_is_believed(backend: str, seed: int, request: pytest.FixtureRequest) -> None:
     """A 3 s drive with a third of the board's lines damaged: every message the host
     acted on is one the board sent (so every ACK it believed answers a request it
     made), no fault is believed, every line is accounted for (good, bad CRC, spliced
     or lost: as many as the board sent), and once the chair stands the pose is the
     plant's to a millimetre, as on a clean link."""
     rng = random.Random(seed)
-    port = Tap(seed)
+    with _board(backend, request) as (inner, truth_pose):
+        port = Tap(seed, inner)
+        _drive_through_corruption(port, rng, truth_pose)
+
+
+def _drive_through_corruption(port: Tap, rng: random.Random,
+                              truth_pose: Callable[[], tuple[float, float, float]]) -> None:
     chair = wcdrive.Wheelchair(port)
     try:
         believed = _believed(chair)
@@ -75,7 +109,7 @@ def test_no_corrupted_board_line_is_believed(seed: int) -> None:
         chair.stop()
         time.sleep(1.5)                                     # at rest
         pose = chair.odometry.pose
-        x, y, _ = port.board.pose()
+        x, y, _ = truth_pose()
         faults, events = chair.faults, list(chair.events)
     finally:
         chair.close()
