@@ -24,10 +24,12 @@ URLs map onto pyserial (the query goes to the handler, which alone parses it):
   (docs/eddie.md), which has the navigation surface of ``wcdrive.host.robot.Robot``.
 
 On connect the board resets (a real Mega does when its port opens); the API waits
-for it to boot, then says hello (a v3 frame, tried 3 times with growing waits). A
-protocol-v3 board answers ``HELLO:3,final_control,<version>,<build id>``; from then on
+for it to boot, then says ``hello:4`` (a v3 frame, tried 3 times with growing waits).
+A protocol-v4 board answers ``HELLO:4,final_control,<version>,<build id>``; from then on
 every line the host writes is a frame with a CRC-16 and a sequence number (a corrupted
-byte is rejected, never driven; the board refuses unframed lines but stops),
+byte is rejected, never driven; the board refuses unframed lines but stops), every
+line the board sends ends in a line counter and a CRC-16 (one that fails is dropped
+and counted in ``chair.link_stats``, never believed),
 ``estop()``/``reset_estop()`` and ``get_param()``/``set_param()`` are acknowledged,
 retried requests, and telemetry carries the ``TLM:`` fields. A board that never
 answers hello raises ``WcdriveProtocolError``, as does one that answers with another
