@@ -202,7 +202,11 @@ def soak(backend: str, hours: float, speed: float, seed: int) -> Report:
                 _wait(board, 2.0, speed)                  # at rest: the pose is final
                 at_rest = chair.odometry.pose
                 before_reset[0] = (at_rest.x, at_rest.y, at_rest.theta)
+                # the host reads every line first: a DTR pulse drops what waits unread
+                # (as on a real port), and those lines would be neither read nor lost
+                sent.freeze(port, lambda: chair.link_stats.total)
                 board.dtr()
+                sent.frozen = False
                 chair.wait_for_handshake(10.0)
                 _wait(board, 0.5, speed)
                 continue
