@@ -59,6 +59,11 @@ class MegaBoard(ThreadedBoard):
         #: ``(cycle, byte)``: a probe for measurements (PWM, the plant) at the step's end.
         self.on_step: Callable[[list[tuple[int, int]]], None] | None = None
 
+    @property
+    def time(self) -> float:
+        """Simulated seconds since the board started (running on across its resets)."""
+        return self.mega.time
+
     def pose(self) -> tuple[float, float, float]:
         """Ground truth (x, y, heading) of the chair behind the pins."""
         if self.plant is None:
