@@ -9,7 +9,7 @@ from pathlib import Path
 
 from wcdrive.firmware.params import PARAMS
 from wcdrive.firmware.state import FirmwareState
-from wcdrive.protocol.codec import frame
+from wcdrive.protocol.codec import board_unframe, frame
 from wcdrive.protocol.spec import integer, real
 
 ElfPath = str | Path | None
@@ -20,7 +20,8 @@ SEQ_MAX = integer("SEQ_MAX")
 MAX_LINEAR = real("MAX_LINEAR")
 MAX_ANGULAR = real("MAX_ANGULAR")
 MAX_WHEEL = real("MAX_WHEEL_SPEED")
-HELLO_FRAME = frame(b"hello", 1)
+#: protocol v4: the board frames its lines from its answer on
+HELLO_FRAME = frame(b"hello:4", 1)
 TICK_MS = 50
 HANG_S = 0.050                      # a line (port) or a byte (firmware) must be done within a tick
 
@@ -61,9 +62,16 @@ def params_of(s: FirmwareState) -> tuple[float | int, ...]:
 
 
 def answer_kinds(out: bytes) -> list[str]:
-    """The answers in a chunk of output (feedback, TLM and BOOT lines left out)."""
+    """The answers in a chunk of output (feedback, TLM and BOOT lines left out), v4
+    frames unframed; a line that looks framed and fails its check is ``BAD FRAME``
+    (the board never sends one)."""
     kinds = []
-    for line in out.split(b"\r\n"):
+    for raw in out.split(b"\r\n"):
+        unframed = board_unframe(raw)
+        line = raw if unframed is None else unframed[0]
+        if unframed is None and b"*" in raw:
+            kinds.append("BAD FRAME")
+            continue
         head = line[:4]
         if head in (b"ERR:", b"EVT:"):
             kinds.append(line.decode("latin-1"))

@@ -277,6 +277,8 @@ def problems(res: Results) -> list[str]:
                     - st.controls_ok["stop"] - st.controls_ok["param"])
             if st.lockstep is not None:
                 bad["port/firmware mismatches"] = st.lockstep.mismatches
+            bad["board lines that failed their v4 check"] = sum(
+                n for (_, kind), n in st.answers.items() if kind == "BAD FRAME")
             found += [f"R1 {side} {name}: {v} {k}" for k, v in bad.items() if v]
             found += [f"  {e}" for e in st.examples] if any(bad.values()) else []
     for side, r in (("port", res.r2_port), ("firmware", res.r2_firmware)):

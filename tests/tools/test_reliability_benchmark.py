@@ -141,6 +141,22 @@ def test_it_sees_a_frame_taken_with_a_bad_crc(rel: ModuleType, monkeypatch: pyte
     assert sum(r2.acked.values()) > 0 and sum(r2.executed.values()) > 0
 
 
+def test_answers_are_read_through_their_v4_frames(rel: ModuleType, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The board says hello:4 in R1 and R2, so its answers come framed: they are read
+    unframed, and one that fails its check is a problem R1 reports."""
+    from wcdrive.firmware import output
+    from wcdrive.protocol.codec import board_frame
+
+    common = sys.modules["wcdrive_reliability_benchmark.common"]
+    assert common.answer_kinds(board_frame(b"NAK:7,checksum", 3) + board_frame(b"ACK:8", 4)) == [
+        "NAK:checksum", "ACK"]
+    assert common.answer_kinds(b"ACK:8#04*0000\r\n") == ["BAD FRAME"]
+    monkeypatch.setattr(output, "board_frame", lambda text, n: board_frame(text, n)[:-4] + b"00\r\n")
+    res = rel.Results(1, {})
+    res.r1_port["strict"] = rel.port_r1(300, random.Random(1), True)
+    assert any("failed their v4 check" in p for p in rel.problems(res)), rel.problems(res)
+
+
 # ---- R3: link cut, unplug and DTR reset mid-motion ----------------------------------------
 def unknown_problems(rel: ModuleType, r: Any) -> list[str]:
     """R3's problems, headlines only. (Two host defects R3 found were allowed for here
