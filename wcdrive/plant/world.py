@@ -1,0 +1,168 @@
+"""The static world the chair drives in: walls (segments), boxes and round posts in the
+map frame, hand-written or from a ROS map (``wcdrive.plant.rosmap``), and the exact
+ray cast a 2D lidar needs.
+
+    world = World.from_table({"walls": [[0, 0, 10, 0, 10, 5]], "circles": [[4, 2, 0.05]]})
+    world = World.from_grid(load_map("room.yaml"))     # the occupied cells' outlines
+    world.cast(origins, angles, max_range=40.0)         # metres to the first hit, inf for none
+
+A hand-written world (a scenario's ``[world]`` table, or a TOML file of its own):
+
+- ``walls``: polylines, each a flat list ``[x0, y0, x1, y1, ...]`` (two points or more);
+- ``boxes``: ``[cx, cy, width, height]`` or ``[cx, cy, width, height, yaw_deg]``;
+- ``circles``: ``[x, y, radius]`` (table legs, posts);
+- ``map``: a map_server YAML, its path relative to ``base``; its occupied cells join
+  the rest.
+
+Everything is a segment but the circles: a box is its four sides, an occupied region
+of a map its outline (the edges between an occupied cell and one that is not, merged
+where they run on in a line). The ray cast is exact for that geometry (a ray's length
+to a wall is the distance along it to the first segment or circle it meets), in
+float64, all rays at once with numpy: the reference the lidar's faster cast is held
+to.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from wcdrive.plant.rosmap import OCCUPIED, OccupancyGrid, load_map
+
+
+class WorldError(ValueError):
+    """A world table that cannot be built (the message says which entry and why)."""
+
+
+def _polyline(points: Iterable[float], what: str) -> list[tuple[float, float, float, float]]:
+    flat = [float(v) for v in points]
+    if len(flat) < 4 or len(flat) % 2:
+        raise WorldError(f"{what}: a polyline needs x, y pairs, two points at least; got {len(flat)} numbers")
+    pts = list(zip(flat[0::2], flat[1::2], strict=True))
+    return [(a[0], a[1], b[0], b[1]) for a, b in itertools.pairwise(pts) if a != b]
+
+
+def box_segments(cx: float, cy: float, width: float, height: float, yaw: float = 0.0
+                 ) -> list[tuple[float, float, float, float]]:
+    """The four sides of a box centred at (cx, cy), turned by ``yaw`` radians."""
+    if not (width > 0 and height > 0):
+        raise WorldError(f"a box needs a positive width and height, not {width} x {height}")
+    c, s = math.cos(yaw), math.sin(yaw)
+    corners = [(cx + c * u - s * v, cy + s * u + c * v)
+               for u, v in ((-width / 2, -height / 2), (width / 2, -height / 2),
+                            (width / 2, height / 2), (-width / 2, height / 2))]
+    return [(*corners[i], *corners[(i + 1) % 4]) for i in range(4)]
+
+
+def grid_outline(grid: OccupancyGrid) -> np.ndarray:
+    """(N, 4) segments ``x0, y0, x1, y1`` in the map frame: the edges between an
+    occupied cell and a cell that is not (or the map's border), collinear neighbours
+    merged into one segment."""
+    occ = np.pad(grid.data == OCCUPIED, 1, constant_values=False)
+    runs: list[tuple[float, float, float, float]] = []    # in cell units, before the origin
+    # horizontal edges: between row r-1 and row r (padded indices), where one side is occupied
+    below, above = occ[:-1, 1:-1], occ[1:, 1:-1]
+    for edges, offset in ((below & ~above, 0), (above & ~below, 0)):
+        for r, row in enumerate(edges):
+            runs += [(c0, r + offset, c1, r + offset) for c0, c1 in _runs(row)]
+    left, right = occ[1:-1, :-1], occ[1:-1, 1:]
+    for edges in (left & ~right, right & ~left):
+        for c, col in enumerate(edges.T):
+            runs += [(c, r0, c, r1) for r0, r1 in _runs(col)]
+    if not runs:
+        return np.zeros((0, 4))
+    cells = np.asarray(runs, dtype=float) * grid.resolution
+    x0, y0, yaw = grid.origin
+    cos, sin = math.cos(yaw), math.sin(yaw)
+    out = np.empty_like(cells)
+    for k in (0, 2):
+        u, v = cells[:, k], cells[:, k + 1]
+        out[:, k], out[:, k + 1] = x0 + cos * u - sin * v, y0 + sin * u + cos * v
+    return out
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """(start, end) of each run of True in a 1-D mask, end exclusive."""
+    padded = np.concatenate(([False], mask, [False])).astype(np.int8)
+    change = np.flatnonzero(np.diff(padded))
+    return list(zip(change[0::2].tolist(), change[1::2].tolist(), strict=True))
+
+
+@dataclass(frozen=True, eq=False)
+class World:
+    """Static geometry in the map frame: ``segments`` (N, 4) ``x0, y0, x1, y1`` and
+    ``circles`` (M, 3) ``x, y, r``, in metres; ``grid`` the ROS map it came from, if
+    any (for ``/map``)."""
+
+    segments: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    circles: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    grid: OccupancyGrid | None = None
+
+    @classmethod
+    def from_grid(cls, grid: OccupancyGrid) -> World:
+        """The outline of a map's occupied cells."""
+        return cls(grid_outline(grid), np.zeros((0, 3)), grid)
+
+    @classmethod
+    def from_table(cls, table: dict[str, Any], base: Path | None = None) -> World:
+        """A hand-written world (the module's docstring has the keys)."""
+        unknown = set(table) - {"walls", "boxes", "circles", "map"}
+        if unknown:
+            raise WorldError(f"unknown world keys: {', '.join(sorted(unknown))} "
+                             "(walls, boxes, circles, map)")
+        segments: list[tuple[float, float, float, float]] = []
+        for i, line in enumerate(table.get("walls", [])):
+            segments += _polyline(line, f"walls[{i}]")
+        for i, box in enumerate(table.get("boxes", [])):
+            if len(box) not in (4, 5):
+                raise WorldError(f"boxes[{i}]: [cx, cy, width, height] or with yaw_deg, not {box}")
+            yaw = math.radians(float(box[4])) if len(box) == 5 else 0.0
+            segments += box_segments(float(box[0]), float(box[1]), float(box[2]), float(box[3]), yaw)
+        circles = []
+        for i, circle in enumerate(table.get("circles", [])):
+            if len(circle) != 3 or not float(circle[2]) > 0:
+                raise WorldError(f"circles[{i}]: [x, y, radius > 0], not {circle}")
+            circles.append([float(v) for v in circle])
+        grid = None
+        seg = np.asarray(segments, dtype=float).reshape(-1, 4)
+        if "map" in table:
+            grid = load_map((base or Path.cwd()) / str(table["map"]))
+            seg = np.concatenate((seg, grid_outline(grid)))
+        return cls(seg, np.asarray(circles, dtype=float).reshape(-1, 3), grid)
+
+    def cast(self, origins: np.ndarray, angles: np.ndarray, max_range: float = math.inf) -> np.ndarray:
+        """For each ray (origin (K, 2) or one (2,), angle (K,) radians in the map
+        frame): the distance to the first segment or circle it meets within
+        ``max_range``, else ``inf``. A ray that starts inside a circle meets its rim."""
+        angles = np.asarray(angles, dtype=float)
+        o = np.broadcast_to(np.asarray(origins, dtype=float), (*angles.shape, 2))
+        dx, dy = np.cos(angles)[:, None], np.sin(angles)[:, None]
+        ox, oy = o[:, 0:1], o[:, 1:2]
+        best = np.full(angles.shape, np.inf)
+        if len(self.segments):
+            x0, y0, x1, y1 = (self.segments[:, k][None, :] for k in range(4))
+            ex, ey = x1 - x0, y1 - y0
+            denom = dx * ey - dy * ex                        # cross(d, e)
+            wx, wy = x0 - ox, y0 - oy
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t = (wx * ey - wy * ex) / denom              # along the ray
+                u = (wx * dy - wy * dx) / denom              # along the segment
+            hit = (denom != 0) & (t >= 0) & (u >= 0) & (u <= 1)
+            best = np.minimum(best, np.where(hit, t, np.inf).min(axis=1))
+        if len(self.circles):
+            cx, cy, r = (self.circles[:, k][None, :] for k in range(3))
+            fx, fy = ox - cx, oy - cy
+            b = fx * dx + fy * dy
+            c = fx * fx + fy * fy - r * r
+            disc = b * b - c
+            root = np.sqrt(np.maximum(disc, 0.0))
+            near, far = -b - root, -b + root
+            t = np.where(near >= 0, near, far)
+            best = np.minimum(best, np.where((disc >= 0) & (t >= 0), t, np.inf).min(axis=1))
+        return np.where(best <= max_range, best, np.inf)
