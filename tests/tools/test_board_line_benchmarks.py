@@ -49,3 +49,21 @@ def test_a_short_soak_meets_its_checks() -> None:
     report = soak.soak("sim", 0.05, 20.0, 3)
     assert report.failures == [], report.failures
     assert report.sent_lines == report.lines.good > 5_000
+
+
+def test_the_soak_sees_a_host_that_leaks(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A host that keeps 1 kB for every read of the board's bytes: the soak's memory
+    check, which starts at the 10-minute mark, goes red within 12 simulated minutes."""
+    from wcdrive.protocol import codec
+
+    soak = _load("soak")
+    kept: list[bytes] = []
+    feed = codec.LineDecoder.feed
+
+    def leaky(self: codec.LineDecoder, data: bytes) -> list[codec.Message]:
+        kept.append(bytes(1000))
+        return feed(self, data)
+
+    monkeypatch.setattr(codec.LineDecoder, "feed", leaky)
+    report = soak.soak("sim", 0.2, 50.0, 3)
+    assert any(f.startswith("host memory grew") for f in report.failures), report.failures
