@@ -106,3 +106,30 @@ def test_ten_minute_sim_session_holds_flat_memory() -> None:
     assert growth < 200_000, f"memory grew by {growth / 1e3:.0f} kB over 360 simulated s"
     assert any(m.startswith("connected, protocol v4") for m in handler.counts), handler.counts
     assert handler.counts["board event WATCHDOG"] >= 10, handler.counts
+
+
+@pytest.mark.simavr
+def test_a_live_simavr_board_keeps_no_log_that_grows(elf) -> None:
+    """``wcavr://``'s board (a ``MegaBoard``) runs for hours: after 2 simulated seconds of
+    commands and feedback it holds none of the hooked entries nor the bytes it was sent
+    (the lock-step harness's records), and its gyro keeps its newest samples only. Kept,
+    they grew 94 MB in the soak's half hour (benchmarks/soak.py --backend simavr)."""
+    from wcdrive.boards.sim_board import GYRO_HISTORY
+    from wcdrive.boards.simavr.mega_board import MegaBoard
+    from wcdrive.protocol.codec import encode_cmdvel
+
+    board = MegaBoard(elf).start()
+    try:
+        deadline = time.monotonic() + 30.0
+        while board.time < 2.0 and time.monotonic() < deadline:
+            board.write(encode_cmdvel(0.5, 0.1))
+            board.read(4096)
+            time.sleep(0.02)
+        assert board.time >= 2.0
+        with board._lock:
+            assert board.mega.hit_log == [] and board.mega.rx_wire == []
+            gyro = board._pins.gyro                   # type: ignore[union-attr]
+            assert isinstance(gyro.times, History) and gyro.times.maxlen == GYRO_HISTORY
+            assert isinstance(gyro.rates, History) and len(gyro.rates) > 0
+    finally:
+        board.close()
