@@ -118,6 +118,8 @@ class BootloaderMega(VirtualMega):
         self._pin_level = {}
         self.tx_log = []
         self.hit_log = []
+        self.rx_wire = []
+        self.rx_lost = []
         self.resets = []
         self._resets_taken = 0
         self._vcd = False
