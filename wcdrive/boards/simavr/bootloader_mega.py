@@ -117,6 +117,7 @@ class BootloaderMega(VirtualMega):
         self._closed_cycle = 0
         self._pin_level = {}
         self.tx_log = []
+        self.keep_records = True
         self.hit_log = []
         self.rx_wire = []
         self.rx_lost = []

@@ -241,6 +241,9 @@ class VirtualMega:
         self._closed_cycle = 0
         self._pin_level: dict[tuple[str, int], int] = {}
         self.tx_log: list[tuple[int, int]] = []
+        #: Whether ``rx_wire`` and ``hit_log`` are kept (the lock-step harness's records);
+        #: a live board that runs for hours turns it off, and they stay empty.
+        self.keep_records = True
         #: Every byte sent to the board, as (the cycle it reaches the USART, byte), in the
         #: order the receiver gets them (``RxLoss.index`` counts in this list).
         self.rx_wire: list[tuple[int, int]] = []
@@ -397,7 +400,8 @@ class VirtualMega:
         cycles = [start + i * UART_BYTE_CYCLES for i in range(len(data))]
         for cycle, byte in zip(cycles, data, strict=True):
             self._c.wcsim_schedule(self._s, cycle + UART_BYTE_CYCLES, 1, 0, 0, byte)
-            self.rx_wire.append((cycle + UART_BYTE_CYCLES, byte))
+            if self.keep_records:
+                self.rx_wire.append((cycle + UART_BYTE_CYCLES, byte))
         if data:
             self._uart_free_at = cycles[-1] + UART_BYTE_CYCLES
         return cycles
@@ -480,7 +484,8 @@ class VirtualMega:
             hooks = (ctypes.c_uint32 * n)()
             args = (ctypes.c_uint32 * n)()
             got = self._c.wcsim_hits_take(self._s, cycles, hooks, args, n)
-            self.hit_log.extend(Hit(cycles[i], self._hook_names[hooks[i]], args[i]) for i in range(got))
+            if self.keep_records:
+                self.hit_log.extend(Hit(cycles[i], self._hook_names[hooks[i]], args[i]) for i in range(got))
         if self._vcd:
             self._c.wcsim_vcd_pwm(self._s, self.pwm("left"), self.pwm("right"))
 
