@@ -116,11 +116,12 @@ class CanLink:
             if not text:
                 continue
             line = text.rstrip(b"\r\n")
-            message = parse_line(line)
-            if isinstance(message, Boot):
-                self._framed = False
-            elif isinstance(message, Hello):
-                self._framed, self._counter = message.lines_framed, 0
+            if line.startswith((b"BOOT:", b"HELLO:")):        # only these change the framing
+                message = parse_line(line)
+                if isinstance(message, Boot):
+                    self._framed = False
+                elif isinstance(message, Hello):
+                    self._framed, self._counter = message.lines_framed, 0
             if self._framed:
                 self._rx.put(board_frame(line, self._counter))
                 self._counter = (self._counter + 1) % LINE_COUNTER_WRAP
