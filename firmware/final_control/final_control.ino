@@ -617,7 +617,7 @@ static bool noEffect(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, flo
     return false;
   }
   if (appliedPwm < effortPwm) effortPwm = appliedPwm;
-  bool shortfall = fabs(measured) < WC_FAULT_EFFORT_SHORTFALL * fabs(setpoint);
+  bool shortfall = fabs(measured) < WC_FAULT_EFFORT_SHORTFALL_MOTOR * fabs(setpoint);
   float otherProgress = setpoint > 0.0f ? other : -other;
   bool trails = progress < (otherProgress > 0.0f ? otherProgress : 0.0f) + WC_FAULT_EFFORT_LEAD;
   effortTicks = shortfall && trails && appliedPwm >= effortPwm + WC_FAULT_EFFORT_PWM ? effortTicks + 1 : 0;

@@ -75,7 +75,7 @@ def no_effect(applied_pwm: int, applied_dir: int, setpoint: float, measured: flo
     if not toward or setpoint != effort_setpoint or progress > effort_speed:
         return False, (applied_pwm, progress, setpoint, 0)
     effort_pwm = min(effort_pwm, applied_pwm)
-    shortfall = abs(measured) < mul(C.FAULT_EFFORT_SHORTFALL, abs(setpoint))
+    shortfall = abs(measured) < mul(C.FAULT_EFFORT_SHORTFALL_MOTOR, abs(setpoint))
     other_progress = other if setpoint > 0.0 else -other
     trails = progress < add(max(other_progress, 0.0), C.FAULT_EFFORT_LEAD)
     ticks = ((ticks + 1) & 0xFF if shortfall and trails and applied_pwm >= effort_pwm + C.FAULT_EFFORT_PWM

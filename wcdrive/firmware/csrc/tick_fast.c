@@ -144,7 +144,7 @@ static int arg_int(PyObject *o, int64_t *out) {
 
 static struct {
     double alpha, one_minus_alpha, cpr, two_pi, pid_out_max, pwm_scale, still_speed,
-        brake_done_speed, reverse_speed, reverse_approach, runaway_gain, effort_shortfall, effort_lead,
+        brake_done_speed, reverse_speed, reverse_approach, runaway_gain, effort_shortfall, effort_shortfall_motor, effort_lead,
         overspeed_margin, overspeed_gain,
         pivot_start_speed,
         pivot_speed, rounding2;
@@ -232,7 +232,7 @@ static int no_effect(int64_t pwm, int64_t dir, double setpoint, double measured,
     }
     if (pwm < e->pwm)
         e->pwm = pwm;
-    int shortfall = fabs(measured) < f_mul(K.effort_shortfall, fabs(setpoint));
+    int shortfall = fabs(measured) < f_mul(K.effort_shortfall_motor, fabs(setpoint));
     double other_progress = setpoint > 0.0 ? other : -other;
     int trails = progress < f_add(other_progress > 0.0 ? other_progress : 0.0, K.effort_lead);
     e->ticks = (shortfall && trails && pwm >= e->pwm + K.effort_pwm) ? ((e->ticks + 1) & 0xFF) : 0;
@@ -722,6 +722,7 @@ static PyObject *bind(PyObject *self, PyObject *args) {
           && const_double(consts, "FAULT_REVERSE_APPROACH", &k.reverse_approach)
           && const_double(consts, "FAULT_RUNAWAY_GAIN", &k.runaway_gain)
           && const_double(consts, "FAULT_EFFORT_SHORTFALL", &k.effort_shortfall)
+          && const_double(consts, "FAULT_EFFORT_SHORTFALL_MOTOR", &k.effort_shortfall_motor)
           && const_double(consts, "FAULT_EFFORT_LEAD", &k.effort_lead)
           && const_double(consts, "PIVOT_START_SPEED", &k.pivot_start_speed)
           && const_double(consts, "PIVOT_SPEED", &k.pivot_speed)
