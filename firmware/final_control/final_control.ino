@@ -193,6 +193,9 @@ float setpointL = 0.0f, setpointR = 0.0f;   // ramped setpoints fed to the PID
 float rawVelL = 0.0f, rawVelR = 0.0f;       // measured this tick, rad/s
 float filtVelL = 0.0f, filtVelR = 0.0f;     // IIR-filtered velocity
 float integralL = 0.0f, integralR = 0.0f;
+// The integrals and setpoints when the last emergency ramp began (resumedIntegral).
+float haltIntegralL = 0.0f, haltIntegralR = 0.0f;
+float haltSetpointL = 0.0f, haltSetpointR = 0.0f;
 float prevMeasL = 0.0f, prevMeasR = 0.0f;   // last filtered velocity seen by the PID
 float outputL = 0.0f, outputR = 0.0f;       // PID output, -100..100
 uint8_t pwmL = 0, pwmR = 0;                 // duty written to the driver
@@ -566,9 +569,17 @@ static void holdMotor(uint8_t pwmPin, uint8_t dirPin, int32_t error, uint8_t ahe
 
 // Targets to zero; the ramp brings the setpoints down at the emergency rate and the
 // PID brakes the wheels along it. Its integrators start from zero: what they held to
-// keep the chair rolling would push against the brake.
+// keep the chair rolling would push against the brake. What they held, and the
+// setpoints then, are kept for a command that drives on during the ramp
+// (resumedIntegral).
 static void emergencyHalt() {
-  if (!emergencyStop) integralL = integralR = 0.0f;
+  if (!emergencyStop) {
+    haltIntegralL = integralL;
+    haltIntegralR = integralR;
+    haltSetpointL = setpointL;
+    haltSetpointR = setpointR;
+    integralL = integralR = 0.0f;
+  }
   targetL = targetR = 0.0f;
   pivotPhase = PIVOT_NONE;
   pivotTicksLeft = 0;
@@ -724,10 +735,27 @@ static uint16_t wheelFaults(uint8_t check, uint16_t stall, uint16_t reversed, ui
   return 0;
 }
 
-// A valid command: new wheel targets, through the pivot state machine.
+// A wheel driven on the way it went when the emergency ramp began takes back the
+// integral it held then (held, at setpoint was), in the share its setpoint kept of was;
+// otherwise 0. Without it the PID rebuilds from zero while the chair still rolls: the
+// duty collapses, the wheel brakes on its own back-EMF (from 1 m/s to under half of it
+// after a 0.5 s silence), and the motor rule takes the duty climbing back for a dead
+// motor.
+static float resumedIntegral(float held, float was, float setpoint, float target) {
+  if (was == 0.0f || setpoint == 0.0f || (setpoint > 0.0f) != (was > 0.0f) ||
+      (target > 0.0f) != (was > 0.0f)) {
+    return 0.0f;
+  }
+  float share = setpoint / was;
+  return share >= 1.0f ? held : held * share;
+}
+
+// A valid command: new wheel targets, through the pivot state machine. One that drives
+// on during an emergency ramp takes the integrals back (resumedIntegral).
 static void acceptCommand(uint8_t newMode, float right, float left) {
   mode = newMode;
   cmdSinceTick = true;
+  bool resuming = emergencyStop;
   emergencyStop = false;
   float travel = (right + left) * 0.5f * WC_WHEEL_RADIUS;
   if (right == 0.0f && left == 0.0f) {
@@ -746,6 +774,10 @@ static void acceptCommand(uint8_t newMode, float right, float left) {
   } else {
     targetR = right;
     targetL = left;
+    if (resuming) {
+      integralL = resumedIntegral(haltIntegralL, haltSetpointL, setpointL, left);
+      integralR = resumedIntegral(haltIntegralR, haltSetpointR, setpointR, right);
+    }
   }
   lastTravel = travel;
 }

@@ -241,12 +241,14 @@ def test_a_bind_that_fails_leaves_the_python_tick(monkeypatch, caplog) -> None:
 
 # ---- the twin rule: a change to the tick touches control.py and tick_fast.c alike ----
 #: Fields only the Python tick writes: those of the ticks the C tick declines (a fault
-#: latches, whose emergency halt sets faultFlags and emergencyStop and forgets
-#: lastTravel), and a hold's start or rollaway, which set holdRollaway (the C tick takes only
+#: latches, whose emergency halt sets faultFlags and emergencyStop, keeps the integrals
+#: and setpoints it began from (haltIntegral*, haltSetpoint*) and forgets lastTravel),
+#: and a hold's start or rollaway, which set holdRollaway (the C tick takes only
 #: a hold already on, its wheels within the deadband), and a halt at the chair's limit
 #: (an overspeed, both wheels at their limit), which sets limitLatched. Any other field
 #: the Python tick writes, the C tick must write too.
-PYTHON_ONLY = {"emergencyStop", "faultFlags", "lastTravel", "holdRollaway", "limitLatched"}
+PYTHON_ONLY = {"emergencyStop", "faultFlags", "lastTravel", "holdRollaway", "limitLatched", "haltIntegralL",
+               "haltIntegralR", "haltSetpointL", "haltSetpointR"}
 _FIRMWARE = Path(tick_fast.__file__).resolve().parent
 
 

@@ -7,7 +7,7 @@ the pending command. ``pivot_step`` runs once per control tick, after the output
 
 from __future__ import annotations
 
-from wcdrive.avr.f32 import add, mul
+from wcdrive.avr.f32 import add, div, mul
 from wcdrive.firmware.constants import (
     PIVOT_SPEED,
     PIVOT_START_SPEED,
@@ -31,8 +31,11 @@ def needs_pivot(travel: float, prev_travel: float) -> bool:
 def emergency_halt(s: FirmwareState) -> None:
     """Targets to zero; the ramp brings the setpoints down at the emergency rate and the
     PID brakes along it, its integrators started from zero (what they held to keep the
-    chair rolling would push against the brake)."""
+    chair rolling would push against the brake). What they held, and the setpoints then,
+    are kept for a command that drives on during the ramp (``resumed_integral``)."""
     if not s.emergencyStop:
+        s.haltIntegralL, s.haltIntegralR = s.integralL, s.integralR
+        s.haltSetpointL, s.haltSetpointR = s.setpointL, s.setpointR
         s.integralL = s.integralR = 0.0
     s.targetL = s.targetR = 0.0
     s.pivotPhase = PIVOT_NONE
@@ -44,9 +47,11 @@ def emergency_halt(s: FirmwareState) -> None:
 def accept_command(s: FirmwareState, new_mode: int, right: float, left: float) -> None:
     """``acceptCommand``: a valid command's wheel targets, through the pivot: a stop
     applies at once (ending a pivot), a reversal starts one with the command pending,
-    and during a pivot a command replaces the pending one."""
+    and during a pivot a command replaces the pending one. One that drives on during
+    an emergency ramp takes the integrals back (``resumed_integral``)."""
     s.mode = new_mode
     s.cmdSinceTick = 1
+    resuming = s.emergencyStop
     s.emergencyStop = 0
     travel = mul(mul(add(right, left), 0.5), WHEEL_RADIUS)
     if right == 0.0 and left == 0.0:
@@ -65,7 +70,21 @@ def accept_command(s: FirmwareState, new_mode: int, right: float, left: float) -
     else:
         s.targetR = right
         s.targetL = left
+        if resuming:
+            s.integralL = resumed_integral(s.haltIntegralL, s.haltSetpointL, s.setpointL, left)
+            s.integralR = resumed_integral(s.haltIntegralR, s.haltSetpointR, s.setpointR, right)
     s.lastTravel = travel
+
+
+def resumed_integral(held: float, was: float, setpoint: float, target: float) -> float:
+    """``resumedIntegral``: a wheel driven on the way it went when an emergency ramp
+    began takes back the integral it held then (``held``, at setpoint ``was``), in the
+    share its setpoint kept of ``was``; otherwise 0. Rebuilt from zero while the chair
+    still rolls, the duty collapses and the wheel brakes on its own back-EMF."""
+    if was == 0.0 or setpoint == 0.0 or (setpoint > 0.0) != (was > 0.0) or (target > 0.0) != (was > 0.0):
+        return 0.0
+    share = div(setpoint, was)
+    return held if share >= 1.0 else mul(held, share)
 
 
 def pivot_step(s: FirmwareState) -> None:

@@ -22,7 +22,8 @@ EE_BLOCK_BYTES = 1 + 4 * (len(PARAMS) - 1) + 2 + 2
 FLOAT_FIELDS = (
     "targetL", "targetR", "setpointL", "setpointR", "rawVelL", "rawVelR", "filtVelL",
     "filtVelR", "integralL", "integralR", "prevMeasL", "prevMeasR", "outputL", "outputR",
-    "lastTravel", "pendingL", "pendingR", "effortSpeedL", "effortSpeedR", "effortSetpointL",
+    "lastTravel", "pendingL", "pendingR", "haltIntegralL", "haltIntegralR", "haltSetpointL",
+    "haltSetpointR", "effortSpeedL", "effortSpeedR", "effortSetpointL",
     "effortSetpointR", "overspeedFromL", "overspeedFromR",
     "kpL", "kiL", "kdL", "kpR", "kiR", "kdR", "maxWheel", "maxAccel", "estopDecel",
 )
@@ -64,6 +65,10 @@ class FirmwareState:
     filtVelR: float = 0.0
     integralL: float = 0.0
     integralR: float = 0.0
+    haltIntegralL: float = 0.0
+    haltIntegralR: float = 0.0
+    haltSetpointL: float = 0.0
+    haltSetpointR: float = 0.0
     prevMeasL: float = 0.0
     prevMeasR: float = 0.0
     outputL: float = 0.0
