@@ -53,12 +53,23 @@ def test_driving_on_after_a_watchdog_stop_is_no_fault(tmp_path: Path, turn: floa
     assert rim.min() > 0.8 * 1.0, rim.min()
 
 
+@st.composite
+def _grounds(draw: st.DrawFn) -> tuple[float, float, float]:
+    """(turn, slope, heading): turns on the level, straight up, down or across a slope.
+    Turning for seconds on a slope is a false alarm of its own, silence or not
+    (docs/safety.md, "Known: turning on a slope")."""
+    slope = draw(st.sampled_from([0.0, 2.0, 4.0]))
+    if slope == 0.0:
+        return draw(st.sampled_from([0.0, 0.2, -0.2, 0.4, -0.4])), 0.0, 0.0
+    return 0.0, slope, draw(st.sampled_from([0.0, 90.0, 180.0]))
+
+
 @settings(max_examples=100 if thorough() else 10, deadline=None)
-@given(speed=st.sampled_from([0.5, 1.0, 1.5, 2.0, 2.68]), turn=st.sampled_from([0.0, 0.2, -0.2, 0.4, -0.4]),
-       gap=st.sampled_from([0.5, 0.55, 0.6, 0.7, 0.9]), slope=st.sampled_from([0.0, 2.0, 4.0]),
-       heading=st.sampled_from([0.0, 90.0, 180.0]))
-def test_no_alarm_after_any_watchdog_stop_and_resume(tmp_path_factory, speed: float, turn: float, gap: float,
-                                                     slope: float, heading: float) -> None:
+@given(speed=st.sampled_from([0.5, 1.0, 1.5, 2.0, 2.68]), gap=st.sampled_from([0.5, 0.55, 0.6, 0.7, 0.9]),
+       ground=_grounds())
+def test_no_alarm_after_any_watchdog_stop_and_resume(tmp_path_factory, speed: float, gap: float,
+                                                     ground: tuple[float, float, float]) -> None:
+    turn, slope, heading = ground
     tmp = Path(tmp_path_factory.mktemp("resume"))
     r = runner.run(_scenario(tmp, speed, turn, gap, slope, heading))
     assert alarms(r) == [], (speed, turn, gap, slope, heading, r.link.events)
