@@ -64,6 +64,8 @@ class Report:
     memory_start: int = 0
     memory_middle: int = 0
     memory_end: int = 0
+    #: where the memory grew from the 10-minute mark to the end: "file:line +N kB"
+    memory_growth: list[str] = field(default_factory=list)
     sent_lines: int = 0
     lines: LineStats = field(default_factory=LineStats)
     board_resets: int = 0
@@ -162,10 +164,12 @@ def soak(backend: str, hours: float, speed: float, seed: int) -> Report:
         end = hours * 3600.0
         expect: set[str] = set()
         marked = False
+        first: tracemalloc.Snapshot | None = None
         while board.time < end:
             if not marked and board.time >= 600.0:
                 gc.collect()
                 report.memory_start = tracemalloc.get_traced_memory()[0]
+                first = tracemalloc.take_snapshot()
                 marked = True
             if not report.memory_middle and board.time >= end / 2 and marked:
                 gc.collect()
@@ -224,8 +228,13 @@ def soak(backend: str, hours: float, speed: float, seed: int) -> Report:
         _wait(board, 2.0, speed)
         gc.collect()
         report.memory_end = tracemalloc.get_traced_memory()[0]
-        if not marked:
+        if first is None:
             report.memory_start = report.memory_end
+        else:
+            grown = tracemalloc.take_snapshot().compare_to(first, "lineno")
+            report.memory_growth = [f"{st.traceback[0].filename}:{st.traceback[0].lineno} "
+                                    f"{st.size_diff / 1e3:+.0f} kB ({st.count_diff:+d} blocks)"
+                                    for st in grown[:8] if st.size_diff > 0]
         events = list(event_counts) + [e for e in chair.events if e not in event_counts]
         sent.freeze(port, lambda: chair.link_stats.total)
         stats = chair.link_stats
@@ -284,6 +293,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"host memory after 10 min / half-way / at the end: {r.memory_start / 1e6:.3f} / "
               f"{r.memory_middle / 1e6:.3f} / {r.memory_end / 1e6:.3f} MB "
               f"({(r.memory_end - r.memory_start) / 1e3:+.0f} kB)")
+        for site in r.memory_growth:
+            print(f"  grew at {site}")
         n = r.lines
         print(f"lines sent {r.sent_lines}: good {n.good}, bad CRC {n.bad_crc}, spliced {n.spliced}, "
               f"lost {n.lost}")
