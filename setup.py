@@ -52,6 +52,8 @@ NATIVE = [
     # plain C loaded with ctypes (no Python module in it), built the same way
     Extension("wcdrive.plant._chair_kernel", ["wcdrive/plant/csrc/chair_kernel.c"],
               extra_compile_args=_FLAGS, libraries=["m"], optional=True),
+    Extension("wcdrive.plant._raycast", ["wcdrive/plant/csrc/raycast.c"],
+              extra_compile_args=_FLAGS, libraries=["m"], optional=True),
 ]
 
 
@@ -95,8 +97,9 @@ class OptionalBuildExt(build_ext):
               "(apt-get install gcc python3-dev, then reinstall)")
 
     def get_export_symbols(self, ext: Extension) -> list[str]:
-        # the plant's kernel is plain C: no PyInit_ to export
-        return [] if ext.name.endswith("_chair_kernel") else super().get_export_symbols(ext)
+        # the plant's kernel and ray cast are plain C: no PyInit_ to export
+        plain = ext.name.endswith(("_chair_kernel", "_raycast"))
+        return [] if plain else super().get_export_symbols(ext)
 
 
 class BuildPyWithPth(build_py):

@@ -5,6 +5,7 @@ ray cast a 2D lidar needs.
     world = World.from_table({"walls": [[0, 0, 10, 0, 10, 5]], "circles": [[4, 2, 0.05]]})
     world = World.from_grid(load_map("room.yaml"))     # the occupied cells' outlines
     world.cast(origins, angles, max_range=40.0)         # metres to the first hit, inf for none
+    world.cast_exact(origins, angles, max_range=40.0)   # the same with numpy: the reference
 
 A hand-written world (a scenario's ``[world]`` table, or a TOML file of its own):
 
@@ -18,12 +19,16 @@ Everything is a segment but the circles: a box is its four sides, an occupied re
 of a map its outline (the edges between an occupied cell and one that is not, merged
 where they run on in a line). The ray cast is exact for that geometry (a ray's length
 to a wall is the distance along it to the first segment or circle it meets), in
-float64, all rays at once with numpy: the reference the lidar's faster cast is held
-to.
+float64. ``cast_exact`` casts all rays at once with numpy, every ray against every
+item: the reference. ``cast`` gives the same figures bit for bit through a grid of
+cells built on the first cast (``wcdrive.plant.raycast``, in C), and is ``cast_exact``
+where the C helper cannot be had. A world's geometry is fixed: its arrays are not to
+be changed after its first cast.
 """
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 from collections.abc import Iterable
@@ -33,6 +38,7 @@ from typing import Any
 
 import numpy as np
 
+from wcdrive.plant.raycast import RayGrid
 from wcdrive.plant.rosmap import OCCUPIED, OccupancyGrid, load_map
 
 
@@ -136,10 +142,30 @@ class World:
             seg = np.concatenate((seg, grid_outline(grid)))
         return cls(seg, np.asarray(circles, dtype=float).reshape(-1, 3), grid)
 
+    @functools.cached_property
+    def _ray_grid(self) -> RayGrid | None:
+        return RayGrid.build(self.segments, self.circles)
+
+    def __getstate__(self) -> dict[str, Any]:
+        # the grid holds C pointers: a copy builds its own
+        return {k: v for k, v in self.__dict__.items() if k != "_ray_grid"}
+
     def cast(self, origins: np.ndarray, angles: np.ndarray, max_range: float = math.inf) -> np.ndarray:
         """For each ray (origin (K, 2) or one (2,), angle (K,) radians in the map
         frame): the distance to the first segment or circle it meets within
-        ``max_range``, else ``inf``. A ray that starts inside a circle meets its rim."""
+        ``max_range``, else ``inf``; ``cast_exact``'s figures, through the C grid."""
+        grid = self._ray_grid
+        if grid is None:
+            return self.cast_exact(origins, angles, max_range)
+        angles = np.asarray(angles, dtype=float)
+        o = np.broadcast_to(np.asarray(origins, dtype=float), (*angles.shape, 2))
+        return grid.cast(o[:, 0], o[:, 1], np.cos(angles), np.sin(angles), max_range)
+
+    def cast_exact(self, origins: np.ndarray, angles: np.ndarray, max_range: float = math.inf
+                   ) -> np.ndarray:
+        """``cast`` with numpy, every ray against every segment and circle: the
+        reference. A ray that starts inside a circle meets its rim; a ray parallel to
+        a segment never meets it."""
         angles = np.asarray(angles, dtype=float)
         o = np.broadcast_to(np.asarray(origins, dtype=float), (*angles.shape, 2))
         dx, dy = np.cos(angles)[:, None], np.sin(angles)[:, None]
