@@ -191,4 +191,4 @@ class World:
             near, far = -b - root, -b + root
             t = np.where(near >= 0, near, far)
             best = np.minimum(best, np.where((disc >= 0) & (t >= 0), t, np.inf).min(axis=1))
-        return np.where(best <= max_range, best, np.inf)
+        return np.where(best <= max_range, best + 0.0, np.inf)          # + 0.0: no -0

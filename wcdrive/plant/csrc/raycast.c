@@ -1,11 +1,12 @@
 /* The lidar's ray cast over a world's static geometry (segments and circles), through a
- * uniform grid of cells: each ray walks the cells it crosses in order (DDA) and stops at
- * the first cell whose exit lies beyond the nearest hit found so far.
+ * uniform grid of cells: each ray walks the cells it crosses in order (DDA), testing the
+ * items binned in each, and stops in the first cell it leaves past the nearest hit found.
  *
  * The distances are those of wcdrive.plant.world.World.cast_exact, operation for
  * operation (build with -ffp-contract=off): a segment is met at t >= 0 along the ray
  * where 0 <= u <= 1 along the segment (a ray parallel to it never meets it), a circle at
- * its near root, or its far one from inside; a ray meets nothing beyond max_range (inf).
+ * its near root, or its far one from inside; a ray meets nothing beyond max_range (inf);
+ * a hit at the origin is +0.
  * The grid only chooses which items a ray tests: an item is binned into every cell its
  * geometry comes within `eps` of, so that a ray's walk, whose positions round, still
  * tests every item it can meet before it stops.
@@ -178,7 +179,7 @@ static double cast_one(const rc_grid *g, double ox, double oy, double dx, double
             if (iy < 0 || iy >= g->ny) break;
         }
     }
-    return best <= max_range ? best : INFINITY;
+    return best <= max_range ? best + 0.0 : INFINITY;    /* + 0.0: a hit at -0 is at 0 */
 }
 
 /* out[i]: ray i's distance to the first item it meets within max_range, else inf; ray
