@@ -49,6 +49,15 @@ dt)`` several:
 * The chassis is a pymunk ``Body`` (mass, yaw inertia, centre of gravity ahead of the
   axle) in a ``Space``; the forces above are applied to it each step and pymunk
   integrates it. Walls or obstacles may be added to ``space``.
+* Walls (``world``, a ``wcdrive.plant.world.World``; none by default): its segments
+  (radius 0) and circles become static shapes, and the chair's footprint
+  (``ChairParams.length`` x ``width``, centred ``footprint_ahead_of_axle`` ahead of the
+  axle) a box on the chassis, without mass of its own. pymunk's solver keeps the two
+  apart: an inelastic contact (elasticity 0, friction ``WALL_FRICTION``) that lets the
+  footprint sink at most ``CONTACT_SLOP`` into a wall. Every contact is reported
+  (``contacts``, a ``Contacts``): a collision starts when the chair, touching nothing,
+  touches the world, and lasts while it touches anything. Without a world the space
+  holds the chassis alone, as before.
 
 The force model exists twice: ``_python_step`` here is the readable reference, and
 ``csrc/chair_kernel.c`` the same lines in C, which calls pymunk's Chipmunk through
@@ -81,9 +90,12 @@ motion after every step (``take_motion_log``), the ground truth of the fault met
 from __future__ import annotations
 
 import ctypes
+import dataclasses
+import heapq
 import math
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 import pymunk
@@ -92,6 +104,9 @@ from pymunk._chipmunk import lib as _chipmunk
 from wcdrive._util.native import BuildError, load, prebuilt_library, record
 from wcdrive.plant.params import ChairParams, G
 from wcdrive.plant.terrain import MAX_RAMPS, Terrain
+
+if TYPE_CHECKING:
+    from wcdrive.plant.world import World
 
 _D = ctypes.c_double
 _P = ctypes.c_void_p
@@ -199,14 +214,127 @@ class WheelView:
     force = property(lambda self: self._s.force[self._i], doc="N on the chassis, forward +")
 
 
+#: m: how far the footprint may sink into a wall before the solver pushes it back out
+#: (pymunk's ``collision_slop``; its default, 0.1, is meant for pixels).
+CONTACT_SLOP = 5e-4
+#: Coulomb friction between the footprint and a wall (a bumper sliding along it; assumed).
+WALL_FRICTION = 0.3
+#: s: a collision's impact is the normal impulse the world gives over this long from its
+#: first touch: the rigid inelastic impact and the spinning wheels' momentum coming
+#: through the tyres (a few steps), and little of the push that may follow.
+IMPACT_WINDOW = 0.02
+#: The collisions ``Contacts.records`` keeps: the first ones, and the largest impacts.
+KEEP_FIRST, KEEP_LARGEST = 50, 10
+
+
+@dataclass
+class Contact:
+    """One collision (``Contacts``): ``time`` (s) the end of the step in which the chair
+    first touched; ``x``, ``y`` (m, map frame) the mean of that step's contact points;
+    ``impact`` (N s) the normal impulse over its first ``IMPACT_WINDOW``; ``impulse``
+    (N s) the normal impulse over it all and ``duration`` (s) how long it touched, so
+    far."""
+
+    time: float
+    x: float
+    y: float
+    impact: float = 0.0
+    impulse: float = 0.0
+    duration: float = 0.0
+
+
+class Contacts:
+    """The chair's collisions with the world, as pymunk's solver gave them (a collision
+    handler on the plant's space, called from within each step on both paths): the
+    figures over the run, and ``records`` (at most ``KEEP_FIRST + KEEP_LARGEST + 1``)."""
+
+    def __init__(self) -> None:
+        self.count = 0
+        """Collisions so far."""
+        self.first_time: float | None = None
+        """s: the first one's ``time`` (None: none)."""
+        self.max_impact = 0.0
+        """N s: the largest ``impact``."""
+        self.total_impulse = 0.0
+        """N s: the world's normal impulse on the chair over the run."""
+        self.contact_time = 0.0
+        """s: the steps in which the chair touched the world."""
+        self._first: list[Contact] = []
+        self._largest: list[tuple[float, int, Contact]] = []      # a min-heap by impact
+        self._current: Contact | None = None
+        self._touching = 0                                          # shapes touched now
+        self._step_end = math.nan                                   # of the last step seen
+
+    @property
+    def touching(self) -> bool:
+        """Whether the chair touches the world after the last step."""
+        return self._touching > 0
+
+    def records(self) -> list[Contact]:
+        """Copies of the first ``KEEP_FIRST`` collisions, the ``KEEP_LARGEST`` largest
+        impacts among the others that have ended, and the one going on, by time."""
+        kept = {id(c): c for c in self._first}
+        kept.update((id(c), c) for _, _, c in self._largest)
+        if self._current is not None:
+            kept[id(self._current)] = self._current
+        return sorted((dataclasses.replace(c) for c in kept.values()), key=lambda c: c.time)
+
+    def begin(self, time: float, x: float, y: float) -> None:
+        """The chair started touching a shape in the step that ends at ``time``, at
+        (``x``, ``y``)."""
+        self._touching += 1
+        if self._touching > 1:
+            return
+        contact = Contact(time, x, y)
+        self._current = contact
+        self.count += 1
+        if self.first_time is None:
+            self.first_time = time
+        if len(self._first) < KEEP_FIRST:
+            self._first.append(contact)
+
+    def solved(self, time: float, dt: float, impulse: float) -> None:
+        """The solver gave one shape's contact ``impulse`` (N s, normal) in the step of
+        ``dt`` that ends at ``time``."""
+        contact = self._current
+        if contact is None:
+            return
+        if time != self._step_end:
+            self._step_end = time
+            self.contact_time += dt
+            contact.duration = time - contact.time + dt
+        self.total_impulse += impulse
+        contact.impulse += impulse
+        if time - contact.time < IMPACT_WINDOW - 0.5 * dt:
+            contact.impact += impulse
+            self.max_impact = max(self.max_impact, contact.impact)
+
+    def separate(self) -> None:
+        """The chair stopped touching a shape."""
+        self._touching -= 1
+        contact = self._current
+        if self._touching > 0 or contact is None:
+            return
+        self._current = None
+        if self.count > KEEP_FIRST:                # not among the first, which stay
+            entry = (contact.impact, self.count, contact)
+            if len(self._largest) < KEEP_LARGEST:
+                heapq.heappush(self._largest, entry)
+            elif entry[0] > self._largest[0][0]:
+                heapq.heapreplace(self._largest, entry)
+
+
 class Plant:
     """The chair of the module docstring: ``set_drive`` is its input, ``step`` and
     ``advance`` move it, ``left``/``right`` (``WheelView``) and the properties read it.
     ``x``, ``y`` and ``heading`` place the axle midpoint at the start; ``terrain``
-    is the floor (default flat); ``use_kernel=False`` takes the Python reference path."""
+    is the floor (default flat); ``world`` the walls the chair collides with (module
+    docstring; a ValueError if the footprint overlaps them at the start);
+    ``use_kernel=False`` takes the Python reference path."""
 
     def __init__(self, params: ChairParams | None = None, *, x: float = 0.0, y: float = 0.0,
-                 heading: float = 0.0, use_kernel: bool = True, terrain: Terrain | None = None) -> None:
+                 heading: float = 0.0, use_kernel: bool = True, terrain: Terrain | None = None,
+                 world: World | None = None) -> None:
         self.p = params or ChairParams()
         p = self.p
         self.terrain = terrain or Terrain()
@@ -216,6 +344,11 @@ class Plant:
         self.body.position = (x, y)
         self.body.angle = heading
         self.space.add(self.body)
+        self.world = world
+        self.contacts = Contacts()
+        self.footprint: pymunk.Poly | None = None
+        if world is not None:
+            self._add_world(world)
         self.s = s = ChairStruct()
         k = p.motor_constant
         s.half_base = 0.5 * p.wheelbase
@@ -263,6 +396,48 @@ class Plant:
             self._bind_chipmunk()
             self._advance = self._kernel.chair_advance
             self._ref = ctypes.pointer(self.s)
+
+    def _add_world(self, world: World) -> None:
+        """The world's static shapes, the footprint on the chassis, and the collision
+        handler that fills ``contacts`` (module docstring)."""
+        space = self.space
+        space.collision_slop = CONTACT_SLOP
+        static = space.static_body
+        shapes: list[pymunk.Shape] = [pymunk.Segment(static, (x0, y0), (x1, y1), 0.0)
+                                      for x0, y0, x1, y1 in world.segments.tolist()]
+        shapes += [pymunk.Circle(static, r, (cx, cy)) for cx, cy, r in world.circles.tolist()]
+        self.footprint = pymunk.Poly(self.body, footprint(self.p))
+        for shape in (*shapes, self.footprint):
+            shape.elasticity = 0.0
+            shape.friction = WALL_FRICTION
+        space.add(*shapes, self.footprint)
+        hits = space.shape_query(self.footprint)
+        if hits:
+            x, y = self.body.position
+            points = hits[0].contact_point_set.points
+            at = points[0].point_b if points else (x, y)
+            raise ValueError(f"the chair's footprint at ({x:g}, {y:g}, {math.degrees(self.body.angle):g} "
+                             f"deg) overlaps the world near ({at[0]:.3f}, {at[1]:.3f})")
+        contacts = self.contacts
+
+        def step_end() -> tuple[float, float]:
+            dt = space.current_time_step
+            return self.s.time + dt, dt
+
+        def begin(arbiter: pymunk.Arbiter, _space: pymunk.Space, _data: object) -> None:
+            points = arbiter.contact_point_set.points
+            n = 2 * len(points) or 1
+            contacts.begin(step_end()[0], sum(c.point_a.x + c.point_b.x for c in points) / n,
+                           sum(c.point_a.y + c.point_b.y for c in points) / n)
+
+        def post_solve(arbiter: pymunk.Arbiter, _space: pymunk.Space, _data: object) -> None:
+            j, n = arbiter.total_impulse, arbiter.normal
+            contacts.solved(*step_end(), abs(j.x * n.x + j.y * n.y))
+
+        def separate(_arbiter: pymunk.Arbiter, _space: pymunk.Space, _data: object) -> None:
+            contacts.separate()
+
+        space.on_collision(None, None, begin=begin, post_solve=post_solve, separate=separate)
 
     def _set_terrain(self) -> None:
         """The terrain's grades into the struct (sines and cosines worked out here, once,
@@ -723,6 +898,15 @@ class Plant:
             s.brake_wait -= dt
             if s.brake_wait <= BRAKE_SLACK:
                 s.brake_engaged = 1 - s.brake_pin
+
+
+def footprint(params: ChairParams) -> list[tuple[float, float]]:
+    """The footprint's corners in the chassis frame (m; x forward from the axle
+    midpoint, y to the left), counter-clockwise from the rear right."""
+    front = params.footprint_ahead_of_axle + 0.5 * params.length
+    rear = params.footprint_ahead_of_axle - 0.5 * params.length
+    half = 0.5 * params.width
+    return [(rear, -half), (front, -half), (front, half), (rear, half)]
 
 
 _NONE = np.empty(0)

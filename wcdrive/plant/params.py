@@ -35,6 +35,10 @@ class ChairParams:
     occupant_mass: float = 80.0        # kg
     length: float = 1.0                # m, footprint used for the yaw inertia
     width: float = 0.65                # m
+    # m: the footprint's centre (a length x width rectangle, square to the chair) ahead of
+    # the drive axle: 0.3 m of frame behind the axle, 0.7 m (footrests) ahead. What
+    # collides with a world's walls (wcdrive.plant.chair).
+    footprint_ahead_of_axle: float = 0.2
     cog_ahead_of_axle: float = 0.12    # m: centre of gravity ahead of the drive axle
     cog_height: float = 0.45           # m: centre of gravity above the floor, seated occupant (assumed)
     caster_ahead_of_axle: float = 0.45  # m: caster pivots ahead of the drive axle
