@@ -44,6 +44,7 @@ def _until_contact(p: Plant, steps: int) -> tuple[float, float]:
         v = p.body.velocity.x
         p.step()
         if p.contacts.count:
+            assert p.contacts.first_time == p.time         # the end of the step it touched in
             return v, p.contacts.total_impulse
     raise AssertionError("no contact")
 
