@@ -188,6 +188,30 @@ def test_the_c_cast_is_the_reference_on_a_ros_map(sandbox: World, cell: float) -
             _exact_in_chunks(sandbox, np.tile([x, y], (3200, 1)), sweep, 40.0).tobytes()
 
 
+def test_a_wall_an_ulp_off_a_cell_edge_is_met() -> None:
+    """A wall whose x lies an ulp or two either side of a cell's edge (where the cell a
+    point is binned in and the cell's own bounds, each rounded, may disagree): the ray
+    across it meets it."""
+    frame = [[-5.0, -5.0, 5.0, -5.0], [5.0, -5.0, 5.0, 5.0], [5.0, 5.0, -5.0, 5.0], [-5.0, 5.0, -5.0, -5.0]]
+    probe = RayGrid.build(np.array([*frame, [0.1, -1.0, 0.1, 1.0]]), np.zeros((0, 3)))
+    assert probe is not None
+    x0, cs = probe.corner[0], probe.cell
+    tried = 0
+    for k in range(1, probe.shape[1]):
+        edge = x0 + k * cs
+        for n in range(-3, 4):
+            x = edge + n * math.ulp(edge)
+            if not -4.5 < x < 4.5:
+                continue
+            world = World(np.array([*frame, [x, -1.0, x, 1.0]]), np.zeros((0, 3)))
+            grid = RayGrid.build(world.segments, world.circles)
+            assert grid is not None and (grid.corner, grid.cell) == (probe.corner, cs)
+            got = grid.cast(np.array([-4.75]), np.zeros(1), np.ones(1), np.zeros(1))
+            assert got[0] == x + 4.75, (k, n)
+            tried += 1
+    assert tried >= 10
+
+
 def test_the_grid_on_a_ros_map_is_sparse(sandbox: World) -> None:
     """A few items a cell on average: the walk tests a handful of segments a cell."""
     grid = RayGrid.build(sandbox.segments, sandbox.circles)

@@ -99,12 +99,14 @@ class RayGrid:
         pad = 0.309 * cs + self.eps
         nx = math.floor((w + 2 * pad) / cs) + 1
         ny = math.floor((h + 2 * pad) / cs) + 1
+        #: rows and columns of cells, the cells' edge (m), the grid's lower left corner
         self.shape = (ny, nx)
         self.cell = cs
+        self.corner = (float(lo[0]) - pad, float(lo[1]) - pad)
         self._start = np.zeros(nx * ny + 1, dtype=np.int32)
         self._items = np.zeros(0, dtype=np.int32)
         self._struct = GridStruct(_address(seg), len(seg), _address(circ), len(circ),
-                                  float(lo[0]) - pad, float(lo[1]) - pad, cs, 1.0 / cs, nx, ny, self.eps,
+                                  *self.corner, cs, 1.0 / cs, nx, ny, self.eps,
                                   _address(self._start), 0)
         ref = ctypes.byref(self._struct)
         counts = np.zeros(nx * ny, dtype=np.int32)
