@@ -55,6 +55,9 @@ FIELDS = {
     "goal": "goal.position", "goal_reached_s": "goal.reached_s", "goal_tolerance": "goal.tolerance",
     "steered_by": "goal.steered_by",
     "firmware_differences": "lockstep.differences", "firmware_events_compared": "lockstep.events_compared",
+    "world_start": "world.start", "world_segments": "world.segments", "world_circles": "world.circles",
+    "collisions": "world.collisions", "first_collision_s": "world.first_collision_s",
+    "max_impact_ns": "world.max_impact_ns", "contact_s": "world.contact_s", "contacts": "world.contacts",
 }
 
 

@@ -6,13 +6,14 @@ import json
 import math
 from pathlib import Path
 
-from wcdrive.sim.result import SimResult
+from wcdrive.sim.result import SimResult, placed
 
 
 def table(result: SimResult) -> str:
     """What ``wcdrive sim`` prints for a run: ground truth against the three odometries,
     tracking error, caster work, the board's line counts, (simavr backend) the
     differences between the port and the firmware, the floor when it is not level, the
+    start pose and the collisions with the walls when the scenario has them, the
     figures after a fault and after the last stop, and the board's events."""
     m = result.metrics()
     rows = [
@@ -71,6 +72,19 @@ def table(result: SimResult) -> str:
         floor = f"{terrain.slope_deg:g} deg toward {terrain.downhill_heading_deg:g} deg"
         floor += "".join(f", {r.slope_deg:g} deg from {r.from_x:g} to {r.to_x:g} m" for r in terrain.ramps)
         lines.append(f"  floor: {floor}")
+    world = result.world
+    if world is not None:
+        x0, y0, th0 = world.start
+        text = f"  world: start ({x0:.3f}, {y0:.3f}, {math.degrees(th0):.1f} deg)"
+        if world.walled:
+            first = world.first_collision_s
+            text += (f", {world.collisions} collision{'' if world.collisions == 1 else 's'}"
+                     + ("" if first is None else f", the first at {first:.3f} s, the largest impact "
+                        f"{world.max_impact_ns:.1f} N s, {world.contact_s:.3f} s touching"))
+        lines.append(text)
+        for c in world.contacts[:10]:
+            lines.append(f"  {c.time:8.3f} s  collision at ({c.x:.3f}, {c.y:.3f}), impact "
+                         f"{c.impact:.1f} N s, {c.duration:.3f} s touching")
     stop = result.stop_metrics()
     if stop["stop_at_s"] is not None:
         drift = stop["drift_parked_m"]
@@ -116,9 +130,18 @@ def plots(result: SimResult, out: Path) -> list[Path]:
     paths = []
 
     fig, ax = plt.subplots(figsize=(6.5, 6))
+    wheel, gyro, world = odometry.wheel, odometry.gyro, result.world
+    if world is not None:
+        wheel, gyro = placed(world.start, wheel), placed(world.start, gyro)
+        for x0, y0, x1, y1 in world.segments:
+            ax.plot([x0, x1], [y0, y1], "-", color="0.4", lw=1)
+        for cx, cy, r in world.circles:
+            ax.add_patch(plt.Circle((cx, cy), r, color="0.4"))
+        for c in world.contacts:
+            ax.plot(c.x, c.y, "rx")
     ax.plot(truth.pose[:, 0], truth.pose[:, 1], "k-", lw=2, label="ground truth")
-    ax.plot(odometry.wheel[:, 0], odometry.wheel[:, 1], "C0--", label="wheel odometry")
-    ax.plot(odometry.gyro[:, 0], odometry.gyro[:, 1], "C2:", lw=2, label="wheels + gyro")
+    ax.plot(wheel[:, 0], wheel[:, 1], "C0--", label="wheel odometry")
+    ax.plot(gyro[:, 0], gyro[:, 1], "C2:", lw=2, label="wheels + gyro")
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")

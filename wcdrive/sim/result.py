@@ -9,6 +9,11 @@ physics step: the chair's speed is that of the faster of its two drive-wheel con
 points (so a chair spinning on the spot is not "still"), and its travel the longer of
 their two paths. The drift of a parked chair is the axle midpoint's distance from where
 it came to rest, by its pose at every control tick.
+
+A scenario with walls or a start pose (``[world]``) adds ``SimResult.world``: where the
+chair started and its collisions with the walls (``wcdrive.plant.chair.Contacts``). The
+ground truth is in the map frame; the host's odometries start at their own (0, 0, 0),
+so the figures compare them with it placed at the start pose (``placed``).
 """
 
 from __future__ import annotations
@@ -19,6 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from wcdrive.boards.port_loop import F_CPU
+from wcdrive.plant.chair import Contact
 from wcdrive.plant.faults import Fault
 from wcdrive.plant.terrain import Terrain
 
@@ -116,6 +122,42 @@ class Lockstep:
 
 
 @dataclass
+class WorldLog:
+    """The chair among the scenario's walls (``[world]``): its start pose in the map frame
+    (x, y in m, heading in rad), the walls (``segments`` (N, 4) and ``circles`` (M, 3),
+    as ``wcdrive.plant.world.World`` has them; empty without any), and its collisions
+    (``wcdrive.plant.chair.Contacts``): how many, the first one's time (s; None: none),
+    the largest impact (N s), the time it spent touching (s) and the records the plant
+    kept (``Contacts.records``)."""
+
+    start: tuple[float, float, float]
+    segments: np.ndarray = field(default_factory=lambda: _empty(0, 4))
+    circles: np.ndarray = field(default_factory=lambda: _empty(0, 3))
+    collisions: int = 0
+    first_collision_s: float | None = None
+    max_impact_ns: float = 0.0
+    contact_s: float = 0.0
+    contacts: list[Contact] = field(default_factory=list)
+
+    @property
+    def walled(self) -> bool:
+        """Whether there are walls to collide with."""
+        return bool(len(self.segments) or len(self.circles))
+
+
+def placed(start: tuple[float, float, float], poses: np.ndarray) -> np.ndarray:
+    """Odometry poses ``(n, 3)`` (x, y, heading from the odometry's own origin) in the map
+    frame of a chair that started at ``start``."""
+    x0, y0, th0 = start
+    c, s = math.cos(th0), math.sin(th0)
+    out = np.empty_like(poses)
+    out[:, 0] = x0 + c * poses[:, 0] - s * poses[:, 1]
+    out[:, 1] = y0 + s * poses[:, 0] + c * poses[:, 1]
+    out[:, 2] = poses[:, 2] + th0
+    return out
+
+
+@dataclass
 class SimResult:
     """One run of a scenario: the ground truth, the board's ticks, the link, the host's
     odometries, the closed loop's goal (None: open loop) and, with the simavr backend,
@@ -139,6 +181,8 @@ class SimResult:
     stop_at: float | None = None
     #: The floor the chair stood on (the scenario's ``[world]``).
     terrain: Terrain = field(default_factory=Terrain)
+    #: The walls and the start pose (the scenario's ``[world]``); None: neither.
+    world: WorldLog | None = None
 
     @property
     def ticks(self) -> int:
@@ -274,8 +318,15 @@ class SimResult:
         uniform grade and the heading it falls toward, degrees), ``ramps`` (its bands,
         ``{"from_x", "to_x", "slope_deg"}`` each; empty on a uniform floor) and
         ``slope_by_time`` (the grade the chair stood on, ``[from_s, to_s, slope_deg]``
-        ranges: ``slope_by_time``)."""
-        truth, odometry, link = self.truth, self.odometry, self.link
+        ranges: ``slope_by_time``).
+
+        With ``world``: ``start_x``, ``start_y``, ``start_heading_deg``; the odometries'
+        poses and errors with the odometry placed at the start (``placed``; a path's goal
+        likewise); and with walls, the collisions: ``collisions`` (how many),
+        ``first_collision_s`` (None: none), ``max_impact_ns`` (the largest impact, N s),
+        ``contact_s`` (s touching) and ``contact_records`` (``[time_s, x, y, impact_ns]``
+        for each record the plant kept)."""
+        truth, odometry, link, world = self.truth, self.odometry, self.link, self.world
         tx, ty, tth = truth.pose[-1]
         out: dict[str, object] = {
             "scenario": self.scenario, "backend": self.backend,
@@ -288,7 +339,7 @@ class SimResult:
                           ("odom_ekf_vel", odometry.ekf_vel)):
             if est is None:
                 continue
-            ex, ey, eth = est[-1]
+            ex, ey, eth = est[-1] if world is None else placed(world.start, est[-1:])[0]
             out[f"{name}_x"], out[f"{name}_y"] = ex, ey
             out[f"{name}_heading_deg"] = math.degrees(eth)
             out[f"{name}_position_error_m"] = math.hypot(ex - tx, ey - ty)
@@ -310,10 +361,19 @@ class SimResult:
         out["ramps"] = [{"from_x": r.from_x, "to_x": r.to_x, "slope_deg": r.slope_deg} for r in terrain.ramps]
         out["slope_by_time"] = self.slope_by_time()
         out.update(self.stop_metrics())
+        if world is not None:
+            out["start_x"], out["start_y"] = world.start[0], world.start[1]
+            out["start_heading_deg"] = math.degrees(world.start[2])
+            if world.walled:
+                out.update(collisions=world.collisions, first_collision_s=world.first_collision_s,
+                           max_impact_ns=world.max_impact_ns, contact_s=world.contact_s,
+                           contact_records=[[c.time, c.x, c.y, c.impact] for c in world.contacts])
         out["closed_loop"] = self.goal is not None
         if self.goal is not None:
             goal = self.goal
             gx, gy = goal.position
+            if world is not None:
+                gx, gy, _ = placed(world.start, np.array([[gx, gy, 0.0]]))[0]
             error = math.hypot(tx - gx, ty - gy)
             out.update(goal_x=gx, goal_y=gy, goal_error_m=error, goal_reached_s=goal.reached_s,
                        goal_tolerance_m=goal.tolerance, steered_by=goal.steered_by,

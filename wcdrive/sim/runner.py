@@ -19,8 +19,9 @@ logs, the host's bytes on the wire):
 A scenario's ``[[fault]]`` entries act on both backends alike (``wcdrive.plant.faults``;
 the boards inject the encoder, plant and reset faults, and the host's bytes that fall
 in a ``link_cut`` never reach the board). The plant stands on the scenario's floor
-(``[world]``, ``Scenario.terrain``) on both backends. What a run gives is a ``SimResult``
-(``wcdrive.sim.result``).
+(``[world]``, ``Scenario.terrain``) on both backends, and among its walls, from its
+start pose (``Scenario.world``, ``Scenario.start``): the one plant both backends drive.
+What a run gives is a ``SimResult`` (``wcdrive.sim.result``).
 """
 
 from __future__ import annotations
@@ -57,6 +58,7 @@ from wcdrive.sim.result import (
     Lockstep,
     Odometry,
     SimResult,
+    WorldLog,
 )
 from wcdrive.sim.scenario import Scenario, Segment
 
@@ -523,7 +525,8 @@ def run(scenario: Scenario, *, backend: str | Backend = "port", seed: int = 0, d
     if not 1e-5 <= dt <= 0.01:
         raise ValueError("dt must be within 10 us .. 10 ms")
     params = scenario.params()
-    plant = Plant(params, terrain=scenario.terrain)
+    x0, y0, heading0 = scenario.start
+    plant = Plant(params, x=x0, y=y0, heading=heading0, terrain=scenario.terrain, world=scenario.world)
     plant.start_motion_log()
     gyro = Gyro(params, seed)
     closed = scenario.closed_loop
@@ -564,7 +567,21 @@ def run(scenario: Scenario, *, backend: str | Backend = "port", seed: int = 0, d
     return SimResult(scenario=scenario.name, backend=chosen.name, duration=ran.end_cycle / F_CPU,
                      wall_time=wall, truth=truth, board=board, odometry=odometry, link=link,
                      faults=scenario.faults, fault_at=fault_time(scenario, wire), goal=goal,
-                     lockstep=ran.lockstep, stop_at=stop_at, terrain=scenario.terrain)
+                     lockstep=ran.lockstep, stop_at=stop_at, terrain=scenario.terrain,
+                     world=_world_log(scenario, plant))
+
+
+def _world_log(scenario: Scenario, plant: Plant) -> WorldLog | None:
+    """The start pose and the plant's collisions (None for a scenario with neither walls
+    nor a start pose of its own)."""
+    world = scenario.world
+    if world is None and scenario.start == (0.0, 0.0, 0.0):
+        return None
+    if world is None:
+        return WorldLog(scenario.start)
+    contacts = plant.contacts
+    return WorldLog(scenario.start, world.segments.copy(), world.circles.copy(), contacts.count,
+                    contacts.first_time, contacts.max_impact, contacts.contact_time, contacts.records())
 
 
 def _cmd_vel(commands: list[tuple[int, bytes]]) -> list[tuple[float, float, float]]:

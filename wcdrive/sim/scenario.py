@@ -29,6 +29,22 @@ The floor is level unless a ``[world]`` table tilts it (``wcdrive.plant.terrain`
     to_x = 3.0               # m where it ends (the floor outside has slope_deg)
     slope_deg = -6.0
 
+The same table gives the walls the chair drives among, and where it starts
+(``wcdrive.plant.world``, ``wcdrive.plant.chair``; all in the map frame):
+
+    [world]
+    map = "worlds/corridor.yaml"        # a ROS map_server YAML, relative to this file
+    walls = [[0, 0, 10, 0, 10, 5]]      # polylines [x0, y0, x1, y1, ...]
+    boxes = [[4, 2, 0.8, 0.6, 30]]      # [cx, cy, width, height(, yaw_deg)]
+    circles = [[6, 1, 0.03]]            # [x, y, radius]: table legs, posts
+    start = [1.0, 2.0, 90]              # the axle midpoint's x, y (m) and heading (deg)
+
+Any of ``map``, ``walls``, ``boxes`` and ``circles`` may be given, together too; the
+chair collides with what they make, and a footprint that overlaps it at ``start`` is a
+ScenarioError. ``start`` (default ``[0, 0, 0]``) places the chair; the host's odometry
+still starts at its own (0, 0, 0), and a ``path``'s waypoints are in that odometry
+frame. The floor's grades (``slope_deg``, ramps) are in the map frame.
+
 Every table's keys are checked: an unknown key, at the top level too, is a ScenarioError
 that names it.
 
@@ -58,14 +74,18 @@ any path to a file of your own works the same.
 from __future__ import annotations
 
 import dataclasses
+import math
 import tomllib
 from collections.abc import Collection
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from wcdrive.plant.chair import Plant
 from wcdrive.plant.faults import FAULT_KINDS, SIDED_KINDS, Fault
 from wcdrive.plant.params import ChairParams
+from wcdrive.plant.rosmap import MapFileError
 from wcdrive.plant.terrain import Ramp, Terrain
+from wcdrive.plant.world import World, WorldError
 from wcdrive.protocol.codec import encode_cmdvel, encode_ppm, encode_set, encode_wheel
 from wcdrive.sim.navigation import FollowParams
 
@@ -75,7 +95,8 @@ _FAULT_KEYS = ("at", "kind", "side", "duration", "rate_hz")
 #: The keys a scenario file may have at its top level.
 TOP_KEYS = ("name", "description", "host_rate_hz", "repeat", "settle_s", "chair", "params", "segment",
             "fault", "path", "follow", "world")
-_WORLD_KEYS = ("slope_deg", "downhill_heading_deg", "ramp")
+_GEOMETRY_KEYS = ("map", "walls", "boxes", "circles")
+_WORLD_KEYS = ("slope_deg", "downhill_heading_deg", "ramp", *_GEOMETRY_KEYS, "start")
 _RAMP_KEYS = ("from_x", "to_x", "slope_deg")
 
 
@@ -123,6 +144,10 @@ class Scenario:
     follow: FollowParams = field(default_factory=FollowParams)
     #: The floor (``[world]``); flat without one.
     terrain: Terrain = field(default_factory=Terrain)
+    #: The walls (``[world]``'s map, walls, boxes, circles); None: none.
+    world: World | None = None
+    #: The chair's start pose in the map frame: x, y (m), heading (rad).
+    start: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     @property
     def closed_loop(self) -> bool:
@@ -225,12 +250,18 @@ def load(name_or_path: str, *, extra: Collection[str] = ()) -> Scenario:
     rate = float(data.get("host_rate_hz", 10.0))
     if not 0.5 <= rate <= 100.0:
         raise ScenarioError(f"{path}: host_rate_hz must be within 0.5..100")
+    terrain, world, start = _world(data.get("world", {}), path)
     scenario = Scenario(
         name=str(data.get("name", path.stem)), description=str(data.get("description", "")),
         segments=tuple(segments) * repeat, host_rate_hz=rate,
         settle_s=float(data.get("settle_s", 1.5)), chair=chair, source=path,
-        path=waypoints, follow=follow, terrain=_world(data.get("world", {}), path),
+        path=waypoints, follow=follow, terrain=terrain, world=world, start=start,
     )
+    if world is not None:
+        try:
+            Plant(scenario.params(), x=start[0], y=start[1], heading=start[2], world=world, use_kernel=False)
+        except ValueError as exc:
+            raise ScenarioError(f"{path}: [world] start: {exc}") from exc
     board_params = dict(data.get("params", {}))
     for name, value in board_params.items():
         try:
@@ -255,11 +286,52 @@ def _known_keys(table: dict, known: Collection[str], where: str, what: str) -> N
                             f"(known: {', '.join(known)})")
 
 
-def _world(raw: object, where: Path) -> Terrain:
-    """The ``[world]`` table (module docstring) as a ``Terrain``."""
+def _world(raw: object, where: Path) -> tuple[Terrain, World | None, tuple[float, float, float]]:
+    """The ``[world]`` table (module docstring): the floor, the walls (None without any)
+    and the start pose (x, y, heading in rad)."""
     if not isinstance(raw, dict):
         raise ScenarioError(f"{where}: world is a table ([world])")
     _known_keys(raw, _WORLD_KEYS, f"{where}: [world]", "")
+    return _terrain(raw, where), _walls(raw, where), _start(raw, where)
+
+
+def _walls(raw: dict, where: Path) -> World | None:
+    """The ``[world]`` table's walls (``World.from_table``; a map relative to the
+    scenario's file); None when it gives none."""
+    table = {k: raw[k] for k in _GEOMETRY_KEYS if k in raw}
+    if not table:
+        return None
+    for key in ("walls", "boxes", "circles"):
+        entries = table.get(key, [])
+        if not isinstance(entries, list) or not all(isinstance(e, list) for e in entries):
+            raise ScenarioError(f"{where}: [world] {key} is a list of lists of numbers")
+        for i, entry in enumerate(entries):
+            if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                       for v in entry):
+                raise ScenarioError(f"{where}: [world] {key}[{i}] must be finite numbers, not {entry}")
+    if "map" in table and not isinstance(table["map"], str):
+        raise ScenarioError(f"{where}: [world] map is the path of a map_server YAML")
+    try:
+        world = World.from_table(table, where.parent)
+    except (WorldError, MapFileError) as exc:
+        raise ScenarioError(f"{where}: [world] {exc}") from exc
+    except OSError as exc:
+        raise ScenarioError(f"{where}: [world] map: {exc}") from exc
+    return world if len(world.segments) or len(world.circles) else None
+
+
+def _start(raw: dict, where: Path) -> tuple[float, float, float]:
+    """The ``[world]`` table's ``start`` as x, y (m) and heading (rad)."""
+    start = raw.get("start", [0.0, 0.0, 0.0])
+    if (not isinstance(start, list) or len(start) != 3
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                       for v in start)):
+        raise ScenarioError(f"{where}: [world] start is [x, y, heading_deg] (finite numbers), not {start!r}")
+    return float(start[0]), float(start[1]), math.radians(float(start[2]))
+
+
+def _terrain(raw: dict, where: Path) -> Terrain:
+    """The ``[world]`` table's floor as a ``Terrain``."""
     raw_ramps = raw.get("ramp", [])
     if not isinstance(raw_ramps, list) or not all(isinstance(r, dict) for r in raw_ramps):
         raise ScenarioError(f"{where}: [world] ramps are [[world.ramp]] tables")
