@@ -54,6 +54,13 @@ def test_the_footprint_is_the_length_by_width_box_ahead_of_the_axle() -> None:
     assert FRONT == pytest.approx(0.7)
 
 
+@pytest.mark.parametrize("heading", [0.0, 1.5707963267948966, -2.5, 3.141592653589793])
+def test_the_start_pose_is_the_axle_midpoints(heading: float) -> None:
+    p = Plant(x=7.475, y=0.9, heading=heading)
+    assert p.pose == pytest.approx((7.475, 0.9, heading), abs=1e-12)
+    assert p.axle_velocity() == (0.0, 0.0)
+
+
 def test_without_a_world_the_space_holds_the_chassis_alone() -> None:
     p = Plant()
     assert not p.space.shapes and p.footprint is None and p.world is None

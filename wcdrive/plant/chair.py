@@ -341,8 +341,10 @@ class Plant:
         self.space = pymunk.Space()
         self.body = pymunk.Body(p.mass, p.yaw_inertia)
         self.body.center_of_gravity = (p.cog_ahead_of_axle, 0.0)
-        self.body.position = (x, y)
+        # the angle first: pymunk turns a body about its centre of gravity, which would
+        # move the axle midpoint off (x, y)
         self.body.angle = heading
+        self.body.position = (x, y)
         self.space.add(self.body)
         self.world = world
         self.contacts = Contacts()
