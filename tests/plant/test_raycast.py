@@ -150,6 +150,33 @@ def test_the_c_cast_is_the_reference_on_random_worlds(seed: int, n_seg: int, n_c
     assert got.tobytes() == want.tobytes()          # the same operations: bit for bit
 
 
+def _distance_to_items(world: World, x: float, y: float) -> float:
+    """How far the point (x, y) is from the nearest segment or circle's rim."""
+    s = world.segments
+    near = math.inf
+    if len(s):
+        ex, ey = s[:, 2] - s[:, 0], s[:, 3] - s[:, 1]
+        length2 = np.maximum(ex * ex + ey * ey, 1e-300)
+        u = np.clip(((x - s[:, 0]) * ex + (y - s[:, 1]) * ey) / length2, 0, 1)
+        near = float(np.hypot(s[:, 0] + u * ex - x, s[:, 1] + u * ey - y).min())
+    c = world.circles
+    if len(c):
+        near = min(near, float(np.abs(np.hypot(c[:, 0] - x, c[:, 1] - y) - c[:, 2]).min()))
+    return near
+
+
+def _same_but_where_the_reference_misses_its_item(world: World, origins: np.ndarray, angles: np.ndarray,
+                                                  got: np.ndarray, want: np.ndarray) -> None:
+    """``got`` is ``want`` bit for bit, but where the reference's hit is rounding noise:
+    a ray within an ulp of parallel to a segment whose line passes through its origin
+    gets t = 0 and a u that says nothing; the reference may then report a hit at a
+    point off every item, which the C cast, testing only the items near the ray, does
+    not. There the C cast's own hit is further on."""
+    for i in np.flatnonzero(got.view(np.int64) != want.view(np.int64)):
+        x, y = origins[i] + want[i] * np.array([math.cos(angles[i]), math.sin(angles[i])])
+        assert got[i] > want[i] and _distance_to_items(world, x, y) > 1e-6, (origins[i], angles[i], got[i])
+
+
 lattice = st.integers(-6, 6).map(float)
 
 
@@ -160,14 +187,29 @@ lattice = st.integers(-6, 6).map(float)
        st.sampled_from([0.25, 1.0, 4.0]))
 def test_degenerate_geometry_on_a_lattice(segments: list, circles: list, rays: list, cell: float) -> None:
     """Walls, posts and origins on integer points, rays at multiples of 45 deg: rays
-    through ends and joints, along walls, from walls, on the grid's cell edges. The
-    same distances as the reference, always."""
+    through ends and joints, along walls, from walls. The reference's distances, but
+    where its own hit is rounding noise off every item."""
     world = World(np.array(segments, dtype=float).reshape(-1, 4),
                   np.array(circles, dtype=float).reshape(-1, 3))
     origins = np.array([r[:2] for r in rays], dtype=float)
     angles = np.array([r[2] * math.pi / 4 for r in rays])
     want = world.cast_exact(origins, angles)
-    _same(_c(world, origins, angles, math.inf, cell), want)
+    got = _c(world, origins, angles, math.inf, cell)
+    _same_but_where_the_reference_misses_its_item(world, origins, angles, got, want)
+
+
+def test_a_ray_within_an_ulp_of_parallel_off_a_segment_s_end() -> None:
+    """From (-4, -2) on the line of the segment (-3, -1)-(4, 6), away from it at 225
+    deg (cos and sin an ulp apart): the reference's t is 0 and its u rounding noise,
+    a hit 1.4 m off the segment; the C cast, its cells smaller than that, meets
+    nothing, as the ray does (it passes the post 2 sqrt(2) m from its centre)."""
+    world = World(np.array([[4.0, 6.0, -3.0, -1.0]]), np.array([[-4.0, -6.0, 2.0]]))
+    origin, angle = np.array([-4.0, -2.0]), np.array([5 * math.pi / 4])
+    assert world.cast_exact(origin, angle)[0] == 0.0
+    got = _c(world, origin, angle, math.inf, 0.2)
+    _same_but_where_the_reference_misses_its_item(world, origin[None, :], angle, got,
+                                                  world.cast_exact(origin, angle))
+    assert got[0] == math.inf
 
 
 @pytest.mark.parametrize("cell", [0.25, 0.6, 1.0, 2.5, 8.0])

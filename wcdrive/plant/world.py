@@ -21,9 +21,10 @@ where they run on in a line). The ray cast is exact for that geometry (a ray's l
 to a wall is the distance along it to the first segment or circle it meets), in
 float64. ``cast_exact`` casts all rays at once with numpy, every ray against every
 item: the reference. ``cast`` gives the same figures bit for bit through a grid of
-cells built on the first cast (``wcdrive.plant.raycast``, in C), and is ``cast_exact``
-where the C helper cannot be had. A world's geometry is fixed: its arrays are not to
-be changed after its first cast.
+cells built on the first cast, in C (``wcdrive.plant.raycast``, which says where the
+reference's own figures are rounding noise), and is ``cast_exact`` where the C helper
+cannot be had. A world's geometry is fixed: its arrays are not to be changed after its
+first cast.
 """
 
 from __future__ import annotations

@@ -133,11 +133,14 @@ static double cast_one(const rc_grid *g, double ox, double oy, double dx, double
     int ix = clamp_cell(floor((ox + t0 * dx - minx) * g->inv_cs), g->nx);
     int iy = clamp_cell(floor((oy + t0 * dy - miny) * g->inv_cs), g->ny);
     double best = INFINITY;
+    /* where the ray leaves the first cell across x and across y, and how far on it
+     * crosses the next column and row: the sums round, far below eps */
+    double tx = sx > 0 ? (minx + (ix + 1) * cs - ox) * inv_dx
+              : sx < 0 ? (minx + ix * cs - ox) * inv_dx : INFINITY;
+    double ty = sy > 0 ? (miny + (iy + 1) * cs - oy) * inv_dy
+              : sy < 0 ? (miny + iy * cs - oy) * inv_dy : INFINITY;
+    const double step_x = sx ? cs * fabs(inv_dx) : INFINITY, step_y = sy ? cs * fabs(inv_dy) : INFINITY;
     for (;;) {
-        double tx = sx > 0 ? (minx + (ix + 1) * cs - ox) * inv_dx
-                  : sx < 0 ? (minx + ix * cs - ox) * inv_dx : INFINITY;
-        double ty = sy > 0 ? (miny + (iy + 1) * cs - oy) * inv_dy
-                  : sy < 0 ? (miny + iy * cs - oy) * inv_dy : INFINITY;
         double texit = fmin(tx, ty);
         int32_t c = iy * g->nx + ix;
         for (int32_t i = g->start[c], end = g->start[c + 1]; i < end; i++) {
@@ -174,9 +177,11 @@ static double cast_one(const rc_grid *g, double ox, double oy, double dx, double
         if (tx < ty) {
             ix += sx;
             if (ix < 0 || ix >= g->nx) break;
+            tx += step_x;
         } else {
             iy += sy;
             if (iy < 0 || iy >= g->ny) break;
+            ty += step_y;
         }
     }
     return best <= max_range ? best + 0.0 : INFINITY;    /* + 0.0: a hit at -0 is at 0 */
