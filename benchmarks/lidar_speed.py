@@ -75,11 +75,11 @@ def log_pose_at(start: tuple[float, float, float], t0: float, log: np.ndarray, o
     return pose_at
 
 
-def drive(seconds: float, world: World | None, offset: tuple[float, float] = (0.0, 0.0)
-          ) -> tuple[float, int, float]:
+def drive(seconds: float, world: World | None, offset: tuple[float, float] = (0.0, 0.0),
+          check: bool = False) -> tuple[float, int, float]:
     """One drive, ``world`` None for the lidar off: its real-time factor, the scans made
-    and the largest gap (m) between the pose integrated from the log and the plant's at
-    a turn's end."""
+    and (``check``, which costs time) the largest gap (m) between the pose integrated
+    from the log and the plant's at a turn's end."""
     chair = SteppedChair()
     chair.set_velocity(SPEED, TURN)
     chair.run(0.5)                              # off the start
@@ -99,6 +99,8 @@ def drive(seconds: float, world: World | None, offset: tuple[float, float] = (0.
             pose_at = log_pose_at(start, t0, plant.take_motion_log(), offset)
             scan = LIDAR.scan(world, pose_at, t0, rng)
             scans += len(scan.ranges) > 0
+            if not check:
+                continue
             ex, ey, _ = pose_at(np.array([plant.time]))
             x, y, _ = plant.pose
             drift = max(drift, math.hypot(ex[0] - offset[0] - x, ey[0] - offset[1] - y))
@@ -111,14 +113,11 @@ def rtf_side_by_side(seconds: float, runs: int) -> dict[str, dict[str, float]]:
     out = {}
     for name, world in worlds().items():
         world.cast(np.zeros(2), np.zeros(1))    # the grid built before the clock starts
-        drive(1.0, world, WORLDS[name])         # warm-up
+        drift = drive(3.0, world, WORLDS[name], check=True)[2]        # and a warm-up
         off, on = [], []
-        drift = 0.0
         for _ in range(runs):
             off.append(drive(seconds, None)[0])
-            rtf, _, d = drive(seconds, world, WORLDS[name])
-            on.append(rtf)
-            drift = max(drift, d)
+            on.append(drive(seconds, world, WORLDS[name])[0])
         out[name] = {"off": statistics.median(off), "on": statistics.median(on), "drift": drift}
     return out
 
