@@ -10,6 +10,8 @@ import dataclasses
 
 import numpy as np
 import pytest
+from hypothesis import example, given, settings
+from hypothesis import strategies as st
 
 from wcdrive.plant import ChairParams, Plant
 from wcdrive.plant.chair import CONTACT_SLOP, KEEP_FIRST, KEEP_LARGEST, Contacts, footprint
@@ -107,6 +109,20 @@ def test_the_impact_on_a_wall_is_the_chairs_momentum(kernel: bool) -> None:
 
 
 @BOTH
+def test_a_fast_impact_sinks_in_a_step_and_comes_back_out(kernel: bool) -> None:
+    """At 2.5 m/s the step of the impact carries the front edge 2.3 mm into the wall
+    (at most the speed times the step); 30 ms later it is back within 0.2 mm of the
+    slop (``CONTACT_BIAS``: pymunk's default leaves 2 mm)."""
+    p = _rolling(WALL, 1.2, 2.5, kernel)
+    _until_contact(p, 200)
+    depth = p.pose[0] + FRONT - WALL_X
+    assert 0.5 * CONTACT_SLOP < depth <= 2.5 * 0.001
+    p.advance(30)
+    assert p.pose[0] + FRONT - WALL_X < CONTACT_SLOP + 2e-4
+    assert abs(p.body.velocity.x) < 0.05
+
+
+@BOTH
 def test_a_post_hit_head_on(kernel: bool) -> None:
     post = World.from_table({"circles": [[WALL_X, 0.0, 0.05]]})
     p = _rolling(post, 1.0, 0.8, kernel)
@@ -192,3 +208,32 @@ def test_the_records_keep_the_first_and_the_largest() -> None:
     assert sorted(r.impact for r in records[KEEP_FIRST:]) == pytest.approx(rest)
     assert contacts.max_impact == impacts.max()
     assert contacts.total_impulse == pytest.approx(impacts.sum())
+
+
+#: m: the furthest a footprint may be in a wall: the slop, and a step at top speed
+DEEPEST = CONTACT_SLOP + 2.68 * 0.001
+ROOM = World.from_table({"walls": [[0.0, 0.0, 3.0, 0.0, 3.0, 3.0, 0.0, 3.0, 0.0, 0.0]]})
+
+
+@settings(max_examples=12, deadline=None)
+@example(drive=[(255, 1, 255, 1)] * 3 + [(255, 1, 0, 0)] * 2 + [(200, 0, 150, 0)] * 3)   # walls ahead, behind
+@given(drive=st.lists(st.tuples(st.integers(0, 255), st.integers(0, 1), st.integers(0, 255),
+                                st.integers(0, 1)), min_size=1, max_size=8))
+def test_in_a_closed_room_the_footprint_stays_inside(drive: list[tuple[int, int, int, int]]) -> None:
+    """Any drive in a 3 m x 3 m room: no corner of the footprint ever gets further
+    through a wall than the slop and a step at top speed (the impact's step: 2.7 mm),
+    and both paths agree bit for bit."""
+    fast, ref = (Plant(world=ROOM, x=1.2, y=1.5, use_kernel=k) for k in (True, False))
+    corners = np.array(footprint(ChairParams()))
+    for d in drive:
+        for _ in range(10):
+            for p in (fast, ref):
+                p.set_drive(*d)
+                p.advance(100)
+            assert fast.pose == ref.pose
+            x, y, th = fast.pose
+            c, s = np.cos(th), np.sin(th)
+            px = x + c * corners[:, 0] - s * corners[:, 1]
+            py = y + s * corners[:, 0] + c * corners[:, 1]
+            assert np.all((px > -DEEPEST) & (px < 3 + DEEPEST) & (py > -DEEPEST) & (py < 3 + DEEPEST))
+    assert fast.contacts.records() == ref.contacts.records()
