@@ -5,6 +5,19 @@
     scan = lidar.scan(world, pose_at, t0=12.3, rng=np.random.default_rng(0))
     scan.ranges          # float32, len(scan.ranges) == lidar.beams, inf for no return
 
+    plant.start_motion_log()
+    start, t0 = plant.pose, plant.time
+    ...                                                  # the plant steps through the turn
+    track = MotionTrack(start, t0, plant.take_motion_log())
+    scan = lidar.scan(world, track, t0, rng)             # the poses integrated in C
+
+``scan`` makes the whole turn in C (``wcdrive.plant.raycast``: the poses, the casts,
+the noise from ``rng``'s standard normal draws, the quantisation and the binning, in
+one call); ``scan_numpy`` is the same turn in numpy, the reference: the same noise
+draws give the same quarter millimetres, but where a range lies within rounding of a
+half quarter millimetre (the C poses and directions round differently: by 1e-15 of
+the figures). Without the C helper ``scan`` is ``scan_numpy``.
+
 How a scan is made, as the device and the driver make it:
 
 - The head turns at ``scan_hz``; the device takes a sample every ``1 / sample_hz`` s,
@@ -18,14 +31,14 @@ How a scan is made, as the device and the driver make it:
 - The driver (``angle_compensate``, the S3 launch file's default) bins the samples into
   ``360 * multiple`` beams, ``multiple = int(points_per_revolution / 360 + 1)`` (3,240
   for the S3 at 32 kHz and 10 Hz): each sample with a return fills the ``multiple``
-  bins from ``int(angle * multiple)`` on, later samples over earlier ones; a bin no
-  sample filled is 0. It then publishes ``angle_min = -pi``, ``angle_max = pi``,
-  ``angle_increment = 2 pi / (beams - 1)``, ``time_increment = scan_time / (beams -
-  1)``, ``range_min`` 0.05 m, ``range_max`` the mode's, 0 as ``+inf``, and the bins in
-  reverse order unless its ``inverted`` parameter is set (``sllidar_node.cpp``,
-  ``publish_scan``). The bin-to-angle rule is the driver's own and is off by up to one
-  bin (0.11 deg) at the end of the turn; the simulated scan keeps that, as the real
-  one has it.
+  bins from ``int(angle * multiple)`` on (the last bin for any past the end), later
+  samples over earlier ones; a bin no sample filled is 0. It then publishes
+  ``angle_min = -pi``, ``angle_max = pi``, ``angle_increment = 2 pi / (beams - 1)``,
+  ``time_increment = scan_time / (beams - 1)``, ``range_min`` 0.05 m, ``range_max``
+  the mode's, 0 as ``+inf``, and the bins in reverse order unless its ``inverted``
+  parameter is set (``sllidar_node.cpp``, ``publish_scan``). The bin-to-angle rule is
+  the driver's own and is off by up to one bin (0.11 deg) at the end of the turn; the
+  simulated scan keeps that, as the real one has it.
 - Mounting: the device's front points along the mount's ``yaw`` (its 0 deg is the
   laser frame's -x, as ``pi - angle`` says); ``inverted`` (a 180 deg roll, the head
   down) turns it the other way. The laser frame of ``/tf_static`` then has a roll of pi
@@ -41,16 +54,58 @@ not modelled).
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from wcdrive.plant.raycast import Turn, integrate_motion
 from wcdrive.plant.world import World
 
 #: (times (K,)) -> (x, y, heading) arrays (K,) of the chair's base in the map frame.
 PoseAt = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]
+Knots = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+
+
+class MotionTrack:
+    """The chair's pose over a stretch of time, a ``PoseAt``: from its pose ``start``
+    (x, y, heading) at ``t0`` and the plant's motion log of the steps since
+    (``Plant.take_motion_log``: rows of time, forward and lateral speed of the axle
+    midpoint, yaw rate, ...), each step turning the heading at its yaw rate and moving
+    the chair at its speeds along the heading at the step's middle; linear between the
+    steps, held before ``t0`` and after the last. ``offset`` shifts x and y (the map
+    frame's origin in the plant's)."""
+
+    def __init__(self, start: tuple[float, float, float], t0: float, log: np.ndarray,
+                 offset: tuple[float, float] = (0.0, 0.0)) -> None:
+        self.start = (start[0] + offset[0], start[1] + offset[1], start[2])
+        self.t0 = t0
+        self.log = np.asarray(log, dtype=float).reshape(len(log), -1)
+
+    def knots_numpy(self) -> Knots:
+        """The knots (times, x, y, heading; ``len(log) + 1`` each), integrated with
+        numpy: the reference."""
+        log, (x0, y0, h0) = self.log, self.start
+        t = np.concatenate(([self.t0], log[:, 0]))
+        dt = np.diff(t)
+        turn = log[:, 3] * dt
+        heading = h0 + np.concatenate(([0.0], np.cumsum(turn)))
+        mid = heading[1:] - turn / 2
+        c, s = np.cos(mid), np.sin(mid)
+        x = x0 + np.concatenate(([0.0], np.cumsum((log[:, 1] * c - log[:, 2] * s) * dt)))
+        y = y0 + np.concatenate(([0.0], np.cumsum((log[:, 1] * s + log[:, 2] * c) * dt)))
+        return t, x, y, heading
+
+    @functools.cached_property
+    def knots(self) -> Knots:
+        """The knots, integrated in C (``knots_numpy`` without the C helper)."""
+        return integrate_motion(self.start, self.t0, self.log) or self.knots_numpy()
+
+    def __call__(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        t, x, y, heading = self.knots
+        return np.interp(times, t, x), np.interp(times, t, y), np.interp(times, t, heading)
 
 
 @dataclass(frozen=True)
@@ -137,44 +192,89 @@ class Lidar:
         """Beams a scan holds."""
         return self.model.beams
 
+    def times(self, t0: float) -> np.ndarray:
+        """Each sample's time in the turn from ``t0``."""
+        return t0 + np.arange(self.model.samples) / self.model.sample_hz
+
+    def _device_angles(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each sample's device angle (deg) and its direction in the chair's frame (rad)."""
+        m, mount = self.model, self.mount
+        angle_deg = np.arange(m.samples) * 360.0 / m.samples
+        device = np.radians(angle_deg)
+        turn = device - math.pi if mount.inverted else math.pi - device
+        return angle_deg, math.radians(mount.yaw_deg) + turn
+
+    def _first_bins(self, angle_deg: np.ndarray) -> np.ndarray:
+        """The driver's first bin of each sample."""
+        m = self.model
+        first = (angle_deg.astype(np.float32) * m.compensate_multiple).astype(np.int64)
+        return np.minimum(first, m.beams - 1)
+
+    @functools.cached_property
+    def _turn(self) -> Turn:
+        m, mount = self.model, self.mount
+        angle_deg, direction = self._device_angles()
+        return Turn(m.sample_hz, np.column_stack((np.cos(direction), np.sin(direction))),
+                    self._first_bins(angle_deg), m.beams, m.compensate_multiple, (mount.x, mount.y),
+                    m.range_sigma, m.device_min, m.range_max, m.intensity, not mount.driver_inverted)
+
+    def _noise(self, rng: np.random.Generator | None) -> np.ndarray | None:
+        """The turn's standard normal draws (one a sample), or None for no noise."""
+        if rng is None or self.model.range_sigma <= 0:
+            return None
+        return rng.standard_normal(self.model.samples)
+
     def samples(self, world: World, pose_at: PoseAt, t0: float, rng: np.random.Generator | None
                 ) -> tuple[np.ndarray, np.ndarray]:
-        """One turn of the device: each sample's time and its ``dist_mm_q2`` (0: no
-        return), in the order taken."""
+        """One turn of the device, in numpy: each sample's time and its ``dist_mm_q2``
+        (0: no return), in the order taken."""
         m, mount = self.model, self.mount
-        j = np.arange(m.samples)
-        times = t0 + j / m.sample_hz
-        device = np.radians(j * 360.0 / m.samples)
+        times = self.times(t0)
         x, y, heading = pose_at(times)
         c, s = np.cos(heading), np.sin(heading)
         ox, oy = x + c * mount.x - s * mount.y, y + s * mount.x + c * mount.y
-        turn = device - math.pi if mount.inverted else math.pi - device
-        angles = heading + math.radians(mount.yaw_deg) + turn
+        angles = heading + self._device_angles()[1]
         ranges = world.cast(np.column_stack((ox, oy)), angles, math.inf)
-        if rng is not None and m.range_sigma > 0:
-            ranges = ranges + rng.normal(0.0, m.range_sigma, ranges.shape)
+        noise = self._noise(rng)
+        if noise is not None:
+            ranges = ranges + m.range_sigma * noise
         ok = np.isfinite(ranges) & (ranges >= m.device_min) & (ranges <= m.range_max)
         q2 = np.where(ok, np.round(np.where(ok, ranges, 0.0) * 4000.0), 0).astype(np.int64)
         return times, q2
 
     def scan(self, world: World, pose_at: PoseAt, t0: float, rng: np.random.Generator | None = None
              ) -> LaserScan:
-        """The scan of the turn that starts at ``t0``, as the driver publishes it."""
+        """The scan of the turn that starts at ``t0``, as the driver publishes it; in C
+        (``scan_numpy`` without the C helper). A ``MotionTrack`` is integrated in C;
+        any other ``pose_at`` is asked for each sample's pose."""
+        grid = world.ray_grid
+        if grid is None:
+            return self.scan_numpy(world, pose_at, t0, rng)
+        if isinstance(pose_at, MotionTrack):
+            knots = pose_at.knots
+        else:
+            times = self.times(t0)
+            knots = (times, *pose_at(times))
+        ranges, intensities, beam_time, _ = grid.scan(self._turn, t0, knots, self._noise(rng))
+        return self._message(t0, ranges, intensities, beam_time)
+
+    def scan_numpy(self, world: World, pose_at: PoseAt, t0: float, rng: np.random.Generator | None = None
+                   ) -> LaserScan:
+        """``scan`` in numpy (its casts ``world.cast``'s): the reference."""
         m = self.model
         times, q2 = self.samples(world, pose_at, t0, rng)
         beams, multiple = m.beams, m.compensate_multiple
-        angle_deg = np.arange(m.samples) * 360.0 / m.samples
-        start_bin = np.minimum((angle_deg.astype(np.float32) * multiple).astype(np.int64), beams - 1)
+        start_bin = self._first_bins(np.arange(m.samples) * 360.0 / m.samples)
         valid = np.flatnonzero(q2 != 0)
         # bin b holds the last sample with a return whose bins (start .. start + multiple - 1,
-        # clamped at the end) reach b
+        # the last bin for those past it) reach b
         b = np.arange(beams)
         if valid.size == 0:
             node = np.full(beams, -1)
         else:
             last = np.searchsorted(start_bin[valid], b, side="right") - 1
             node = np.where(last >= 0, valid[np.maximum(last, 0)], -1)
-        reaches = (node >= 0) & ((start_bin[np.maximum(node, 0)] + multiple - 1 >= b) | (b == beams - 1))
+        reaches = (node >= 0) & (start_bin[np.maximum(node, 0)] + multiple - 1 >= b)
         bins_q2 = np.where(reaches, q2[np.maximum(node, 0)], 0)
         bins_t = np.where(reaches, times[np.maximum(node, 0)], np.nan)
         if not self.mount.driver_inverted:
@@ -182,6 +282,12 @@ class Lidar:
         ranges = (bins_q2.astype(np.float32) / np.float32(4.0)) / np.float32(1000.0)
         ranges = np.where(bins_q2 == 0, np.float32(np.inf), ranges).astype(np.float32)
         intensities = np.where(bins_q2 == 0, 0.0, m.intensity).astype(np.float32)
+        return self._message(t0, ranges, intensities, bins_t)
+
+    def _message(self, t0: float, ranges: np.ndarray, intensities: np.ndarray, beam_time: np.ndarray
+                 ) -> LaserScan:
+        m = self.model
+        beams = m.beams
         scan_time = 1.0 / m.scan_hz
         # the driver: DEG2RAD(360.0f) and DEG2RAD(0.0f) as floats, M_PI a double, each
         # field a float32
@@ -191,4 +297,4 @@ class Lidar:
         increment = float(f32((angle_max - angle_min) / (beams - 1)))
         return LaserScan(t0, self.frame_id, angle_min, angle_max, increment,
                          float(f32(scan_time / (beams - 1))), float(f32(scan_time)), float(f32(m.range_min)),
-                         float(f32(m.range_max)), ranges, intensities, bins_t)
+                         float(f32(m.range_max)), ranges, intensities, beam_time)

@@ -10,6 +10,7 @@ what lies along it.
 
     grid = RayGrid.build(world.segments, world.circles)    # None without the C helper
     grid.cast(ox, oy, dx, dy, max_range)                    # (K,) metres, inf for none
+    grid.scan(turn, t0, knots, noise)                       # a lidar's turn (wcdrive.plant.lidar)
 
 ``World.cast`` builds its grid on its first cast and uses it from then on; the
 geometry's arrays are copied into the grid, so a world's arrays changed after its first
@@ -44,7 +45,35 @@ class GridStruct(ctypes.Structure):
 
     _fields_ = [("seg", _P), ("n_seg", _I), ("circ", _P), ("n_circ", _I),
                 ("minx", _D), ("miny", _D), ("cs", _D), ("inv_cs", _D), ("nx", _I), ("ny", _I),
-                ("eps", _D), ("start", _P), ("items", _P)]
+                ("eps", _D), ("start", _P), ("items", _P), ("dir", _P)]
+
+
+class TurnStruct(ctypes.Structure):
+    """``rc_lidar`` of raycast.c."""
+
+    _fields_ = [("samples", _I), ("sample_hz", _D), ("device", _P), ("first_bin", _P), ("beams", _I),
+                ("multiple", _I), ("mount_x", _D), ("mount_y", _D), ("sigma", _D), ("device_min", _D),
+                ("range_max", _D), ("intensity", ctypes.c_float), ("reverse", _I)]
+
+
+class Turn:
+    """What ``RayGrid.scan`` needs of a lidar and its driver: ``samples`` a turn taken at
+    ``sample_hz``, sample j along ``device[j]`` (the unit vector in the chair's frame)
+    from ``mount`` (x, y on the chair), binned from ``first_bin[j]`` into ``multiple``
+    of ``beams`` bins (published last first with ``reverse``); ranges with ``sigma`` of
+    noise, kept from ``device_min`` to ``range_max``, read with ``intensity``."""
+
+    def __init__(self, sample_hz: float, device: np.ndarray, first_bin: np.ndarray, beams: int, multiple: int,
+                 mount: tuple[float, float], sigma: float, device_min: float, range_max: float,
+                 intensity: float, reverse: bool) -> None:
+        self.device = np.ascontiguousarray(device, dtype=float).reshape(-1, 2).copy()
+        self.first_bin = np.ascontiguousarray(first_bin, dtype=np.int32).copy()
+        if len(self.first_bin) != len(self.device):
+            raise ValueError("one first bin a sample")
+        self.samples, self.beams = len(self.device), beams
+        self.struct = TurnStruct(self.samples, sample_hz, _address(self.device), _address(self.first_bin),
+                                 beams, multiple, mount[0], mount[1], sigma, device_min, range_max,
+                                 intensity, int(reverse))
 
 
 def load_raycast() -> ctypes.CDLL | None:
@@ -65,6 +94,11 @@ def load_raycast() -> ctypes.CDLL | None:
             lib.rc_fill.restype = None
             lib.rc_cast.argtypes = [grid, _I, _P, _P, _P, _P, _D, _P]
             lib.rc_cast.restype = None
+            lib.rc_integrate.argtypes = [_D, _D, _D, _D, _I, _P, _I, _P, _P, _P, _P]
+            lib.rc_integrate.restype = None
+            lib.rc_scan.argtypes = [grid, ctypes.POINTER(TurnStruct), _D, _I, _P, _P, _P, _P, _P, _P, _P, _P,
+                                    _P]
+            lib.rc_scan.restype = None
             _lib = lib
             record("ray cast", how)
         except (BuildError, OSError) as exc:            # OSError: no writable cache
@@ -111,9 +145,10 @@ class RayGrid:
         self.corner = (float(lo[0]) - pad, float(lo[1]) - pad)
         self._start = np.zeros(nx * ny + 1, dtype=np.int32)
         self._items = np.zeros(0, dtype=np.int32)
+        self._dir = np.ascontiguousarray(seg[:, 2:4] - seg[:, 0:2])
         self._struct = GridStruct(_address(seg), len(seg), _address(circ), len(circ),
                                   *self.corner, cs, 1.0 / cs, nx, ny, self.eps,
-                                  _address(self._start), 0)
+                                  _address(self._start), 0, _address(self._dir))
         ref = ctypes.byref(self._struct)
         counts = np.zeros(nx * ny, dtype=np.int32)
         lib.rc_count(ref, _address(counts))
@@ -145,8 +180,50 @@ class RayGrid:
                               _address(out))
         return out
 
+    def scan(self, turn: Turn, t0: float, knots: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+             noise: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """One turn from ``t0``, the chair's pose interpolated in ``knots`` (times,
+        increasing, x, y, heading; held past the ends) and ``noise`` (standard normal
+        draws, one a sample, or None): the published ranges (float32, inf for none),
+        intensities (float32), each beam's sample time (NaN for none), and each
+        sample's quarter millimetres (0 for no return)."""
+        kt, kx, ky, kh = (np.ascontiguousarray(a, dtype=float) for a in knots)
+        n = len(kt)
+        if n == 0 or not len(kx) == len(ky) == len(kh) == n:
+            raise ValueError("knots: four arrays of one length, one knot at least")
+        if noise is not None:
+            noise = np.ascontiguousarray(noise, dtype=float)
+            if len(noise) < turn.samples:
+                raise ValueError(f"noise: {turn.samples} draws needed, {len(noise)} given")
+        q2 = np.empty(turn.samples, dtype=np.int32)
+        ranges = np.empty(turn.beams, dtype=np.float32)
+        intensities = np.empty(turn.beams, dtype=np.float32)
+        beam_time = np.empty(turn.beams)
+        self._lib.rc_scan(ctypes.byref(self._struct), ctypes.byref(turn.struct), t0, n, _address(kt),
+                          _address(kx), _address(ky), _address(kh),
+                          None if noise is None else _address(noise), _address(q2), _address(ranges),
+                          _address(intensities), _address(beam_time))
+        return ranges, intensities, beam_time, q2
+
     @property
     def items_per_cell(self) -> float:
         """The mean number of items a cell holds (each item counted in every cell it
         touches)."""
         return len(self._items) / (self.shape[0] * self.shape[1])
+
+
+def integrate_motion(start: tuple[float, float, float], t0: float, log: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """``wcdrive.plant.lidar.MotionTrack``'s knots in C (times, x, y, heading, each
+    ``len(log) + 1``); None without the C helper."""
+    lib = load_raycast()
+    if lib is None:
+        return None
+    log = np.ascontiguousarray(log, dtype=float)
+    if log.ndim != 2 or log.shape[1] < 4:
+        raise ValueError("a motion log is n x 4 at least: time, forward, lateral, yaw rate")
+    n = len(log)
+    out = np.empty((4, n + 1))
+    lib.rc_integrate(t0, start[0], start[1], start[2], n, _address(log) if n else None, log.shape[1],
+                     *(_address(out[i]) for i in range(4)))
+    return out[0], out[1], out[2], out[3]

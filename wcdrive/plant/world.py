@@ -147,6 +147,12 @@ class World:
     def _ray_grid(self) -> RayGrid | None:
         return RayGrid.build(self.segments, self.circles)
 
+    @property
+    def ray_grid(self) -> RayGrid | None:
+        """The C cast's grid over this geometry (built on first use); None without the
+        C helper or without geometry."""
+        return self._ray_grid
+
     def __getstate__(self) -> dict[str, Any]:
         # the grid holds C pointers: a copy builds its own
         return {k: v for k, v in self.__dict__.items() if k != "_ray_grid"}

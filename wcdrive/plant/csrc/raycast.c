@@ -13,9 +13,18 @@
  *
  * Items: index k < n_seg is segment k, k >= n_seg circle k - n_seg. The grid is CSR:
  * cell (ix, iy) is c = iy * nx + ix and holds items[start[c] .. start[c + 1]).
+ *
+ * rc_scan makes one turn of a lidar (wcdrive.plant.lidar.Lidar.scan_numpy, the
+ * reference) in one call: each sample's pose, its cast, its noise, its quarter
+ * millimetres and the driver's binning into the published beams.
  */
 #include <math.h>
+#include <stddef.h>
 #include <stdint.h>
+
+/* fmin and fmax of figures that are never NaN (libm's calls cost more than the walk's steps) */
+static inline double min2(double a, double b) { return a < b ? a : b; }
+static inline double max2(double a, double b) { return a > b ? a : b; }
 
 typedef struct {
     const double *seg;      /* n_seg x 4: x0, y0, x1, y1 */
@@ -28,6 +37,7 @@ typedef struct {
     double eps;             /* how near an item must come to a cell to be binned in it */
     const int32_t *start;   /* nx * ny + 1 */
     int32_t *items;
+    const double *dir;      /* n_seg x 2: x1 - x0, y1 - y0 */
 } rc_grid;
 
 static int seg_touches_box(const double *s, double bx0, double by0, double bx1, double by1,
@@ -114,15 +124,15 @@ static double cast_one(const rc_grid *g, double ox, double oy, double dx, double
     double t0 = 0.0, t1 = INFINITY;
     if (sx) {
         double a = (minx - ox) * inv_dx, b = (maxx - ox) * inv_dx;
-        t0 = fmax(t0, fmin(a, b));
-        t1 = fmin(t1, fmax(a, b));
+        t0 = max2(t0, min2(a, b));
+        t1 = min2(t1, max2(a, b));
     } else if (ox < minx || ox > maxx) {
         return INFINITY;
     }
     if (sy) {
         double a = (miny - oy) * inv_dy, b = (maxy - oy) * inv_dy;
-        t0 = fmax(t0, fmin(a, b));
-        t1 = fmin(t1, fmax(a, b));
+        t0 = max2(t0, min2(a, b));
+        t1 = min2(t1, max2(a, b));
     } else if (oy < miny || oy > maxy) {
         return INFINITY;
     }
@@ -141,20 +151,26 @@ static double cast_one(const rc_grid *g, double ox, double oy, double dx, double
               : sy < 0 ? (miny + iy * cs - oy) * inv_dy : INFINITY;
     const double step_x = sx ? cs * fabs(inv_dx) : INFINITY, step_y = sy ? cs * fabs(inv_dy) : INFINITY;
     for (;;) {
-        double texit = fmin(tx, ty);
+        double texit = min2(tx, ty);
         int32_t c = iy * g->nx + ix;
         for (int32_t i = g->start[c], end = g->start[c + 1]; i < end; i++) {
             int32_t k = g->items[i];
             if (k < g->n_seg) {
-                const double *s = g->seg + 4 * k;
-                double x0 = s[0], y0 = s[1];
-                double ex = s[2] - x0, ey = s[3] - y0;
+                const double *s = g->seg + 4 * k, *e = g->dir + 2 * k;
+                double ex = e[0], ey = e[1];
                 double denom = dx * ey - dy * ex;
                 if (denom == 0.0)
                     continue;
-                double wx = x0 - ox, wy = y0 - oy;
-                double t = (wx * ey - wy * ex) / denom;
-                double u = (wx * dy - wy * dx) / denom;
+                double wx = s[0] - ox, wy = s[1] - oy;
+                double tn = wx * ey - wy * ex, un = wx * dy - wy * dx;
+                /* the quotients' signs and sizes without dividing, with margins that
+                 * keep every candidate the divided figures would take */
+                double a = fabs(denom), st = denom < 0.0 ? -tn : tn, su = denom < 0.0 ? -un : un;
+                if (st < -a * 0x1p-1000 || su < -a * 0x1p-1000 || su > a * (1.0 + 0x1p-50)
+                        || st > best * a * (1.0 + 0x1p-50))
+                    continue;
+                double t = tn / denom;
+                double u = un / denom;
                 if (t >= 0.0 && u >= 0.0 && u <= 1.0 && t < best)
                     best = t;
             } else {
@@ -174,15 +190,15 @@ static double cast_one(const rc_grid *g, double ox, double oy, double dx, double
         }
         if (best <= texit || texit > limit)
             break;
-        if (tx < ty) {
-            ix += sx;
-            if (ix < 0 || ix >= g->nx) break;
-            tx += step_x;
-        } else {
-            iy += sy;
-            if (iy < 0 || iy >= g->ny) break;
-            ty += step_y;
-        }
+        /* the step across x or across y, chosen without a branch (which way it goes
+         * is a coin toss on a slanted ray) */
+        int across_x = tx < ty;
+        ix += across_x ? sx : 0;
+        iy += across_x ? 0 : sy;
+        tx = across_x ? tx + step_x : tx;
+        ty = across_x ? ty : ty + step_y;
+        if ((uint32_t)ix >= (uint32_t)g->nx || (uint32_t)iy >= (uint32_t)g->ny)
+            break;
     }
     return best <= max_range ? best + 0.0 : INFINITY;    /* + 0.0: a hit at -0 is at 0 */
 }
@@ -193,4 +209,143 @@ void rc_cast(const rc_grid *g, int32_t n, const double *ox, const double *oy, co
              const double *dy, double max_range, double *out) {
     for (int32_t i = 0; i < n; i++)
         out[i] = cast_one(g, ox[i], oy[i], dx[i], dy[i], max_range);
+}
+
+/* A lidar and its driver (wcdrive.plant.lidar): the turn's samples, each taken at
+ * t0 + j / sample_hz along the device direction (cos, sin)[j] of the chair's frame
+ * (the mount's yaw and the head's turn in it), from (mount_x, mount_y) on the chair. */
+typedef struct {
+    int32_t samples;
+    double sample_hz;
+    const double *device;   /* samples x 2: the direction of sample j in the chair's frame */
+    const int32_t *first_bin;   /* samples: the driver's first bin of sample j */
+    int32_t beams, multiple;
+    double mount_x, mount_y;
+    double sigma;           /* range noise (m) on the draws `noise` */
+    double device_min, range_max;
+    float intensity;
+    int32_t reverse;        /* publish the bins last first (the driver not told "inverted") */
+} rc_lidar;
+
+/* cos and sin of a small angle (|d| < 0.05: within an ulp or two of libm's) */
+static void small_rotation(double d, double *c, double *s) {
+    double d2 = d * d;
+    *c = 1.0 - d2 * (0.5 - d2 * (1.0 / 24 - d2 * (1.0 / 720 - d2 * (1.0 / 40320))));
+    *s = d * (1.0 - d2 * (1.0 / 6 - d2 * (1.0 / 120 - d2 * (1.0 / 5040 - d2 * (1.0 / 362880)))));
+}
+
+/* The chair's poses from the pose at t0 and the plant's motion log (rows of `stride`
+ * doubles: time, forward, lateral, yaw rate, ...): knots t, x, y, h (n + 1 each), as
+ * wcdrive.plant.lidar.MotionTrack integrates them (the heading's step at its midpoint). */
+void rc_integrate(double t0, double x0, double y0, double h0, int32_t n, const double *log,
+                  int32_t stride, double *t, double *x, double *y, double *h) {
+    double ch = 0.0, cx = 0.0, cy = 0.0;
+    t[0] = t0; x[0] = x0; y[0] = y0; h[0] = h0;
+    for (int32_t k = 0; k < n; k++) {
+        const double *r = log + (ptrdiff_t)k * stride;
+        double dt = r[0] - t[k];
+        double turn = r[3] * dt;
+        ch += turn;
+        t[k + 1] = r[0];
+        h[k + 1] = h0 + ch;
+        double mid = h[k + 1] - turn / 2;
+        double c = cos(mid), s = sin(mid);
+        cx += (r[1] * c - r[2] * s) * dt;
+        cy += (r[1] * s + r[2] * c) * dt;
+        x[k + 1] = x0 + cx;
+        y[k + 1] = y0 + cy;
+    }
+}
+
+/* One turn from t0: sample j's pose interpolated in the knots (kt increasing, n >= 1;
+ * np.interp's rule: held at the ends), its ray cast, its noise (noise[j] * sigma, none
+ * without `noise`), its range in quarter millimetres (0: none, below device_min or
+ * above range_max), and the driver's bins: ranges (float32 m, inf for none),
+ * intensities and beam_time (the time of the sample in each bin, NaN for none), each
+ * `beams` long. q2: `samples` int32, each sample's quarter millimetres. */
+void rc_scan(const rc_grid *g, const rc_lidar *L, double t0, int32_t n, const double *kt,
+             const double *kx, const double *ky, const double *kh, const double *noise,
+             int32_t *q2, float *ranges, float *intensities, double *beam_time) {
+    int32_t k = 0;
+    double slope_x = 0.0, slope_y = 0.0, slope_h = 0.0, ck = 1.0, sk = 0.0;
+    int32_t at = -1, sloped = -1;         /* the knots ck, sk and the slopes belong to */
+    for (int32_t j = 0; j < L->samples; j++) {
+        double tj = t0 + j / L->sample_hz;
+        while (k < n - 1 && kt[k + 1] <= tj)
+            k++;
+        double x, y, h, dh;
+        if (tj < kt[0]) {
+            x = kx[0]; y = ky[0]; h = kh[0]; dh = 0.0; k = 0;
+        } else if (k == n - 1 || kt[k] == tj) {
+            x = kx[k]; y = ky[k]; h = kh[k]; dh = 0.0;
+        } else {
+            if (sloped != k) {
+                sloped = k;
+                double inv = 1.0 / (kt[k + 1] - kt[k]);
+                slope_x = (kx[k + 1] - kx[k]) * inv;
+                slope_y = (ky[k + 1] - ky[k]) * inv;
+                slope_h = (kh[k + 1] - kh[k]) * inv;
+            }
+            double u = tj - kt[k];
+            x = slope_x * u + kx[k];
+            y = slope_y * u + ky[k];
+            h = slope_h * u + kh[k];
+            dh = h - kh[k];
+        }
+        /* the heading's cos and sin: the knot's, turned by the small step from it */
+        double c, s;
+        if (at != k) {
+            ck = cos(kh[k]);
+            sk = sin(kh[k]);
+            at = k;
+        }
+        if (fabs(dh) < 0.05) {
+            double cd, sd;
+            small_rotation(dh, &cd, &sd);
+            c = ck * cd - sk * sd;
+            s = sk * cd + ck * sd;
+        } else {
+            c = cos(h);
+            s = sin(h);
+        }
+        double ox = x + c * L->mount_x - s * L->mount_y;
+        double oy = y + s * L->mount_x + c * L->mount_y;
+        const double *d = L->device + 2 * j;
+        double dx = c * d[0] - s * d[1], dy = s * d[0] + c * d[1];
+        double r = cast_one(g, ox, oy, dx, dy, INFINITY);
+        if (noise)
+            r = r + (0.0 + L->sigma * noise[j]);
+        q2[j] = isfinite(r) && r >= L->device_min && r <= L->range_max ? (int32_t)nearbyint(r * 4000.0) : 0;
+    }
+    /* the driver's angle_compensate: sample j with a return fills the `multiple` bins
+     * from its first on (the last bin for any past the end), later samples over earlier.
+     * The first bins rise with j: taken last first, a sample fills its bins below the
+     * lowest a later one filled (`hi`), each bin once. */
+    for (int32_t b = 0; b < L->beams; b++) {
+        ranges[b] = INFINITY;
+        intensities[b] = 0.0f;
+        beam_time[b] = NAN;
+    }
+    int32_t hi = L->beams;
+    for (int32_t j = L->samples - 1; j >= 0; j--) {
+        if (q2[j] == 0)
+            continue;
+        int32_t lo = L->first_bin[j], top = lo + L->multiple - 1;
+        if (lo < 0)
+            lo = 0;
+        if (top > L->beams - 1)
+            top = L->beams - 1;
+        if (top > hi - 1)
+            top = hi - 1;
+        float range = ((float)q2[j] / 4.0f) / 1000.0f;
+        double tj = t0 + j / L->sample_hz;
+        for (int32_t b = lo; b <= top; b++) {
+            int32_t out = L->reverse ? L->beams - 1 - b : b;
+            ranges[out] = range;
+            intensities[out] = L->intensity;
+            beam_time[out] = tj;
+        }
+        if (lo < hi)
+            hi = lo;
+    }
 }
