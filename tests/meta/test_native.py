@@ -51,7 +51,8 @@ def test_a_compile_error_says_what_failed(tmp_path: Path, monkeypatch) -> None:
 
 HELPERS = [("wcdrive.avr._f32_fast", "avr/csrc/f32_fast.c", native.prebuilt),
            ("wcdrive.firmware._tick_fast", "firmware/csrc/tick_fast.c", native.prebuilt),
-           ("wcdrive.plant._chair_kernel", "plant/csrc/chair_kernel.c", native.prebuilt_library)]
+           ("wcdrive.plant._chair_kernel", "plant/csrc/chair_kernel.c", native.prebuilt_library),
+           ("wcdrive.plant._raycast", "plant/csrc/raycast.c", native.prebuilt_library)]
 
 
 @pytest.mark.parametrize(("module", "source", "find"), HELPERS)
@@ -70,6 +71,8 @@ def test_every_helper_this_process_loaded_says_how() -> None:
     from wcdrive.avr import f32
     from wcdrive.firmware import tick_fast
     from wcdrive.plant.chair import load_kernel
+    from wcdrive.plant.raycast import load_raycast
 
     assert f32.fast is not None and tick_fast.fast is not None and load_kernel() is not None
-    assert set(native.paths()) >= {"binary32", "control tick", "plant kernel"}
+    assert load_raycast() is not None
+    assert set(native.paths()) >= {"binary32", "control tick", "plant kernel", "ray cast"}

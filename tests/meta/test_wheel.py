@@ -39,9 +39,10 @@ def installed(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 
 
 #: The C helpers setup.py builds at install.
-HELPERS = ("wcdrive/avr/_f32_fast", "wcdrive/firmware/_tick_fast", "wcdrive/plant/_chair_kernel")
+HELPERS = ("wcdrive/avr/_f32_fast", "wcdrive/firmware/_tick_fast", "wcdrive/plant/_chair_kernel",
+           "wcdrive/plant/_raycast")
 SHIPPED = tuple(h.rsplit("/", 1)[1] + "." for h in HELPERS)
-NATIVE_PATHS = ("binary32", "control tick", "plant kernel")
+NATIVE_PATHS = ("binary32", "control tick", "plant kernel", "ray cast")
 
 
 def _run(installed: dict[str, Path], *args: str, timeout: float = 300) -> subprocess.CompletedProcess[str]:
@@ -61,6 +62,7 @@ def test_the_wheel_installs_only_wcdrive_and_the_url_hook(installed: dict[str, P
                    "wcdrive/_data/firmware/final_control/final_control.ino",
                    "wcdrive/_data/firmware/final_control/Makefile",
                    "wcdrive/boards/simavr/csrc/wcsim.c", "wcdrive/plant/csrc/chair_kernel.c",
+                   "wcdrive/plant/csrc/raycast.c",
                    "wcdrive/avr/csrc/f32_fast.c", "wcdrive/firmware/csrc/tick_fast.c"):
         assert needed in names, needed
     assert not [n for n in names if "/build/" in n or n.endswith((".o", ".elf"))]

@@ -60,8 +60,10 @@ def version_text() -> str:
     from wcdrive.avr import f32  # noqa: F401  (each loads its C helper, or records why not)
     from wcdrive.firmware import tick_fast  # noqa: F401
     from wcdrive.plant.chair import load_kernel
+    from wcdrive.plant.raycast import load_raycast
 
     load_kernel()
+    load_raycast()
     lines = [f"wcdrive {__version__} (protocol v{integer('PROTOCOL_VERSION')})"]
     lines += [f"  {helper}: {how}" for helper, how in sorted(native.paths().items())]
     return "\n".join(lines)
