@@ -53,7 +53,7 @@ NATIVE = [
     Extension("wcdrive.plant._chair_kernel", ["wcdrive/plant/csrc/chair_kernel.c"],
               extra_compile_args=_FLAGS, libraries=["m"], optional=True),
     Extension("wcdrive.plant._raycast", ["wcdrive/plant/csrc/raycast.c"],
-              extra_compile_args=_FLAGS, libraries=["m"], optional=True),
+              extra_compile_args=_FLAGS, libraries=["m", "pthread"], optional=True),
 ]
 
 

@@ -3,7 +3,8 @@
 same noise draws, for a chair driving through a ROS map's outline and a furnished
 room, on random motion logs and mounts; the poses a motion log integrates to, in C and
 in numpy, and against the plant's own; the driver's last bin, which only a sample
-whose bins reach it fills."""
+whose bins reach it fills; turns made on a ``ScanPipe``'s thread are the same as
+those made at once, in the order of their noise draws, waited for in any order."""
 
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ from hypothesis import strategies as st
 
 from wcdrive.plant import raycast
 from wcdrive.plant.lidar import LaserScan, Lidar, LidarMount, MotionTrack
+from wcdrive.plant.raycast import ScanJob, ScanPipe
 from wcdrive.plant.rosmap import load_map
 from wcdrive.plant.world import World
 from wcdrive.testing.stepped import SteppedChair
@@ -172,3 +174,67 @@ def test_bad_knots_and_noise_are_errors(sandbox: World) -> None:
         grid.scan(lidar._turn, 0.0, (np.zeros(0),) * 4, None)
     with pytest.raises(ValueError, match="3200 draws"):
         grid.scan(lidar._turn, 0.0, (one, one, one, one), np.zeros(10))
+
+
+def _turns(n: int) -> list[tuple[float, MotionTrack]]:
+    """n turns of a chair on a circle through the sandbox, 0.1 s each."""
+    out = []
+    start = (0.0, 0.0, 0.0)
+    for k in range(n):
+        t0 = 0.1 * k
+        track = MotionTrack(start, t0, _log(t0, 100, 0.4, 0.0, 0.5), (0.5, 0.3))
+        _, x, y, h = track.knots_numpy()
+        start = (x[-1] - 0.5, y[-1] - 0.3, h[-1])
+        out.append((t0, track))
+    return out
+
+
+def test_turns_made_on_the_pipe_s_thread_are_those_made_at_once() -> None:
+    """Eight turns queued at once, their noise from one generator: each the same as
+    made at once in the same order; waited for last first; a job waited for twice is
+    the same; the generator drew as much either way."""
+    lidar = Lidar(mount=LidarMount(x=0.3))
+    turns = _turns(8)
+    now, later = np.random.default_rng(11), np.random.default_rng(11)
+    want = [lidar.scan(SANDBOX, track, t0, now) for t0, track in turns]
+    with ScanPipe() as pipe:
+        pending = [lidar.start_scan(SANDBOX, track, t0, later, pipe) for t0, track in turns]
+        got = [p.result() for p in reversed(pending)][::-1]
+        assert pending[3].result() is got[3]
+    for g, w in zip(got, want, strict=True):
+        _same_scan(g, w)
+        assert g.stamp == w.stamp
+    assert now.standard_normal() == later.standard_normal()
+
+
+def test_closing_the_pipe_finishes_what_is_queued() -> None:
+    lidar = Lidar()
+    grid = SANDBOX.ray_grid
+    assert grid is not None
+    turns = _turns(4)
+    jobs = [ScanJob(grid, lidar._turn, t0, None, motion=(track.start, track.log)) for t0, track in turns]
+    pipe = ScanPipe()
+    for job in jobs:
+        pipe.submit(job)
+    with pytest.raises(ValueError, match="already queued"):
+        pipe.submit(jobs[-1])
+    pipe.close()
+    pipe.close()
+    with pytest.raises(ValueError, match="closed"):
+        pipe.submit(jobs[0])
+    for (t0, track), job in zip(turns, jobs, strict=True):
+        assert pipe.wait(job) is job
+        want = lidar.scan_numpy(SANDBOX, track, t0)
+        assert np.array_equal(job.ranges, want.ranges)
+        assert np.allclose(np.stack(job.knots), np.stack(track.knots_numpy()), rtol=0, atol=1e-12)
+
+
+def test_without_a_pipe_or_the_c_helper_a_started_scan_is_made_at_once(monkeypatch: pytest.MonkeyPatch
+                                                                      ) -> None:
+    t0, track = _turns(1)[0]
+    want = Lidar().scan_numpy(SANDBOX, track, t0, np.random.default_rng(2))
+    _same_scan(Lidar().start_scan(SANDBOX, track, t0, np.random.default_rng(2), None).result(), want)
+    monkeypatch.setattr(raycast, "_lib", False)
+    assert ScanPipe.open() is None
+    world = World(SANDBOX.segments, SANDBOX.circles)
+    _same_scan(Lidar().start_scan(world, track, t0, np.random.default_rng(2), None).result(), want)

@@ -11,12 +11,19 @@
     track = MotionTrack(start, t0, plant.take_motion_log())
     scan = lidar.scan(world, track, t0, rng)             # the poses integrated in C
 
+    with ScanPipe() as pipe:                             # turns made on a C thread (or ScanPipe.open())
+        pending = lidar.start_scan(world, track, t0, rng, pipe)
+        ...                                              # the plant steps through the next turn
+        scan = pending.result()
+
 ``scan`` makes the whole turn in C (``wcdrive.plant.raycast``: the poses, the casts,
 the noise from ``rng``'s standard normal draws, the quantisation and the binning, in
-one call); ``scan_numpy`` is the same turn in numpy, the reference: the same noise
-draws give the same quarter millimetres, but where a range lies within rounding of a
-half quarter millimetre (the C poses and directions round differently: by 1e-15 of
-the figures). Without the C helper ``scan`` is ``scan_numpy``.
+one call); ``start_scan`` does the same on a ``ScanPipe``'s thread, the noise drawn
+at once (the generator's draws in the order of the calls), while the caller runs on.
+``scan_numpy`` is the same turn in numpy, the reference: the same noise draws give
+the same quarter millimetres, but where a range lies within rounding of a half
+quarter millimetre (the C poses and directions round differently: by 1e-15 of the
+figures). Without the C helper ``scan`` and ``start_scan`` are ``scan_numpy``.
 
 How a scan is made, as the device and the driver make it:
 
@@ -61,7 +68,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from wcdrive.plant.raycast import Turn, integrate_motion
+from wcdrive.plant.raycast import ScanJob, ScanPipe, Turn, integrate_motion
 from wcdrive.plant.world import World
 
 #: (times (K,)) -> (x, y, heading) arrays (K,) of the chair's base in the map frame.
@@ -179,6 +186,24 @@ class LaserScan:
     beam_time: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))
 
 
+def _made(job: ScanJob) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    return job.ranges, job.intensities, job.beam_time
+
+
+class PendingScan:
+    """A scan being made (``Lidar.start_scan``); ``result`` waits for it."""
+
+    def __init__(self, done: LaserScan | None, finish: Callable[[], LaserScan] | None = None) -> None:
+        self._done, self._finish = done, finish
+
+    def result(self) -> LaserScan:
+        """The scan (waiting for its thread to make it)."""
+        if self._done is None:
+            assert self._finish is not None
+            self._done, self._finish = self._finish(), None
+        return self._done
+
+
 @dataclass(frozen=True)
 class Lidar:
     """A lidar model on a mount; ``scan`` makes one revolution's ``LaserScan``."""
@@ -242,21 +267,43 @@ class Lidar:
         q2 = np.where(ok, np.round(np.where(ok, ranges, 0.0) * 4000.0), 0).astype(np.int64)
         return times, q2
 
+    def _job(self, world: World, pose_at: PoseAt, t0: float, rng: np.random.Generator | None
+             ) -> ScanJob | None:
+        """The C scan's job for that turn (its noise drawn now), or None without the C
+        helper."""
+        grid = world.ray_grid
+        if grid is None:
+            return None
+        noise = self._noise(rng)
+        if isinstance(pose_at, MotionTrack):
+            return ScanJob(grid, self._turn, t0, noise, motion=(pose_at.start, pose_at.log))
+        times = self.times(t0)
+        return ScanJob(grid, self._turn, t0, noise, knots=(times, *pose_at(times)))
+
     def scan(self, world: World, pose_at: PoseAt, t0: float, rng: np.random.Generator | None = None
              ) -> LaserScan:
         """The scan of the turn that starts at ``t0``, as the driver publishes it; in C
         (``scan_numpy`` without the C helper). A ``MotionTrack`` is integrated in C;
         any other ``pose_at`` is asked for each sample's pose."""
-        grid = world.ray_grid
-        if grid is None:
+        job = self._job(world, pose_at, t0, rng)
+        if job is None:
             return self.scan_numpy(world, pose_at, t0, rng)
-        if isinstance(pose_at, MotionTrack):
-            knots = pose_at.knots
-        else:
-            times = self.times(t0)
-            knots = (times, *pose_at(times))
-        ranges, intensities, beam_time, _ = grid.scan(self._turn, t0, knots, self._noise(rng))
-        return self._message(t0, ranges, intensities, beam_time)
+        job.run()
+        return self._message(t0, job.ranges, job.intensities, job.beam_time)
+
+    def start_scan(self, world: World, pose_at: PoseAt, t0: float, rng: np.random.Generator | None,
+                   pipe: ScanPipe | None) -> PendingScan:
+        """``scan`` made on ``pipe``'s thread: its noise drawn and its poses asked for
+        now, the rest while the caller runs on; ``result()`` waits for it. Without a
+        pipe (``ScanPipe.open()`` gives None where there is none) the scan is made now."""
+        job = self._job(world, pose_at, t0, rng)
+        if job is None:
+            return PendingScan(self.scan_numpy(world, pose_at, t0, rng))
+        if pipe is None:
+            job.run()
+            return PendingScan(self._message(t0, *_made(job)))
+        pipe.submit(job)
+        return PendingScan(None, lambda: self._message(t0, *_made(pipe.wait(job))))
 
     def scan_numpy(self, world: World, pose_at: PoseAt, t0: float, rng: np.random.Generator | None = None
                    ) -> LaserScan:

@@ -11,6 +11,12 @@ what lies along it.
     grid = RayGrid.build(world.segments, world.circles)    # None without the C helper
     grid.cast(ox, oy, dx, dy, max_range)                    # (K,) metres, inf for none
     grid.scan(turn, t0, knots, noise)                       # a lidar's turn (wcdrive.plant.lidar)
+    job = ScanJob(grid, turn, t0, noise=noise, motion=(start, log))
+    with ScanPipe() as pipe:                                # turns made on a thread of its own
+        pipe.submit(job)
+        ...                                                 # the simulation runs on meanwhile
+        pipe.wait(job)
+        job.ranges, job.q2
 
 ``World.cast`` builds its grid on its first cast and uses it from then on; the
 geometry's arrays are copied into the grid, so a world's arrays changed after its first
@@ -26,6 +32,8 @@ from pathlib import Path
 import numpy as np
 
 from wcdrive._util.native import BuildError, load, prebuilt_library, record
+
+Knots = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
 _SOURCE = Path(__file__).resolve().parent / "csrc" / "raycast.c"
 _lib: ctypes.CDLL | bool | None = None
@@ -45,15 +53,26 @@ class GridStruct(ctypes.Structure):
 
     _fields_ = [("seg", _P), ("n_seg", _I), ("circ", _P), ("n_circ", _I),
                 ("minx", _D), ("miny", _D), ("cs", _D), ("inv_cs", _D), ("nx", _I), ("ny", _I),
-                ("eps", _D), ("start", _P), ("items", _P), ("dir", _P)]
+                ("eps", _D), ("start", _P), ("items", _P), ("rec", _P), ("seg_end", _P)]
 
 
 class TurnStruct(ctypes.Structure):
     """``rc_lidar`` of raycast.c."""
 
-    _fields_ = [("samples", _I), ("sample_hz", _D), ("device", _P), ("first_bin", _P), ("beams", _I),
+    _fields_ = [("samples", _I), ("offset", _P), ("device", _P), ("first_bin", _P), ("beams", _I),
                 ("multiple", _I), ("mount_x", _D), ("mount_y", _D), ("sigma", _D), ("device_min", _D),
                 ("range_max", _D), ("intensity", ctypes.c_float), ("reverse", _I)]
+
+
+class JobStruct(ctypes.Structure):
+    """``rc_job`` of raycast.c."""
+
+
+JobStruct._fields_ = [("grid", _P), ("lidar", _P), ("t0", _D), ("n", _I), ("kt", _P), ("kx", _P), ("ky", _P),
+                      ("kh", _P), ("log", _P), ("log_rows", _I), ("log_stride", _I), ("start_x", _D),
+                      ("start_y", _D), ("start_h", _D), ("noise", _P), ("q2", _P), ("ranges", _P),
+                      ("intensities", _P), ("beam_time", _P), ("done", _I),
+                      ("next", ctypes.POINTER(JobStruct))]
 
 
 class Turn:
@@ -70,10 +89,16 @@ class Turn:
         self.first_bin = np.ascontiguousarray(first_bin, dtype=np.int32).copy()
         if len(self.first_bin) != len(self.device):
             raise ValueError("one first bin a sample")
+        if beams < 1 or multiple < 1:
+            raise ValueError("a turn has one beam at least, each sample one bin at least")
+        if not 0 < range_max * 4000 < 2**31:
+            raise ValueError(f"range_max {range_max} m: quarter millimetres must fit an int32")
         self.samples, self.beams = len(self.device), beams
-        self.struct = TurnStruct(self.samples, sample_hz, _address(self.device), _address(self.first_bin),
-                                 beams, multiple, mount[0], mount[1], sigma, device_min, range_max,
-                                 intensity, int(reverse))
+        #: each sample's time in the turn (``j / sample_hz``, as numpy divides)
+        self.offset = np.arange(self.samples) / sample_hz
+        self.struct = TurnStruct(self.samples, _address(self.offset), _address(self.device),
+                                 _address(self.first_bin), beams, multiple, mount[0], mount[1], sigma,
+                                 device_min, range_max, intensity, int(reverse))
 
 
 def load_raycast() -> ctypes.CDLL | None:
@@ -85,7 +110,7 @@ def load_raycast() -> ctypes.CDLL | None:
             lib = prebuilt_library("wcdrive.plant._raycast", _SOURCE)
             how = "built at install"
             if lib is None:
-                lib = load(_SOURCE, "raycast", ("-lm",), ("-O2", "-ffp-contract=off"))
+                lib = load(_SOURCE, "raycast", ("-lm", "-lpthread"), ("-O2", "-ffp-contract=off"))
                 how = "built at first use"
             grid = ctypes.POINTER(GridStruct)
             lib.rc_count.argtypes = [grid, _P]
@@ -96,9 +121,16 @@ def load_raycast() -> ctypes.CDLL | None:
             lib.rc_cast.restype = None
             lib.rc_integrate.argtypes = [_D, _D, _D, _D, _I, _P, _I, _P, _P, _P, _P]
             lib.rc_integrate.restype = None
-            lib.rc_scan.argtypes = [grid, ctypes.POINTER(TurnStruct), _D, _I, _P, _P, _P, _P, _P, _P, _P, _P,
-                                    _P]
-            lib.rc_scan.restype = None
+            job = ctypes.POINTER(JobStruct)
+            lib.rc_run.argtypes = [job]
+            lib.rc_run.restype = None
+            lib.rc_pipe_open.argtypes = []
+            lib.rc_pipe_open.restype = _P
+            for name in ("rc_pipe_submit", "rc_pipe_wait"):
+                getattr(lib, name).argtypes = [_P, job]
+                getattr(lib, name).restype = None
+            lib.rc_pipe_close.argtypes = [_P]
+            lib.rc_pipe_close.restype = None
             _lib = lib
             record("ray cast", how)
         except (BuildError, OSError) as exc:            # OSError: no writable cache
@@ -145,10 +177,9 @@ class RayGrid:
         self.corner = (float(lo[0]) - pad, float(lo[1]) - pad)
         self._start = np.zeros(nx * ny + 1, dtype=np.int32)
         self._items = np.zeros(0, dtype=np.int32)
-        self._dir = np.ascontiguousarray(seg[:, 2:4] - seg[:, 0:2])
         self._struct = GridStruct(_address(seg), len(seg), _address(circ), len(circ),
                                   *self.corner, cs, 1.0 / cs, nx, ny, self.eps,
-                                  _address(self._start), 0, _address(self._dir))
+                                  _address(self._start), 0, None, None)
         ref = ctypes.byref(self._struct)
         counts = np.zeros(nx * ny, dtype=np.int32)
         lib.rc_count(ref, _address(counts))
@@ -157,6 +188,18 @@ class RayGrid:
         self._struct.items = _address(self._items) if len(self._items) else None
         cursor = self._start[:-1].copy()          # held here while C writes through it
         lib.rc_fill(ref, _address(cursor))
+        # each cell's items as records for the cast: segments x0, y0, x1 - x0, y1 - y0 (the
+        # reference's differences), circles x, y, r, 0
+        items = self._items
+        is_seg = items < len(seg)
+        self._rec = np.zeros((max(len(items), 1), 4))
+        records = np.column_stack((seg[:, 0:2], seg[:, 2:4] - seg[:, 0:2]))
+        self._rec[:len(items)][is_seg] = records[items[is_seg]]
+        self._rec[:len(items)][~is_seg, :3] = circ[items[~is_seg] - len(seg)]
+        segs_before = np.concatenate(([0], np.cumsum(is_seg))).astype(np.int32)
+        self._seg_end = (self._start[:-1] + segs_before[self._start[1:]] - segs_before[self._start[:-1]]
+                         ).astype(np.int32)
+        self._struct.rec, self._struct.seg_end = _address(self._rec), _address(self._seg_end)
 
     @classmethod
     def build(cls, segments: np.ndarray, circles: np.ndarray, cell_factor: float = CELL_FACTOR
@@ -180,30 +223,16 @@ class RayGrid:
                               _address(out))
         return out
 
-    def scan(self, turn: Turn, t0: float, knots: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
-             noise: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def scan(self, turn: Turn, t0: float, knots: Knots, noise: np.ndarray | None
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """One turn from ``t0``, the chair's pose interpolated in ``knots`` (times,
         increasing, x, y, heading; held past the ends) and ``noise`` (standard normal
         draws, one a sample, or None): the published ranges (float32, inf for none),
         intensities (float32), each beam's sample time (NaN for none), and each
         sample's quarter millimetres (0 for no return)."""
-        kt, kx, ky, kh = (np.ascontiguousarray(a, dtype=float) for a in knots)
-        n = len(kt)
-        if n == 0 or not len(kx) == len(ky) == len(kh) == n:
-            raise ValueError("knots: four arrays of one length, one knot at least")
-        if noise is not None:
-            noise = np.ascontiguousarray(noise, dtype=float)
-            if len(noise) < turn.samples:
-                raise ValueError(f"noise: {turn.samples} draws needed, {len(noise)} given")
-        q2 = np.empty(turn.samples, dtype=np.int32)
-        ranges = np.empty(turn.beams, dtype=np.float32)
-        intensities = np.empty(turn.beams, dtype=np.float32)
-        beam_time = np.empty(turn.beams)
-        self._lib.rc_scan(ctypes.byref(self._struct), ctypes.byref(turn.struct), t0, n, _address(kt),
-                          _address(kx), _address(ky), _address(kh),
-                          None if noise is None else _address(noise), _address(q2), _address(ranges),
-                          _address(intensities), _address(beam_time))
-        return ranges, intensities, beam_time, q2
+        job = ScanJob(self, turn, t0, noise, knots=knots)
+        job.run()
+        return job.ranges, job.intensities, job.beam_time, job.q2
 
     @property
     def items_per_cell(self) -> float:
@@ -227,3 +256,121 @@ def integrate_motion(start: tuple[float, float, float], t0: float, log: np.ndarr
     lib.rc_integrate(t0, start[0], start[1], start[2], n, _address(log) if n else None, log.shape[1],
                      *(_address(out[i]) for i in range(4)))
     return out[0], out[1], out[2], out[3]
+
+
+class ScanJob:
+    """One lidar turn for the C scan (``RayGrid.scan``), its inputs and outputs held
+    here while C reads and writes them: the poses from ``knots`` (times, x, y,
+    heading) or from ``motion``, a motion log's start pose and rows (``MotionTrack``),
+    whose knots the job integrates (``knots`` once run). ``run`` makes it now; a
+    ``ScanPipe`` makes it on its thread."""
+
+    def __init__(self, grid: RayGrid, turn: Turn, t0: float, noise: np.ndarray | None, *,
+                 knots: Knots | None = None,
+                 motion: tuple[tuple[float, float, float], np.ndarray] | None = None) -> None:
+        if (knots is None) == (motion is None):
+            raise ValueError("a scan job's poses: knots or a motion log, one of them")
+        self._grid, self._turn = grid, turn
+        s = JobStruct(grid=ctypes.addressof(grid._struct), lidar=ctypes.addressof(turn.struct), t0=t0)
+        self._log: np.ndarray | None = None
+        if motion is not None:
+            start, log = motion
+            self._log = np.ascontiguousarray(log, dtype=float)
+            if self._log.ndim != 2 or self._log.shape[1] < 4:
+                raise ValueError("a motion log is n x 4 at least: time, forward, lateral, yaw rate")
+            rows = len(self._log)
+            self._knots = np.empty((4, rows + 1))
+            s.log = _address(self._log) if rows else None
+            s.log_rows, s.log_stride = rows, self._log.shape[1]
+            s.start_x, s.start_y, s.start_h = start
+        else:
+            assert knots is not None
+            k = [np.ascontiguousarray(a, dtype=float) for a in knots]
+            if len(k) != 4 or len(k[0]) == 0 or not all(a.shape == k[0].shape for a in k) or k[0].ndim != 1:
+                raise ValueError("knots: four arrays of one length, one knot at least")
+            self._knots = np.stack(k)
+        s.n = self._knots.shape[1]
+        s.kt, s.kx, s.ky, s.kh = (_address(self._knots[i]) for i in range(4))
+        self._noise = None
+        if noise is not None:
+            self._noise = np.ascontiguousarray(noise, dtype=float)
+            if len(self._noise) < turn.samples:
+                raise ValueError(f"noise: {turn.samples} draws needed, {len(self._noise)} given")
+            s.noise = _address(self._noise)
+        #: each sample's quarter millimetres (0: none)
+        self.q2 = np.empty(turn.samples, dtype=np.int32)
+        #: the published ranges (float32 m, inf for none), intensities, beam times (NaN for none)
+        self.ranges = np.empty(turn.beams, dtype=np.float32)
+        self.intensities = np.empty(turn.beams, dtype=np.float32)
+        self.beam_time = np.empty(turn.beams)
+        s.q2, s.ranges = _address(self.q2), _address(self.ranges)
+        s.intensities, s.beam_time = _address(self.intensities), _address(self.beam_time)
+        self.struct = s
+
+    @property
+    def knots(self) -> Knots:
+        """The poses' knots (a motion log's once the job has run)."""
+        k = self._knots
+        return k[0], k[1], k[2], k[3]
+
+    def run(self) -> None:
+        """Makes the turn now, in this thread."""
+        self._grid._lib.rc_run(ctypes.byref(self.struct))
+
+
+class ScanPipe:
+    """A C thread that makes the ``ScanJob`` s submitted to it, in order, while the
+    caller runs on (ctypes lets go of the GIL; the thread never takes it). Wait for
+    each job before reading it; a job not waited for is kept until ``close``, which
+    finishes what is queued and stops the thread. Raises ``OSError`` without the C
+    helper or a thread."""
+
+    def __init__(self) -> None:
+        self._pipe: int | None = None
+        lib = load_raycast()
+        if lib is None:
+            raise OSError("no C ray cast: no scan thread")
+        self._lib = lib
+        self._pipe = lib.rc_pipe_open()
+        if not self._pipe:
+            raise OSError("no scan thread could be started")
+        self._pending: dict[int, ScanJob] = {}
+
+    @classmethod
+    def open(cls) -> ScanPipe | None:
+        """A pipe, or None where none can be had (no C helper, no thread)."""
+        try:
+            return cls()
+        except OSError:
+            return None
+
+    def submit(self, job: ScanJob) -> None:
+        """Queues ``job``; its arrays are not to be read until ``wait``."""
+        if self._pipe is None:
+            raise ValueError("the scan pipe is closed")
+        if id(job) in self._pending:
+            raise ValueError("that job is already queued")
+        self._pending[id(job)] = job
+        self._lib.rc_pipe_submit(self._pipe, ctypes.byref(job.struct))
+
+    def wait(self, job: ScanJob) -> ScanJob:
+        """``job`` once made (at once if it was)."""
+        if self._pending.pop(id(job), None) is not None and self._pipe is not None:
+            self._lib.rc_pipe_wait(self._pipe, ctypes.byref(job.struct))
+        return job
+
+    def close(self) -> None:
+        """Finishes the queued jobs and stops the thread (again: nothing)."""
+        if self._pipe is not None:
+            self._lib.rc_pipe_close(self._pipe)
+            self._pipe = None
+            self._pending.clear()
+
+    def __enter__(self) -> ScanPipe:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def __del__(self) -> None:
+        self.close()

@@ -12,15 +12,20 @@
  * tests every item it can meet before it stops.
  *
  * Items: index k < n_seg is segment k, k >= n_seg circle k - n_seg. The grid is CSR:
- * cell (ix, iy) is c = iy * nx + ix and holds items[start[c] .. start[c + 1]).
+ * cell (ix, iy) is c = iy * nx + ix and holds items[start[c] .. start[c + 1]), in
+ * increasing order (so its segments before its circles).
  *
  * rc_scan makes one turn of a lidar (wcdrive.plant.lidar.Lidar.scan_numpy, the
  * reference) in one call: each sample's pose, its cast, its noise, its quarter
- * millimetres and the driver's binning into the published beams.
+ * millimetres and the driver's binning into the published beams. rc_run does an
+ * rc_job (a turn, its poses from a motion log or from knots); an rc_pipe does jobs
+ * in order on a thread of its own.
  */
 #include <math.h>
+#include <pthread.h>
 #include <stddef.h>
 #include <stdint.h>
+#include <stdlib.h>
 
 /* fmin and fmax of figures that are never NaN (libm's calls cost more than the walk's steps) */
 static inline double min2(double a, double b) { return a < b ? a : b; }
@@ -37,7 +42,11 @@ typedef struct {
     double eps;             /* how near an item must come to a cell to be binned in it */
     const int32_t *start;   /* nx * ny + 1 */
     int32_t *items;
-    const double *dir;      /* n_seg x 2: x1 - x0, y1 - y0 */
+    /* the cast's copy of the items, in the cells' order (rc_fill's, then the caller's):
+     * rec[i] is item items[i] as x0, y0, x1 - x0, y1 - y0 (a segment) or x, y, r, 0 (a
+     * circle); a cell's segments come first, up to seg_end[c] */
+    const double *rec;
+    const int32_t *seg_end;
 } rc_grid;
 
 static int seg_touches_box(const double *s, double bx0, double by0, double bx1, double by1,
@@ -61,6 +70,8 @@ static int seg_touches_box(const double *s, double bx0, double by0, double bx1, 
     return above < 4 && below < 4;
 }
 
+/* the cell at v cells from the grid's edge, within 0 .. n - 1 (a truncation, which is
+ * floor where it is not clamped) */
 static int clamp_cell(double v, int32_t n) {
     if (!(v >= 0.0)) return 0;
     if (v >= (double)(n - 1)) return n - 1;
@@ -83,10 +94,10 @@ static void bin(const rc_grid *g, int32_t *counts, int32_t *items) {
             lox = c[0] - c[2]; hix = c[0] + c[2];
             loy = c[1] - c[2]; hiy = c[1] + c[2];
         }
-        int ix0 = clamp_cell(floor((lox - g->eps - g->minx) * g->inv_cs), g->nx);
-        int ix1 = clamp_cell(floor((hix + g->eps - g->minx) * g->inv_cs), g->nx);
-        int iy0 = clamp_cell(floor((loy - g->eps - g->miny) * g->inv_cs), g->ny);
-        int iy1 = clamp_cell(floor((hiy + g->eps - g->miny) * g->inv_cs), g->ny);
+        int ix0 = clamp_cell((lox - g->eps - g->minx) * g->inv_cs, g->nx);
+        int ix1 = clamp_cell((hix + g->eps - g->minx) * g->inv_cs, g->nx);
+        int iy0 = clamp_cell((loy - g->eps - g->miny) * g->inv_cs, g->ny);
+        int iy1 = clamp_cell((hiy + g->eps - g->miny) * g->inv_cs, g->ny);
         for (int iy = iy0; iy <= iy1; iy++) {
             for (int ix = ix0; ix <= ix1; ix++) {
                 if (s) {
@@ -140,8 +151,8 @@ static double cast_one(const rc_grid *g, double ox, double oy, double dx, double
     double limit = max_range + g->eps + 1e-12 * fabs(max_range);
     if (t0 > t1 || t0 > limit)
         return INFINITY;
-    int ix = clamp_cell(floor((ox + t0 * dx - minx) * g->inv_cs), g->nx);
-    int iy = clamp_cell(floor((oy + t0 * dy - miny) * g->inv_cs), g->ny);
+    int ix = clamp_cell((ox + t0 * dx - minx) * g->inv_cs, g->nx);
+    int iy = clamp_cell((oy + t0 * dy - miny) * g->inv_cs, g->ny);
     double best = INFINITY;
     /* where the ray leaves the first cell across x and across y, and how far on it
      * crosses the next column and row: the sums round, far below eps */
@@ -153,40 +164,40 @@ static double cast_one(const rc_grid *g, double ox, double oy, double dx, double
     for (;;) {
         double texit = min2(tx, ty);
         int32_t c = iy * g->nx + ix;
-        for (int32_t i = g->start[c], end = g->start[c + 1]; i < end; i++) {
-            int32_t k = g->items[i];
-            if (k < g->n_seg) {
-                const double *s = g->seg + 4 * k, *e = g->dir + 2 * k;
-                double ex = e[0], ey = e[1];
-                double denom = dx * ey - dy * ex;
-                if (denom == 0.0)
-                    continue;
-                double wx = s[0] - ox, wy = s[1] - oy;
-                double tn = wx * ey - wy * ex, un = wx * dy - wy * dx;
-                /* the quotients' signs and sizes without dividing, with margins that
-                 * keep every candidate the divided figures would take */
-                double a = fabs(denom), st = denom < 0.0 ? -tn : tn, su = denom < 0.0 ? -un : un;
-                if (st < -a * 0x1p-1000 || su < -a * 0x1p-1000 || su > a * (1.0 + 0x1p-50)
-                        || st > best * a * (1.0 + 0x1p-50))
-                    continue;
-                double t = tn / denom;
-                double u = un / denom;
-                if (t >= 0.0 && u >= 0.0 && u <= 1.0 && t < best)
-                    best = t;
-            } else {
-                const double *q = g->circ + 3 * (k - g->n_seg);
-                double fx = ox - q[0], fy = oy - q[1], r = q[2];
-                double b = fx * dx + fy * dy;
-                double cc = fx * fx + fy * fy - r * r;
-                double disc = b * b - cc;
-                if (!(disc >= 0.0))
-                    continue;
-                double root = sqrt(disc);
-                double t_near = -b - root, t_far = -b + root;
-                double t = t_near >= 0.0 ? t_near : t_far;
-                if (t >= 0.0 && t < best)
-                    best = t;
-            }
+        /* the cell's segments, then its circles, each a record of four */
+        int32_t i = g->start[c], mid = g->seg_end[c], end = g->start[c + 1];
+        for (; i < mid; i++) {
+            const double *s = g->rec + 4 * (ptrdiff_t)i;
+            double ex = s[2], ey = s[3];
+            double denom = dx * ey - dy * ex;
+            if (denom == 0.0)
+                continue;
+            double wx = s[0] - ox, wy = s[1] - oy;
+            double tn = wx * ey - wy * ex, un = wx * dy - wy * dx;
+            /* the quotients' signs and sizes without dividing, with margins that keep
+             * every candidate the divided figures would take */
+            double a = fabs(denom), st = denom < 0.0 ? -tn : tn, su = denom < 0.0 ? -un : un;
+            if (st < -a * 0x1p-1000 || su < -a * 0x1p-1000 || su > a * (1.0 + 0x1p-50)
+                    || st > best * a * (1.0 + 0x1p-50))
+                continue;
+            double t = tn / denom;
+            double u = un / denom;
+            if (t >= 0.0 && u >= 0.0 && u <= 1.0 && t < best)
+                best = t;
+        }
+        for (; i < end; i++) {
+            const double *q = g->rec + 4 * (ptrdiff_t)i;
+            double fx = ox - q[0], fy = oy - q[1], r = q[2];
+            double b = fx * dx + fy * dy;
+            double cc = fx * fx + fy * fy - r * r;
+            double disc = b * b - cc;
+            if (!(disc >= 0.0))
+                continue;
+            double root = sqrt(disc);
+            double t_near = -b - root, t_far = -b + root;
+            double t = t_near >= 0.0 ? t_near : t_far;
+            if (t >= 0.0 && t < best)
+                best = t;
         }
         if (best <= texit || texit > limit)
             break;
@@ -212,11 +223,11 @@ void rc_cast(const rc_grid *g, int32_t n, const double *ox, const double *oy, co
 }
 
 /* A lidar and its driver (wcdrive.plant.lidar): the turn's samples, each taken at
- * t0 + j / sample_hz along the device direction (cos, sin)[j] of the chair's frame
+ * t0 + offset[j] along the device direction (cos, sin)[j] of the chair's frame
  * (the mount's yaw and the head's turn in it), from (mount_x, mount_y) on the chair. */
 typedef struct {
     int32_t samples;
-    double sample_hz;
+    const double *offset;   /* samples: j / sample_hz */
     const double *device;   /* samples x 2: the direction of sample j in the chair's frame */
     const int32_t *first_bin;   /* samples: the driver's first bin of sample j */
     int32_t beams, multiple;
@@ -270,7 +281,7 @@ void rc_scan(const rc_grid *g, const rc_lidar *L, double t0, int32_t n, const do
     double slope_x = 0.0, slope_y = 0.0, slope_h = 0.0, ck = 1.0, sk = 0.0;
     int32_t at = -1, sloped = -1;         /* the knots ck, sk and the slopes belong to */
     for (int32_t j = 0; j < L->samples; j++) {
-        double tj = t0 + j / L->sample_hz;
+        double tj = t0 + L->offset[j];
         while (k < n - 1 && kt[k + 1] <= tj)
             k++;
         double x, y, h, dh;
@@ -315,7 +326,10 @@ void rc_scan(const rc_grid *g, const rc_lidar *L, double t0, int32_t n, const do
         double r = cast_one(g, ox, oy, dx, dy, INFINITY);
         if (noise)
             r = r + (0.0 + L->sigma * noise[j]);
-        q2[j] = isfinite(r) && r >= L->device_min && r <= L->range_max ? (int32_t)nearbyint(r * 4000.0) : 0;
+        /* to the nearest quarter millimetre, ties to even (2^52 added and taken off:
+         * the default rounding, for 0 <= r * 4000 < 2^51) */
+        q2[j] = isfinite(r) && r >= L->device_min && r <= L->range_max
+                ? (int32_t)((r * 4000.0 + 0x1p52) - 0x1p52) : 0;
     }
     /* the driver's angle_compensate: sample j with a return fills the `multiple` bins
      * from its first on (the last bin for any past the end), later samples over earlier.
@@ -338,7 +352,7 @@ void rc_scan(const rc_grid *g, const rc_lidar *L, double t0, int32_t n, const do
         if (top > hi - 1)
             top = hi - 1;
         float range = ((float)q2[j] / 4.0f) / 1000.0f;
-        double tj = t0 + j / L->sample_hz;
+        double tj = t0 + L->offset[j];
         for (int32_t b = lo; b <= top; b++) {
             int32_t out = L->reverse ? L->beams - 1 - b : b;
             ranges[out] = range;
@@ -348,4 +362,118 @@ void rc_scan(const rc_grid *g, const rc_lidar *L, double t0, int32_t n, const do
         if (lo < hi)
             hi = lo;
     }
+}
+
+/* One turn to make: its poses from knots kt, kx, ky, kh (n of them) or, with `log`,
+ * from the motion log's rows integrated from (start_x, start_y, start_h) at t0 into
+ * them (n = log_rows + 1, the knots written); then rc_scan into q2 .. beam_time.
+ * `done` and `next` are the pipe's. */
+typedef struct rc_job {
+    const rc_grid *grid;
+    const rc_lidar *lidar;
+    double t0;
+    int32_t n;
+    double *kt, *kx, *ky, *kh;
+    const double *log;
+    int32_t log_rows, log_stride;
+    double start_x, start_y, start_h;
+    const double *noise;
+    int32_t *q2;
+    float *ranges, *intensities;
+    double *beam_time;
+    int32_t done;
+    struct rc_job *next;
+} rc_job;
+
+void rc_run(rc_job *job) {
+    if (job->log)
+        rc_integrate(job->t0, job->start_x, job->start_y, job->start_h, job->log_rows, job->log,
+                     job->log_stride, job->kt, job->kx, job->ky, job->kh);
+    rc_scan(job->grid, job->lidar, job->t0, job->n, job->kt, job->kx, job->ky, job->kh, job->noise,
+            job->q2, job->ranges, job->intensities, job->beam_time);
+}
+
+/* A thread that runs the jobs submitted to it in order. A job's memory (and all it
+ * points to) is the caller's, untouched by the caller from rc_pipe_submit until
+ * rc_pipe_wait has returned for it. */
+typedef struct {
+    pthread_t thread;
+    pthread_mutex_t lock;
+    pthread_cond_t work, finished;
+    rc_job *head, *tail;
+    int closing;
+} rc_pipe;
+
+static void *pipe_main(void *arg) {
+    rc_pipe *p = arg;
+    pthread_mutex_lock(&p->lock);
+    for (;;) {
+        while (!p->head && !p->closing)
+            pthread_cond_wait(&p->work, &p->lock);
+        rc_job *job = p->head;
+        if (!job)
+            break;                                  /* closing, and nothing left to do */
+        p->head = job->next;
+        if (!p->head)
+            p->tail = 0;
+        pthread_mutex_unlock(&p->lock);
+        rc_run(job);
+        pthread_mutex_lock(&p->lock);
+        job->done = 1;
+        pthread_cond_broadcast(&p->finished);
+    }
+    pthread_mutex_unlock(&p->lock);
+    return 0;
+}
+
+/* A pipe with its thread started; NULL when it cannot be had. */
+rc_pipe *rc_pipe_open(void) {
+    rc_pipe *p = calloc(1, sizeof *p);
+    if (!p)
+        return 0;
+    if (pthread_mutex_init(&p->lock, 0) != 0) {
+        free(p);
+        return 0;
+    }
+    if (pthread_cond_init(&p->work, 0) != 0 || pthread_cond_init(&p->finished, 0) != 0
+            || pthread_create(&p->thread, 0, pipe_main, p) != 0) {
+        /* the conditions need no destroying here: neither was waited on */
+        pthread_mutex_destroy(&p->lock);
+        free(p);
+        return 0;
+    }
+    return p;
+}
+
+void rc_pipe_submit(rc_pipe *p, rc_job *job) {
+    job->done = 0;
+    job->next = 0;
+    pthread_mutex_lock(&p->lock);
+    if (p->tail)
+        p->tail->next = job;
+    else
+        p->head = job;
+    p->tail = job;
+    pthread_cond_signal(&p->work);
+    pthread_mutex_unlock(&p->lock);
+}
+
+void rc_pipe_wait(rc_pipe *p, rc_job *job) {
+    pthread_mutex_lock(&p->lock);
+    while (!job->done)
+        pthread_cond_wait(&p->finished, &p->lock);
+    pthread_mutex_unlock(&p->lock);
+}
+
+/* Runs the jobs still queued, stops the thread and frees the pipe. */
+void rc_pipe_close(rc_pipe *p) {
+    pthread_mutex_lock(&p->lock);
+    p->closing = 1;
+    pthread_cond_signal(&p->work);
+    pthread_mutex_unlock(&p->lock);
+    pthread_join(p->thread, 0);
+    pthread_cond_destroy(&p->work);
+    pthread_cond_destroy(&p->finished);
+    pthread_mutex_destroy(&p->lock);
+    free(p);
 }
