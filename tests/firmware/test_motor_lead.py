@@ -20,12 +20,15 @@ from wcdrive.firmware.control import WHEEL_STALLED, check_wheel, no_effect
 SETPOINT = 2.85   # rad/s toward which the duty rises
 
 
-def _ticks_to_trip(measured: float, other: float, setpoint: float = SETPOINT, ticks: int = 40) -> int | None:
-    """The tick at which the rule trips, the duty rising 2 a tick from 80, or None."""
+def _ticks_to_trip(measured: float, other: float, setpoint: float = SETPOINT, ticks: int = 40,
+                   other_setpoint: float | None = None) -> int | None:
+    """The tick at which the rule trips, the duty rising 2 a tick from 80, or None; the
+    other wheel at its own setpoint unless ``other_setpoint`` says otherwise."""
     direction = C.HIGH if setpoint > 0.0 else C.LOW
     effort = (0, 0.0, 0.0, 0)
+    theirs = other if other_setpoint is None else other_setpoint
     for k in range(ticks):
-        tripped, effort = no_effect(80 + 2 * k, direction, setpoint, measured, other, effort)
+        tripped, effort = no_effect(80 + 2 * k, direction, setpoint, measured, other, theirs, effort)
         if tripped:
             return k
     return None
@@ -61,13 +64,40 @@ def test_the_lead_is_taken_the_way_of_the_setpoint() -> None:
     assert _ticks_to_trip(-1.45, -1.6, setpoint=-SETPOINT) is not None
 
 
+@pytest.mark.parametrize(("other", "other_setpoint"), [(2.8, 0.65), (2.0, 0.0), (-1.0, 0.0), (3.0, 2.4),
+                                                      (2.65, -0.44)])
+def test_a_wheel_trailing_one_that_brakes_is_carried_by_the_chair(other: float,
+                                                                   other_setpoint: float) -> None:
+    """The other wheel turning faster than its own setpoint asks, either way, by more
+    than FAULT_EFFORT_LEAD (its setpoint lower, zero, or the other way) brakes: the chair's
+    momentum, not a motor, sets both speeds (a sharp change of course), and a wheel
+    short of its setpoint behind it is no dead motor."""
+    assert _ticks_to_trip(1.87, other, setpoint=2.02, other_setpoint=other_setpoint) is None
+
+
+@pytest.mark.parametrize(("other", "other_setpoint"), [(2.8, 2.5), (2.8, 2.31), (2.0, 2.85), (2.6, 2.2)])
+def test_a_wheel_trailing_one_at_or_near_its_setpoint_is_a_dead_motor(other: float,
+                                                                      other_setpoint: float) -> None:
+    """Within FAULT_EFFORT_LEAD of its own setpoint, or short of it (it drags the chair
+    alone, or rolls back against it at its limit on a grade), the other wheel drags or
+    strains: the rule counts."""
+    assert _ticks_to_trip(1.87, other, setpoint=2.02, other_setpoint=other_setpoint) is not None
+
+
+def test_a_wheel_beside_one_rolling_back_against_its_setpoint_counts() -> None:
+    """Beyond the motors on a climb the other wheel rolls back at -0.3 rad/s against its
+    setpoint of 3.28: at its limit, not braking; the rule counts (and ``atLimit`` takes
+    both wheels at once for the grade, not a fault)."""
+    assert _ticks_to_trip(0.2, -0.3, setpoint=3.28, other_setpoint=3.28) is not None
+
+
 def _ticks_to_stall(prev_measured: float, setpoint: float = -0.89, ticks: int = 10) -> int | None:
     """The tick count at which a wheel driven at duty 31 toward ``setpoint``, without a
     count, is a stall, the PID having last run on ``prev_measured``."""
     direction = C.HIGH if setpoint > 0.0 else C.LOW
     stall = 0
     for k in range(ticks):
-        verdict, stall, _, _, _ = check_wheel(0, 0, 0, 31, direction, setpoint, 0.0, 0.0, stall, 0, 0,
+        verdict, stall, _, _, _ = check_wheel(0, 0, 0, 31, direction, setpoint, 0.0, 0.0, 0.0, stall, 0, 0,
                                               (0, 0.0, 0.0, 0), prev_measured)
         if verdict == WHEEL_STALLED:
             return k + 1
