@@ -2,15 +2,20 @@
 cast" section, measured side by side in one run:
 
 * the real-time factor of one drive of the stepped port + plant (``SteppedChair``, a
-  CMDVEL every 0.2 s, 0.1 s at a time) with the lidar off, and with an RPLidar S3 on
-  (10 Hz, 3,200 samples a turn published as 3,240 beams, each sample cast from the
-  chair's pose at its own time: the plant's motion log of the turn, integrated from
-  the pose at its start), on tb3_sandbox's map and on a hand-written room; off and on
-  alternate, ``--runs`` times each, medians;
-* one turn's cast (3,200 rays from a moving chair) with the C grid
+  CMDVEL every 0.2 s, 0.1 s at a time) with the lidar off; with an RPLidar S3 on (10
+  Hz, 3,200 samples a turn published as 3,240 beams, each sample cast from the
+  chair's pose at its own time: a ``MotionTrack`` of the plant's motion log), each
+  turn made at once after its window (``Lidar.scan``); and with each turn made on a
+  ``ScanPipe``'s C thread while the next window runs, collected after it
+  (``Lidar.start_scan``; the wait makes what is left of the turn, so both cores work
+  on it); on tb3_sandbox's map and on a hand-written room; the three alternate,
+  ``--runs`` times each, medians;
+* one turn's cost, best of several: the C cast of its 3,200 rays from a moving chair
   (``World.cast``), with numpy (``World.cast_exact``) and with pymunk
-  (``Space.segment_query_first`` per ray, static radius-0 segments and circles): ms per
-  scan, and how far each lands from the C cast.
+  (``Space.segment_query_first`` per ray, static radius-0 segments and circles), how
+  far each lands from the C cast; the whole ``Lidar.scan`` and its parts (the noise
+  draws, the C turn with its poses integrated, the rest: Python), and the reference
+  ``Lidar.scan_numpy`` (numpy poses, noise and bins around ``World.cast``).
 
     python benchmarks/lidar_speed.py               # 30 simulated s, 5 runs each
     python benchmarks/lidar_speed.py --quick       # 10 s, 2 runs
@@ -32,7 +37,8 @@ import pymunk
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from wcdrive.plant.lidar import Lidar, LidarMount, PoseAt  # noqa: E402
+from wcdrive.plant.lidar import Lidar, LidarMount, MotionTrack, PendingScan  # noqa: E402
+from wcdrive.plant.raycast import ScanJob, ScanPipe  # noqa: E402
 from wcdrive.plant.rosmap import load_map  # noqa: E402
 from wcdrive.plant.world import World  # noqa: E402
 from wcdrive.testing.stepped import SteppedChair  # noqa: E402
@@ -57,29 +63,15 @@ def worlds() -> dict[str, World]:
     return {"tb3_sandbox": World.from_grid(sandbox), "room": World.from_table(ROOM)}
 
 
-def log_pose_at(start: tuple[float, float, float], t0: float, log: np.ndarray, offset: tuple[float, float]
-                ) -> PoseAt:
-    """The chair's pose at any time of a turn from the pose at its start and the plant's
-    motion log of its steps (time, forward, lateral, yaw rate, ...), in the world's frame
-    (the chair's start at ``offset``)."""
-    t = np.concatenate(([t0], log[:, 0]))
-    dt = np.diff(t)
-    heading = start[2] + np.concatenate(([0.0], np.cumsum(log[:, 3] * dt)))
-    mid = heading[1:] - log[:, 3] * dt / 2
-    c, s = np.cos(mid), np.sin(mid)
-    x = start[0] + offset[0] + np.concatenate(([0.0], np.cumsum((log[:, 1] * c - log[:, 2] * s) * dt)))
-    y = start[1] + offset[1] + np.concatenate(([0.0], np.cumsum((log[:, 1] * s + log[:, 2] * c) * dt)))
-
-    def pose_at(times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        return np.interp(times, t, x), np.interp(times, t, y), np.interp(times, t, heading)
-    return pose_at
+MODES = ("off", "on", "thread")
 
 
 def drive(seconds: float, world: World | None, offset: tuple[float, float] = (0.0, 0.0),
-          check: bool = False) -> tuple[float, int, float]:
-    """One drive, ``world`` None for the lidar off: its real-time factor, the scans made
-    and (``check``, which costs time) the largest gap (m) between the pose integrated
-    from the log and the plant's at a turn's end."""
+          check: bool = False, pipe: ScanPipe | None = None) -> tuple[float, int, float]:
+    """One drive, ``world`` None for the lidar off, with ``pipe`` each turn made on its
+    thread: its real-time factor, the scans made and (``check``, which costs time) the
+    largest gap (m) between the pose integrated from the log and the plant's at a
+    turn's end."""
     chair = SteppedChair()
     chair.set_velocity(SPEED, TURN)
     chair.run(0.5)                              # off the start
@@ -88,6 +80,7 @@ def drive(seconds: float, world: World | None, offset: tuple[float, float] = (0.
     if world is not None:
         plant.start_motion_log()
     scans, drift = 0, 0.0
+    pending: PendingScan | None = None
     windows = round(seconds * LIDAR.model.scan_hz)
     wall = time.perf_counter()
     for w in range(windows):
@@ -95,30 +88,41 @@ def drive(seconds: float, world: World | None, offset: tuple[float, float] = (0.
             chair.set_velocity(SPEED, TURN)
         start, t0 = plant.pose, plant.time
         chair.run(1.0 / LIDAR.model.scan_hz)
-        if world is not None:
-            pose_at = log_pose_at(start, t0, plant.take_motion_log(), offset)
-            scan = LIDAR.scan(world, pose_at, t0, rng)
-            scans += len(scan.ranges) > 0
-            if not check:
-                continue
-            ex, ey, _ = pose_at(np.array([plant.time]))
+        if world is None:
+            continue
+        track = MotionTrack(start, t0, plant.take_motion_log(), offset)
+        if pipe is None:
+            scans += len(LIDAR.scan(world, track, t0, rng).ranges) > 0
+        else:
+            started = LIDAR.start_scan(world, track, t0, rng, pipe)
+            if pending is not None:
+                scans += len(pending.result().ranges) > 0
+            pending = started
+        if check:
+            ex, ey, _ = track(np.array([plant.time]))
             x, y, _ = plant.pose
             drift = max(drift, math.hypot(ex[0] - offset[0] - x, ey[0] - offset[1] - y))
+    if pending is not None:
+        scans += len(pending.result().ranges) > 0
     wall = time.perf_counter() - wall
     return windows / LIDAR.model.scan_hz / wall, scans, drift
 
 
 def rtf_side_by_side(seconds: float, runs: int) -> dict[str, dict[str, float]]:
-    """Per world, the median real-time factor with the lidar off and on (alternating)."""
+    """Per world, the median real-time factor with the lidar off, on, and on with a
+    scan thread (alternating)."""
     out = {}
-    for name, world in worlds().items():
-        world.cast(np.zeros(2), np.zeros(1))    # the grid built before the clock starts
-        drift = drive(3.0, world, WORLDS[name], check=True)[2]        # and a warm-up
-        off, on = [], []
-        for _ in range(runs):
-            off.append(drive(seconds, None)[0])
-            on.append(drive(seconds, world, WORLDS[name])[0])
-        out[name] = {"off": statistics.median(off), "on": statistics.median(on), "drift": drift}
+    with ScanPipe() as pipe:
+        for name, world in worlds().items():
+            world.cast(np.zeros(2), np.zeros(1))    # the grid built before the clock starts
+            drift = drive(3.0, world, WORLDS[name], check=True)[2]        # and a warm-up
+            drive(3.0, world, WORLDS[name], pipe=pipe)
+            rtf: dict[str, list[float]] = {mode: [] for mode in MODES}
+            for _ in range(runs):
+                rtf["off"].append(drive(seconds, None)[0])
+                rtf["on"].append(drive(seconds, world, WORLDS[name])[0])
+                rtf["thread"].append(drive(seconds, world, WORLDS[name], pipe=pipe)[0])
+            out[name] = {mode: statistics.median(v) for mode, v in rtf.items()} | {"drift": drift}
     return out
 
 
@@ -172,22 +176,34 @@ def _gap(a: np.ndarray, b: np.ndarray) -> tuple[float, int]:
 
 
 def scan_cost(world: World, offset: tuple[float, float], repeat: int) -> dict[str, float]:
-    """ms for one turn's cast: C, numpy, pymunk; and the whole ``Lidar.scan``."""
+    """ms for one turn: the cast in C, numpy and pymunk; ``Lidar.scan`` and its parts;
+    ``Lidar.scan_numpy``."""
     origins, angles = one_turn(offset)
     c = world.cast(origins, angles, 40.0)
     exact = world.cast_exact(origins, angles, 40.0)
     pm = pymunk_cast(world, origins, angles)
     by_pymunk = pm()
-    grid = world.__dict__["_ray_grid"]
-    moving = log_pose_at((0.0, 0.0, 0.0), 0.0, np.array([[0.1, SPEED, 0.0, TURN, 0.0, 0.0]]), offset)
+    grid = world.ray_grid
+    assert grid is not None
+    steps = round(1e3 / LIDAR.model.scan_hz)
+    log = np.zeros((steps, 6))
+    log[:, 0] = np.arange(1, steps + 1) * 1e-3
+    log[:, 1], log[:, 3] = SPEED, TURN
+    track = MotionTrack((0.0, 0.0, 0.0), 0.0, log, offset)
     rng = np.random.default_rng(0)
+    job = ScanJob(grid, LIDAR._turn, 0.0, rng.standard_normal(LIDAR.model.samples),
+                  motion=(track.start, track.log))
     return {
         "segments": len(world.segments), "circles": len(world.circles),
         "cells": grid.shape[0] * grid.shape[1], "cell_m": grid.cell,
         "c_ms": _best_ms(lambda: world.cast(origins, angles, 40.0), 10 * repeat),
         "numpy_ms": _best_ms(lambda: world.cast_exact(origins, angles, 40.0), max(1, repeat // 2)),
         "pymunk_ms": _best_ms(pm, repeat),
-        "scan_ms": _best_ms(lambda: LIDAR.scan(world, moving, 0.0, rng), 10 * repeat),
+        "scan_ms": _best_ms(lambda: LIDAR.scan(world, MotionTrack(track.start, 0.0, log), 0.0, rng),
+                            10 * repeat),
+        "noise_ms": _best_ms(lambda: rng.standard_normal(LIDAR.model.samples), 10 * repeat),
+        "turn_ms": _best_ms(job.run, 10 * repeat),
+        "reference_ms": _best_ms(lambda: LIDAR.scan_numpy(world, track, 0.0, rng), repeat),
         "numpy_gap": _gap(c, exact)[0], "numpy_bitwise": float(c.tobytes() == exact.tobytes()),
         "pymunk_gap": _gap(c, by_pymunk)[0], "pymunk_mismatch": _gap(c, by_pymunk)[1],
         "hits": int(np.isfinite(c).sum()),
@@ -203,23 +219,35 @@ def main() -> None:
     seconds, runs = (10.0, 2) if args.quick else (args.seconds, args.runs)
     costs = {name: scan_cost(world, WORLDS[name], 3 if args.quick else 5) for name, world in worlds().items()}
     print("one S3 turn (3,200 rays from a moving chair), best of several:")
-    print("| world | segments, circles | grid | C grid | numpy | pymunk | whole Lidar.scan (C) "
+    print("| world | segments, circles | grid | C grid | numpy | pymunk "
           "| C vs numpy | C vs pymunk |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|")
     for name, c in costs.items():
         vs_numpy = "bit for bit" if c["numpy_bitwise"] else f"{c['numpy_gap']:.1e} m"
         print(f"| {name} | {c['segments']}, {c['circles']} | {c['cells']} cells of {c['cell_m']:.2f} m "
               f"| {c['c_ms']:.2f} ms | {c['numpy_ms']:.0f} ms | {c['pymunk_ms']:.1f} ms "
-              f"| {c['scan_ms']:.2f} ms | {vs_numpy} | {c['pymunk_gap']:.1e} m, "
+              f"| {vs_numpy} | {c['pymunk_gap']:.1e} m, "
               f"{c['pymunk_mismatch']} hit/miss differences ({c['hits']} hits) |")
+    print("\nthe whole Lidar.scan of one turn and its parts (ms), best of several:")
+    print("| world | Lidar.scan | noise draws | C turn (poses, casts, bins) | the rest (Python) "
+          "| Lidar.scan_numpy (its casts World.cast's) |")
+    print("|---|---|---|---|---|---|")
+    for name, c in costs.items():
+        rest = c["scan_ms"] - c["noise_ms"] - c["turn_ms"]
+        print(f"| {name} | {c['scan_ms']:.3f} | {c['noise_ms']:.3f} | {c['turn_ms']:.3f} | {rest:.3f} "
+              f"| {c['reference_ms']:.2f} |")
     rtf = rtf_side_by_side(seconds, runs)
     print(f"\nreal-time factor, stepped port + plant, {seconds:g} s drives, median of {runs}:")
-    print("| world | lidar off | lidar on | on / off | lidar's ms per scan | budget for on / off = 0.5 |")
-    print("|---|---|---|---|---|---|")
+    print("| world | lidar off | on | on / off | lidar's ms per scan | on, scan thread | on / off "
+          "| lidar's ms per scan | budget for on / off = 0.5 |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for name, r in rtf.items():
-        per_scan = (1 / r["on"] - 1 / r["off"]) / LIDAR.model.scan_hz * 1e3
+        def per_scan(mode: str, r: dict[str, float] = r) -> float:
+            return (1 / r[mode] - 1 / r["off"]) / LIDAR.model.scan_hz * 1e3
         budget = 1 / r["off"] / LIDAR.model.scan_hz * 1e3
-        print(f"| {name} | {r['off']:.0f}x | {r['on']:.0f}x | {r['on'] / r['off']:.3f} | {per_scan:.2f} ms "
+        print(f"| {name} | {r['off']:.0f}x | {r['on']:.0f}x | {r['on'] / r['off']:.3f} "
+              f"| {per_scan('on'):.2f} ms "
+              f"| {r['thread']:.0f}x | {r['thread'] / r['off']:.3f} | {per_scan('thread'):.2f} ms "
               f"| {budget:.3f} ms |")
     drift = max(r["drift"] for r in rtf.values())
     print(f"(the pose integrated from the motion log is within {drift * 1e3:.2f} mm of the plant's at each "

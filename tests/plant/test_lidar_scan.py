@@ -38,8 +38,8 @@ def sandbox() -> World:
     return SANDBOX
 
 
-def _log(t0: float, steps: int, forward: np.ndarray, lateral: np.ndarray, yaw_rate: np.ndarray,
-         dt: float = 0.001) -> np.ndarray:
+def _log(t0: float, steps: int, forward: float | np.ndarray, lateral: float | np.ndarray,
+         yaw_rate: float | np.ndarray, dt: float = 0.001) -> np.ndarray:
     """A motion log's rows: time, forward, lateral, yaw rate, and two volts."""
     log = np.zeros((steps, 6))
     log[:, 0] = t0 + dt * np.arange(1, steps + 1)
@@ -191,17 +191,24 @@ def _turns(n: int) -> list[tuple[float, MotionTrack]]:
 
 def test_turns_made_on_the_pipe_s_thread_are_those_made_at_once() -> None:
     """Eight turns queued at once, their noise from one generator: each the same as
-    made at once in the same order; waited for last first; a job waited for twice is
-    the same; the generator drew as much either way."""
+    made at once in the same order; waited for out of order (the waiting thread makes
+    the ones still queued, and the rest of one begun); a result asked for twice is
+    the same; then four more on the same pipe, made by it before it closes; the
+    generator drew as much either way."""
     lidar = Lidar(mount=LidarMount(x=0.3))
-    turns = _turns(8)
+    turns = _turns(12)
     now, later = np.random.default_rng(11), np.random.default_rng(11)
     want = [lidar.scan(SANDBOX, track, t0, now) for t0, track in turns]
     with ScanPipe() as pipe:
-        pending = [lidar.start_scan(SANDBOX, track, t0, later, pipe) for t0, track in turns]
-        got = [p.result() for p in reversed(pending)][::-1]
+        pending = [lidar.start_scan(SANDBOX, track, t0, later, pipe) for t0, track in turns[:8]]
+        got: list[LaserScan | None] = [None] * 8
+        for k in (4, 0, 7, 2, 6, 1, 5, 3):
+            got[k] = pending[k].result()
         assert pending[3].result() is got[3]
+        pending = [lidar.start_scan(SANDBOX, track, t0, later, pipe) for t0, track in turns[8:]]
+    got += [p.result() for p in pending]            # made by the pipe before it closed
     for g, w in zip(got, want, strict=True):
+        assert g is not None
         _same_scan(g, w)
         assert g.stamp == w.stamp
     assert now.standard_normal() == later.standard_normal()

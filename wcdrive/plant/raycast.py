@@ -71,8 +71,8 @@ class JobStruct(ctypes.Structure):
 JobStruct._fields_ = [("grid", _P), ("lidar", _P), ("t0", _D), ("n", _I), ("kt", _P), ("kx", _P), ("ky", _P),
                       ("kh", _P), ("log", _P), ("log_rows", _I), ("log_stride", _I), ("start_x", _D),
                       ("start_y", _D), ("start_h", _D), ("noise", _P), ("q2", _P), ("ranges", _P),
-                      ("intensities", _P), ("beam_time", _P), ("done", _I),
-                      ("next", ctypes.POINTER(JobStruct))]
+                      ("intensities", _P), ("beam_time", _P), ("state", _I), ("next_chunk", _I),
+                      ("chunks_left", _I), ("next", ctypes.POINTER(JobStruct))]
 
 
 class Turn:

@@ -268,19 +268,30 @@ void rc_integrate(double t0, double x0, double y0, double h0, int32_t n, const d
     }
 }
 
-/* One turn from t0: sample j's pose interpolated in the knots (kt increasing, n >= 1;
+/* rc_scan: one turn from t0: sample j's pose interpolated in the knots (kt increasing, n >= 1;
  * np.interp's rule: held at the ends), its ray cast, its noise (noise[j] * sigma, none
  * without `noise`), its range in quarter millimetres (0: none, below device_min or
  * above range_max), and the driver's bins: ranges (float32 m, inf for none),
  * intensities and beam_time (the time of the sample in each bin, NaN for none), each
  * `beams` long. q2: `samples` int32, each sample's quarter millimetres. */
-void rc_scan(const rc_grid *g, const rc_lidar *L, double t0, int32_t n, const double *kt,
-             const double *kx, const double *ky, const double *kh, const double *noise,
-             int32_t *q2, float *ranges, float *intensities, double *beam_time) {
+/* rc_scan's samples j0 .. j1 - 1, into q2 */
+static void scan_samples(const rc_grid *g, const rc_lidar *L, double t0, int32_t n, const double *kt,
+                         const double *kx, const double *ky, const double *kh, const double *noise,
+                         int32_t j0, int32_t j1, int32_t *q2) {
+    /* the last knot at or before the first sample (0 for none) */
     int32_t k = 0;
+    if (j0 < j1) {
+        int32_t lo = 0, hi = n;                 /* kt[lo] <= t < kt[hi], as far as known */
+        double t = t0 + L->offset[j0];
+        while (hi - lo > 1) {
+            int32_t m = lo + (hi - lo) / 2;
+            if (kt[m] <= t) lo = m; else hi = m;
+        }
+        k = lo;
+    }
     double slope_x = 0.0, slope_y = 0.0, slope_h = 0.0, ck = 1.0, sk = 0.0;
     int32_t at = -1, sloped = -1;         /* the knots ck, sk and the slopes belong to */
-    for (int32_t j = 0; j < L->samples; j++) {
+    for (int32_t j = j0; j < j1; j++) {
         double tj = t0 + L->offset[j];
         while (k < n - 1 && kt[k + 1] <= tj)
             k++;
@@ -331,6 +342,11 @@ void rc_scan(const rc_grid *g, const rc_lidar *L, double t0, int32_t n, const do
         q2[j] = isfinite(r) && r >= L->device_min && r <= L->range_max
                 ? (int32_t)((r * 4000.0 + 0x1p52) - 0x1p52) : 0;
     }
+}
+
+/* rc_scan's bins from the samples' q2 */
+static void bin_samples(const rc_lidar *L, double t0, const int32_t *q2, float *ranges, float *intensities,
+                        double *beam_time) {
     /* the driver's angle_compensate: sample j with a return fills the `multiple` bins
      * from its first on (the last bin for any past the end), later samples over earlier.
      * The first bins rise with j: taken last first, a sample fills its bins below the
@@ -364,10 +380,18 @@ void rc_scan(const rc_grid *g, const rc_lidar *L, double t0, int32_t n, const do
     }
 }
 
+void rc_scan(const rc_grid *g, const rc_lidar *L, double t0, int32_t n, const double *kt,
+             const double *kx, const double *ky, const double *kh, const double *noise,
+             int32_t *q2, float *ranges, float *intensities, double *beam_time) {
+    scan_samples(g, L, t0, n, kt, kx, ky, kh, noise, 0, L->samples, q2);
+    bin_samples(L, t0, q2, ranges, intensities, beam_time);
+}
+
 /* One turn to make: its poses from knots kt, kx, ky, kh (n of them) or, with `log`,
  * from the motion log's rows integrated from (start_x, start_y, start_h) at t0 into
  * them (n = log_rows + 1, the knots written); then rc_scan into q2 .. beam_time.
- * `done` and `next` are the pipe's. */
+ * The rest is the pipe's: where the job is (JOB_QUEUED .. JOB_DONE), its samples
+ * handed out in chunks (the next to hand out, those not finished), the queue. */
 typedef struct rc_job {
     const rc_grid *grid;
     const rc_lidar *lidar;
@@ -381,21 +405,41 @@ typedef struct rc_job {
     int32_t *q2;
     float *ranges, *intensities;
     double *beam_time;
-    int32_t done;
+    int32_t state, next_chunk, chunks_left;
     struct rc_job *next;
 } rc_job;
 
-void rc_run(rc_job *job) {
+enum { JOB_QUEUED, JOB_STARTING, JOB_CHUNKS, JOB_DONE };
+/* samples in a chunk: a few tens of microseconds of work */
+#define CHUNK 256
+
+static void integrate_job(rc_job *job) {
     if (job->log)
         rc_integrate(job->t0, job->start_x, job->start_y, job->start_h, job->log_rows, job->log,
                      job->log_stride, job->kt, job->kx, job->ky, job->kh);
-    rc_scan(job->grid, job->lidar, job->t0, job->n, job->kt, job->kx, job->ky, job->kh, job->noise,
-            job->q2, job->ranges, job->intensities, job->beam_time);
 }
 
-/* A thread that runs the jobs submitted to it in order. A job's memory (and all it
- * points to) is the caller's, untouched by the caller from rc_pipe_submit until
- * rc_pipe_wait has returned for it. */
+static void scan_chunk(rc_job *job, int32_t chunk) {
+    int32_t j0 = chunk * CHUNK, j1 = j0 + CHUNK < job->lidar->samples ? j0 + CHUNK : job->lidar->samples;
+    scan_samples(job->grid, job->lidar, job->t0, job->n, job->kt, job->kx, job->ky, job->kh, job->noise,
+                 j0, j1, job->q2);
+}
+
+static void bin_job(rc_job *job) {
+    bin_samples(job->lidar, job->t0, job->q2, job->ranges, job->intensities, job->beam_time);
+}
+
+void rc_run(rc_job *job) {
+    integrate_job(job);
+    rc_scan(job->grid, job->lidar, job->t0, job->n, job->kt, job->kx, job->ky, job->kh, job->noise,
+            job->q2, job->ranges, job->intensities, job->beam_time);
+    job->state = JOB_DONE;
+}
+
+/* A thread that makes the jobs submitted to it in order; a caller waiting for a job
+ * makes chunks of its samples too (or the whole job, if the thread has not started
+ * it), so that both make it. A job's memory (and all it points to) is the caller's,
+ * untouched by the caller from rc_pipe_submit until rc_pipe_wait has returned for it. */
 typedef struct {
     pthread_t thread;
     pthread_mutex_t lock;
@@ -403,6 +447,53 @@ typedef struct {
     rc_job *head, *tail;
     int closing;
 } rc_pipe;
+
+/* With the lock held (and held again on return): makes the job's chunks not yet
+ * handed out; whoever finishes its last chunk bins it and marks it done. */
+static void make_chunks(rc_pipe *p, rc_job *job) {
+    while (job->state == JOB_CHUNKS && job->next_chunk * CHUNK < job->lidar->samples) {
+        int32_t chunk = job->next_chunk++;
+        pthread_mutex_unlock(&p->lock);
+        scan_chunk(job, chunk);
+        pthread_mutex_lock(&p->lock);
+        if (--job->chunks_left == 0) {
+            pthread_mutex_unlock(&p->lock);
+            bin_job(job);
+            pthread_mutex_lock(&p->lock);
+            job->state = JOB_DONE;
+            pthread_cond_broadcast(&p->finished);
+        }
+    }
+}
+
+/* With the lock held: takes a queued job out of the queue, integrates its poses and
+ * opens its chunks. */
+static void start_job(rc_pipe *p, rc_job *job) {
+    rc_job **at = &p->head, *before = 0;
+    while (*at && *at != job) {
+        before = *at;
+        at = &(*at)->next;
+    }
+    if (*at) {
+        *at = job->next;
+        if (p->tail == job)
+            p->tail = before;
+    }
+    job->state = JOB_STARTING;
+    pthread_mutex_unlock(&p->lock);
+    integrate_job(job);
+    pthread_mutex_lock(&p->lock);
+    job->next_chunk = 0;
+    job->chunks_left = (job->lidar->samples + CHUNK - 1) / CHUNK;
+    job->state = JOB_CHUNKS;
+    if (job->chunks_left == 0) {
+        pthread_mutex_unlock(&p->lock);
+        bin_job(job);
+        pthread_mutex_lock(&p->lock);
+        job->state = JOB_DONE;
+    }
+    pthread_cond_broadcast(&p->finished);
+}
 
 static void *pipe_main(void *arg) {
     rc_pipe *p = arg;
@@ -413,14 +504,8 @@ static void *pipe_main(void *arg) {
         rc_job *job = p->head;
         if (!job)
             break;                                  /* closing, and nothing left to do */
-        p->head = job->next;
-        if (!p->head)
-            p->tail = 0;
-        pthread_mutex_unlock(&p->lock);
-        rc_run(job);
-        pthread_mutex_lock(&p->lock);
-        job->done = 1;
-        pthread_cond_broadcast(&p->finished);
+        start_job(p, job);
+        make_chunks(p, job);
     }
     pthread_mutex_unlock(&p->lock);
     return 0;
@@ -446,7 +531,7 @@ rc_pipe *rc_pipe_open(void) {
 }
 
 void rc_pipe_submit(rc_pipe *p, rc_job *job) {
-    job->done = 0;
+    job->state = JOB_QUEUED;
     job->next = 0;
     pthread_mutex_lock(&p->lock);
     if (p->tail)
@@ -458,10 +543,16 @@ void rc_pipe_submit(rc_pipe *p, rc_job *job) {
     pthread_mutex_unlock(&p->lock);
 }
 
+/* Returns once the job is done, making what is left of it meanwhile. */
 void rc_pipe_wait(rc_pipe *p, rc_job *job) {
     pthread_mutex_lock(&p->lock);
-    while (!job->done)
-        pthread_cond_wait(&p->finished, &p->lock);
+    while (job->state != JOB_DONE) {
+        if (job->state == JOB_QUEUED)
+            start_job(p, job);
+        make_chunks(p, job);
+        if (job->state != JOB_DONE)
+            pthread_cond_wait(&p->finished, &p->lock);
+    }
     pthread_mutex_unlock(&p->lock);
 }
 
