@@ -19,6 +19,8 @@ cast" section, measured side by side in one run:
 
     python benchmarks/lidar_speed.py               # 30 simulated s, 5 runs each
     python benchmarks/lidar_speed.py --quick       # 10 s, 2 runs
+
+The scan thread gains only where the machine's second core is free.
 """
 
 from __future__ import annotations
