@@ -9,6 +9,7 @@ those made at once, in the order of their noise draws, waited for in any order."
 from __future__ import annotations
 
 import math
+import pickle
 from pathlib import Path
 
 import numpy as np
@@ -245,3 +246,11 @@ def test_without_a_pipe_or_the_c_helper_a_started_scan_is_made_at_once(monkeypat
     assert ScanPipe.open() is None
     world = World(SANDBOX.segments, SANDBOX.circles)
     _same_scan(Lidar().start_scan(world, track, t0, np.random.default_rng(2), None).result(), want)
+
+
+def test_a_lidar_that_has_scanned_pickles() -> None:
+    lidar = Lidar(mount=LidarMount(x=0.3))
+    t0, track = _turns(1)[0]
+    first = lidar.scan(SANDBOX, track, t0)
+    copy = pickle.loads(pickle.dumps(lidar))
+    assert copy == lidar and np.array_equal(copy.scan(SANDBOX, track, t0).ranges, first.ranges)

@@ -235,6 +235,10 @@ class Lidar:
         first = (angle_deg.astype(np.float32) * m.compensate_multiple).astype(np.int64)
         return np.minimum(first, m.beams - 1)
 
+    def __getstate__(self) -> dict[str, object]:
+        # the C scan's description of the turn holds pointers: a copy makes its own
+        return {k: v for k, v in self.__dict__.items() if k != "_turn"}
+
     @functools.cached_property
     def _turn(self) -> Turn:
         m, mount = self.model, self.mount

@@ -319,9 +319,10 @@ class ScanJob:
 
 
 class ScanPipe:
-    """A C thread that makes the ``ScanJob`` s submitted to it, in order, while the
-    caller runs on (ctypes lets go of the GIL; the thread never takes it). Wait for
-    each job before reading it; a job not waited for is kept until ``close``, which
+    """A C thread that makes the jobs (``ScanJob``) submitted to it, in order, while the
+    caller runs on (ctypes lets go of the GIL; the thread never takes it); ``wait``
+    makes what is left of the job meanwhile (so two cores make it). A job is not to be
+    read or run until waited for; one not waited for is kept until ``close``, which
     finishes what is queued and stops the thread. Raises ``OSError`` without the C
     helper or a thread."""
 
