@@ -130,22 +130,32 @@ static double cast_one(const rc_grid *g, double ox, double oy, double dx, double
     /* the walk's directions: a component too small to step along counts as 0 */
     int sx = dx > 1e-300 ? 1 : dx < -1e-300 ? -1 : 0;
     int sy = dy > 1e-300 ? 1 : dy < -1e-300 ? -1 : 0;
-    double inv_dx = sx ? 1.0 / dx : 0.0, inv_dy = sy ? 1.0 / dy : 0.0;
-    /* the part of the ray inside the grid */
-    double t0 = 0.0, t1 = INFINITY;
-    if (sx) {
-        double a = (minx - ox) * inv_dx, b = (maxx - ox) * inv_dx;
-        t0 = max2(t0, min2(a, b));
-        t1 = min2(t1, max2(a, b));
-    } else if (ox < minx || ox > maxx) {
-        return INFINITY;
+    double inv_dx, inv_dy;
+    if (sx && sy && fabs(dx * dy) > 1e-290) {
+        double inv = 1.0 / (dx * dy);           /* one division for both */
+        inv_dx = dy * inv;
+        inv_dy = dx * inv;
+    } else {
+        inv_dx = sx ? 1.0 / dx : 0.0;
+        inv_dy = sy ? 1.0 / dy : 0.0;
     }
-    if (sy) {
-        double a = (miny - oy) * inv_dy, b = (maxy - oy) * inv_dy;
-        t0 = max2(t0, min2(a, b));
-        t1 = min2(t1, max2(a, b));
-    } else if (oy < miny || oy > maxy) {
-        return INFINITY;
+    /* the part of the ray inside the grid (from 0 where the origin is inside) */
+    double t0 = 0.0, t1 = INFINITY;
+    if (!(ox >= minx && ox <= maxx && oy >= miny && oy <= maxy)) {
+        if (sx) {
+            double a = (minx - ox) * inv_dx, b = (maxx - ox) * inv_dx;
+            t0 = max2(t0, min2(a, b));
+            t1 = min2(t1, max2(a, b));
+        } else if (ox < minx || ox > maxx) {
+            return INFINITY;
+        }
+        if (sy) {
+            double a = (miny - oy) * inv_dy, b = (maxy - oy) * inv_dy;
+            t0 = max2(t0, min2(a, b));
+            t1 = min2(t1, max2(a, b));
+        } else if (oy < miny || oy > maxy) {
+            return INFINITY;
+        }
     }
     /* beyond `limit` no hit can be within max_range */
     double limit = max_range + g->eps + 1e-12 * fabs(max_range);
