@@ -613,17 +613,16 @@ static void emergencyHalt() {
 // leads the other wheel (other: its measured speed) by less than WC_FAULT_EFFORT_LEAD its
 // way (a dead motor, a broken motor wire: the wheel is only dragged along, and trails the
 // wheel that drags it, or stands when that one turns against it). A wheel that leads is
-// pulled by its own motor, at its current limit on a grade. Nor does it count while the
-// other wheel turns faster than its own setpoint (otherSetpoint) asks, either way, by
-// more than WC_FAULT_EFFORT_LEAD: that wheel is being slowed, not dragging, and the
-// chair's momentum sets both wheels' speeds (a sharp change of course). A new setpoint,
-// a duty away from it, or any gain in speed starts over.
+// pulled by its own motor, at its current limit on a grade. A new setpoint, a duty away
+// from it, any gain in speed, or the wheel turning faster than its setpoint starts over:
+// a wheel being slowed to its setpoint (a sharp change of course) runs on a low duty, and
+// its return to the duty that holds the setpoint is no effort without progress.
 static bool noEffect(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, float measured,
-                     float other, float otherSetpoint, uint8_t& effortPwm, float& effortSpeed,
-                     float& effortSetpoint, uint8_t& effortTicks) {
+                     float other, uint8_t& effortPwm, float& effortSpeed, float& effortSetpoint,
+                     uint8_t& effortTicks) {
   float progress = setpoint > 0.0f ? measured : -measured;
   bool toward = setpoint != 0.0f && (appliedDir == HIGH) == (setpoint > 0.0f);
-  if (!toward || setpoint != effortSetpoint || progress > effortSpeed) {
+  if (!toward || setpoint != effortSetpoint || progress > effortSpeed || progress > fabs(setpoint)) {
     effortSetpoint = setpoint;
     effortSpeed = progress;
     effortPwm = appliedPwm;
@@ -634,9 +633,7 @@ static bool noEffect(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, flo
   bool shortfall = fabs(measured) < WC_FAULT_EFFORT_SHORTFALL_MOTOR * fabs(setpoint);
   float otherProgress = setpoint > 0.0f ? other : -other;
   bool trails = progress < (otherProgress > 0.0f ? otherProgress : 0.0f) + WC_FAULT_EFFORT_LEAD;
-  bool braking = fabs(other) > fabs(otherSetpoint) + WC_FAULT_EFFORT_LEAD;
-  effortTicks = shortfall && trails && !braking && appliedPwm >= effortPwm + WC_FAULT_EFFORT_PWM
-                    ? effortTicks + 1 : 0;
+  effortTicks = shortfall && trails && appliedPwm >= effortPwm + WC_FAULT_EFFORT_PWM ? effortTicks + 1 : 0;
   return effortTicks >= WC_FAULT_EFFORT_TICKS;
 }
 
@@ -695,7 +692,7 @@ static bool straining(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, fl
 
 static uint8_t checkWheel(int32_t delta, uint32_t illegal, uint8_t storm, uint8_t appliedPwm,
                           uint8_t appliedDir, float setpoint, float measured, float other,
-                          float otherSetpoint, uint8_t& stallTicks, uint8_t& reverseTicks, uint8_t& runawayTicks,
+                          uint8_t& stallTicks, uint8_t& reverseTicks, uint8_t& runawayTicks,
                           uint8_t& effortPwm, float& effortSpeed, float& effortSetpoint,
                           uint8_t& effortTicks, float prevMeasured) {
   if (storm || illegal >= WC_FAULT_ILLEGAL_PER_TICK) return WHEEL_IMPLAUSIBLE;
@@ -713,8 +710,8 @@ static uint8_t checkWheel(int32_t delta, uint32_t illegal, uint8_t storm, uint8_
   if (reverseTicks >= WC_FAULT_REVERSE_TICKS) return WHEEL_REVERSED;
   runawayTicks = runsAway(appliedPwm, appliedDir, setpoint, measured, prevMeasured) ? runawayTicks + 1 : 0;
   if (runawayTicks >= WC_FAULT_RUNAWAY_TICKS) return WHEEL_REVERSED;
-  if (noEffect(appliedPwm, appliedDir, setpoint, measured, other, otherSetpoint, effortPwm,
-               effortSpeed, effortSetpoint, effortTicks)) {
+  if (noEffect(appliedPwm, appliedDir, setpoint, measured, other, effortPwm, effortSpeed,
+               effortSetpoint, effortTicks)) {
     return WHEEL_NO_EFFECT;
   }
   return (stalled || against) ? WHEEL_SUSPECT : WHEEL_OK;
@@ -874,10 +871,10 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
     bool strainL = straining(pwmL, dirL, setpointL, filtVelL);
     bool strainR = straining(pwmR, dirR, setpointR, filtVelR);
     checkL = checkWheel(deltaL, illDeltaL, stormTickL, pwmL, dirL, setpointL, filtVelL, filtVelR,
-                        setpointR, stallTicksL, reverseTicksL, runawayTicksL, effortPwmL, effortSpeedL,
+                        stallTicksL, reverseTicksL, runawayTicksL, effortPwmL, effortSpeedL,
                         effortSetpointL, effortTicksL, prevMeasL);
     checkR = checkWheel(deltaR, illDeltaR, stormTickR, pwmR, dirR, setpointR, filtVelR, filtVelL,
-                        setpointL, stallTicksR, reverseTicksR, runawayTicksR, effortPwmR, effortSpeedR,
+                        stallTicksR, reverseTicksR, runawayTicksR, effortPwmR, effortSpeedR,
                         effortSetpointR, effortTicksR, prevMeasR);
     // Driving only: a held wheel that runs away is a fault (a reversed encoder turns the
     // hold into positive feedback), whatever the other wheel does.

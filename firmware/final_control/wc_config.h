@@ -92,7 +92,7 @@
 #define WC_FAULT_EFFORT_PWM 20     // duty rise (8 %) toward a steady setpoint without any gain in speed: the motor does not respond
 #define WC_FAULT_EFFORT_SHORTFALL 0.8f // ...while the wheel turns slower than this fraction of its setpoint
 #define WC_FAULT_EFFORT_SHORTFALL_MOTOR 0.95f // ...while the wheel turns slower than this fraction of its setpoint (the motor rule; a dead motor's wheel dragged at speed keeps most of its setpoint, a healthy one at steady speed keeps more: 92 % at 1 m/s on the level)
-#define WC_FAULT_EFFORT_LEAD 0.5f  // rad/s: ...while turning its way no faster than this beyond the other wheel (or beyond standing, when the other turns against it): a dead motor's wheel is only dragged, and trails the wheel that drags it; and while the other wheel turns no faster than this beyond its own setpoint (faster, it is being slowed, not dragging: a sharp change of course)
+#define WC_FAULT_EFFORT_LEAD 0.5f  // rad/s: ...while turning its way no faster than this beyond the other wheel (or beyond standing, when the other turns against it): a dead motor's wheel is only dragged, and trails the wheel that drags it
 #define WC_FAULT_EFFORT_TICKS 4    // consecutive ticks of that effort without progress: the motor fault
 #define WC_FAULT_ILLEGAL_PER_TICK 4 // illegal transitions in one tick: implausible encoder
 #define WC_STORM_EDGES 80          // edges of one encoder in one Timer0 period (1.024 ms) that mask it: 78,000 edges/s, > 2.5x top speed, above the 70,000 every edge is counted at

@@ -65,25 +65,22 @@ Effort = tuple[int, float, float, int]
 
 
 def no_effect(applied_pwm: int, applied_dir: int, setpoint: float, measured: float, other: float,
-              other_setpoint: float, effort: Effort) -> tuple[bool, Effort]:
+              effort: Effort) -> tuple[bool, Effort]:
     """``noEffect``: effort without progress, by a wheel that trails ``other`` (the other
-    wheel's measured speed), as a dragged one does, while the other wheel is not being
-    slowed (turning faster than ``other_setpoint``, its own, asks, either way, by more
-    than FAULT_EFFORT_LEAD). ``effort`` is
-    (lowest duty, speed toward the setpoint, setpoint, ticks) of the reference; returns
-    (tripped, the new one)."""
+    wheel's measured speed), as a dragged one does, judged from where the wheel last
+    turned faster than its setpoint (being slowed to it). ``effort`` is (lowest duty,
+    speed toward the setpoint, setpoint, ticks) of the reference; returns (tripped, the
+    new one)."""
     effort_pwm, effort_speed, effort_setpoint, ticks = effort
     progress = measured if setpoint > 0.0 else -measured
     toward = setpoint != 0.0 and (applied_dir == C.HIGH) == (setpoint > 0.0)
-    if not toward or setpoint != effort_setpoint or progress > effort_speed:
+    if not toward or setpoint != effort_setpoint or progress > effort_speed or progress > abs(setpoint):
         return False, (applied_pwm, progress, setpoint, 0)
     effort_pwm = min(effort_pwm, applied_pwm)
     shortfall = abs(measured) < mul(C.FAULT_EFFORT_SHORTFALL_MOTOR, abs(setpoint))
     other_progress = other if setpoint > 0.0 else -other
     trails = progress < add(max(other_progress, 0.0), C.FAULT_EFFORT_LEAD)
-    braking = abs(other) > add(abs(other_setpoint), C.FAULT_EFFORT_LEAD)
-    ticks = ((ticks + 1) & 0xFF
-             if shortfall and trails and not braking and applied_pwm >= effort_pwm + C.FAULT_EFFORT_PWM
+    ticks = ((ticks + 1) & 0xFF if shortfall and trails and applied_pwm >= effort_pwm + C.FAULT_EFFORT_PWM
              else 0)
     return ticks >= C.FAULT_EFFORT_TICKS, (effort_pwm, effort_speed, effort_setpoint, ticks)
 
@@ -146,8 +143,7 @@ def at_limit(check: int, other_strains: bool, other_reverse: int, other_runaway:
 
 
 def check_wheel(delta: int, illegal: int, storm: int, applied_pwm: int, applied_dir: int,
-                setpoint: float, measured: float, other: float, other_setpoint: float,
-                stall_ticks: int, reverse_ticks: int,
+                setpoint: float, measured: float, other: float, stall_ticks: int, reverse_ticks: int,
                 runaway_ticks: int, effort: Effort, prev_measured: float
                 ) -> tuple[int, int, int, int, Effort]:
     """``checkWheel``: ``(verdict, stall ticks, reverse ticks, runaway ticks, effort
@@ -179,8 +175,7 @@ def check_wheel(delta: int, illegal: int, storm: int, applied_pwm: int, applied_
     runaway_ticks = (runaway_ticks + 1) & 0xFF if running else 0
     if runaway_ticks >= C.FAULT_RUNAWAY_TICKS:
         return WHEEL_REVERSED, stall_ticks, reverse_ticks, runaway_ticks, effort
-    tripped, effort = no_effect(applied_pwm, applied_dir, setpoint, measured, other, other_setpoint,
-                                effort)
+    tripped, effort = no_effect(applied_pwm, applied_dir, setpoint, measured, other, effort)
     if tripped:
         return WHEEL_NO_EFFECT, stall_ticks, reverse_ticks, runaway_ticks, effort
     verdict = WHEEL_SUSPECT if stalled or against else WHEEL_OK
@@ -212,12 +207,12 @@ def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_
     strain_l = straining(s.pwmL, s.dirL, s.setpointL, s.filtVelL)
     strain_r = straining(s.pwmR, s.dirR, s.setpointR, s.filtVelR)
     check_l, s.stallTicksL, s.reverseTicksL, s.runawayTicksL, effort_l = check_wheel(
-        delta_l, ill_l, s.stormTickL, s.pwmL, s.dirL, s.setpointL, s.filtVelL, s.filtVelR, s.setpointR,
+        delta_l, ill_l, s.stormTickL, s.pwmL, s.dirL, s.setpointL, s.filtVelL, s.filtVelR,
         s.stallTicksL, s.reverseTicksL, s.runawayTicksL,
         (s.effortPwmL, s.effortSpeedL, s.effortSetpointL, s.effortTicksL), s.prevMeasL)
     s.effortPwmL, s.effortSpeedL, s.effortSetpointL, s.effortTicksL = effort_l
     check_r, s.stallTicksR, s.reverseTicksR, s.runawayTicksR, effort_r = check_wheel(
-        delta_r, ill_r, s.stormTickR, s.pwmR, s.dirR, s.setpointR, s.filtVelR, s.filtVelL, s.setpointL,
+        delta_r, ill_r, s.stormTickR, s.pwmR, s.dirR, s.setpointR, s.filtVelR, s.filtVelL,
         s.stallTicksR, s.reverseTicksR, s.runawayTicksR,
         (s.effortPwmR, s.effortSpeedR, s.effortSetpointR, s.effortTicksR), s.prevMeasR)
     s.effortPwmR, s.effortSpeedR, s.effortSetpointR, s.effortTicksR = effort_r

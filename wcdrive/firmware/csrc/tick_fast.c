@@ -220,10 +220,10 @@ typedef struct {
 
 /* no_effect: whether it tripped; *e the new reference */
 static int no_effect(int64_t pwm, int64_t dir, double setpoint, double measured, double other,
-                     double other_setpoint, Effort *e) {
+                     Effort *e) {
     double progress = setpoint > 0.0 ? measured : -measured;
     int toward = setpoint != 0.0 && ((dir == K.high) == (setpoint > 0.0));
-    if (!toward || setpoint != e->setpoint || progress > e->speed) {
+    if (!toward || setpoint != e->setpoint || progress > e->speed || progress > fabs(setpoint)) {
         e->pwm = pwm;
         e->speed = progress;
         e->setpoint = setpoint;
@@ -235,9 +235,7 @@ static int no_effect(int64_t pwm, int64_t dir, double setpoint, double measured,
     int shortfall = fabs(measured) < f_mul(K.effort_shortfall_motor, fabs(setpoint));
     double other_progress = setpoint > 0.0 ? other : -other;
     int trails = progress < f_add(other_progress > 0.0 ? other_progress : 0.0, K.effort_lead);
-    int braking = fabs(other) > f_add(fabs(other_setpoint), K.effort_lead);
-    e->ticks = (shortfall && trails && !braking && pwm >= e->pwm + K.effort_pwm)
-                   ? ((e->ticks + 1) & 0xFF) : 0;
+    e->ticks = (shortfall && trails && pwm >= e->pwm + K.effort_pwm) ? ((e->ticks + 1) & 0xFF) : 0;
     return e->ticks >= K.effort_ticks;
 }
 
@@ -277,8 +275,7 @@ static int overspeed_run(int over, double measured, double prev_measured, int64_
 /* check_wheel: WHEEL_OK, WHEEL_SUSPECT or WHEEL_FAULT (any fault: the Python tick
  * latches it) */
 static int check_wheel(int64_t delta, int64_t illegal, int64_t storm, int64_t pwm, int64_t dir,
-                       double setpoint, double measured, double other, double other_setpoint,
-                       int64_t *stall, int64_t *reverse,
+                       double setpoint, double measured, double other, int64_t *stall, int64_t *reverse,
                        int64_t *runaway, Effort *e, double prev_measured) {
     if (storm || illegal >= K.illegal_per_tick)
         return WHEEL_FAULT;
@@ -297,7 +294,7 @@ static int check_wheel(int64_t delta, int64_t illegal, int64_t storm, int64_t pw
     *runaway = runs_away(pwm, dir, setpoint, measured, prev_measured) ? ((*runaway + 1) & 0xFF) : 0;
     if (*runaway >= K.runaway_ticks)
         return WHEEL_FAULT;
-    if (no_effect(pwm, dir, setpoint, measured, other, other_setpoint, e))
+    if (no_effect(pwm, dir, setpoint, measured, other, e))
         return WHEEL_FAULT;
     return (stalled || against) ? WHEEL_SUSPECT : WHEEL_OK;
 }
@@ -474,9 +471,9 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
         Effort el = { I(effortPwmL), I(effortTicksL), D(effortSpeedL), D(effortSetpointL) };
         Effort er = { I(effortPwmR), I(effortTicksR), D(effortSpeedR), D(effortSetpointR) };
         check_l = check_wheel(delta_l, ill_l, I(stormTickL), I(pwmL), I(dirL), D(setpointL),
-                              D(filtVelL), D(filtVelR), D(setpointR), &stall_l, &rev_l, &run_l, &el, D(prevMeasL));
+                              D(filtVelL), D(filtVelR), &stall_l, &rev_l, &run_l, &el, D(prevMeasL));
         check_r = check_wheel(delta_r, ill_r, I(stormTickR), I(pwmR), I(dirR), D(setpointR),
-                              D(filtVelR), D(filtVelL), D(setpointL), &stall_r, &rev_r, &run_r, &er, D(prevMeasR));
+                              D(filtVelR), D(filtVelL), &stall_r, &rev_r, &run_r, &er, D(prevMeasR));
         if (check_l == WHEEL_FAULT || check_r == WHEEL_FAULT)
             Py_RETURN_NONE;
         SETI(stallTicksL, stall_l); SETI(reverseTicksL, rev_l);
