@@ -20,9 +20,20 @@ pulse, as a reopened port or a brown-out). The report, and the check of each:
 - no unexpected event: only ``WATCHDOG`` after a pause, ``ESTOP`` after an e-stop,
   ``BOARD_RESET`` and ``PARAMS_*`` after a reset.
 
-``--hours`` of simulated time take ``hours * 3600 / speed`` s of wall time at best (the
-host sleeps on the wall clock, 0.1 s of board time between commands). Exits 1 when a
-check fails.
+On ``sim://`` the board is paced by the host's program (``HostPacedClock``): it runs,
+at most ``speed`` times the wall clock, only as far as the host's next step (0.1 s of
+board time between commands, or the length of a pause), and runs freely only while the
+host waits for an answer. So the only silences are those the program makes, as a
+navigation stack's own: pauses at rest, and stalls in the middle of a drive (a host
+that stops sending for 0.2 to 1.5 s, as a garbage collection, a swapped-out process or
+a USB hiccup makes, then drives on), each counted. A board paced by the wall clock
+alone at 30x or more measures the machine's scheduler instead: the host's loop starves
+now and then and the watchdog stops the chair where no program paused
+(``watchdog_while_driving`` counts such stops; 0 when paced by the host). On
+``simavr://`` (1x) the wall clock paces the board.
+
+``--hours`` of simulated time take ``hours * 3600 / speed`` s of wall time at best.
+Exits 1 when a check fails.
 """
 
 from __future__ import annotations
@@ -31,20 +42,26 @@ import argparse
 import collections
 import gc
 import json
+import math
 import random
 import sys
 import time
 import tracemalloc
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import serial
 
 import wcdrive
+from wcdrive.boards.port_loop import F_CPU, PortLoop
+from wcdrive.boards.sim_board import GYRO_HISTORY
 from wcdrive.host.telemetry import Reset, Telemetry
+from wcdrive.plant import ChairParams, Gyro, Plant
 from wcdrive.protocol.codec import Event, LineStats
 
 #: bytes the host may grow by from the 10-minute mark to the end.
@@ -66,12 +83,18 @@ class Report:
     memory_end: int = 0
     #: where the memory grew from the 10-minute mark to the end: "file:line +N kB"
     memory_growth: list[str] = field(default_factory=list)
+    #: the same from half-way to the end
+    memory_growth_late: list[str] = field(default_factory=list)
+    #: the plant's pose at the end (x, y, heading): ground truth, and a replay's check
+    final_truth: tuple[float, float, float] = (0.0, 0.0, 0.0)
     sent_lines: int = 0
     lines: LineStats = field(default_factory=LineStats)
     board_resets: int = 0
     worst_reset_jump_m: float = 0.0
     estops: int = 0
     pauses: int = 0
+    #: drives in which the host fell silent for 0.2 to 1.5 s and then drove on
+    stalls: int = 0
     #: watchdog stops while the host kept sending every 0.1 s: a host loop starved of
     #: CPU at this speed (not a check: a figure of the machine).
     watchdog_while_driving: int = 0
@@ -79,7 +102,87 @@ class Report:
     ticks: int = 0
     tick_gaps: list[float] = field(default_factory=list)
     unexpected_events: list[str] = field(default_factory=list)
+    #: board time and name of the first 50 events not in EXPECTED_EVENTS
+    event_log: list[str] = field(default_factory=list)
     failures: list[str] = field(default_factory=list)
+
+
+class HostPacedClock:
+    """The board's pacing clock held to the host's program: the board reaches the time
+    the wrapped clock (``WallClock``) gives, but never past ``until``, which the host
+    moves on as its program goes; while the host waits for an answer (``answering``)
+    the board runs at real time from where it was, as a board does while a host waits
+    on it."""
+
+    def __init__(self, inner: Any) -> None:
+        self.inner = inner
+        self.speed: float = inner.speed
+        self.until = 0.0
+        self._real_time_from: tuple[float, float] | None = None    # (wall, board) s
+
+    def target(self, now_s: float) -> float | None:
+        due = self.inner.target(now_s)
+        if due is None:
+            return None
+        if self._real_time_from is not None:
+            wall, board = self._real_time_from
+            due = min(due, board + time.monotonic() - wall)
+        else:
+            due = min(due, self.until)
+        return due if due > now_s else None
+
+    def real_time(self, board: Any) -> None:
+        self._real_time_from = (time.monotonic(), board.time)
+
+    def hold(self, board: Any) -> None:
+        self._real_time_from = None
+        self.until = board.time
+
+
+class InputRecord:
+    """Writes every byte the board is sent, and every reset, with the board's cycle,
+    to ``path`` (JSON lines), so that ``replay`` runs the same board again, bit for bit,
+    without the host and its threads."""
+
+    def __init__(self, board: Any, path: Path) -> None:
+        self._file = path.open("w")
+        self._loop = board.loop
+        send, reset = board._send, board._dtr_reset
+
+        def recorded_send(data: bytes) -> None:
+            self._file.write(json.dumps({"c": self._loop.cycle, "d": data.hex()}) + "\n")
+            send(data)
+
+        def recorded_reset() -> None:
+            self._file.write(json.dumps({"c": self._loop.cycle, "reset": True}) + "\n")
+            reset()
+        board._send, board._dtr_reset = recorded_send, recorded_reset
+
+    def close(self) -> None:
+        self._file.close()
+
+
+def replay(path: Path, seed: int, until_s: float | None = None) -> PortLoop:
+    """The board of a soak run with ``--record path``, run again from its recorded
+    input up to ``until_s`` (its end by default): the same ``PortLoop`` state, its
+    output in ``take_output()``. ``wcsim://``'s board is a ``PortLoop`` with a gyro
+    seeded by the URL's seed."""
+    params = ChairParams()
+    loop = PortLoop(Plant(params), Gyro(params, seed, history=GYRO_HISTORY))
+    end = None if until_s is None else round(until_s * F_CPU)
+    with path.open() as f:
+        for line in f:
+            entry = json.loads(line)
+            if end is not None and entry["c"] > end:
+                break
+            loop.run_until(entry["c"])
+            if entry.get("reset"):
+                loop.reset()
+            else:
+                loop.send(bytes.fromhex(entry["d"]))
+    if end is not None:
+        loop.run_until(end)
+    return loop
 
 
 class SentLines:
@@ -119,12 +222,64 @@ class SentLines:
             time.sleep(0.02)
 
 
-def soak(backend: str, hours: float, speed: float, seed: int) -> Report:
+class Pacer:
+    """The host's program on the board's clock: ``wait`` lets the board run ``seconds``
+    on and returns when it has; ``answering()`` frees the board while the host waits
+    for an answer (an ``ACK``, a handshake), and holds it where it got to after."""
+
+    def __init__(self, board: Any, speed: float, paced_by_host: bool) -> None:
+        self.board = board
+        self.speed = speed
+        self.clock: HostPacedClock | None = None
+        #: (start, end) of each silence the host's program made, in board time
+        self.silences: collections.deque[tuple[float, float]] = collections.deque(maxlen=8)
+        if paced_by_host:
+            self.clock = HostPacedClock(board.clock)
+            board.clock = self.clock
+            # the board thread looks for the next step every 0.2 ms, not every 2 ms:
+            # held at each step of the host's, it would otherwise wait 2 ms a step
+            board._pause = lambda: 0.0002
+
+    def silent(self, seconds: float) -> None:
+        """``wait``, noting the silence (and the 0.3 s after it in which its events
+        may still come in) for ``in_silence``."""
+        start = self.board.time
+        self.silences.append((start, start + seconds + 0.3))
+        self.wait(seconds)
+
+    def in_silence(self) -> bool:
+        """Whether the board is now within a silence the host's program made."""
+        now = self.board.time
+        return any(a <= now <= b for a, b in self.silences)
+
+    def wait(self, seconds: float) -> None:
+        """Sleeps until the board's clock has moved ``seconds`` on."""
+        until = self.board.time + seconds
+        if self.clock is not None:
+            self.clock.until = until
+        while self.board.time < until - 1e-6:      # the board stops on a whole cycle
+            time.sleep(min(0.1, seconds) / self.speed)
+
+    @contextmanager
+    def answering(self) -> Iterator[None]:
+        if self.clock is None:
+            yield
+            return
+        self.clock.real_time(self.board)
+        try:
+            yield
+        finally:
+            self.clock.hold(self.board)
+
+
+def soak(backend: str, hours: float, speed: float, seed: int, record: Path | None = None) -> Report:
     rng = random.Random(seed)
     report = Report(backend, hours, speed, seed)
     url = f"wcsim://?speed={speed:g}&seed={seed}" if backend == "sim" else f"wcavr://?speed={speed:g}"
     port = serial.serial_for_url(url, timeout=0.05)
     board = port.board
+    pace = Pacer(board, speed, paced_by_host=backend == "sim")
+    recorder = InputRecord(board, record) if record is not None and backend == "sim" else None
     sent = SentLines(board, port)
     last_millis: list[int | None] = [None]
     resets: list[tuple[tuple[float, float, float], Reset]] = []
@@ -151,6 +306,13 @@ def soak(backend: str, hours: float, speed: float, seed: int) -> Report:
 
     def count_event(now: float, msg: Event) -> None:
         event_counts[msg.name] += 1
+        if msg.name == "WATCHDOG" and not pace.in_silence():
+            report.watchdog_while_driving += 1
+            if len(report.event_log) < 50:
+                report.event_log.append(f"{board.time:.2f} s: WATCHDOG while driving "
+                                        f"(silences {list(pace.silences)[-2:]})")
+        if not msg.name.startswith(EXPECTED_EVENTS) and len(report.event_log) < 50:
+            report.event_log.append(f"{board.time:.2f} s: {msg.name}")
         on_event(now, msg)
     chair._session._dispatch[Event] = count_event
 
@@ -159,21 +321,17 @@ def soak(backend: str, hours: float, speed: float, seed: int) -> Report:
     tracemalloc.start()
     started = time.monotonic()
     try:
-        chair.wait_for_handshake(10.0)
+        with pace.answering():
+            chair.wait_for_handshake(10.0)
         chair.history_limit = 1000
         end = hours * 3600.0
         expect: set[str] = set()
-        marked = False
-        first: tracemalloc.Snapshot | None = None
+        marks: dict[str, tracemalloc.Snapshot] = {}
         while board.time < end:
-            if not marked and board.time >= 600.0:
-                gc.collect()
-                report.memory_start = tracemalloc.get_traced_memory()[0]
-                first = tracemalloc.take_snapshot()
-                marked = True
-            if not report.memory_middle and board.time >= end / 2 and marked:
-                gc.collect()
-                report.memory_middle = tracemalloc.get_traced_memory()[0]
+            if "start" not in marks and board.time >= 600.0:
+                report.memory_start, marks["start"] = _memory()
+            if "middle" not in marks and board.time >= end / 2 and "start" in marks:
+                report.memory_middle, marks["middle"] = _memory()
             kind = rng.choices(("drive", "stand", "pause", "param", "estop", "reset"),
                                (70, 20, 4, 3, 2, 1))[0]
             length = rng.uniform(2.0, 20.0)
@@ -185,62 +343,73 @@ def soak(backend: str, hours: float, speed: float, seed: int) -> Report:
                 report.pauses += 1
                 expect.add("WATCHDOG")
                 chair.stop()
-                _wait(board, rng.uniform(1.0, 3.0), speed)
+                pace.silent(rng.uniform(1.0, 3.0))
                 continue
             elif kind == "param":
                 report.param_changes += 1
                 name, value = rng.choice((("max_accel", rng.uniform(1.0, 4.0)),
                                           ("watchdog_ms", float(rng.choice((300, 500, 1000))))))
-                chair.set_param(name, value)
+                with pace.answering():
+                    chair.set_param(name, value)
             elif kind == "estop":
                 report.estops += 1
                 expect.add("ESTOP")
-                chair.estop()
-                _wait(board, 2.0, speed)
-                chair.reset_estop(timeout=10.0)
+                with pace.answering():
+                    chair.estop()
+                pace.silent(2.0)
+                with pace.answering():
+                    chair.reset_estop(timeout=10.0)
                 continue
             elif kind == "reset":
                 report.board_resets += 1
                 expect.update(("BOARD_RESET", "PARAMS_LOADED", "PARAMS_DEFAULT"))
                 chair.stop()
-                _wait(board, 2.0, speed)                  # at rest: the pose is final
-                at_rest = chair.odometry.pose
-                before_reset[0] = (at_rest.x, at_rest.y, at_rest.theta)
+                pace.silent(2.0)                            # at rest: the pose is final
                 # the host reads every line first: a DTR pulse drops what waits unread
                 # (as on a real port), and those lines would be neither read nor lost
                 sent.freeze(port, lambda: chair.link_stats.total)
+                at_rest = chair.odometry.pose
+                before_reset[0] = (at_rest.x, at_rest.y, at_rest.theta)
                 board.dtr()
                 sent.frozen = False
-                chair.wait_for_handshake(10.0)
-                _wait(board, 0.5, speed)
+                with pace.answering():
+                    chair.wait_for_handshake(10.0)
+                pace.silent(0.5)
                 continue
             stop_at = board.time + length
-            watchdogs = event_counts["WATCHDOG"]
+            stall_at = board.time + rng.uniform(1.0, length) if kind == "drive" and rng.random() < 0.2 \
+                else math.inf
             while board.time < stop_at:
                 try:
                     chair.set_velocity(linear, angular)
                 except wcdrive.WcdriveError as exc:
                     report.failures.append(f"{board.time:.1f} s: {exc}")
                     break
-                _wait(board, 0.1, speed)
-            report.watchdog_while_driving += event_counts["WATCHDOG"] - watchdogs
+                if board.time >= stall_at:                # the host stops sending, then drives on
+                    report.stalls += 1
+                    expect.add("WATCHDOG")
+                    stall_at = math.inf
+                    pace.silent(rng.uniform(0.2, 1.5))
+                    continue
+                pace.wait(0.1)
         chair.stop()
-        _wait(board, 2.0, speed)
-        gc.collect()
-        report.memory_end = tracemalloc.get_traced_memory()[0]
-        if first is None:
+        pace.silent(2.0)
+        report.memory_end, last = _memory()
+        if "start" not in marks:
             report.memory_start = report.memory_end
-        else:
-            grown = tracemalloc.take_snapshot().compare_to(first, "lineno")
-            report.memory_growth = [f"{st.traceback[0].filename}:{st.traceback[0].lineno} "
-                                    f"{st.size_diff / 1e3:+.0f} kB ({st.count_diff:+d} blocks)"
-                                    for st in grown[:8] if st.size_diff > 0]
+        for name, into in (("start", report.memory_growth), ("middle", report.memory_growth_late)):
+            if name in marks:
+                into += _growth(last, marks[name])
         events = list(event_counts) + [e for e in chair.events if e not in event_counts]
-        sent.freeze(port, lambda: chair.link_stats.total)
+        with pace.answering():
+            sent.freeze(port, lambda: chair.link_stats.total)
         stats = chair.link_stats
+        report.final_truth = board.pose()
     finally:
         tracemalloc.stop()
         chair.close()
+        if recorder is not None:
+            recorder.close()
     report.wall_s = time.monotonic() - started
     report.sent_lines = sent.count
     report.lines = stats
@@ -253,11 +422,18 @@ def soak(backend: str, hours: float, speed: float, seed: int) -> Report:
     return report
 
 
-def _wait(board: object, seconds: float, speed: float) -> None:
-    """Sleeps until the board's clock has moved ``seconds`` on."""
-    until = board.time + seconds                  # type: ignore[attr-defined]
-    while board.time < until:                     # type: ignore[attr-defined]
-        time.sleep(min(0.1, seconds) / speed)
+def _memory() -> tuple[int, tracemalloc.Snapshot]:
+    """The memory traced now, after a collection, and a snapshot of where it is."""
+    gc.collect()
+    return tracemalloc.get_traced_memory()[0], tracemalloc.take_snapshot()
+
+
+def _growth(now: tracemalloc.Snapshot, then: tracemalloc.Snapshot) -> list[str]:
+    """Where the memory grew from ``then`` to ``now``: the 8 largest sites."""
+    grown = now.compare_to(then, "lineno")
+    return [f"{st.traceback[0].filename}:{st.traceback[0].lineno} "
+            f"{st.size_diff / 1e3:+.0f} kB ({st.count_diff:+d} blocks)"
+            for st in grown[:8] if st.size_diff > 0]
 
 
 def _judge(r: Report) -> None:
@@ -284,8 +460,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--backend", choices=("sim", "simavr"), default="sim")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--record", type=Path, metavar="FILE",
+                    help="write the board's input (sim) to FILE for replay()")
     args = ap.parse_args(argv)
-    r = soak(args.backend, args.hours, args.speed, args.seed)
+    r = soak(args.backend, args.hours, args.speed, args.seed, args.record)
     if args.json:
         print(json.dumps(asdict(r), indent=2))
     else:
@@ -294,16 +472,22 @@ def main(argv: list[str] | None = None) -> int:
               f"{r.memory_middle / 1e6:.3f} / {r.memory_end / 1e6:.3f} MB "
               f"({(r.memory_end - r.memory_start) / 1e3:+.0f} kB)")
         for site in r.memory_growth:
-            print(f"  grew at {site}")
+            print(f"  grew from 10 min at {site}")
+        for site in r.memory_growth_late:
+            print(f"  grew from half-way at {site}")
         n = r.lines
+        print(f"the chair at the end (x, y, heading): {r.final_truth}")
         print(f"lines sent {r.sent_lines}: good {n.good}, bad CRC {n.bad_crc}, spliced {n.spliced}, "
               f"lost {n.lost}")
         print(f"ticks {r.ticks}; gaps over {TICK_GAP * 1000:.0f} ms: {len(r.tick_gaps)}")
         print(f"board resets {r.board_resets} (largest odometry jump {r.worst_reset_jump_m * 1000:.2f} mm), "
-              f"e-stops {r.estops}, watchdog pauses {r.pauses}, parameter changes {r.param_changes}")
-        print(f"watchdog stops while the host drove (its loop starved at this speed): "
+              f"e-stops {r.estops}, watchdog pauses {r.pauses}, stalls while driving {r.stalls}, "
+              f"parameter changes {r.param_changes}")
+        print(f"watchdog stops while the host drove, but for its stalls (a starved loop): "
               f"{r.watchdog_while_driving}")
         print(f"unexpected events: {', '.join(r.unexpected_events) or 'none'}")
+        for line in r.event_log:
+            print(f"  {line}")
         print("checks: " + ("all met" if not r.failures else "FAILED: " + "; ".join(r.failures)))
     return 1 if r.failures else 0
 

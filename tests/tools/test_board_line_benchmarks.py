@@ -51,6 +51,19 @@ def test_a_short_soak_meets_its_checks() -> None:
     assert report.sent_lines == report.lines.good > 5_000
 
 
+def test_a_soaks_board_runs_again_bit_for_bit_from_its_record(tmp_path: Path) -> None:
+    """The board of a soak on ``sim://`` is paced by the host's program and its input is
+    recorded: ``replay`` runs the same board again without the host, to the same pose of
+    the plant, so whatever a soak finds can be looked at tick by tick."""
+    soak = _load("soak")
+    record = tmp_path / "input.jsonl"
+    report = soak.soak("sim", 0.05, 50.0, 5, record)
+    assert report.failures == [], report.failures
+    assert report.watchdog_while_driving == 0
+    loop = soak.replay(record, 5)
+    assert loop.plant.pose == report.final_truth
+
+
 def test_the_soak_sees_a_host_that_leaks(monkeypatch: pytest.MonkeyPatch) -> None:
     """A host that keeps 1 kB for every read of the board's bytes: the soak's memory
     check, which starts at the 10-minute mark, goes red within 12 simulated minutes."""
