@@ -62,7 +62,8 @@ def test_the_wheel_installs_only_wcdrive_and_the_url_hook(installed: dict[str, P
                    "wcdrive/_data/firmware/final_control/final_control.ino",
                    "wcdrive/_data/firmware/final_control/Makefile",
                    "wcdrive/boards/simavr/csrc/wcsim.c", "wcdrive/plant/csrc/chair_kernel.c",
-                   "wcdrive/plant/csrc/raycast.c",
+                   "wcdrive/plant/csrc/raycast.c", "wcdrive/sim/scenarios/worlds/hospital_corridor.yaml",
+                   "wcdrive/sim/scenarios/worlds/hospital_corridor.pgm",
                    "wcdrive/avr/csrc/f32_fast.c", "wcdrive/firmware/csrc/tick_fast.c"):
         assert needed in names, needed
     assert not [n for n in names if "/build/" in n or n.endswith((".o", ".elf"))]
