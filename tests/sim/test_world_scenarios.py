@@ -234,7 +234,8 @@ def test_into_a_wall_the_firmware_latches_an_encoder_stall() -> None:
 def test_into_a_wall_on_simavr_as_on_the_port() -> None:
     """The compiled firmware in simavr (no difference from the port on its own inputs)
     drives the same plant into the same wall: the same collision, within 2 ms (the two
-    boards' timing differs a little), and the same first fault within 0.3 s of it."""
+    boards' timing differs a little), and the same fault, the only one, within 0.3 s of
+    it."""
     port, avr = bundled("room_wall_bump", "port"), bundled("room_wall_bump", "simavr")
     assert avr.world is not None and port.world is not None
     assert avr.world.collisions == port.world.collisions == 1
@@ -242,6 +243,6 @@ def test_into_a_wall_on_simavr_as_on_the_port() -> None:
     assert first is not None and first == pytest.approx(port.world.first_collision_s, abs=0.002)
     assert avr.world.max_impact_ns == pytest.approx(port.world.max_impact_ns, rel=0.02)
     faults = [[(t, line) for t, line in r.link.events if line.startswith("EVT:FAULT")] for r in (avr, port)]
-    assert faults[0][0][1] == faults[1][0][1] == "EVT:FAULT,ENC_STALL_R"
+    assert [line for _, line in faults[0]] == [line for _, line in faults[1]] == ["EVT:FAULT,ENC_STALL_R"]
     assert 0.0 < faults[0][0][0] - first < 0.3
     assert avr.truth.pose[-1, 0] == pytest.approx(5.0 - 0.7, abs=2e-3)
