@@ -115,6 +115,17 @@ def load(source: Path, name: str, libs: tuple[str, ...] = (),
     return ctypes.CDLL(str(compile_shared(source, name, libs, flags)))
 
 
+def library(module: str, source: Path, name: str, libs: tuple[str, ...] = (),
+            flags: tuple[str, ...] = ("-O2",)) -> tuple[ctypes.CDLL, str]:
+    """The shared library the install built from ``source`` as ``module``, else ``load``
+    compiles it now; with how it was had ("built at install" or "built at first use").
+    Raises ``BuildError`` as ``load`` does."""
+    lib = prebuilt_library(module, source)
+    if lib is not None:
+        return lib, "built at install"
+    return load(source, name, libs, flags), "built at first use"
+
+
 def load_extension(source: Path, name: str, flags: tuple[str, ...] = ("-O2",)) -> ModuleType:
     """A CPython extension module ``name`` (its ``PyInit_<name>``) built from ``source``
     against this interpreter's headers (``sysconfig``), imported from the cache; the

@@ -102,7 +102,7 @@ import numpy as np
 import pymunk
 from pymunk._chipmunk import lib as _chipmunk
 
-from wcdrive._util.native import BuildError, load, prebuilt_library, record
+from wcdrive._util.native import BuildError, library, record
 from wcdrive.plant.params import ChairParams, G
 from wcdrive.plant.terrain import MAX_RAMPS, Terrain
 
@@ -161,11 +161,8 @@ def load_kernel() -> ctypes.CDLL | None:
     global _kernel
     if _kernel is None:
         try:
-            lib = prebuilt_library("wcdrive.plant._chair_kernel", _KERNEL_SOURCE)
-            how = "built at install"
-            if lib is None:
-                lib = load(_KERNEL_SOURCE, "chairkernel", ("-lm",), ("-O2", "-ffp-contract=off"))
-                how = "built at first use"
+            lib, how = library("wcdrive.plant._chair_kernel", _KERNEL_SOURCE, "chairkernel", ("-lm",),
+                               ("-O2", "-ffp-contract=off"))
             lib.chair_advance.argtypes = [ctypes.POINTER(ChairStruct), ctypes.c_int32, _D, _D,
                                           _P, _P, _P]
             lib.chair_advance.restype = None

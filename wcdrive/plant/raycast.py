@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from wcdrive._util.native import BuildError, load, prebuilt_library, record
+from wcdrive._util.native import BuildError, library, record
 
 Knots = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
@@ -107,11 +107,8 @@ def load_raycast() -> ctypes.CDLL | None:
     global _lib
     if _lib is None:
         try:
-            lib = prebuilt_library("wcdrive.plant._raycast", _SOURCE)
-            how = "built at install"
-            if lib is None:
-                lib = load(_SOURCE, "raycast", ("-lm", "-lpthread"), ("-O2", "-ffp-contract=off"))
-                how = "built at first use"
+            lib, how = library("wcdrive.plant._raycast", _SOURCE, "raycast", ("-lm", "-lpthread"),
+                               ("-O2", "-ffp-contract=off"))
             grid = ctypes.POINTER(GridStruct)
             lib.rc_count.argtypes = [grid, _P]
             lib.rc_count.restype = None
