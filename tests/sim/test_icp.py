@@ -3,8 +3,8 @@ the mount; a point set moved by a known rigid transform is moved back to 1e-6 by
 methods; two S3 scans of a hand-written room from poses 0.10 m and 3 deg apart give
 that step within millimetres, point-to-line in fewer iterations; a guess that no scan
 can settle (a corridor's length, a quarter turn, a far-off room) is never a converged,
-usable pose; and point-to-line ICP odometry over an arc ends at most half as far off
-as a wheel guess 5 % long."""
+usable pose; people in one scan only are left out; and point-to-line ICP odometry
+over an arc ends at most half as far off as a wheel guess 5 % long."""
 
 from __future__ import annotations
 
@@ -34,6 +34,11 @@ BARE = World.from_table({"walls": [[5, -2, 5, 3, -5, 3, -5, -2, 5, -2]]})
 ROOM = World.from_table({"walls": [[-4, -3, 6, -3, 6, 4, -4, 4, -4, -3]],
                          "boxes": [[3.0, 1.5, 0.8, 0.6], [-2.0, -1.5, 1.0, 0.5, 30.0]],
                          "circles": [[1.5, -2.0, 0.15], [-1.0, 2.5, 0.25]]})
+#: ROOM with three people (0.2 m radius) near the chair, come in between two scans
+PEOPLE = World.from_table({"walls": [[-4, -3, 6, -3, 6, 4, -4, 4, -4, -3]],
+                           "boxes": [[3.0, 1.5, 0.8, 0.6], [-2.0, -1.5, 1.0, 0.5, 30.0]],
+                           "circles": [[1.5, -2.0, 0.15], [-1.0, 2.5, 0.25],
+                                       [0.2, 0.3, 0.2], [0.5, 0.5, 0.2], [-0.2, -1.3, 0.2]]})
 #: two parallel walls 2 m apart, 120 m long: past the S3's 40 m either way
 CORRIDOR = World.from_table({"walls": [[-60, -1, 60, -1], [-60, 1, 60, 1]]})
 MOUNT = LidarMount(x=0.30, z=0.45)
@@ -198,6 +203,22 @@ def test_two_s3_scans_of_a_room_give_the_step(seed: int) -> None:
 
 
 @pytest.mark.parametrize("method", ["point_to_point", "point_to_line"])
+@pytest.mark.parametrize("seed", [0, 1])
+def test_people_in_one_scan_only_are_left_out(method: Method, seed: int) -> None:
+    """The second scan sees three people the first did not: their points lie over
+    0.5 m from anything in the first and are not paired, so the step is found as
+    without them (measured, seeds 0 to 2: 0.3 to 3.5 mm, under 0.035 deg). Paired
+    anyway, they pull it 13 to 16 cm off."""
+    rng = np.random.default_rng(seed)
+    a, b = ROOM_STEP
+    target, source = _points(ROOM, a, rng), _points(PEOPLE, b, rng)
+    r = icp(source, target, method=method)
+    pos, head = _error(relative(a, b), r.pose)
+    assert r.ok and r.inlier_fraction < 0.97
+    assert pos < 0.005 and head < 0.05
+
+
+@pytest.mark.parametrize("method", ["point_to_point", "point_to_line"])
 def test_a_corridor_s_length_is_flagged_not_found(method: Method) -> None:
     """Two scans from the same pose in a corridor longer than the lidar's range, the
     guess 1 m along it: nothing in the scans says where along it the chair is. The
@@ -213,12 +234,15 @@ def test_a_corridor_s_length_is_flagged_not_found(method: Method) -> None:
 @pytest.mark.parametrize("method", ["point_to_point", "point_to_line"])
 @pytest.mark.parametrize("guess", [(0.0, 0.0, math.pi / 2), (5.0, 3.0, 0.0)], ids=["quarter-turn", "5m"])
 def test_a_guess_outside_the_basin_is_not_converged(method: Method, guess: Pose2D) -> None:
-    """The same room scan against itself from a quarter turn or 5 m off: it settles (if
-    at all) where under 60 % of the points pair up, so it is not converged."""
+    """The same room scan against itself from a quarter turn or 5 m off: never a
+    converged pose but the true one. Here it settles, if at all, at a wrong pose
+    where under 60 % of the points pair up, so it is not converged."""
     pts = _points(ROOM, (0.0, 0.0, 0.0), np.random.default_rng(4))
     r = icp(pts, pts, initial=guess, method=method)
-    assert _error((0, 0, 0), r.pose)[0] > 0.3 or _error((0, 0, 0), r.pose)[1] > 45
-    assert not r.converged and not r.ok and r.inlier_fraction < 0.6
+    pos, head = _error((0.0, 0.0, 0.0), r.pose)
+    assert not r.converged or (pos < 0.001 and head < 0.01)
+    assert pos > 0.3 or head > 45
+    assert not r.ok and r.inlier_fraction < 0.6
 
 
 def test_too_few_points_is_not_converged() -> None:
