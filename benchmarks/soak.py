@@ -233,6 +233,7 @@ class Pacer:
         self.clock: HostPacedClock | None = None
         #: (start, end) of each silence the host's program made, in board time
         self.silences: collections.deque[tuple[float, float]] = collections.deque(maxlen=8)
+        self._answering_since: float | None = None
         if paced_by_host:
             self.clock = HostPacedClock(board.clock)
             board.clock = self.clock
@@ -250,6 +251,8 @@ class Pacer:
     def in_silence(self) -> bool:
         """Whether the board is now within a silence the host's program made."""
         now = self.board.time
+        if self._answering_since is not None and now >= self._answering_since:
+            return True
         return any(a <= now <= b for a, b in self.silences)
 
     def wait(self, seconds: float) -> None:
@@ -262,14 +265,18 @@ class Pacer:
 
     @contextmanager
     def answering(self) -> Iterator[None]:
-        if self.clock is None:
-            yield
-            return
-        self.clock.real_time(self.board)
+        """The host waits for an answer and sends no motion meanwhile: a silence too."""
+        start = self.board.time
+        self._answering_since = start
+        if self.clock is not None:
+            self.clock.real_time(self.board)
         try:
             yield
         finally:
-            self.clock.hold(self.board)
+            if self.clock is not None:
+                self.clock.hold(self.board)
+            self._answering_since = None
+            self.silences.append((start, self.board.time + 0.3))
 
 
 def soak(backend: str, hours: float, speed: float, seed: int, record: Path | None = None) -> Report:
