@@ -224,8 +224,9 @@ class SentLines:
 
 class Pacer:
     """The host's program on the board's clock: ``wait`` lets the board run ``seconds``
-    on and returns when it has; ``answering()`` frees the board while the host waits
-    for an answer (an ``ACK``, a handshake), and holds it where it got to after."""
+    on and returns when it has; ``answering()`` runs the board at real time while the
+    host waits for an answer (an ``ACK``, a handshake), and holds it where it got to
+    after."""
 
     def __init__(self, board: Any, speed: float, paced_by_host: bool) -> None:
         self.board = board
@@ -251,7 +252,7 @@ class Pacer:
     def in_silence(self) -> bool:
         """Whether the board is now within a silence the host's program made."""
         now = self.board.time
-        if self._answering_since is not None and now >= self._answering_since:
+        if self._answering_since is not None:
             return True
         return any(a <= now <= b for a, b in self.silences)
 
