@@ -104,6 +104,11 @@ class Lockstep:
     extra_boots: int = 0
 
 
+#: The faults a firmware whose encoders stand still (R1 on the firmware drives no plant)
+#: may latch under a drive: a stalled wheel, or both (the driver).
+STILL_WHEEL_FAULTS = 0x01 | 0x02 | 0x40
+
+
 @dataclass
 class R1Slice:
     """R1 on one side, for the lines sent after hello (strict) or before (legacy)."""
@@ -116,6 +121,11 @@ class R1Slice:
     mutated_valid_drove: int = 0
     controls: Counter[str] = field(default_factory=Counter)   # valid lines by kind
     controls_ok: Counter[str] = field(default_factory=Counter)
+    #: valid drives refused because a fault was latched when they came (firmware R1)
+    refused_latched: int = 0
+    #: faults latched, by flags (firmware R1: its encoders stand still, so only a stalled
+    #: wheel's or the driver's fault can latch)
+    latched: Counter[int] = field(default_factory=Counter)
     answers: Counter[tuple[str, str]] = field(default_factory=Counter)   # (group, kind)
     silent: Counter[str] = field(default_factory=Counter)    # lines without an answer, by group
     suppressed: int = 0

@@ -213,6 +213,16 @@ def byte_effects(rec: Recording, cycles: list[int], totals: Lockstep) -> Iterato
     totals.lost_bytes += len(cycles) - k
 
 
+def _book_latches(st: R1Slice, rec: Recording) -> None:
+    """Counts the faults the firmware latched in this run, by flags."""
+    previous = int(rec.initial["faultFlags"])
+    for ev in rec.events:
+        flags = int(ev.after["faultFlags"])
+        if flags and not previous:
+            st.latched[flags] += 1
+        previous = flags
+
+
 def firmware_r1(n: int, rng: random.Random, elf: ElfPath, chunk: int | None = None
                 ) -> dict[str, R1Slice]:
     """R1 on the firmware: chunks of ``chunk`` lines (default: 300, or a tenth of ``n``
@@ -242,13 +252,17 @@ def firmware_r1(n: int, rng: random.Random, elf: ElfPath, chunk: int | None = No
             continue
         drove = [False] * count
         params = [False] * count
+        latched = [False] * count
         sup0 = None
+        _book_latches(st, rec)
         for k, before, after in byte_effects(rec, cycles, st.lockstep):
             i = line_of[k]
             if i < 0:
                 continue
             if sup0 is None:
                 sup0 = int(before["errSuppressed"])
+            if before["faultFlags"]:
+                latched[i] = True
             m1 = motion_in(after)
             arm = bool(after["cmdSinceTick"]) and not before["cmdSinceTick"]
             if not is_stop(m1) and (arm or m1 != motion_in(before)):
@@ -265,7 +279,13 @@ def firmware_r1(n: int, rng: random.Random, elf: ElfPath, chunk: int | None = No
             st.answers["all", kind] += 1
         for i, (source, line) in enumerate(lines):
             # Only driving controls are checked here: a stop or a get/set may leave no
-            # trace in SRAM when the state already matches; the port checks those.
+            # trace in SRAM when the state already matches; the port checks those. A
+            # valid drive that came while a fault was latched is refused, as it must be.
+            if source == "drive" and not drove[i] and latched[i]:
+                st.lines[source] += 1
+                st.controls[source] += 1
+                st.refused_latched += 1
+                continue
             _check_line(st, source, line, strict, drove[i], False, params[i], None, False,
                         check=source in ("random", "mutated", "drive"))
     for st in slices.values():

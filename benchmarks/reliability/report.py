@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections import Counter
 from dataclasses import dataclass, field
 
-from .common import Legacy, R1Slice, R2Result
+from .common import STILL_WHEEL_FAULTS, Legacy, R1Slice, R2Result
 from .inputs import CORRUPTIONS
 from .r3 import R3Result, r3_problems
 
@@ -184,6 +184,8 @@ def _r1_details(res: Results) -> list[str]:
             valid = st.total - st.lines["random"] - st.lines["mutated"]
             ok = " / ".join(f"{_n(st.controls_ok[k])}/{_n(st.controls[k])}"
                             for k in ("drive", "stop", "param") if st.controls[k])
+            if st.refused_latched:
+                ok += f" ({_n(st.refused_latched)} drives refused: a fault latched)"
             out.append(f"| {side}, {'after hello' if name == 'strict' else 'before hello (legacy)'} | "
                        f"{_n(st.lines['random'])} / {_n(st.lines['mutated'])} / {_n(valid)} | "
                        f"{_n(st.invalid)} | {st.invalid_motions} | {_n(st.mutated_valid)} "
@@ -226,7 +228,21 @@ def _reply_table(res: Results) -> list[str]:
                     + ", ".join(f"{k} {_n(v)}" for (_, k), v in sorted(st.answers.items()))
                     + f", suppressed {_n(st.suppressed)}"
                     for name, st in res.r1_firmware.items()) + "."]
+        latched: Counter[int] = Counter()
+        for st in res.r1_firmware.values():
+            latched.update(st.latched)
+        if latched:
+            out += ["", "Faults the firmware latched (its encoders stand still: R1 drives no plant, "
+                    "so a drive that builds duty latches a stalled wheel's fault, and the drives "
+                    "after it are refused until the next chunk's reboot): " + ", ".join(
+                        f"{_fault_names(flags)} {n}" for flags, n in sorted(latched.items())) + "."]
     return out
+
+
+def _fault_names(flags: int) -> str:
+    from wcdrive.protocol.codec import fault_names
+
+    return "|".join(fault_names(flags)) or "none"
 
 
 def _comparison_table(res: Results) -> list[str]:
@@ -270,7 +286,10 @@ def problems(res: Results) -> list[str]:
             bad = {"crashes": st.crashes, "hangs": st.hangs, "motions from invalid input":
                    st.invalid_motions, "parameter changes from invalid input":
                    st.invalid_param_changes,
-                   "valid motions not carried out": st.controls["drive"] - st.controls_ok["drive"]}
+                   "valid motions not carried out": st.controls["drive"] - st.controls_ok["drive"]
+                   - st.refused_latched,
+                   "faults latched but a still wheel's": sum(
+                       n for flags, n in st.latched.items() if flags & ~STILL_WHEEL_FAULTS)}
             if side == "port":
                 bad["valid stops/params not carried out"] = (
                     st.controls["stop"] + st.controls["param"]
