@@ -10,11 +10,14 @@
 
 URLs map onto pyserial (the query goes to the handler, which alone parses it):
 
-- ``sim://[?speed=S&seed=N]`` -> ``wcsim://``: in process, the bit-exact port + pymunk
-  plant, at real time (``speed=S``: S times real time);
-- ``simavr://[path/to.elf][?realtime=0&speed=S]`` -> ``wcavr://``: the compiled firmware
-  in simavr driving the pymunk chair, at real time by default like a real board
-  (``speed=S``: S times real time; ``realtime=0``: as fast as simavr runs);
+- ``sim://[?speed=S&seed=N&chair=chair.toml]`` -> ``wcsim://``: in process, the bit-exact
+  port + pymunk plant, at real time (``speed=S``: S times real time);
+- ``simavr://[path/to.elf][?realtime=0&speed=S&chair=chair.toml]`` -> ``wcavr://``: the
+  compiled firmware in simavr driving the pymunk chair, at real time by default like a
+  real board (``speed=S``: S times real time; ``realtime=0``: as fast as simavr runs);
+- on both, ``chair=chair.toml`` gives the plant the ``[chair]`` table of that file in
+  place of the default figures (``wcdrive.plant.params.load_chair``; ``wcdrive bench
+  identify`` fits one to recordings of a real chair, docs/bench.md);
 - ``can://<interface>/<channel>`` -> ``wccan://``: a chair behind a ``wcdrive can-gateway``;
 - any ``scheme://`` pyserial opens (``wcsim://``, ``socket://``, ``rfc2217://``);
 - a device path such as ``/dev/ttyACM0``: opened exclusively (a second program gets

@@ -9,7 +9,10 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import tomllib
+from collections.abc import Mapping
 from dataclasses import dataclass
+from pathlib import Path
 
 from wcdrive.protocol.spec import real
 
@@ -208,3 +211,80 @@ class ChairParams:
         """The friction coefficient of the ``"left"`` or ``"right"`` drive tyre."""
         override = self.friction_left if side == "left" else self.friction_right
         return self.friction if override is None else override
+
+
+class ChairFileError(ValueError):
+    """A chair file (``load_chair``) is missing or malformed; the message names it."""
+
+
+def chair_overrides(table: dict[str, object], where: str = "[chair]") -> dict[str, object]:
+    """The ``ChairParams`` overrides of a ``[chair]`` table, checked: every key a field,
+    every value of the field's kind (a number for a float, a pair for a tuple, true or
+    false for a flag). ``ChairFileError`` names the first key that is not."""
+    fields = {f.name: f for f in dataclasses.fields(ChairParams)}
+    out: dict[str, object] = {}
+    for name, value in table.items():
+        if name not in fields:
+            raise ChairFileError(f"{where}: unknown key {name!r} (not a ChairParams field)")
+        default = fields[name].default
+        number = isinstance(value, (int, float)) and not isinstance(value, bool)
+        if isinstance(default, bool):
+            ok = isinstance(value, bool)
+        elif isinstance(default, tuple):
+            items = list(value) if isinstance(value, (list, tuple)) else []
+            ok = len(items) == len(default) and all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) for v in items)
+            value = tuple(float(v) for v in items)
+        elif isinstance(default, int):
+            ok = number and float(value).is_integer()       # type: ignore[arg-type]
+            value = round(value) if ok else value            # type: ignore[call-overload]
+        else:
+            ok = number or (default is None and value is None)
+        if not ok:
+            raise ChairFileError(f"{where}: {name} = {table[name]!r} is not a value of {fields[name].type}")
+        out[name] = value
+    return out
+
+
+def load_chair(path: str | Path) -> ChairParams:
+    """The ``ChairParams`` of a chair file: a TOML file whose ``[chair]`` table overrides
+    the defaults, as a scenario's does (what ``wcdrive bench identify`` writes, and what
+    ``sim://?chair=`` and ``simavr://?chair=`` load). Other tables in the file are left
+    alone. ``ChairFileError`` when the file is missing, not TOML, has no ``[chair]``
+    table or a key that ``chair_overrides`` refuses."""
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text())
+    except OSError as exc:
+        raise ChairFileError(f"cannot read chair file {path}: {exc.strerror or exc}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ChairFileError(f"{path}: not valid TOML: {exc}") from None
+    table = data.get("chair")
+    if not isinstance(table, dict):
+        raise ChairFileError(f"{path}: no [chair] table")
+    return dataclasses.replace(ChairParams(), **chair_overrides(table, f"{path}: [chair]"))  # type: ignore[arg-type]
+
+
+def chair_toml(overrides: Mapping[str, object], comments: dict[str, str] | None = None,
+               header: str = "") -> str:
+    """A chair file's text: ``header`` as ``#`` comment lines, then the ``[chair]`` table
+    of ``overrides`` (each value with ``repr``'s round-trip digits), each line followed
+    by its entry of ``comments`` after a ``#``. ``load_chair`` reads it back."""
+    lines = [f"# {line}".rstrip() for line in header.splitlines()]
+    lines.append("[chair]")
+    for name, value in overrides.items():
+        chair_overrides({name: value})
+        text = f"{name} = {_toml_value(value)}"
+        note = (comments or {}).get(name)
+        lines.append(f"{text:<40} # {note}" if note else text)
+    return "\n".join(lines) + "\n"
+
+
+def _toml_value(value: object) -> str:
+    """A ``[chair]`` value as TOML: true/false, an array for a tuple, else ``repr``'s
+    round-trip digits."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (tuple, list)):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    return repr(value)

@@ -1,5 +1,7 @@
-"""``wcavr://[path/to.elf][?realtime=0&speed=S&plant=0]``: the compiled firmware in simavr as
-a pyserial port, the pymunk chair behind its pins (``plant=0``: wheels still).
+"""``wcavr://[path/to.elf][?realtime=0&speed=S&plant=0&chair=chair.toml]``: the compiled
+firmware in simavr as a pyserial port, the pymunk chair behind its pins (``plant=0``:
+wheels still; ``chair``: a chair file whose ``[chair]`` table replaces the plant's
+default parameters, ``wcdrive.plant.params.load_chair``).
 
 The virtual Mega runs at real time by default, as a real board does, so that a
 program paced by the wall clock sees the chair a real one would be. ``speed=S`` runs
@@ -12,6 +14,7 @@ from __future__ import annotations
 
 from serial.serialutil import SerialException
 
+from wcdrive.plant.params import load_chair
 from wcdrive.transports.urlhandler.board_serial import (
     BoardSerial,
     Option,
@@ -20,9 +23,9 @@ from wcdrive.transports.urlhandler.board_serial import (
     url_options,
 )
 
-USAGE = "wcavr://[elf][?realtime=0&speed=S&plant=0]"
+USAGE = "wcavr://[elf][?realtime=0&speed=S&plant=0&chair=chair.toml]"
 OPTIONS = {"realtime": Option(True, flag_option), "speed": Option(1.0, speed_option),
-           "plant": Option(True, flag_option)}
+           "plant": Option(True, flag_option), "chair": Option(None, load_chair)}
 
 
 class Serial(BoardSerial):
@@ -34,5 +37,8 @@ class Serial(BoardSerial):
         parts, o, given = url_options(url, "wcavr", USAGE, OPTIONS)
         if not o["realtime"] and "speed" in given:
             raise SerialException("wcavr://: realtime=0 runs flat out; give speed= or realtime=0, not both")
+        if not o["plant"] and "chair" in given:
+            raise SerialException("wcavr://: plant=0 has no chair; give chair= or plant=0, not both")
         elf = (parts.netloc + parts.path) or None
-        return MegaBoard(elf, realtime=o["realtime"], speed=o["speed"], plant=o["plant"])
+        plant = o["chair"] if o["plant"] and o["chair"] is not None else o["plant"]
+        return MegaBoard(elf, realtime=o["realtime"], speed=o["speed"], plant=plant)
