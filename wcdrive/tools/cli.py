@@ -11,6 +11,8 @@
     wcdrive pty --eddie [--speed S] [--eol tolerant]           a simulated Eddie board on a pty
     wcdrive can-gateway --chair URL_OR_PATH --interface I --channel C
                                                          a chair's serial port on a CAN bus
+    wcdrive ros2 [--url URL] [--twist] [--no-tf] [--network [--peer HOST]]
+                                                         the chair as a ROS 2 node on DDS (docs/ros2.md)
     wcdrive sweep SPEC.toml [--scheduler tcp://HOST:8786 | --workers N | --serial] [--out rows.csv]
                                                          many sim runs on Dask, one row each
 
@@ -43,7 +45,7 @@ from wcdrive.boards.sim_board import SimulatedBoard
 from wcdrive.hil import verify
 from wcdrive.protocol.spec import integer
 from wcdrive.sim import report, runner, scenario
-from wcdrive.tools import bench, console, sweep
+from wcdrive.tools import bench, console, ros2_node, sweep
 from wcdrive.tools.options import add_ros_output
 from wcdrive.transports.can_link import CanGateway, open_bus
 from wcdrive.transports.pty_bridge import PtyBridge
@@ -330,6 +332,8 @@ def parser() -> argparse.ArgumentParser:
     gw.add_argument("--channel", default="can0", help="CAN channel (default can0)")
     gw.add_argument("--seconds", type=float, help="stop after this long (default: run until Ctrl-C)")
     gw.set_defaults(func=_can_gateway)
+
+    ros2_node.add_parser(sub)
 
     sw = sub.add_parser("sweep", help="many sim runs (scenarios x parameters x seeds) on Dask",
                         description=(sweep.__doc__ or "").split("\n\n")[0])

@@ -1,0 +1,62 @@
+"""ROS 2's QoS profiles as DDS QoS, and the USER_DATA a ROS 2 Jazzy endpoint carries.
+
+A ``Profile`` is what ``rclcpp`` names a QoS: reliability, durability, history depth.
+The profiles are rclcpp's: ``DEFAULT`` (reliable, volatile, keep last 10: ``/odom``,
+``/joint_states``, ``/diagnostics``, ``/cmd_vel``), ``SENSOR_DATA`` (best effort,
+volatile, keep last 5: ``/imu``, ``/scan``), ``CLOCK`` (best effort, keep last 1),
+``TF`` (tf2_ros' dynamic broadcaster: reliable, volatile, keep last 100), ``TF_STATIC``
+(reliable, transient local, keep last 1: a late subscriber still gets the static
+transforms) and ``DISCOVERY`` (``ros_discovery_info``: reliable, transient local,
+keep last 1, as ``rmw_dds_common`` publishes it).
+
+``qos(profile, type_hash)`` adds what every ROS 2 Jazzy RMW sets on an endpoint:
+the type hash in USER_DATA (``typehash=RIHS01_<64 hex>;``) and the plain CDR
+(XCDR1) data representation.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from cyclonedds.core import Policy, Qos
+
+
+@dataclass(frozen=True)
+class Profile:
+    """A ROS 2 QoS profile: ``reliable`` or best effort, ``transient_local`` or
+    volatile, keep last ``depth``."""
+
+    name: str
+    reliable: bool
+    transient_local: bool
+    depth: int
+
+    def describe(self) -> str:
+        """As docs/ros2.md's topic table shows it."""
+        return (f"{'reliable' if self.reliable else 'best effort'}, "
+                f"{'transient local' if self.transient_local else 'volatile'}, keep last {self.depth}")
+
+
+DEFAULT = Profile("default", reliable=True, transient_local=False, depth=10)
+SENSOR_DATA = Profile("sensor data", reliable=False, transient_local=False, depth=5)
+CLOCK = Profile("clock", reliable=False, transient_local=False, depth=1)
+TF = Profile("tf", reliable=True, transient_local=False, depth=100)
+TF_STATIC = Profile("tf_static", reliable=True, transient_local=True, depth=1)
+DISCOVERY = Profile("ros_discovery_info", reliable=True, transient_local=True, depth=1)
+
+
+def user_data(type_hash: str) -> bytes:
+    """The USER_DATA of a ROS 2 Jazzy endpoint of a type with RIHS01 ``type_hash``."""
+    return f"typehash={type_hash};".encode()
+
+
+def qos(profile: Profile, type_hash: str) -> Qos:
+    """The DDS QoS of an endpoint with ``profile`` for a type with hash ``type_hash``."""
+    return Qos(
+        Policy.Reliability.Reliable(max_blocking_time=100_000_000) if profile.reliable
+        else Policy.Reliability.BestEffort,
+        Policy.Durability.TransientLocal if profile.transient_local else Policy.Durability.Volatile,
+        Policy.History.KeepLast(profile.depth),
+        Policy.DataRepresentation(use_cdrv0_representation=True),
+        Policy.Userdata(user_data(type_hash)),
+    )

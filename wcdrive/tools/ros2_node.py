@@ -1,0 +1,122 @@
+"""``wcdrive ros2``: a chair (any URL ``wcdrive.connect`` takes) as a ROS 2 node on
+DDS, for Nav2, slam_toolbox, robot_localization on this machine (docs/ros2.md).
+
+    wcdrive ros2 --url sim://                     this host only (the default)
+    wcdrive ros2 --url /dev/ttyACM0 --no-tf       an EKF publishes odom -> base_link
+    wcdrive ros2 --url sim:// --network           the LAN: anyone in the domain can drive
+
+It joins ``ROS_DOMAIN_ID`` (``--domain``) before connecting, so that a DDS stack
+that cannot start fails before the chair is touched; then connects, starts a
+``wcdrive.ros2.dds.node.ChairNode`` and serves until Ctrl-C, SIGTERM or ``--seconds``.
+On the way out it stops the chair, leaves the graph and closes the link; if it is
+killed instead, the board's watchdog stops the chair 500 ms after the last command.
+
+``--network`` on a real device (not ``sim://``, ``simavr://``, ``eddie+sim://``) prints
+that any node in the domain can then drive the chair, and where to read about
+SROS2 / DDS Security.
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import threading
+import time
+from types import FrameType
+from urllib.parse import parse_qs, urlsplit
+
+#: URL schemes of simulated robots (no person in a chair).
+SIMULATED = ("sim", "simavr", "wcsim", "wcavr", "eddie+sim", "wceddie")
+NETWORK_WARNING = (
+    "wcdrive ros2: WARNING: --network on a real chair: plain DDS has no authentication, so "
+    "ANY node in ROS 2 domain {domain} on this network can publish /cmd_vel and drive this "
+    "chair with a person in it. Lock the domain down with SROS2 (DDS Security: "
+    "https://docs.ros.org/en/jazzy/Tutorials/Advanced/Security/Introducing-ros2-security.html) "
+    "or leave out --network (this host only).")
+
+
+def simulated(url: str) -> bool:
+    """Whether ``url`` is a simulated robot."""
+    return url.partition("://")[0] in SIMULATED and "://" in url
+
+
+def faster_than_real_time(url: str) -> bool:
+    """Whether a simulated ``url`` runs faster than the wall clock (``speed`` above 1,
+    or simavr's ``realtime=0``): then ``/clock`` carries its time."""
+    if not simulated(url):
+        return False
+    query = parse_qs(urlsplit(url.replace("+", "-", 1)).query)
+    try:
+        speed = float(query.get("speed", ["1"])[0])
+    except ValueError:
+        speed = 1.0
+    return speed > 1.0 or query.get("realtime", ["1"])[0] == "0"
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    """Adds ``ros2`` to the ``wcdrive`` command's subcommands."""
+    p = sub.add_parser("ros2", help="the chair as a ROS 2 node on DDS (no ROS install needed)",
+                       description=(__doc__ or "").split("\n\n")[0])
+    p.add_argument("--url", default="sim://", help="the robot: any URL connect() takes (default sim://)")
+    p.add_argument("--name", default="wcdrive", help="the node's name (default wcdrive)")
+    p.add_argument("--domain", type=int, help="the ROS 2 domain (default $ROS_DOMAIN_ID, else 0)")
+    p.add_argument("--twist", action="store_true",
+                   help="/cmd_vel is geometry_msgs/Twist (default: TwistStamped, Jazzy's)")
+    p.add_argument("--no-tf", action="store_true", help="do not publish odom -> base_link (an EKF does)")
+    p.add_argument("--cmd-timeout", type=float, default=0.5,
+                   help="stop when no good /cmd_vel came for this long (s, default 0.5)")
+    p.add_argument("--max-age", type=float, default=0.5,
+                   help="drop a TwistStamped stamped further than this from now (s, default 0.5)")
+    p.add_argument("--sim-time", choices=("auto", "on", "off"), default="auto",
+                   help="publish /clock and stamp with the board's clock (auto: when the "
+                        "backend runs faster than real time)")
+    p.add_argument("--network", action="store_true",
+                   help="join the ROS graph on the network (default: this host only)")
+    p.add_argument("--peer", action="append", default=[],
+                   help="--network: a host to discover by unicast (repeatable)")
+    p.add_argument("--interface", help="--network: the interface name or address to use")
+    p.add_argument("--seconds", type=float, help="stop after this long (default: until Ctrl-C)")
+    p.set_defaults(func=run)
+
+
+def _terminate(signum: int, frame: FrameType | None) -> None:
+    raise SystemExit(128 + signum)
+
+
+def run(args: argparse.Namespace) -> int:
+    """``wcdrive ros2`` (module docstring)."""
+    import wcdrive
+    from wcdrive.ros2.dds.config import domain_id
+    from wcdrive.ros2.dds.graph import RosNode
+    from wcdrive.ros2.dds.node import ChairNode, ImuTap, Options
+
+    domain = domain_id() if args.domain is None else args.domain
+    if args.network and not simulated(args.url):
+        print(NETWORK_WARNING.format(domain=domain), file=sys.stderr, flush=True)
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, _terminate)
+    ros = RosNode(args.name, domain=domain, network=args.network, peers=tuple(args.peer),
+                  interface=args.interface)
+    try:
+        tap = ImuTap() if args.url.startswith(("sim://", "simavr://", "wcsim://", "wcavr://")) else None
+        chair = wcdrive.connect(args.url, ros=tap) if tap is not None else wcdrive.connect(args.url)
+        with chair:
+            sim_time = {"on": True, "off": False}.get(args.sim_time, faster_than_real_time(args.url))
+            options = Options(name=args.name, twist=args.twist, publish_tf=not args.no_tf,
+                              cmd_timeout=args.cmd_timeout, max_age=args.max_age, sim_time=sim_time)
+            node = ChairNode(chair, ros, options, imu=tap).start()
+            try:
+                where = "the network" if args.network else "this host only"
+                print(f"wcdrive ros2: node /{args.name} on ROS 2 domain {domain} ({where}), driving "
+                      f"{args.url}; /cmd_vel is {'Twist' if args.twist else 'TwistStamped'}"
+                      + (", /clock on" if sim_time else "") + "; Ctrl-C to stop", flush=True)
+                end = time.monotonic() + args.seconds if args.seconds else None
+                while end is None or time.monotonic() < end:
+                    time.sleep(0.1)
+            finally:
+                node.close()            # stops the chair, leaves the graph; then the link closes
+                print(f"wcdrive ros2: /cmd_vel {dict(sorted(node.gate.counts.items()))}", flush=True)
+    finally:
+        ros.close()
+    return 0
