@@ -268,8 +268,9 @@ class Interrupted(KeyboardInterrupt):
 def run_scenario(name: str, url: str, *, speed: float = 1.0,
                  announce: Callable[[str], None] | None = None, progress: bool = False,
                  ros: Any = None) -> Recording:
-    """Drives scenario ``name`` on the board at ``url`` and returns the recording;
-    ``announce`` gets a line once the chair is connected; ``progress`` draws a tqdm bar
+    """Drives scenario ``name`` on the board at ``url`` and returns the recording (the
+    scenario's ``[params]`` set first, in the board's RAM only: its next reset forgets
+    them); ``announce`` gets a line once the chair is connected; ``progress`` draws a tqdm bar
     of scenario time on stderr (on a terminal). Ctrl-C stops the chair and raises
     ``Interrupted`` with the recording so far, marked ``"partial": true``."""
     from tqdm import tqdm
@@ -286,6 +287,13 @@ def run_scenario(name: str, url: str, *, speed: float = 1.0,
             recording.meta.update({"scenario": sc.name, "url": url, "protocol": chair.protocol_version,
                                    "firmware": chair.firmware, "firmware_version": chair.firmware_version,
                                    "build_id": chair.build_id})
+            if sc.board_params:                             # [params], as wcdrive sim sets them
+                set_param = getattr(chair, "set_param", None)
+                if set_param is None:
+                    raise scenario.ScenarioError(f"{sc.name} sets [params], which {url} does not take")
+                for name, value in sc.board_params.items():
+                    set_param(name, value)
+                recording.meta["params"] = dict(sc.board_params)
             if announce is not None:
                 announce(f"driving {sc.name} on {url} (firmware {chair.firmware} "
                          f"{chair.firmware_version}, build {chair.build_id}; Ctrl-C stops the chair)")

@@ -1,0 +1,349 @@
+"""Fitting ``ChairParams`` to what a board did: its duty per control tick and its wheels'
+angles at each tick (``Run``), the wheels on blocks or on the floor.
+
+    fit = identify([run_on_blocks, run_on_floor])     # -> Fit
+    fit.params                                        # ChairParams with the fitted figures
+    print(fit.report())
+
+The fit is a simulation-error fit (``scipy.optimize.least_squares``): each run is
+re-simulated from rest, driven by its recorded duty tick by tick, and the residuals are
+the wheels' mean speeds over each tick interval, simulated less measured (rad/s). So the
+encoder's quantisation is one count over a whole interval, a dropped tick only widens an
+interval, and the equation of motion is the plant's own:
+
+* On the floor ``simulate`` runs ``wcdrive.plant.chair.Plant`` itself (body, tyres,
+  casters), 1 ms steps, the duty of tick k from ``millis[k]`` to ``millis[k+1]``.
+* On blocks the drive tyres touch nothing; the wheel is the plant's wheel with no tyre
+  force (``block_wheel_step``: the kernel's implicit step, ``j dw/dt = tau - b w`` with
+  ``tau = Kt (V - Ke G w) / R`` held to the driver's current limit). The plant cannot be
+  used for this: with no grip (``friction = 0``) its wheel step takes the current limit
+  it decided with the tyre gripping, and a wheel in the air then runs away beyond its
+  no-load speed (docs/bench.md, "Known limits").
+
+What the counts can tell apart (docs/bench.md has the reasoning). The motor's torque is
+``Kt (V - Ke G w) / R`` with ``Kt = eta G Ke`` at the wheel, against ``J dw/dt + b w``
+and, on the floor, the body. Multiplying ``Kt/R``, the inertias, the masses, ``b`` and
+the driver's current limit's torque together changes no motion, so one scale is not
+identifiable; the gear ratio, its efficiency and the armature resistance are held at
+their defaults and fix it. Viscous gear friction adds ``b R / Kt`` (0.4 % for the
+defaults) to the back-EMF constant in every steady speed and time constant alike, so
+``b`` is held too. The drive wheels' and the casters' rolling resistance are one force
+``m g (crr (1 - s) + crr_c s)``: ``crr_c`` is held. Chair and occupant are one mass:
+the occupant is held. Then, with ``FITTED``:
+
+* blocks: ``motor_constant`` (as ``top_wheel_speed``, which sets it), ``wheel_inertia``,
+  ``current_limit``;
+* floor: ``motor_constant``, ``current_limit``, ``chair_mass``, ``rolling_resistance``;
+  ``wheel_inertia`` only weakly (6 % of what a wheel drives on the floor), so it is
+  fitted only when a run on blocks is given.
+
+Each fitted figure has a standard uncertainty from the fit's Jacobian (residuals taken
+as independent: an underestimate where they are correlated); one beyond
+``PIN_LIMIT`` is reported as not pinned down.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from wcdrive.plant.chair import Plant
+from wcdrive.plant.params import ChairParams
+
+#: The figures a fit may move, in the order the fit keeps them; ``motor_constant`` is
+#: written as the ``top_wheel_speed`` that gives it.
+FITTED = ("motor_constant", "wheel_inertia", "current_limit", "chair_mass", "rolling_resistance")
+#: Which runs tell each fitted figure.
+BLOCKS_FITS = ("motor_constant", "wheel_inertia", "current_limit")
+FLOOR_FITS = ("motor_constant", "current_limit", "chair_mass", "rolling_resistance")
+#: Held at their defaults (or the starting chair's), with why.
+HELD = {
+    "gear_ratio": "with gear_efficiency and armature_resistance: one scale of torque, inertia and "
+                  "mass that no motion shows",
+    "gear_efficiency": "as gear_ratio",
+    "armature_resistance": "as gear_ratio (measure it with an ohmmeter and start from it)",
+    "viscous_friction": "adds b R / Kt to the back-EMF constant in every speed alike",
+    "rotor_inertia": "one inertia with wheel_inertia",
+    "caster_rolling_resistance": "one force with rolling_resistance",
+    "occupant_mass": "one mass with chair_mass",
+    "supply_voltage": "the duty's scale: measure the battery (battery_voltage)",
+}
+#: A fitted figure whose relative standard uncertainty passes this is not pinned down.
+PIN_LIMIT = 0.02
+#: s of a plant step.
+DT = 0.001
+
+
+@dataclass(frozen=True)
+class Run:
+    """One recorded experiment: ``millis`` (n) the ticks' board times in ms; ``duty``
+    (n x 2, left and right) the signed duty (-255..255, + forward) each tick wrote,
+    driving until the next; ``angle`` (n x 2) the wheels' angles at each tick (rad,
+    forward +, from the encoder counts); ``blocks`` whether the wheels were off the
+    ground. The first tick is at rest."""
+
+    millis: np.ndarray
+    duty: np.ndarray
+    angle: np.ndarray
+    blocks: bool
+    name: str = ""
+
+    def __post_init__(self) -> None:
+        n = len(self.millis)
+        if n < 3 or self.duty.shape != (n, 2) or self.angle.shape != (n, 2):
+            raise ValueError("a run needs 3 or more ticks, with a duty and an angle pair for each")
+        if np.any(np.diff(self.millis) <= 0):
+            raise ValueError("the ticks' millis must increase")
+
+    @property
+    def duration(self) -> float:
+        """s from the first tick to the last."""
+        return float(self.millis[-1] - self.millis[0]) / 1000.0
+
+    def speeds(self) -> np.ndarray:
+        """(n-1) x 2: each wheel's mean speed over each interval between ticks (rad/s)."""
+        return np.diff(self.angle, axis=0) / (np.diff(self.millis)[:, None] / 1000.0)
+
+
+def block_wheel_step(p: ChairParams, volts: float, speed: float, dt: float = DT) -> float:
+    """A wheel on blocks one step of ``dt`` on from ``speed`` (rad/s) at ``volts``: the
+    plant's implicit wheel step with no tyre force. The unlimited solution of
+    ``j (w - speed) / dt = k1 V - (k2 + b) w``; where its current would pass the limit,
+    the limit's torque instead: ``j (w - speed) / dt = +-tau_max - b w``."""
+    k = p.motor_constant
+    ke_g = k * p.gear_ratio
+    k1 = p.gear_ratio * p.gear_efficiency * k / p.armature_resistance
+    j_dt = p.wheel_total_inertia / dt
+    b = p.viscous_friction
+    w = (j_dt * speed + k1 * volts) / (j_dt + k1 * ke_g + b)
+    if abs(volts - ke_g * w) > p.current_limit * p.armature_resistance:
+        tau = math.copysign(p.gear_ratio * p.gear_efficiency * k * p.current_limit, volts - ke_g * w)
+        w = (j_dt * speed + tau) / (j_dt + b)
+    return w
+
+
+def simulate(p: ChairParams, run: Run) -> np.ndarray:
+    """The wheels' angles (n x 2) at ``run``'s ticks, from rest at its first, driven by
+    its duty: on the floor the plant itself, on blocks ``block_wheel_step``."""
+    steps = np.diff(run.millis).astype(int)
+    volts_per_duty = (p.battery_voltage or p.supply_voltage) / 255.0
+    out = np.zeros((len(run.millis), 2))
+    if not run.blocks:
+        plant = Plant(p)
+        for i, n in enumerate(steps):
+            dl, dr = int(run.duty[i, 0]), int(run.duty[i, 1])
+            plant.set_drive(abs(dl), int(dl >= 0), abs(dr), int(dr >= 0))
+            plant.advance(int(n), DT)
+            out[i + 1] = plant.left.angle, plant.right.angle
+        return out
+    # the kernel's wheel step, inlined (a call per step costs more than the step)
+    k = p.motor_constant
+    ke_g = k * p.gear_ratio
+    k1 = p.gear_ratio * p.gear_efficiency * k / p.armature_resistance
+    j_dt = p.wheel_total_inertia / DT
+    b = p.viscous_friction
+    limit_v = p.current_limit * p.armature_resistance
+    tau_max = p.gear_ratio * p.gear_efficiency * k * p.current_limit
+    free = j_dt + k1 * ke_g + b
+    held = j_dt + b
+    for side in (0, 1):
+        w = theta = 0.0
+        for i, n in enumerate(steps):
+            volts = volts_per_duty * float(run.duty[i, side])
+            drive = k1 * volts
+            for _ in range(int(n)):
+                nxt = (j_dt * w + drive) / free
+                if abs(volts - ke_g * nxt) > limit_v:
+                    nxt = (j_dt * w + math.copysign(tau_max, volts - ke_g * nxt)) / held
+                w = nxt
+                theta += w * DT
+            out[i + 1, side] = theta
+    return out
+
+
+def with_motor_constant(p: ChairParams, k: float) -> ChairParams:
+    """``p`` with the ``top_wheel_speed`` that makes its ``motor_constant`` ``k``.
+    ``ChairParams.motor_constant`` solves ``V = k G w + R load / (k G eta)`` for ``k`` at
+    the top speed ``w``, the load ``L0 + b w`` per wheel (rolling resistance, the
+    casters' share, viscous friction); for a given ``k`` that is linear in ``w``:
+    ``w = (V k - R L0 / (G eta)) / (G k^2 + R b / (G eta))``."""
+    g, eta, res = p.gear_ratio, p.gear_efficiency, p.armature_resistance
+    static = (p.rolling_resistance * p.drive_wheel_load
+              + p.caster_rolling_resistance * p.caster_load) * p.wheel_radius
+    top = ((p.supply_voltage * k - res * static / (g * eta))
+           / (g * k * k + res * p.viscous_friction / (g * eta)))
+    if not top > 0:
+        raise ValueError(f"no top speed gives the motor constant {k}: too small for the loads")
+    return dataclasses.replace(p, top_wheel_speed=float(top))
+
+
+def apply(base: ChairParams, values: dict[str, float]) -> ChairParams:
+    """``base`` with the ``FITTED`` figures of ``values``."""
+    fields = {n: v for n, v in values.items() if n != "motor_constant"}
+    p = dataclasses.replace(base, **fields)                     # type: ignore[arg-type]
+    if "motor_constant" in values:
+        p = with_motor_constant(p, values["motor_constant"])
+    return p
+
+
+def value(p: ChairParams, name: str) -> float:
+    """A ``FITTED`` figure of ``p``."""
+    return float(getattr(p, name))
+
+
+@dataclass
+class Fit:
+    """What ``identify`` found: ``params`` (the start with the fitted figures),
+    ``values`` and ``sigma`` (standard uncertainties, same units) of each fitted figure,
+    ``held`` the figures kept at the start's, ``rms`` (rad/s) each run's residual
+    speed RMS before and after, ``wheel_factor`` each wheel's back-EMF constant over
+    the mean (with its uncertainty), and ``unpinned``: fitted figures whose relative
+    uncertainty passed ``PIN_LIMIT``."""
+
+    params: ChairParams
+    start: ChairParams
+    values: dict[str, float]
+    sigma: dict[str, float]
+    held: dict[str, str]
+    rms_before: dict[str, float]
+    rms_after: dict[str, float]
+    wheel_factor: dict[str, tuple[float, float]] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def unpinned(self) -> list[str]:
+        """Fitted figures the runs did not pin down (relative uncertainty > ``PIN_LIMIT``)."""
+        return [n for n, v in self.values.items() if not self.sigma[n] <= PIN_LIMIT * abs(v)]
+
+    def overrides(self) -> dict[str, float]:
+        """The ``[chair]`` table: the fitted figures as ``ChairParams`` fields
+        (``motor_constant`` as ``top_wheel_speed``), the rest as the start has them."""
+        names = [n for n in self.values if n != "motor_constant"]
+        if "motor_constant" in self.values:
+            names.insert(0, "top_wheel_speed")
+        start = dataclasses.asdict(self.start)
+        default = dataclasses.asdict(ChairParams())
+        out = {n: float(getattr(self.params, n)) for n in names}
+        out.update({n: v for n, v in start.items() if v != default[n] and n not in out})
+        return out
+
+    def report(self) -> str:
+        """The fit as text: each figure with its uncertainty, what was held and why,
+        per-wheel factors and each run's residuals."""
+        lines = ["fitted (value +- standard uncertainty; default):"]
+        default = ChairParams()
+        for n, v in self.values.items():
+            s = self.sigma[n]
+            rel = s / abs(v) if v else math.inf
+            flag = "" if rel <= PIN_LIMIT else "   NOT PINNED DOWN by these runs"
+            lines.append(f"  {n:<20} {v:.6g} +- {s:.2g} ({100 * rel:.2f} %; default "
+                         f"{value(default, n):.6g}){flag}")
+        if "motor_constant" in self.values:
+            lines.append("  (motor_constant is written as top_wheel_speed = "
+                         f"{self.params.top_wheel_speed:.6g})")
+        lines.append("held (not identifiable from duty and encoder counts):")
+        for n, why in self.held.items():
+            lines.append(f"  {n:<26} {getattr(self.params, n)!r:<10} {why}")
+        if self.wheel_factor:
+            lines.append("per-wheel back-EMF factor (each wheel's over the mean; the plant has one "
+                         "motor model for both wheels):")
+            for side, (f, s) in self.wheel_factor.items():
+                lines.append(f"  {side:<6} {f:.4f} +- {s:.4f}")
+        lines.append("residual wheel-speed RMS per run (rad/s), start -> fitted:")
+        for name in self.rms_after:
+            lines.append(f"  {name}: {self.rms_before[name]:.4f} -> {self.rms_after[name]:.4f}")
+        lines += [f"note: {note}" for note in self.notes]
+        return "\n".join(lines)
+
+
+def residuals(p: ChairParams, runs: Sequence[Run]) -> np.ndarray:
+    """Simulated less measured mean wheel speeds over every tick interval of every run
+    (rad/s), flattened."""
+    out = []
+    for run in runs:
+        sim = simulate(p, run)
+        dt = np.diff(run.millis)[:, None] / 1000.0
+        out.append(((np.diff(sim, axis=0) - np.diff(run.angle, axis=0)) / dt).ravel())
+    return np.concatenate(out)
+
+
+def rms(p: ChairParams, run: Run) -> float:
+    """The RMS of ``residuals`` for one run (rad/s)."""
+    return float(np.sqrt(np.mean(residuals(p, [run]) ** 2)))
+
+
+def identify(runs: Sequence[Run], start: ChairParams | None = None) -> Fit:
+    """Fits the figures the runs can tell (module docstring) to all ``runs`` at once,
+    from ``start`` (default ``ChairParams()``), the rest held at ``start``'s. Raises
+    ValueError without a run."""
+    if not runs:
+        raise ValueError("no runs to fit")
+    start = start or ChairParams()
+    blocks = any(r.blocks for r in runs)
+    floor = any(not r.blocks for r in runs)
+    names = [n for n in FITTED if (blocks and n in BLOCKS_FITS) or (floor and n in FLOOR_FITS)]
+    held = dict(HELD)
+    notes = []
+    if not blocks:
+        held["wheel_inertia"] = ("weakly seen on the floor (6 % of the driven inertia): fitted "
+                                 "from runs on blocks")
+    if not floor:
+        held["chair_mass"] = "invisible on blocks: fitted from runs on the floor"
+        held["rolling_resistance"] = "invisible on blocks: fitted from runs on the floor"
+    x0 = np.array([math.log(value(start, n)) for n in names])
+
+    def params_of(x: np.ndarray) -> ChairParams:
+        return apply(start, {n: math.exp(v) for n, v in zip(names, x, strict=True)})
+
+    def fun(x: np.ndarray) -> np.ndarray:
+        return residuals(params_of(x), runs)
+
+    result = least_squares(fun, x0, x_scale=0.1, diff_step=1e-4, xtol=1e-10, ftol=1e-10,
+                           bounds=(x0 - math.log(5.0), x0 + math.log(5.0)))
+    fitted = params_of(result.x)
+    values = {n: value(fitted, n) for n in names}
+    dof = max(1, result.fun.size - len(names))
+    s2 = float(result.fun @ result.fun) / dof
+    jac = result.jac
+    try:
+        cov = np.linalg.inv(jac.T @ jac) * s2
+        sigma = {n: abs(values[n]) * math.sqrt(max(cov[i, i], 0.0)) for i, n in enumerate(names)}
+    except np.linalg.LinAlgError:
+        sigma = {n: math.inf for n in names}
+        notes.append("the fit's Jacobian is singular: some figure has no effect on these runs")
+    if not result.success:
+        notes.append(f"the optimiser stopped: {result.message}")
+    fit = Fit(params=fitted, start=start, values=values, sigma=sigma, held=held,
+              rms_before={r.name: rms(start, r) for r in runs},
+              rms_after={r.name: rms(fitted, r) for r in runs}, notes=notes)
+    if blocks:
+        fit.wheel_factor = wheel_factors(fitted, [r for r in runs if r.blocks])
+    return fit
+
+
+def wheel_factors(p: ChairParams, runs: Sequence[Run]) -> dict[str, tuple[float, float]]:
+    """Each wheel's back-EMF constant over the mean of both, from runs on blocks (where
+    the wheels are independent): a one-figure fit of ``motor_constant`` per wheel, the
+    rest at ``p``'s; with its standard uncertainty."""
+    out: dict[str, tuple[float, float]] = {}
+    ks: list[tuple[float, float]] = []
+    for side in (0, 1):
+        one = [dataclasses.replace(r, duty=r.duty[:, [side, side]], angle=r.angle[:, [side, side]])
+               for r in runs]
+
+        def fun(x: np.ndarray, one: list[Run] = one) -> np.ndarray:
+            return residuals(with_motor_constant(p, math.exp(x[0])), one)[::2]
+
+        res = least_squares(fun, [math.log(p.motor_constant)], x_scale=0.1, diff_step=1e-4)
+        s2 = float(res.fun @ res.fun) / max(1, res.fun.size - 1)
+        jtj = float(res.jac[:, 0] @ res.jac[:, 0])
+        ks.append((math.exp(res.x[0]), math.sqrt(s2 / jtj) if jtj > 0 else math.inf))
+    mean = 0.5 * (ks[0][0] + ks[1][0])
+    for name, (k, rel) in zip(("left", "right"), ks, strict=True):
+        out[name] = (k / mean, rel * k / mean)
+    return out
