@@ -308,14 +308,14 @@ def identify(runs: Sequence[Run], start: ChairParams | None = None) -> Fit:
     fitted = params_of(result.x)
     values = {n: value(fitted, n) for n in names}
     dof = max(1, result.fun.size - len(names))
-    s2 = float(result.fun @ result.fun) / dof
-    jac = result.jac
-    try:
-        cov = np.linalg.inv(jac.T @ jac) * s2
-        sigma = {n: abs(values[n]) * math.sqrt(max(cov[i, i], 0.0)) for i, n in enumerate(names)}
-    except np.linalg.LinAlgError:
-        sigma = {n: math.inf for n in names}
-        notes.append("the fit's Jacobian is singular: some figure has no effect on these runs")
+    # the residuals' variance, no less than the counts' own: one count's quantisation at
+    # each end of a tick interval (2 q^2 / 12 over the interval squared)
+    interval = float(np.median(np.concatenate([np.diff(r.millis) for r in runs]))) / 1000.0
+    floor_var = (2.0 * math.pi / start.counts_per_rev / interval) ** 2 / 6.0
+    s2 = max(float(result.fun @ result.fun) / dof, floor_var)
+    sigma = {n: abs(values[n]) * s for n, s in zip(names, _standard_errors(result.jac, s2), strict=True)}
+    if any(math.isinf(s) for s in sigma.values()):
+        notes.append("some figure has no effect on these runs (its column of the Jacobian is zero)")
     if not result.success:
         notes.append(f"the optimiser stopped: {result.message}")
     fit = Fit(params=fitted, start=start, values=values, sigma=sigma, held=held,
@@ -324,6 +324,33 @@ def identify(runs: Sequence[Run], start: ChairParams | None = None) -> Fit:
     if blocks:
         fit.wheel_factor = wheel_factors(fitted, [r for r in runs if r.blocks])
     return fit
+
+
+def _standard_errors(jac: np.ndarray, s2: float) -> list[float]:
+    """Standard errors of the fitted (log) figures: ``sqrt(diag(s2 (J^T J)^-1))``; inf for
+    a figure the residuals do not depend on (a zero column, or one the others span)."""
+    norms = np.linalg.norm(jac, axis=0)
+    if not norms.max() > 0:
+        return [math.inf] * jac.shape[1]
+    if not np.all(norms > 1e-9 * float(norms.max())):
+        return _with_dead_columns(jac, s2, norms)
+    scaled = jac / norms
+    try:
+        cov = np.linalg.inv(scaled.T @ scaled)
+    except np.linalg.LinAlgError:
+        return [math.inf] * jac.shape[1]
+    return [math.sqrt(max(cov[i, i], 0.0) * s2) / norms[i] if cov[i, i] < 1e12 else math.inf
+            for i in range(jac.shape[1])]
+
+
+def _with_dead_columns(jac: np.ndarray, s2: float, norms: np.ndarray) -> list[float]:
+    """``_standard_errors`` when some columns are zero: those inf, the rest on their own."""
+    live = norms > 1e-9 * float(norms.max())
+    out = [math.inf] * jac.shape[1]
+    if live.any():
+        for i, s in zip(np.flatnonzero(live), _standard_errors(jac[:, live], s2), strict=True):
+            out[int(i)] = s
+    return out
 
 
 def wheel_factors(p: ChairParams, runs: Sequence[Run]) -> dict[str, tuple[float, float]]:
@@ -347,3 +374,23 @@ def wheel_factors(p: ChairParams, runs: Sequence[Run]) -> dict[str, tuple[float,
     for name, (k, rel) in zip(("left", "right"), ks, strict=True):
         out[name] = (k / mean, rel * k / mean)
     return out
+
+
+def degraded(run: Run, rng: np.random.Generator, *, quantum: int = 1, counts_per_rev: int = 10000,
+             late: float = 0.0, late_ms: int = 2, drop: float = 0.0) -> Run:
+    """``run`` as a poorer recording would give it: the counts floored to multiples of
+    ``quantum`` (a coarser encoder); a share ``late`` of the ticks stamped up to
+    ``late_ms`` ms after their counts were latched (a late line: its ``millis`` is not
+    when the counts were taken); a share ``drop`` of the ticks lost (not the first)."""
+    step = 2.0 * math.pi * quantum / counts_per_rev
+    angle = np.floor(np.round(run.angle / (2.0 * math.pi / counts_per_rev)) / quantum) * step
+    millis = run.millis.copy()
+    shifted = rng.random(len(millis)) < late
+    shifted[0] = False
+    millis[shifted] += rng.integers(1, late_ms + 1, size=int(shifted.sum()))
+    keep = rng.random(len(millis)) >= drop
+    keep[0] = True
+    keep &= np.concatenate([[True], np.diff(millis) > 0])     # a late stamp may pass the next
+    millis, duty, angle = millis[keep], run.duty[keep], angle[keep]
+    # a lost tick's duty is unknown: the one before it is taken to hold on (the fit's view)
+    return Run(millis=millis, duty=duty, angle=angle, blocks=run.blocks, name=run.name)

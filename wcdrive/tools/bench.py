@@ -5,6 +5,8 @@
                          [--mcap run.mcap | --live]   (ROS 2 messages, wcdrive.ros2.bridge)
     wcdrive bench record SCENARIO --port /dev/ttyACM0 --out run.wcrec.json
     wcdrive bench replay run.wcrec.json            # the port must agree, byte for byte
+    wcdrive bench replay run.wcrec.json --plant chair.toml   # how well that plant predicts it
+    wcdrive bench identify blocks.wcrec.json floor.wcrec.json --out chair.toml
     wcdrive bench plot   run.wcrec.json --out DIR
 
 ``--port`` takes what ``wcdrive.connect`` takes: a device path, ``simavr://`` (the
@@ -373,7 +375,17 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _replay(args: argparse.Namespace) -> int:
+    if args.plant is not None:
+        from wcdrive.tools.identify import prediction_main
+
+        return prediction_main(args.recording, args.plant, True if args.blocks else None)
     return replay_main(args.recording)
+
+
+def _identify(args: argparse.Namespace) -> int:
+    from wcdrive.tools.identify import identify_main
+
+    return identify_main(args)
 
 
 def plot(recording: Recording, out: Path) -> list[Path]:
@@ -451,9 +463,28 @@ def add_parser(sub: Any) -> None:
         r.add_argument("--speed", type=float, default=1.0,
                        help="scenario time per wall time (only for simulated boards)")
         r.set_defaults(func=_run)
-    p = verbs.add_parser("replay", help="replay a recording through the Python port")
+    p = verbs.add_parser("replay", help="replay a recording through the Python port (--plant: "
+                         "how well a chair file's plant predicts its wheels)")
     p.add_argument("recording", type=Path)
+    p.add_argument("--plant", type=Path, help="a chair file (bench identify --out): re-simulate the "
+                   "recording's wheels with it and with the default plant, and print both errors")
+    p.add_argument("--blocks", action="store_true",
+                   help="with --plant: the recording was made on blocks (default: its scenario's name says)")
     p.set_defaults(func=_replay)
+    i = verbs.add_parser("identify", help="fit the plant's figures to recordings; write a chair file",
+                         description="Fits the chair's motor constant, wheel inertia, current limit, "
+                         "mass and rolling resistance to recordings of ident_blocks (on blocks) and "
+                         "ident_floor (on the floor); docs/bench.md.")
+    i.add_argument("recordings", type=Path, nargs="+", help="bench recordings (.wcrec.json)")
+    i.add_argument("--out", type=Path, help="write the fitted [chair] table here (chair.toml)")
+    i.add_argument("--start", type=Path,
+                   help="a chair file to start from: its figures are held where not fitted "
+                        "(a measured armature_resistance or battery_voltage, say)")
+    i.add_argument("--blocks", type=Path, action="append",
+                   help="this recording was made on blocks (repeatable; default: the scenario's name)")
+    i.add_argument("--floor", type=Path, action="append",
+                   help="this recording was made on the floor (repeatable)")
+    i.set_defaults(func=_identify)
     q = verbs.add_parser("plot", help="plot a recording")
     q.add_argument("recording", type=Path)
     q.add_argument("--out", default="wcdrive-out/bench")
