@@ -197,7 +197,9 @@ class ChairNode:
             return self._last_board_time
         return time.monotonic() + self._wall
 
-    def _stamp_of(self, tel: Telemetry) -> float:
+    def stamp(self, tel: Telemetry) -> float:
+        """The stamp (s) of the messages of tick ``tel``: its board time with
+        ``sim_time``, else the host time it maps to, on the wall clock's epoch."""
         if self.options.sim_time and tel.board_time is not None:
             self._last_board_time = tel.board_time
             return tel.board_time
@@ -224,7 +226,7 @@ class ChairNode:
 
     def _publish_tick(self, tel: Telemetry) -> None:
         o = self.options
-        t = self._stamp_of(tel)
+        t = self.stamp(tel)
         estimate = self.robot.odometry
         self._pub["/odom"].publish(messages.odometry(t, estimate, o.odom_frame, o.base_frame))
         if o.publish_tf:
