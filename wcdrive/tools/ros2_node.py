@@ -89,7 +89,6 @@ def run(args: argparse.Namespace) -> int:
     import wcdrive
     from wcdrive.ros2.dds.config import domain_id
     from wcdrive.ros2.dds.graph import RosNode
-    from wcdrive.ros2.dds.node import ChairNode, ImuTap, Options
 
     domain = domain_id() if args.domain is None else args.domain
     if args.network and not simulated(args.url):
@@ -97,7 +96,9 @@ def run(args: argparse.Namespace) -> int:
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGTERM, _terminate)
     ros = RosNode(args.name, domain=domain, network=args.network, peers=tuple(args.peer),
-                  interface=args.interface)
+                  interface=args.interface)            # first: a DDS stack that fails, fails here
+    from wcdrive.ros2.dds.node import ChairNode, ImuTap, Options
+
     try:
         tap = ImuTap() if args.url.startswith(("sim://", "simavr://", "wcsim://", "wcavr://")) else None
         chair = wcdrive.connect(args.url, ros=tap) if tap is not None else wcdrive.connect(args.url)

@@ -14,17 +14,21 @@ configuration of ``config.xml`` and follows ROS 2 Jazzy's conventions, those of
   read; it is written again whenever an endpoint is added.
 
 A DDS stack that cannot start raises ``WcdriveConnectionError`` naming Cyclone DDS and
-what to check; a missing ``cyclonedds`` package names the package to install.
+what to check; a missing ``cyclonedds`` package names the package to install; on the
+network without unicast peers, multicast that does not work here raises before the
+participant starts (``multicast.check``).
 """
 
 from __future__ import annotations
 
 import threading
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from wcdrive.errors import WcdriveConnectionError, WcdriveError
 from wcdrive.ros2.dds import config
-from wcdrive.ros2.dds.qos import DISCOVERY, Profile
+
+if TYPE_CHECKING:
+    from wcdrive.ros2.dds.qos import Profile
 
 DISCOVERY_TOPIC = "ros_discovery_info"
 ENTITIES_INFO = "rmw_dds_common/msg/ParticipantEntitiesInfo"
@@ -82,6 +86,10 @@ class RosNode:
         self._writers: list[Any] = []
         self._topics: dict[str, Any] = {}
         self._closed = False
+        if network and not peers:
+            from wcdrive.ros2.dds import multicast
+
+            multicast.check(interface if interface and interface[:1].isdigit() else None)
         try:
             self._domain = dds.domain.Domain(self.domain_id, config.xml(network, peers, interface))
             self.participant = dds.domain.DomainParticipant(
@@ -93,6 +101,8 @@ class RosNode:
                 "Check that the interface exists and is up"
                 + (", that multicast is allowed on it or --peer names the other hosts" if network else "")
                 + ", and that no firewall blocks UDP ports 7400 and above") from exc
+        from wcdrive.ros2.dds.qos import DISCOVERY
+
         self._info = self._writer(DISCOVERY_TOPIC, ENTITIES_INFO, DISCOVERY, announce=False)
         self.announce()
 
