@@ -40,6 +40,7 @@ from wcdrive.firmware.final_control import Firmware
 from wcdrive.host.odometry import OdometryParams, WheelOdometry
 from wcdrive.plant import ChairParams, Gyro, Plant
 from wcdrive.plant.faults import Fault
+from wcdrive.plant.rosmap import OccupancyGrid
 from wcdrive.protocol.codec import encode_cmdvel, encode_wheel
 from wcdrive.sim import runner
 from wcdrive.sim.scenario import bundled, load
@@ -66,6 +67,8 @@ def _signature(monkeypatch: pytest.MonkeyPatch, name: str, stepped: bool
     monkeypatch.undo()
     out: dict[str, object] = {"states": states}
     for key, value in fields(result).items():
+        if isinstance(value, OccupancyGrid):                # a map's cells, as an array
+            value = np.concatenate((value.data.reshape(-1), np.array((*value.origin, value.resolution))))
         out[key] = value.tobytes() + str(value.shape).encode() if isinstance(value, np.ndarray) else value
     metrics = result.metrics()
     metrics.pop("real_time_factor")

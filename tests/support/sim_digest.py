@@ -58,6 +58,7 @@ FIELDS = {
     "world_start": "world.start", "world_segments": "world.segments", "world_circles": "world.circles",
     "collisions": "world.collisions", "first_collision_s": "world.first_collision_s",
     "max_impact_ns": "world.max_impact_ns", "contact_s": "world.contact_s", "contacts": "world.contacts",
+    "world_grid": "world.grid", "lidar": "lidar.lidar", "lidar_scans": "lidar.scans",
 }
 
 

@@ -64,7 +64,7 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
@@ -167,9 +167,16 @@ class LidarMount:
         return math.pi if self.inverted != self.driver_inverted else 0.0
 
 
-@dataclass
+#: The seed's mount: its static transform base_link -> laser, 0.20 m ahead of the axle
+#: midpoint and 0.30 m up, no rotation (seed 000, "Static TF Publishers").
+SEED_MOUNT = LidarMount(x=0.20, y=0.0, z=0.30)
+
+
+@dataclass(eq=False)
 class LaserScan:
-    """The fields of ``sensor_msgs/LaserScan`` a driver fills (``stamp`` in simulated s)."""
+    """The fields of ``sensor_msgs/LaserScan`` a driver fills (``stamp`` in simulated s).
+    Two scans are equal when every field is (the arrays element by element, a NaN
+    beam time equal to a NaN)."""
 
     stamp: float
     frame_id: str
@@ -182,8 +189,16 @@ class LaserScan:
     range_max: float
     ranges: np.ndarray
     intensities: np.ndarray
-    #: ground truth for tests: each published beam's time and direction in the map
+    #: ground truth for tests: each published beam's time (NaN: no sample filled it)
     beam_time: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, LaserScan):
+            return NotImplemented
+        return all(np.array_equal(a, b, equal_nan=True) if isinstance(a, np.ndarray) else a == b
+                   for a, b in ((getattr(self, f.name), getattr(other, f.name)) for f in fields(self)))
+
+    __hash__ = None  # type: ignore[assignment]
 
 
 def _made(job: ScanJob) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

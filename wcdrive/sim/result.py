@@ -26,6 +26,8 @@ import numpy as np
 from wcdrive.boards.port_loop import F_CPU
 from wcdrive.plant.chair import Contact
 from wcdrive.plant.faults import Fault
+from wcdrive.plant.lidar import LaserScan, Lidar
+from wcdrive.plant.rosmap import OccupancyGrid
 from wcdrive.plant.terrain import Terrain
 
 #: m/s: the chair is at a standstill once its speed stays below this.
@@ -138,11 +140,22 @@ class WorldLog:
     max_impact_ns: float = 0.0
     contact_s: float = 0.0
     contacts: list[Contact] = field(default_factory=list)
+    #: The ROS map the walls came from, if they came from one (``/map``).
+    grid: OccupancyGrid | None = None
 
     @property
     def walled(self) -> bool:
         """Whether there are walls to collide with."""
         return bool(len(self.segments) or len(self.circles))
+
+
+@dataclass
+class LidarLog:
+    """The lidar on the chair (the scenario's ``[lidar]``) and the scans it took, one a
+    turn from 0 s on (``wcdrive.sim.scanning``), as its ROS driver publishes them."""
+
+    lidar: Lidar
+    scans: list[LaserScan] = field(default_factory=list)
 
 
 def placed(start: tuple[float, float, float], poses: np.ndarray) -> np.ndarray:
@@ -183,6 +196,8 @@ class SimResult:
     terrain: Terrain = field(default_factory=Terrain)
     #: The walls and the start pose (the scenario's ``[world]``); None: neither.
     world: WorldLog | None = None
+    #: The lidar and its scans (the scenario's ``[lidar]``); None: no lidar.
+    lidar: LidarLog | None = None
 
     @property
     def ticks(self) -> int:
@@ -368,6 +383,14 @@ class SimResult:
                 out.update(collisions=world.collisions, first_collision_s=world.first_collision_s,
                            max_impact_ns=world.max_impact_ns, contact_s=world.contact_s,
                            contact_records=[[c.time, c.x, c.y, c.impact] for c in world.contacts])
+        if self.lidar is not None:
+            from wcdrive.sim.scanning import scan_summary
+
+            lidar = self.lidar.lidar
+            mount = lidar.mount
+            out.update(lidar_model=lidar.model.name, lidar_mount=[mount.x, mount.y, mount.z, mount.yaw_deg],
+                       lidar_inverted=mount.inverted, lidar_driver_inverted=mount.driver_inverted)
+            out.update(scan_summary(self.lidar.scans))
         out["closed_loop"] = self.goal is not None
         if self.goal is not None:
             goal = self.goal

@@ -48,18 +48,21 @@ from wcdrive.hil.traces import Trace
 from wcdrive.plant import Gyro, Plant
 from wcdrive.plant.encoders import EdgeTrain
 from wcdrive.plant.faults import Fault
+from wcdrive.plant.world import World
 from wcdrive.sim.host import Pilot, SimHost
 from wcdrive.sim.result import (
     STANDSTILL_SPEED,
     BoardLog,
     Goal,
     GroundTruth,
+    LidarLog,
     LinkLog,
     Lockstep,
     Odometry,
     SimResult,
     WorldLog,
 )
+from wcdrive.sim.scanning import ScanRecorder
 from wcdrive.sim.scenario import Scenario, Segment
 
 __all__ = ["STANDSTILL_SPEED", "Backend", "BackendRun", "LineLog", "PortBackend", "Rig", "SimResult",
@@ -362,6 +365,8 @@ class Rig:
     dt: float
     end_cycle: int
     progress: Callable[[float], None] | None = None
+    #: The lidar's scans (``wcdrive.sim.scanning``): polled after every tick or step.
+    scanner: ScanRecorder | None = None
 
 
 @dataclass(frozen=True)
@@ -400,6 +405,7 @@ class PortBackend:
         for cycle, data in rig.wire.runs:
             loop.send(data, at=cycle)
         last_progress = [0.0]
+        poll = rig.scanner.poll if rig.scanner is not None else None
 
         def take() -> None:
             for cycle, out in loop.take_output():
@@ -412,6 +418,8 @@ class PortBackend:
             assert loop.last_tick_cycle is not None
             log.add(loop.last_tick_cycle, plant, host, (s.setpointL, s.setpointR), (s.filtVelL, s.filtVelR),
                     (_signed(s.pwmL, s.dirL), _signed(s.pwmR, s.dirR)), (s.encTickL, s.encTickR))
+            if poll is not None:
+                poll()
             if progress and t - last_progress[0] > 1.0:
                 progress(t * F_CPU / end_cycle)
                 last_progress[0] = t
@@ -454,6 +462,7 @@ class SimavrBackend:
         n_events_logged = 0
         open_tick: tuple[int, Event] | None = None
         runs = rig.wire.runs
+        poll = rig.scanner.poll if rig.scanner is not None else None
         next_run = 0
         steps = end_cycle // step_cycles
         piloted: list[tuple[int, bytes]] = []
@@ -475,6 +484,8 @@ class SimavrBackend:
             for side, train in pins.step(t0, t1, recorder.run_until, recorder.reset).items():
                 if train.times.size:
                     trains[side].append(train)
+            if poll is not None:
+                poll()
             if len(mega.tx_log) > tx_seen:
                 fresh = mega.tx_log[tx_seen:]
                 host.receive(t1, bytes(b for _, b in fresh))
@@ -514,8 +525,9 @@ def run(scenario: Scenario, *, backend: str | Backend = "port", seed: int = 0, d
     """Runs ``scenario`` in closed loop: ``backend`` "port" (the Python port), "simavr"
     (the ELF ``elf``, by default the bundled firmware, built if needed) or a ``Backend``,
     the plant stepping every ``dt`` s, with the scenario's faults. ``seed`` seeds the
-    gyro; ``progress`` is called now and then with the fraction done; ``ekf`` runs the
-    seeds' EKFs (``Odometry.ekf``, ``Odometry.ekf_vel``) on the host too."""
+    gyro and the lidar's range noise (a scenario with a ``[lidar]``: its scans in
+    ``SimResult.lidar``); ``progress`` is called now and then with the fraction done;
+    ``ekf`` runs the seeds' EKFs (``Odometry.ekf``, ``Odometry.ekf_vel``) on the host too."""
     if isinstance(backend, str):
         if backend not in BACKENDS:
             raise ValueError("backend must be 'port' or 'simavr'")
@@ -535,11 +547,17 @@ def run(scenario: Scenario, *, backend: str | Backend = "port", seed: int = 0, d
     commands = [(round(t * F_CPU), data) for t, data in scenario.host_commands()
                 if t < scenario.duration and not (closed and t >= 0.02)]   # closed: params only
     wire = wire_schedule(commands, scenario.faults)
+    scanner = None
+    if scenario.lidar is not None:        # no walls: every beam without a return
+        scanner = ScanRecorder(scenario.lidar, scenario.world or World(), plant,
+                               np.random.default_rng([seed, _LIDAR_STREAM]))
     rig = Rig(plant, gyro, host, pilot, TickLog(), LineLog(), wire, scenario.faults, dt,
-              round(scenario.duration * F_CPU), progress)
+              round(scenario.duration * F_CPU), progress, scanner)
     wall0 = time.perf_counter()
     with cyclic_gc_paused():
         ran = chosen.run(rig)
+        if scanner is not None:
+            scanner.poll()                    # a turn that ended with the run's last step
     wall = time.perf_counter() - wall0
     goal = None
     if pilot is not None:
@@ -547,6 +565,8 @@ def run(scenario: Scenario, *, backend: str | Backend = "port", seed: int = 0, d
         goal = Goal(pilot.ctl.goal, None if pilot.done_at is None else pilot.done_at / F_CPU,
                     scenario.follow.truth_tolerance, scenario.follow.localization)
     motion = plant.take_motion_log()
+    if scanner is not None:
+        motion = np.concatenate([*scanner.motion(), motion])
     half = 0.5 * params.wheelbase
     contact = np.stack((np.hypot(motion[:, 1] - motion[:, 3] * half, motion[:, 2]),
                         np.hypot(motion[:, 1] + motion[:, 3] * half, motion[:, 2])), axis=1)
@@ -568,7 +588,12 @@ def run(scenario: Scenario, *, backend: str | Backend = "port", seed: int = 0, d
                      wall_time=wall, truth=truth, board=board, odometry=odometry, link=link,
                      faults=scenario.faults, fault_at=fault_time(scenario, wire), goal=goal,
                      lockstep=ran.lockstep, stop_at=stop_at, terrain=scenario.terrain,
-                     world=_world_log(scenario, plant))
+                     world=_world_log(scenario, plant),
+                     lidar=None if scanner is None else LidarLog(scanner.lidar, scanner.scans))
+
+
+#: The lidar noise's generator: ``default_rng([seed, _LIDAR_STREAM])``, apart from the gyro's.
+_LIDAR_STREAM = 0x5CA9
 
 
 def _world_log(scenario: Scenario, plant: Plant) -> WorldLog | None:
@@ -581,7 +606,8 @@ def _world_log(scenario: Scenario, plant: Plant) -> WorldLog | None:
         return WorldLog(scenario.start)
     contacts = plant.contacts
     return WorldLog(scenario.start, world.segments.copy(), world.circles.copy(), contacts.count,
-                    contacts.first_time, contacts.max_impact, contacts.contact_time, contacts.records())
+                    contacts.first_time, contacts.max_impact, contacts.contact_time, contacts.records(),
+                    world.grid)
 
 
 def _cmd_vel(commands: list[tuple[int, bytes]]) -> list[tuple[float, float, float]]:

@@ -39,11 +39,31 @@ The same table gives the walls the chair drives among, and where it starts
     circles = [[6, 1, 0.03]]            # [x, y, radius]: table legs, posts
     start = [1.0, 2.0, 90]              # the axle midpoint's x, y (m) and heading (deg)
 
-Any of ``map``, ``walls``, ``boxes`` and ``circles`` may be given, together too; the
+A hand-written world can also live in a TOML file of its own (the bundled
+``worlds/furnished_room.toml``), with the same ``walls``, ``boxes``, ``circles`` and
+``map`` keys at its top level (its ``map`` relative to that file):
+
+    [world]
+    file = "worlds/furnished_room.toml" # relative to this file; joins the keys above
+
+Any of ``file``, ``map``, ``walls``, ``boxes`` and ``circles`` may be given, together too; the
 chair collides with what they make, and a footprint that overlaps it at ``start`` is a
 ScenarioError. ``start`` (default ``[0, 0, 0]``) places the chair; the host's odometry
 still starts at its own (0, 0, 0), and a ``path``'s waypoints are in that odometry
 frame. The floor's grades (``slope_deg``, ramps) are in the map frame.
+
+A ``[lidar]`` table puts a lidar on the chair (``wcdrive.plant.lidar``); without one
+there is none. The run takes a scan every turn of its head from the start on, each
+beam cast at its own time from where the chair then is (``SimResult.lidar``):
+
+    [lidar]
+    model = "rplidar_s3"     # the only model (MODELS in wcdrive.plant.lidar)
+    x = 0.20                 # the mount in the chair's base frame (m, deg): the seed's
+    y = 0.0                  #   static transform base_link -> laser (these defaults)
+    z = 0.30
+    yaw_deg = 0.0
+    roll_deg = 0.0           # 180: mounted head down (the seed's chair); 0 or 180
+    driver_inverted = false  # the driver's ``inverted`` parameter (told of the roll)
 
 Every table's keys are checked: an unknown key, at the top level too, is a ScenarioError
 that names it.
@@ -82,6 +102,7 @@ from pathlib import Path
 
 from wcdrive.plant.chair import Plant
 from wcdrive.plant.faults import FAULT_KINDS, SIDED_KINDS, Fault
+from wcdrive.plant.lidar import MODELS, SEED_MOUNT, Lidar, LidarMount
 from wcdrive.plant.params import ChairParams
 from wcdrive.plant.rosmap import MapFileError
 from wcdrive.plant.terrain import Ramp, Terrain
@@ -94,9 +115,10 @@ _KINDS = ("cmdvel", "wheel", "ppm", "stop", "silence")
 _FAULT_KEYS = ("at", "kind", "side", "duration", "rate_hz")
 #: The keys a scenario file may have at its top level.
 TOP_KEYS = ("name", "description", "host_rate_hz", "repeat", "settle_s", "chair", "params", "segment",
-            "fault", "path", "follow", "world")
+            "fault", "path", "follow", "world", "lidar")
 _GEOMETRY_KEYS = ("map", "walls", "boxes", "circles")
-_WORLD_KEYS = ("slope_deg", "downhill_heading_deg", "ramp", *_GEOMETRY_KEYS, "start")
+_LIDAR_KEYS = ("model", "x", "y", "z", "yaw_deg", "roll_deg", "driver_inverted")
+_WORLD_KEYS = ("slope_deg", "downhill_heading_deg", "ramp", *_GEOMETRY_KEYS, "file", "start")
 _RAMP_KEYS = ("from_x", "to_x", "slope_deg")
 
 
@@ -148,6 +170,8 @@ class Scenario:
     world: World | None = None
     #: The chair's start pose in the map frame: x, y (m), heading (rad).
     start: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    #: The lidar on the chair (``[lidar]``); None: none.
+    lidar: Lidar | None = None
 
     @property
     def closed_loop(self) -> bool:
@@ -251,11 +275,12 @@ def load(name_or_path: str, *, extra: Collection[str] = ()) -> Scenario:
     if not 0.5 <= rate <= 100.0:
         raise ScenarioError(f"{path}: host_rate_hz must be within 0.5..100")
     terrain, world, start = _world(data.get("world", {}), path)
+    lidar = _lidar(data.get("lidar"), path)
     scenario = Scenario(
         name=str(data.get("name", path.stem)), description=str(data.get("description", "")),
         segments=tuple(segments) * repeat, host_rate_hz=rate,
         settle_s=float(data.get("settle_s", 1.5)), chair=chair, source=path,
-        path=waypoints, follow=follow, terrain=terrain, world=world, start=start,
+        path=waypoints, follow=follow, terrain=terrain, world=world, start=start, lidar=lidar,
     )
     if world is not None:
         try:
@@ -299,6 +324,8 @@ def _walls(raw: dict, where: Path) -> World | None:
     """The ``[world]`` table's walls (``World.from_table``; a map relative to the
     scenario's file); None when it gives none."""
     table = {k: raw[k] for k in _GEOMETRY_KEYS if k in raw}
+    if "file" in raw:
+        table = _merge(table, _world_file(raw["file"], where), where)
     if not table:
         return None
     for key in ("walls", "boxes", "circles"):
@@ -318,6 +345,65 @@ def _walls(raw: dict, where: Path) -> World | None:
     except OSError as exc:
         raise ScenarioError(f"{where}: [world] map: {exc}") from exc
     return world if len(world.segments) or len(world.circles) else None
+
+
+def _world_file(name: object, where: Path) -> dict:
+    """The geometry keys of a hand-written world's own TOML file (``[world] file``), its
+    ``map`` made relative to the scenario's file."""
+    if not isinstance(name, str):
+        raise ScenarioError(f"{where}: [world] file is the path of a world's TOML file")
+    path = where.parent / name
+    try:
+        data = tomllib.loads(path.read_text())
+    except OSError as exc:
+        raise ScenarioError(f"{where}: [world] file: {exc}") from exc
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(f"{where}: [world] file {name}: not valid TOML: {exc}") from exc
+    _known_keys(data, (*_GEOMETRY_KEYS, "name", "description"), f"{where}: [world] file {name}", "")
+    table = {k: data[k] for k in _GEOMETRY_KEYS if k in data}
+    if "map" in table:
+        if not isinstance(table["map"], str):
+            raise ScenarioError(f"{where}: [world] file {name}: map is the path of a map_server YAML")
+        table["map"] = str(Path(name).parent / table["map"])
+    return table
+
+
+def _merge(table: dict, more: dict, where: Path) -> dict:
+    """Two sets of geometry keys as one (lists joined; one ``map`` at most)."""
+    out = dict(table)
+    for key, value in more.items():
+        if key == "map":
+            if "map" in out:
+                raise ScenarioError(f"{where}: [world] has a map and its file another: one map at most")
+            out["map"] = value
+        else:
+            out[key] = [*out.get(key, []), *value]
+    return out
+
+
+def _lidar(raw: object, where: Path) -> Lidar | None:
+    """The ``[lidar]`` table (module docstring) as a ``Lidar``; None without one."""
+    if raw is None:
+        return None
+    if not isinstance(raw, dict):
+        raise ScenarioError(f"{where}: lidar is a table ([lidar])")
+    _known_keys(raw, _LIDAR_KEYS, f"{where}: [lidar]", "")
+    model = raw.get("model")
+    if model not in MODELS:
+        raise ScenarioError(f"{where}: [lidar] model must be one of {', '.join(MODELS)}, not {model!r}")
+    values = {}
+    for key in ("x", "y", "z", "yaw_deg", "roll_deg"):
+        value = raw.get(key, getattr(SEED_MOUNT, key, 0.0))
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise ScenarioError(f"{where}: [lidar] {key} must be a finite number, not {value!r}")
+        values[key] = float(value)
+    roll = values.pop("roll_deg") % 360.0
+    if roll not in (0.0, 180.0):
+        raise ScenarioError(f"{where}: [lidar] roll_deg is 0 (head up) or 180 (head down), not {roll:g}")
+    told = raw.get("driver_inverted", False)
+    if not isinstance(told, bool):
+        raise ScenarioError(f"{where}: [lidar] driver_inverted is true or false, not {told!r}")
+    return Lidar(MODELS[model], LidarMount(inverted=roll == 180.0, driver_inverted=told, **values))
 
 
 def _start(raw: dict, where: Path) -> tuple[float, float, float]:
