@@ -238,16 +238,22 @@ def square(peer: Peer, writer: Any, side: float = 0.3, timeout: float = 40.0) ->
         ddspy_write(writer._ref, twist_stamped(int(wall), int((wall % 1) * 1e9), "base_link",
                                                (linear, 0.0, 0.0), (0.0, 0.0, angular)))
 
+    end = time.monotonic() + timeout
+
     def pose() -> tuple[float, float, float, float, float]:
         while not peer.received["rt/odom"]:
+            if time.monotonic() > end:
+                raise TimeoutError("no /odom from the bridge")
             peer.poll()
             time.sleep(0.01)
         o = peer.received["rt/odom"][-1]
         return (o.pose.pose.position.x, o.pose.pose.position.y, yaw(o), o.twist.twist.linear.x,
                 o.twist.twist.angular.z)
 
-    end = time.monotonic() + timeout
-    x0, y0, h0, _, _ = pose()
+    try:
+        x0, y0, h0, _, _ = pose()
+    except TimeoutError:
+        return []
     started = time.monotonic()
     legs: list[str] = []
     for corner in range(4):

@@ -160,9 +160,9 @@ def test_ros_discovery_info_names_the_node_and_its_endpoints(square: dict[str, A
     assert nodes[-1] == ["/", "wcdrive", 3, writers, square["guid"]]
 
 
-def test_twist_stamped_is_byte_for_byte_a_jazzy_publishers(square: dict[str, Any]) -> None:
+def test_twist_stamped_is_byte_for_byte_a_jazzy_publishers() -> None:
     """The bridge's generated type writes, and reads, the buffer built by hand from the
-    definition (``dds_peer.twist_stamped``), which the peer also drove the square with."""
+    definition (``dds_peer.twist_stamped``), which the peer drives the square with."""
     buffer = twist_stamped(1_700_000_000, 123_456_789, "base_link", (0.5, 0.0, 0.0), (0.0, 0.0, -0.25))
     message = types.build("geometry_msgs/msg/TwistStamped", {
         "header": {"stamp": {"sec": 1_700_000_000, "nanosec": 123_456_789}, "frame_id": "base_link"},
@@ -172,4 +172,8 @@ def test_twist_stamped_is_byte_for_byte_a_jazzy_publishers(square: dict[str, Any
                          types.idl_class("geometry_msgs/msg/TwistStamped").deserialize(buffer))
     assert back["twist"]["angular"]["z"] == -0.25 and back["header"]["frame_id"] == "base_link"
     assert len(buffer) == 4 + 8 + 4 + 10 + 2 + 48      # header, stamp, string, pad to 8, 6 doubles
+
+
+def test_the_peers_own_types_write_the_hand_built_buffer(square: dict[str, Any]) -> None:
+    """The peer's types (from the .msg text) agree with the hand-built buffer too."""
     assert square["peer"]["hand_built_equals_generated"]
