@@ -63,11 +63,16 @@ def test_sim_url_gives_the_plant_the_chair_file(tmp_path: Path) -> None:
         plain.close()
 
 
-def test_avr_url_reads_the_chair_file(tmp_path: Path) -> None:
+def test_avr_url_gives_the_plant_behind_the_pins_the_chair_file(tmp_path: Path, elf: Path) -> None:
     path = _chair(tmp_path, "[chair]\ncurrent_limit = 9.5\n")
     _, values, _ = url_options(f"wcavr://?realtime=0&chair={path}", "wcavr", protocol_wcavr.USAGE,
                                protocol_wcavr.OPTIONS)
     assert values["chair"].current_limit == 9.5 and values["plant"] is True
+    board = protocol_wcavr.Serial()._open_board(f"wcavr://{elf}?realtime=0&chair={path}")
+    try:
+        assert board.plant is not None and board.plant.p.current_limit == 9.5
+    finally:
+        board.close()
 
 
 @pytest.mark.parametrize(("url", "message"), [

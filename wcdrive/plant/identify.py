@@ -77,6 +77,14 @@ HELD = {
 PIN_LIMIT = 0.02
 #: s of a plant step.
 DT = 0.001
+#: An interval longer than this many ticks is a gap: a tick's lines were lost.
+GAP = 1.5
+#: s after a gap that the fit leaves out (the floor's slowest time constant, about 0.45 s
+#: for the default chair, decays to a third).
+GAP_SETTLE = 0.5
+#: rad/s: residuals beyond this weigh less and less (``least_squares``' soft L1 loss): a
+#: tick stamped late, a lost line's guessed duty, do not steer the fit.
+ROBUST_SCALE = 0.1
 
 
 @dataclass(frozen=True)
@@ -92,6 +100,9 @@ class Run:
     angle: np.ndarray
     blocks: bool
     name: str = ""
+    #: (n-1) bools: the intervals over which a tick's lines were lost (its duty unknown);
+    #: None: every interval longer than ``GAP`` ticks (a tick that ran late is one too).
+    lost: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         n = len(self.millis)
@@ -104,6 +115,45 @@ class Run:
     def duration(self) -> float:
         """s from the first tick to the last."""
         return float(self.millis[-1] - self.millis[0]) / 1000.0
+
+    @property
+    def tick_ms(self) -> float:
+        """ms of a control tick: the median interval."""
+        return float(np.median(np.diff(self.millis)))
+
+    def gaps(self) -> np.ndarray:
+        """(n-1) bools: the intervals where a tick's lines were lost (its duty is not
+        known): ``lost``, else those longer than ``GAP`` ticks."""
+        if self.lost is not None:
+            return self.lost
+        return np.diff(self.millis) > GAP * self.tick_ms
+
+    def weights(self) -> np.ndarray:
+        """(n-1): 1 for an interval the fit compares, 0 for a gap and the ``GAP_SETTLE``
+        s after it (the simulation guessed the lost duty: its state settles again)."""
+        out = np.ones(len(self.millis) - 1)
+        settle = math.ceil(GAP_SETTLE * 1000.0 / self.tick_ms)
+        for i in np.flatnonzero(self.gaps()):
+            out[i:i + 1 + settle] = 0.0
+        return out
+
+    def schedule(self) -> list[tuple[int, float, float, int]]:
+        """What drives the simulation: (steps, duty left, duty right, interval) runs of
+        ``DT`` steps, each ending where the interval ``interval`` ends (-1: it does not).
+        Over a gap the tick's own duty holds for a tick, then the mean of it and the
+        next known one (the lost tick's, guessed)."""
+        out: list[tuple[int, float, float, int]] = []
+        gaps = self.gaps()
+        tick = round(self.tick_ms)
+        for i, n in enumerate(np.diff(self.millis).astype(int)):
+            dl, dr = float(self.duty[i, 0]), float(self.duty[i, 1])
+            if gaps[i]:
+                out.append((tick, dl, dr, -1))
+                out.append((int(n) - tick, round(0.5 * (dl + self.duty[i + 1, 0])),
+                            round(0.5 * (dr + self.duty[i + 1, 1])), i))
+            else:
+                out.append((int(n), dl, dr, i))
+        return out
 
     def speeds(self) -> np.ndarray:
         """(n-1) x 2: each wheel's mean speed over each interval between ticks (rad/s)."""
@@ -130,16 +180,16 @@ def block_wheel_step(p: ChairParams, volts: float, speed: float, dt: float = DT)
 def simulate(p: ChairParams, run: Run) -> np.ndarray:
     """The wheels' angles (n x 2) at ``run``'s ticks, from rest at its first, driven by
     its duty: on the floor the plant itself, on blocks ``block_wheel_step``."""
-    steps = np.diff(run.millis).astype(int)
+    schedule = run.schedule()
     volts_per_duty = (p.battery_voltage or p.supply_voltage) / 255.0
     out = np.zeros((len(run.millis), 2))
     if not run.blocks:
         plant = Plant(p)
-        for i, n in enumerate(steps):
-            dl, dr = int(run.duty[i, 0]), int(run.duty[i, 1])
-            plant.set_drive(abs(dl), int(dl >= 0), abs(dr), int(dr >= 0))
-            plant.advance(int(n), DT)
-            out[i + 1] = plant.left.angle, plant.right.angle
+        for n, dl, dr, i in schedule:
+            plant.set_drive(abs(int(dl)), int(dl >= 0), abs(int(dr)), int(dr >= 0))
+            plant.advance(n, DT)
+            if i >= 0:
+                out[i + 1] = plant.left.angle, plant.right.angle
         return out
     # the kernel's wheel step, inlined (a call per step costs more than the step)
     k = p.motor_constant
@@ -153,16 +203,17 @@ def simulate(p: ChairParams, run: Run) -> np.ndarray:
     held = j_dt + b
     for side in (0, 1):
         w = theta = 0.0
-        for i, n in enumerate(steps):
-            volts = volts_per_duty * float(run.duty[i, side])
+        for n, dl, dr, i in schedule:
+            volts = volts_per_duty * (dl if side == 0 else dr)
             drive = k1 * volts
-            for _ in range(int(n)):
+            for _ in range(n):
                 nxt = (j_dt * w + drive) / free
                 if abs(volts - ke_g * nxt) > limit_v:
                     nxt = (j_dt * w + math.copysign(tau_max, volts - ke_g * nxt)) / held
                 w = nxt
                 theta += w * DT
-            out[i + 1, side] = theta
+            if i >= 0:
+                out[i + 1, side] = theta
     return out
 
 
@@ -263,12 +314,13 @@ class Fit:
 
 def residuals(p: ChairParams, runs: Sequence[Run]) -> np.ndarray:
     """Simulated less measured mean wheel speeds over every tick interval of every run
-    (rad/s), flattened."""
+    (rad/s), flattened; 0 where ``Run.weights`` leaves an interval out."""
     out = []
     for run in runs:
         sim = simulate(p, run)
         dt = np.diff(run.millis)[:, None] / 1000.0
-        out.append(((np.diff(sim, axis=0) - np.diff(run.angle, axis=0)) / dt).ravel())
+        err = (np.diff(sim, axis=0) - np.diff(run.angle, axis=0)) / dt * run.weights()[:, None]
+        out.append(err.ravel())
     return np.concatenate(out)
 
 
@@ -303,17 +355,15 @@ def identify(runs: Sequence[Run], start: ChairParams | None = None) -> Fit:
     def fun(x: np.ndarray) -> np.ndarray:
         return residuals(params_of(x), runs)
 
-    result = least_squares(fun, x0, x_scale=0.1, diff_step=1e-4, xtol=1e-10, ftol=1e-10,
-                           bounds=(x0 - math.log(5.0), x0 + math.log(5.0)))
+    bounds = (x0 - math.log(5.0), x0 + math.log(5.0))
+    # least squares first (a smooth bowl from far off), then the robust loss from there
+    first = least_squares(fun, x0, x_scale=0.1, diff_step=1e-4, xtol=1e-10, ftol=1e-10, bounds=bounds)
+    result = least_squares(fun, first.x, x_scale=0.1, diff_step=1e-4, xtol=1e-10, ftol=1e-10,
+                           loss="soft_l1", f_scale=ROBUST_SCALE, bounds=bounds)
     fitted = params_of(result.x)
     values = {n: value(fitted, n) for n in names}
-    dof = max(1, result.fun.size - len(names))
-    # the residuals' variance, no less than the counts' own: one count's quantisation at
-    # each end of a tick interval (2 q^2 / 12 over the interval squared)
-    interval = float(np.median(np.concatenate([np.diff(r.millis) for r in runs]))) / 1000.0
-    floor_var = (2.0 * math.pi / start.counts_per_rev / interval) ** 2 / 6.0
-    s2 = max(float(result.fun @ result.fun) / dof, floor_var)
-    sigma = {n: abs(values[n]) * s for n, s in zip(names, _standard_errors(result.jac, s2), strict=True)}
+    scale = _uncertainty_scale(runs, result.fun, start.counts_per_rev)
+    sigma = {n: abs(values[n]) * s for n, s in zip(names, _standard_errors(result.jac, scale), strict=True)}
     if any(math.isinf(s) for s in sigma.values()):
         notes.append("some figure has no effect on these runs (its column of the Jacobian is zero)")
     if not result.success:
@@ -324,6 +374,34 @@ def identify(runs: Sequence[Run], start: ChairParams | None = None) -> Fit:
     if blocks:
         fit.wheel_factor = wheel_factors(fitted, [r for r in runs if r.blocks])
     return fit
+
+
+def _uncertainty_scale(runs: Sequence[Run], fun: np.ndarray, counts_per_rev: int) -> float:
+    """The variance that scales ``(J^T J)^-1`` into the figures' covariance: the
+    residuals' own (robustly, from their median absolute deviation), no less than the
+    counts' quantisation gives (one count at each end of a tick interval:
+    ``2 q^2 / 12`` over the interval squared), and times ``(1 + r) / (1 - r)`` for the
+    residuals' correlation ``r`` from one tick to the next: residuals that run in
+    streaks (a model the data does not quite fit) carry fewer independent errors than
+    their number."""
+    used = fun[fun != 0.0]
+    if used.size < 3:
+        return math.inf
+    mad = float(np.median(np.abs(used - np.median(used))))
+    tick = float(np.median([r.tick_ms for r in runs])) / 1000.0
+    var = max((1.4826 * mad) ** 2, (2.0 * math.pi / counts_per_rev / tick) ** 2 / 6.0)
+    clipped = np.clip(fun, -3 * ROBUST_SCALE, 3 * ROBUST_SCALE)
+    pairs, lagged, total = 0.0, 0.0, 0.0
+    at = 0
+    for run in runs:
+        n = len(run.millis) - 1
+        block = clipped[at:at + 2 * n].reshape(n, 2)
+        at += 2 * n
+        lagged += float(np.sum(block[1:] * block[:-1]))
+        total += float(np.sum(block * block))
+        pairs += n
+    r = min(max(lagged / total, 0.0), 0.98) if total > 0 else 0.0
+    return var * (1.0 + r) / (1.0 - r)
 
 
 def _standard_errors(jac: np.ndarray, s2: float) -> list[float]:
@@ -380,8 +458,10 @@ def degraded(run: Run, rng: np.random.Generator, *, quantum: int = 1, counts_per
              late: float = 0.0, late_ms: int = 2, drop: float = 0.0) -> Run:
     """``run`` as a poorer recording would give it: the counts floored to multiples of
     ``quantum`` (a coarser encoder); a share ``late`` of the ticks stamped up to
-    ``late_ms`` ms after their counts were latched (a late line: its ``millis`` is not
-    when the counts were taken); a share ``drop`` of the ticks lost (not the first)."""
+    ``late_ms`` ms after their counts were latched (a stamp that disagrees with its
+    counts: the board's own lines cannot, as ``millis`` and the counts are taken in
+    the same tick, but a logger that stamps lines as they arrive would); a share
+    ``drop`` of the ticks lost (not the first)."""
     step = 2.0 * math.pi * quantum / counts_per_rev
     angle = np.floor(np.round(run.angle / (2.0 * math.pi / counts_per_rev)) / quantum) * step
     millis = run.millis.copy()
@@ -392,5 +472,4 @@ def degraded(run: Run, rng: np.random.Generator, *, quantum: int = 1, counts_per
     keep[0] = True
     keep &= np.concatenate([[True], np.diff(millis) > 0])     # a late stamp may pass the next
     millis, duty, angle = millis[keep], run.duty[keep], angle[keep]
-    # a lost tick's duty is unknown: the one before it is taken to hold on (the fit's view)
     return Run(millis=millis, duty=duty, angle=angle, blocks=run.blocks, name=run.name)

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from wcdrive.plant.identify import Fit, Run, identify, simulate
+from wcdrive.plant.identify import GAP, Fit, Run, identify, simulate
 from wcdrive.plant.params import ChairFileError, ChairParams, chair_toml, load_chair
 from wcdrive.protocol.codec import Boot, ExtendedTelemetry, Feedback, LineDecoder
 from wcdrive.transports.recording import Recording
@@ -38,10 +38,12 @@ def run_of(recording: Recording, *, blocks: bool | None = None, counts_per_rev: 
            name: str = "") -> Run:
     """The ``Run`` of a recording: every tick whose ``ENC:`` line is followed by its
     ``TLM:`` line (a tick with either line lost is left out: the interval around it
-    just widens), from the first such tick after the board's boot up to a reset.
-    ``blocks`` None: from the scenario's name in the recording's meta."""
+    widens, and is ``lost`` unless the board's ``late`` count says a tick ran late
+    there), from the first such tick after the board's boot up to a reset. The board
+    stamps each tick with its own ``millis()``, so when a line reached the host does not
+    matter. ``blocks`` None: from the scenario's name in the recording's meta."""
     cpr = counts_per_rev or ChairParams().counts_per_rev
-    rows: list[tuple[int, int, int, int, int]] = []
+    rows: list[tuple[int, int, int, int, int, int]] = []
     feedback: Feedback | None = None
     boots = 0
     for msg in LineDecoder().feed(recording.received_bytes):
@@ -56,7 +58,8 @@ def run_of(recording: Recording, *, blocks: bool | None = None, counts_per_rev: 
             if not rows or msg.millis > rows[-1][0]:
                 rows.append((msg.millis, msg.pwm_left * (1 if msg.dir_left else -1),
                              msg.pwm_right * (1 if msg.dir_right else -1),
-                             -feedback.count_left, feedback.count_right))   # the left counts down forward
+                             -feedback.count_left, feedback.count_right,   # the left counts down forward
+                             msg.late))
         feedback = None
     if len(rows) < 3:
         raise RecordingError(f"{name or 'the recording'}: fewer than 3 ticks with ENC and TLM lines "
@@ -65,8 +68,12 @@ def run_of(recording: Recording, *, blocks: bool | None = None, counts_per_rev: 
     if blocks is None:
         blocks = "blocks" in str(recording.meta.get("scenario", ""))
     angle = (data[:, 3:5] - data[0, 3:5]) * (2.0 * math.pi / cpr)
+    # a long interval is a lost tick unless the board counted a late tick in it (then the
+    # duty held all along, and is known)
+    intervals = np.diff(data[:, 0])
+    lost = (intervals > GAP * np.median(intervals)) & (np.diff(data[:, 5]) == 0)
     return Run(millis=data[:, 0], duty=data[:, 1:3].astype(float), angle=angle, blocks=blocks,
-               name=name)
+               name=name, lost=lost)
 
 
 def load_runs(paths: Sequence[Path], blocks: Sequence[Path] = (), floor: Sequence[Path] = (),
