@@ -323,6 +323,7 @@ def main() -> None:
     writer = DataWriter(self_dp := peer.dp, peer.topic("rt/cmd_vel", "geometry_msgs/msg/TwistStamped"),
                         qos=reliable)
     estop = DataWriter(self_dp, peer.topic("rt/estop", "std_msgs/msg/Bool"), qos=reliable)
+    reset = DataWriter(self_dp, peer.topic("rt/estop_reset", "std_msgs/msg/Empty"), qos=reliable)
     result["discovered"] = (peer.wait_for("rt/cmd_vel", "sub", args.discovery_timeout)
                             and peer.wait_for("rt/odom", "pub", args.discovery_timeout))
     deadline = time.monotonic() + args.discovery_timeout
@@ -342,7 +343,7 @@ def main() -> None:
     elif args.mode == "square":
         result["legs"] = square(peer, writer)
     else:
-        result.update(bad_commands(peer, writer, estop))
+        result.update(bad_commands(peer, writer, estop, reset))
     time.sleep(0.3)
     peer.poll()
     result["endpoints"] = peer.endpoints()
@@ -377,9 +378,10 @@ def forward(writer: Any, seconds: float) -> None:
         time.sleep(0.05)
 
 
-def bad_commands(peer: Peer, writer: Any, estop: Any) -> dict[str, Any]:
+def bad_commands(peer: Peer, writer: Any, estop: Any, reset: Any) -> dict[str, Any]:
     """Stale, non-finite and out-of-range commands, each for 1 s at 20 Hz, then good
-    ones for 1 s, then /estop and good ones again: what /odom's speed did after each."""
+    ones, then /estop and good ones again, then /estop_reset and good ones: the
+    largest /odom speed of the last half second of each."""
     from cyclonedds._clayer import ddspy_write
 
     def send(linear: float, angular: float, age: float = 0.0, seconds: float = 1.0) -> float:
@@ -400,6 +402,11 @@ def bad_commands(peer: Peer, writer: Any, estop: Any) -> dict[str, Any]:
     time.sleep(0.2)
     send(0.0, 0.0, seconds=0.2)
     out["after_estop"] = send(0.4, 0.0, seconds=1.5)
+    print("estop held", flush=True, file=sys.stderr)
+    time.sleep(0.5)                                         # the test reads the latch here
+    reset.write(idl("std_msgs/msg/Empty")(structure_needs_at_least_one_member=0))
+    send(0.0, 0.0, seconds=1.0)                             # the board resets once parked
+    out["after_reset"] = send(0.4, 0.0, seconds=1.5)
     return out
 
 

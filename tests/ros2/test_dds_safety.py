@@ -26,7 +26,7 @@ from typing import Any
 import pytest
 
 import wcdrive
-from tests.ros2.conftest import fresh_domain, run_peer
+from tests.ros2.conftest import PEER, fresh_domain
 from wcdrive.errors import WcdriveConnectionError
 from wcdrive.ros2.dds import config, multicast
 from wcdrive.ros2.dds.cmdvel import CmdVelGate
@@ -118,19 +118,31 @@ def test_the_gate_drops_and_counts_stale_non_finite_and_out_of_range() -> None:
 
 @pytest.fixture(scope="module")
 def bad() -> Iterator[dict[str, Any]]:
+    """The peer's ``bad`` run against the bridge on ``sim://`` here; the e-stop as the
+    chair reported it while the peer held it, and at the end."""
     domain = fresh_domain()
     chair = wcdrive.connect("sim://")
     assert isinstance(chair, wcdrive.Wheelchair)
     node = ChairNode(chair, RosNode("wcdrive", domain=domain), Options())
     try:
         node.start()
-        peer = run_peer(domain, "bad")
+        peer = subprocess.Popen([sys.executable, str(PEER), "--domain", str(domain), "--mode", "bad"],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        assert peer.stderr is not None
+        latched_during = False
+        for line in peer.stderr:
+            if "estop held" in line:
+                latched_during = chair.estop_latched and node.estop_held
+                break
+        out, err = peer.communicate(timeout=90)
+        assert peer.returncode == 0, err
         counts = dict(node.gate.counts)
         latched = chair.estop_latched
     finally:
         node.close()
         chair.close()
-    yield {"peer": peer, "counts": counts, "latched": latched}
+    yield {"peer": json.loads(out.strip().splitlines()[-1]), "counts": counts,
+           "latched_during": latched_during, "latched": latched}
 
 
 def test_stale_non_finite_and_out_of_range_cmd_vel_never_drive(bad: dict[str, Any]) -> None:
@@ -142,10 +154,12 @@ def test_stale_non_finite_and_out_of_range_cmd_vel_never_drive(bad: dict[str, An
     assert counts["stale"] >= 10 and counts["non_finite"] >= 20 and counts["out_of_range"] >= 10, counts
 
 
-def test_estop_latches_and_drops_cmd_vel(bad: dict[str, Any]) -> None:
-    assert bad["latched"]
+def test_estop_latches_and_drops_cmd_vel_until_estop_reset(bad: dict[str, Any]) -> None:
+    assert bad["latched_during"], bad["peer"]
     assert bad["peer"]["after_estop"] < 0.01, bad["peer"]
     assert bad["counts"]["estop"] >= 10, bad["counts"]
+    assert bad["peer"]["after_reset"] > 0.2, bad["peer"]          # /estop_reset, then it drives
+    assert not bad["latched"]
 
 
 # ---- errors that name the cause ----------------------------------------------------------
@@ -182,7 +196,8 @@ def test_blocked_multicast_is_named() -> None:
         with pytest.raises(WcdriveConnectionError, match="multicast"):
             multicast.check("203.0.113.9")        # not an address of this host
         return
-    code = "from wcdrive.tools.cli import main; import sys; sys.exit(main(['ros2', '--network']))"
+    code = ("from wcdrive.tools.cli import main; import sys; "
+            "sys.exit(main(['ros2', '--network', '--seconds', '1']))")
     shell = f"ip link set lo up && exec {sys.executable} -c \"{code}\""
     out = subprocess.run(["unshare", "-n", "sh", "-c", shell],
                          capture_output=True, text=True, timeout=60, cwd=REPO)
