@@ -14,6 +14,9 @@ Cyclone configuration of its own, then, by ``--mode``:
 - ``bad``: publishes stale, non-finite and out-of-range TwistStamped, then a burst of
   good ones, then ``/estop``; prints what ``/odom`` did.
 - ``forward``: sends 0.3 m/s straight at 20 Hz for ``--seconds`` s, whoever listens.
+- ``twist``: ``/cmd_vel`` as plain ``geometry_msgs/Twist`` (0.3 m/s for 2 s) to a
+  bridge run with ``--twist`` and ``/clock``; records ``/clock`` with the wall time of
+  each arrival.
 - ``discover``: only waits for the bridge's ``rt/odom`` writer; prints whether it saw it.
 
     python dds_peer.py --domain 117 --mode square [--address 127.0.0.1 | 192.0.2.2]
@@ -300,7 +303,7 @@ def square(peer: Peer, writer: Any, side: float = 0.3, timeout: float = 40.0) ->
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--domain", type=int, required=True)
-    ap.add_argument("--mode", choices=("square", "bad", "discover", "forward"), default="square")
+    ap.add_argument("--mode", choices=("square", "bad", "discover", "forward", "twist"), default="square")
     ap.add_argument("--seconds", type=float, default=10.0, help="forward: how long to send")
     ap.add_argument("--address", default="127.0.0.1")
     ap.add_argument("--discovery-timeout", type=float, default=20.0)
@@ -320,6 +323,9 @@ def main() -> None:
     peer.read("rt/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", reliable)
     peer.read("ros_discovery_info", "rmw_dds_common/msg/ParticipantEntitiesInfo",
               qos(True, transient=True, depth=1))
+    if args.mode == "twist":
+        print(json.dumps(twist_run(peer, reliable, args.discovery_timeout)))
+        return
     writer = DataWriter(self_dp := peer.dp, peer.topic("rt/cmd_vel", "geometry_msgs/msg/TwistStamped"),
                         qos=reliable)
     estop = DataWriter(self_dp, peer.topic("rt/estop", "std_msgs/msg/Bool"), qos=reliable)
@@ -364,6 +370,28 @@ def main() -> None:
                         bytes(info.gid.data).hex()]
                        for info in r["ros_discovery_info"] for n in info.node_entities_info_seq]
     print(json.dumps(result))
+
+
+def twist_run(peer: Peer, reliable: Qos, discovery_timeout: float) -> dict[str, Any]:
+    """Plain Twist commands; /odom's speed, /clock with arrival times, /odom's stamps."""
+    peer.read("rt/odom", "nav_msgs/msg/Odometry", reliable)
+    clock = DataReader(peer.dp, peer.topic("rt/clock", "rosgraph_msgs/msg/Clock"), qos=qos(False, depth=1))
+    writer = DataWriter(peer.dp, peer.topic("rt/cmd_vel", "geometry_msgs/msg/Twist"), qos=reliable)
+    deadline = time.monotonic() + discovery_timeout
+    while writer.get_publication_matched_status().current_count < 1 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    vector, twist = idl("geometry_msgs/msg/Vector3"), idl("geometry_msgs/msg/Twist")
+    clocks: list[tuple[float, float]] = []
+    end = time.monotonic() + 2.0
+    while time.monotonic() < end:
+        writer.write(twist(linear=vector(0.3, 0.0, 0.0), angular=vector(0.0, 0.0, 0.0)))
+        peer.poll()
+        clocks += [(c.clock.sec + c.clock.nanosec * 1e-9, time.monotonic()) for c in clock.take(N=64)
+                   if c.sample_info.valid_data]
+        time.sleep(0.05)
+    odoms = peer.received["rt/odom"]
+    return {"speed": max((o.twist.twist.linear.x for o in odoms), default=-1.0), "clock": clocks,
+            "odom_stamps": [o.header.stamp.sec + o.header.stamp.nanosec * 1e-9 for o in odoms]}
 
 
 def forward(writer: Any, seconds: float) -> None:

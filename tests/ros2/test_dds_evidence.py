@@ -8,6 +8,7 @@ held to ``chair.odometry`` tick by tick.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Iterator
 from typing import Any
@@ -177,3 +178,28 @@ def test_twist_stamped_is_byte_for_byte_a_jazzy_publishers() -> None:
 def test_the_peers_own_types_write_the_hand_built_buffer(square: dict[str, Any]) -> None:
     """The peer's types (from the .msg text) agree with the hand-built buffer too."""
     assert square["peer"]["hand_built_equals_generated"]
+
+
+def test_twist_cmd_vel_and_clock_when_faster_than_real_time() -> None:
+    """``--twist``: plain ``geometry_msgs/Twist`` drives; with ``sim_time`` (a board at
+    twice real time) ``/clock`` runs at the board's pace and every stamp is on it."""
+    domain = fresh_domain()
+    tap = ImuTap()
+    chair = wcdrive.connect("sim://?speed=2", ros=tap)
+    node = ChairNode(chair, RosNode("wcdrive", domain=domain), Options(twist=True, sim_time=True), imu=tap)
+    try:
+        node.start()
+        peer = run_peer(domain, "twist")
+        counts = dict(node.gate.counts)
+    finally:
+        node.close()
+        chair.close()
+    assert peer["speed"] > 0.2 and counts["accepted"] >= 20, (peer["speed"], counts)
+    clock = peer["clock"]
+    assert len(clock) >= 20
+    (board0, wall0), (board1, wall1) = clock[0], clock[-1]
+    assert all(b1 >= b0 for (b0, _), (b1, _) in itertools.pairwise(clock))
+    assert 1.5 < (board1 - board0) / (wall1 - wall0) < 2.5        # the board's pace, not the wall's
+    assert board1 < 1000.0                                         # board seconds, not the epoch
+    stamps = peer["odom_stamps"]                                   # /odom on the same clock
+    assert all(board0 - 0.5 < s < board1 + 0.5 for s in stamps[-20:]), (stamps[-20:], board0, board1)
