@@ -203,3 +203,20 @@ def test_twist_cmd_vel_and_clock_when_faster_than_real_time() -> None:
     assert board1 < 1000.0                                         # board seconds, not the epoch
     stamps = peer["odom_stamps"]                                   # /odom on the same clock
     assert all(board0 - 0.5 < s < board1 + 0.5 for s in stamps[-20:]), (stamps[-20:], board0, board1)
+
+
+def test_the_eddie_is_driven_the_same_way() -> None:
+    """``eddie+sim://`` behind the same node: the peer's TwistStamped stream drives it."""
+    domain = fresh_domain()
+    eddie = wcdrive.connect("eddie+sim://")
+    node = ChairNode(eddie, RosNode("wcdrive", domain=domain), Options())
+    try:
+        node.start()
+        run_peer(domain, "forward", "--seconds", "3")
+        moved = eddie.odometry.pose.x
+        counts = dict(node.gate.counts)
+    finally:
+        node.close()
+        eddie.close()
+    assert moved > 0.3, moved                       # 0.3 m/s for 3 s, less the ramp
+    assert counts["accepted"] >= 40 and counts.get("refused", 0) == 0, counts
