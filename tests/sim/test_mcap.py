@@ -46,9 +46,14 @@ def square(tmp_path_factory: pytest.TempPathFactory) -> tuple[dict, dict[str, li
     return metrics, by_topic, types
 
 
+#: The topics only a run among walls (``/map``) or with a lidar (``/scan``, ``/tf_static``) has.
+WORLD_TOPICS = {"/map", "/scan", "/tf_static"}
+
+
 def test_every_topic_with_its_type(square) -> None:
     _, _, types = square
-    assert types == TOPICS
+    assert types == {k: v for k, v in TOPICS.items() if k not in WORLD_TOPICS}
+    assert types["/cmd_vel"] == "geometry_msgs/msg/TwistStamped"               # Jazzy's
 
 
 def test_rates_and_board_clock_stamps(square) -> None:
@@ -63,9 +68,8 @@ def test_rates_and_board_clock_stamps(square) -> None:
             assert np.all(steps >= 0)
         else:
             assert np.all(steps > 0), topic                      # strictly monotonic
-        if topic != "/cmd_vel":
-            stamps = np.array([_stamp(m) for _, m in msgs])
-            assert np.allclose(stamps, times, atol=1e-9), topic   # header = log time
+        stamps = np.array([_stamp(m) for _, m in msgs])
+        assert np.allclose(stamps, times, atol=1e-9), topic       # header = log time
         span = times[-1] - times[0]
         measured = (len(times) - 1) / span
         if topic == "/cmd_vel":                                  # sent while segments run
@@ -104,8 +108,9 @@ def test_values_are_the_runs(square) -> None:
     true_rate = np.mean([m.twist.twist.angular.z for t, m in by_topic["/ground_truth"] if 4.0 < t < 6.0])
     assert true_rate > 0.2
     assert np.mean([m.angular_velocity.z for m in turn]) == pytest.approx(true_rate, rel=0.05)
-    commands = {(round(m.linear.x, 3), round(m.angular.z, 3)) for _, m in by_topic["/cmd_vel"]}
+    commands = {(round(m.twist.linear.x, 3), round(m.twist.angular.z, 3)) for _, m in by_topic["/cmd_vel"]}
     assert commands == {(0.3, 0.0), (0.0, 0.5), (0.0, 0.0)}
+    assert {m.header.frame_id for _, m in by_topic["/cmd_vel"]} == {"base_link"}
     lines = [m.status[0].message for _, m in by_topic["/diagnostics/serial"]]
     assert lines[0].startswith("BOOT:") and any(line.startswith("ENC:") for line in lines)
 
@@ -128,7 +133,7 @@ def test_a_connected_chair_records_mcap(tmp_path: Path) -> None:
     with AnyReader([path]) as reader:
         for conn, log_time, raw in reader.messages():
             by_topic[conn.topic].append((log_time * 1e-9, reader.deserialize(raw, conn.msgtype)))
-    assert set(by_topic) == set(TOPICS) - {"/odometry/filtered"}
+    assert set(by_topic) == set(TOPICS) - {"/odometry/filtered"} - WORLD_TOPICS
     odom = by_topic["/odom"]
     stamps = np.array([_stamp(m) for _, m in odom])
     assert np.all(np.diff(stamps) > 0)
@@ -137,7 +142,7 @@ def test_a_connected_chair_records_mcap(tmp_path: Path) -> None:
     late = [(t, m.twist.twist.linear.x) for t, m in odom if t > stamps[-1] - 0.5]
     truth = [m.twist.twist.linear.x for t, m in by_topic["/ground_truth"] if t > stamps[-1] - 0.5]
     assert np.mean([v for _, v in late]) == pytest.approx(np.mean(truth), rel=0.05)
-    assert {round(m.linear.x, 3) for _, m in by_topic["/cmd_vel"]} >= {0.4}
+    assert {round(m.twist.linear.x, 3) for _, m in by_topic["/cmd_vel"]} >= {0.4}
     assert any(m.status[0].message.startswith("TLM:") for _, m in by_topic["/diagnostics/serial"])
     imu_rate = (len(by_topic["/imu"]) - 1) / (by_topic["/imu"][-1][0] - by_topic["/imu"][0][0])
     assert imu_rate == pytest.approx(4 * 400.0, rel=0.1)
@@ -158,6 +163,7 @@ def test_bench_run_writes_mcap_beside_its_recording(tmp_path: Path) -> None:
         for conn, log_time, raw in reader.messages():
             by_topic[conn.topic].append((log_time * 1e-9, reader.deserialize(raw, conn.msgtype)))
     assert {"/odom", "/tf", "/joint_states", "/cmd_vel", "/diagnostics/serial"} <= set(by_topic)
-    assert {(round(m.linear.x, 3), round(m.angular.z, 3)) for _, m in by_topic["/cmd_vel"]} >= {(0.3, 0.2)}
+    assert {(round(m.twist.linear.x, 3), round(m.twist.angular.z, 3))
+            for _, m in by_topic["/cmd_vel"]} >= {(0.3, 0.2)}
     stamps = [_stamp(m) for _, m in by_topic["/odom"]]
     assert len(stamps) > 30 and all(b > a for a, b in itertools.pairwise(stamps))

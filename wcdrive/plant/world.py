@@ -143,6 +143,43 @@ class World:
             seg = np.concatenate((seg, grid_outline(grid)))
         return cls(seg, np.asarray(circles, dtype=float).reshape(-1, 3), grid)
 
+    def occupancy(self, resolution: float = 0.05, margin: float = 0.5) -> OccupancyGrid:
+        """The world as a ROS map (``/map``): the map it came from, if any; else its
+        geometry drawn into a grid of ``resolution`` m cells over its bounding box and
+        ``margin`` m around it (the origin at a whole number of cells), a cell
+        occupied (100) where a wall or a circle passes through it, free (0) elsewhere.
+        A hand-written world's map loses what is thinner than a cell; its occupied
+        cells' outline (``from_grid``) lies within a cell of the geometry."""
+        if self.grid is not None:
+            return self.grid
+        pts = [self.segments[:, :2], self.segments[:, 2:], self.circles[:, :2] - self.circles[:, 2:3],
+               self.circles[:, :2] + self.circles[:, 2:3]]
+        allpts = np.concatenate([p.reshape(-1, 2) for p in pts])
+        if not len(allpts):
+            return OccupancyGrid(np.zeros((1, 1), dtype=np.int8), resolution)
+        lo = np.floor((allpts.min(axis=0) - margin) / resolution) * resolution
+        hi = allpts.max(axis=0) + margin
+        width, height = (int(v) for v in np.ceil((hi - lo) / resolution))
+        data = np.zeros((height, width), dtype=np.int8)
+
+        def mark(x: np.ndarray, y: np.ndarray) -> None:
+            cols = np.floor((x - lo[0]) / resolution).astype(np.int64)
+            rows = np.floor((y - lo[1]) / resolution).astype(np.int64)
+            ok = (cols >= 0) & (cols < width) & (rows >= 0) & (rows < height)
+            data[rows[ok], cols[ok]] = OCCUPIED
+
+        step = resolution / 4
+        for x0, y0, x1, y1 in self.segments:
+            n = max(2, math.ceil(math.hypot(x1 - x0, y1 - y0) / step) + 1)
+            u = np.linspace(0.0, 1.0, n)
+            mark(x0 + u * (x1 - x0), y0 + u * (y1 - y0))
+        for cx, cy, r in self.circles:
+            n = max(8, math.ceil(2 * math.pi * r / step))
+            a = np.linspace(0.0, 2 * math.pi, n, endpoint=False)
+            for k in np.linspace(0.0, 1.0, max(2, math.ceil(r / step) + 1)):     # rings: a disc
+                mark(cx + k * r * np.cos(a), cy + k * r * np.sin(a))
+        return OccupancyGrid(data, resolution, (float(lo[0]), float(lo[1]), 0.0))
+
     @functools.cached_property
     def _ray_grid(self) -> RayGrid | None:
         return RayGrid.build(self.segments, self.circles)

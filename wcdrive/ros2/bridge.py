@@ -1,15 +1,21 @@
 """ROS 2 messages for the chair's data, and where they go: an MCAP file (``McapSink``,
-written with the ``mcap`` and ``mcap-ros2-support`` packages) or Foxglove's WebSocket
-server (``LiveSink``, ``foxglove-sdk``). No ROS installation is needed: the message
-definitions are ROS 2's own (Humble), spelled out here, and the messages are plain
-dicts serialised to CDR.
+written as ROS 2 Jazzy's rosbag2 writes one) or Foxglove's WebSocket server
+(``LiveSink``, ``foxglove-sdk``). No ROS installation is needed: the message
+definitions and type hashes come from rosbags' type store for ROS 2 Jazzy
+(``msgdef``, ``type_hash``), and the messages are plain dicts serialised to CDR.
 
 The topics (``TOPICS``): ``/odom`` (``nav_msgs/msg/Odometry``), ``/imu``
-(``sensor_msgs/msg/Imu``: the gyro), ``/cmd_vel`` (``geometry_msgs/msg/Twist``),
-``/tf`` (``tf2_msgs/msg/TFMessage``: odom -> base_link), ``/joint_states``
-(``sensor_msgs/msg/JointState``: the wheels), ``/ground_truth`` (``nav_msgs/msg/Odometry``:
-the plant, in simulation), ``/diagnostics/serial`` (``diagnostic_msgs/msg/DiagnosticArray``:
-each raw line from the board) and ``/odometry/filtered`` (the EKF, when there is one).
+(``sensor_msgs/msg/Imu``: the gyro), ``/cmd_vel`` (``geometry_msgs/msg/TwistStamped``,
+what Jazzy's diff_drive_controller takes), ``/tf`` (``tf2_msgs/msg/TFMessage``: odom ->
+base_link), ``/tf_static`` (base_link -> laser, the lidar's mount), ``/scan``
+(``sensor_msgs/msg/LaserScan``), ``/map`` (``nav_msgs/msg/OccupancyGrid``: the world),
+``/joint_states`` (``sensor_msgs/msg/JointState``: the wheels), ``/ground_truth``
+(``nav_msgs/msg/Odometry``: the plant, in simulation), ``/diagnostics/serial``
+(``diagnostic_msgs/msg/DiagnosticArray``: each raw line from the board) and
+``/odometry/filtered`` (the EKF, when there is one). ``QOS`` is the QoS each is
+offered with: ``/tf_static`` and ``/map`` are latched (reliable, transient local, keep
+last 1, as tf2's static broadcaster and map_server offer them), so ``ros2 bag play``
+offers them latched too.
 
 ``ChairPublisher`` turns a ``Wheelchair``'s ticks into these messages (``connect(url,
 record="run.mcap")``); ``wcdrive.sim.rosout`` does the same for a simulated run.
@@ -17,10 +23,12 @@ record="run.mcap")``); ``wcdrive.sim.rosout`` does the same for a simulated run.
 
 from __future__ import annotations
 
+import functools
 import math
 import re
 import threading
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -32,68 +40,127 @@ from wcdrive.transports.wrapper import PortWrapper
 TOPICS: dict[str, str] = {
     "/odom": "nav_msgs/msg/Odometry",
     "/imu": "sensor_msgs/msg/Imu",
-    "/cmd_vel": "geometry_msgs/msg/Twist",
+    "/cmd_vel": "geometry_msgs/msg/TwistStamped",
     "/tf": "tf2_msgs/msg/TFMessage",
+    "/tf_static": "tf2_msgs/msg/TFMessage",
+    "/scan": "sensor_msgs/msg/LaserScan",
+    "/map": "nav_msgs/msg/OccupancyGrid",
     "/joint_states": "sensor_msgs/msg/JointState",
     "/ground_truth": "nav_msgs/msg/Odometry",
     "/diagnostics/serial": "diagnostic_msgs/msg/DiagnosticArray",
     "/odometry/filtered": "nav_msgs/msg/Odometry",
 }
-ODOM_FRAME, BASE_FRAME = "odom", "base_link"
+ODOM_FRAME, BASE_FRAME, MAP_FRAME = "odom", "base_link", "map"
 WHEEL_JOINTS = ("left_wheel_joint", "right_wheel_joint")
-
-#: ROS 2 Humble's definitions (constants and comments left out), by ``pkg/Type``.
-_DEFS: dict[str, str] = {
-    "builtin_interfaces/Time": "int32 sec\nuint32 nanosec",
-    "std_msgs/Header": "builtin_interfaces/Time stamp\nstring frame_id",
-    "geometry_msgs/Point": "float64 x\nfloat64 y\nfloat64 z",
-    "geometry_msgs/Vector3": "float64 x\nfloat64 y\nfloat64 z",
-    "geometry_msgs/Quaternion": "float64 x\nfloat64 y\nfloat64 z\nfloat64 w",
-    "geometry_msgs/Pose": "Point position\nQuaternion orientation",
-    "geometry_msgs/PoseWithCovariance": "Pose pose\nfloat64[36] covariance",
-    "geometry_msgs/Twist": "Vector3 linear\nVector3 angular",
-    "geometry_msgs/TwistWithCovariance": "Twist twist\nfloat64[36] covariance",
-    "geometry_msgs/Transform": "Vector3 translation\nQuaternion rotation",
-    "geometry_msgs/TransformStamped": "std_msgs/Header header\nstring child_frame_id\nTransform transform",
-    "nav_msgs/Odometry": ("std_msgs/Header header\nstring child_frame_id\n"
-                          "geometry_msgs/PoseWithCovariance pose\ngeometry_msgs/TwistWithCovariance twist"),
-    "sensor_msgs/Imu": ("std_msgs/Header header\ngeometry_msgs/Quaternion orientation\n"
-                        "float64[9] orientation_covariance\ngeometry_msgs/Vector3 angular_velocity\n"
-                        "float64[9] angular_velocity_covariance\ngeometry_msgs/Vector3 linear_acceleration\n"
-                        "float64[9] linear_acceleration_covariance"),
-    "sensor_msgs/JointState": ("std_msgs/Header header\nstring[] name\nfloat64[] position\n"
-                               "float64[] velocity\nfloat64[] effort"),
-    "tf2_msgs/TFMessage": "geometry_msgs/TransformStamped[] transforms",
-    "diagnostic_msgs/KeyValue": "string key\nstring value",
-    "diagnostic_msgs/DiagnosticStatus": ("byte level\nstring name\nstring message\nstring hardware_id\n"
-                                         "KeyValue[] values"),
-    "diagnostic_msgs/DiagnosticArray": "std_msgs/Header header\nDiagnosticStatus[] status",
-}
-_PRIMITIVES = {"bool", "byte", "char", "float32", "float64", "int8", "uint8", "int16", "uint16",
-               "int32", "uint32", "int64", "uint64", "string", "wstring"}
-_SEPARATOR = "=" * 80
+#: The ROS distribution whose definitions, hashes and bag format are written.
+ROS_DISTRO = "jazzy"
 
 
-def _dependencies(name: str, seen: list[str]) -> None:
-    package = name.split("/")[0]
-    for line in _DEFS[name].splitlines():
-        kind = re.sub(r"\[\d*\]$", "", line.split()[0])
-        if kind in _PRIMITIVES:
-            continue
-        full = kind if "/" in kind else f"{package}/{kind}"
-        if full not in seen:
-            seen.append(full)
-            _dependencies(full, seen)
+@dataclass(frozen=True)
+class Qos:
+    """The QoS a topic's publisher offers (rclcpp's names): reliable or best effort,
+    transient local or volatile, keep last ``depth``; deadline, lifespan and liveliness
+    as rclcpp leaves them (infinite, automatic)."""
+
+    depth: int = 10
+    reliable: bool = True
+    transient_local: bool = False
+
+    def profile(self) -> dict[str, Any]:
+        """The profile as rosbag2 (Jazzy, bag version 9) writes it in
+        ``offered_qos_profiles``."""
+        infinite = {"sec": 9223372036, "nsec": 854775807}
+        return {"history": "keep_last", "depth": self.depth,
+                "reliability": "reliable" if self.reliable else "best_effort",
+                "durability": "transient_local" if self.transient_local else "volatile",
+                "deadline": dict(infinite), "lifespan": dict(infinite), "liveliness": "automatic",
+                "liveliness_lease_duration": dict(infinite), "avoid_ros_namespace_conventions": False}
 
 
+LATCHED = Qos(depth=1, transient_local=True)
+#: Topic -> the QoS its publisher offers (rclcpp's default for the rest: reliable,
+#: volatile, keep last 10).
+QOS: dict[str, Qos] = {"/tf_static": LATCHED, "/map": LATCHED, "/tf": Qos(depth=100)}
+
+
+def qos(topic: str) -> Qos:
+    """The QoS ``topic`` is offered with."""
+    return QOS.get(topic, Qos())
+
+
+@functools.cache
+def typestore() -> Any:
+    """rosbags' type store for ROS 2 Jazzy."""
+    from rosbags.typesys import Stores, get_typestore
+
+    return get_typestore(Stores.ROS2_JAZZY)
+
+
+@functools.cache
 def msgdef(typename: str) -> str:
     """The full ``ros2msg`` definition of ``typename`` (``pkg/msg/Type``), its
-    dependencies appended as ``MSG: pkg/Type`` sections, as MCAP's ros2msg schemas take it."""
-    name = typename.replace("/msg/", "/")
-    seen: list[str] = []
-    _dependencies(name, seen)
-    parts = [_DEFS[name]] + [f"{_SEPARATOR}\nMSG: {dep}\n{_DEFS[dep]}" for dep in seen]
-    return "\n".join(parts) + "\n"
+    dependencies appended as ``MSG: pkg/Type`` sections, from rosbags' type store
+    (``generate_msgdef``): what MCAP's ros2msg schemas hold."""
+    text, _ = typestore().generate_msgdef(typename, ros_version=2)
+    return str(text)
+
+
+@functools.cache
+def type_hash(typename: str) -> str:
+    """The RIHS01 type hash of ``typename`` in ROS 2 Jazzy (rosbag2's
+    ``topic_type_hash``)."""
+    return str(typestore().hash_rihs01(typename))
+
+
+@functools.cache
+def encoder(typename: str) -> Callable[[dict[str, Any]], bytes]:
+    """The CDR serialiser of ``typename``: a dict in the message's field layout (nested
+    dicts, lists or numpy arrays; a missing field is zero or empty) to its bytes,
+    through rosbags' type store (``serialize_cdr``; arrays of numbers in bulk)."""
+    store = typestore()
+
+    def encode(message: dict[str, Any]) -> bytes:
+        return bytes(store.serialize_cdr(_build(typename, message), typename))
+    return encode
+
+
+#: ROS 2 primitive -> the numpy type of an array of it.
+_NUMPY: dict[str, Any] = {"bool": np.bool_, "byte": np.uint8, "char": np.uint8, "int8": np.int8,
+                          "uint8": np.uint8, "int16": np.int16, "uint16": np.uint16, "int32": np.int32,
+                          "uint32": np.uint32, "int64": np.int64, "uint64": np.uint64,
+                          "float32": np.float32, "float64": np.float64}
+
+
+def _build(typename: str, value: dict[str, Any] | None) -> Any:
+    """The type store's message object of ``typename`` from a dict."""
+    from rosbags.typesys.base import Nodetype
+
+    store = typestore()
+    value = value or {}
+    fields = {}
+    for name, (kind, rest) in store.fielddefs[typename][1]:
+        fields[name] = _field(kind, rest, value.get(name), Nodetype)
+    return store.types[typename](**fields)
+
+
+def _field(kind: Any, rest: Any, value: Any, nodetype: Any) -> Any:
+    if kind == nodetype.BASE:
+        base = rest[0]
+        if base in ("string", "wstring"):
+            return "" if value is None else str(value)
+        if base == "bool":
+            return bool(value)
+        if base in ("float32", "float64"):
+            return 0.0 if value is None else float(value)
+        return 0 if value is None else int(value)
+    if kind == nodetype.NAME:
+        return _build(rest, value)
+    (inner, inner_rest), count = rest
+    if inner == nodetype.BASE and inner_rest[0] in _NUMPY:
+        if value is None:
+            value = np.zeros(count if kind == nodetype.ARRAY else 0)
+        return np.asarray(value, dtype=_NUMPY[inner_rest[0]])
+    return [_field(inner, inner_rest, v, nodetype) for v in (value or [])]
 
 
 # ---- messages ---------------------------------------------------------------------------
@@ -147,6 +214,48 @@ def twist(linear: float, angular: float) -> dict[str, Any]:
     return {"linear": _v3(linear), "angular": _v3(z=angular)}
 
 
+def twist_stamped(t: float, linear: float, angular: float, frame: str = BASE_FRAME) -> dict[str, Any]:
+    """``geometry_msgs/msg/TwistStamped`` (``/cmd_vel`` in Jazzy)."""
+    return {"header": _header(t, frame), "twist": twist(linear, angular)}
+
+
+def _rotation(yaw: float, roll: float = 0.0) -> dict[str, float]:
+    """The quaternion of a yaw about z after a roll about x (``Rz(yaw) Rx(roll)``)."""
+    cz, sz, cx, sx = math.cos(yaw / 2), math.sin(yaw / 2), math.cos(roll / 2), math.sin(roll / 2)
+    return {"x": cz * sx, "y": sz * sx, "z": sz * cx, "w": cz * cx}
+
+
+def tf_static(t: float, child: str, x: float, y: float, z: float, yaw: float, roll: float = 0.0,
+              frame: str = BASE_FRAME) -> dict[str, Any]:
+    """``tf2_msgs/msg/TFMessage`` for ``/tf_static``: ``frame`` -> ``child`` at (x, y, z),
+    turned by ``yaw`` about z after ``roll`` about x (rad)."""
+    return {"transforms": [{"header": _header(t, frame), "child_frame_id": child,
+                            "transform": {"translation": _v3(x, y, z), "rotation": _rotation(yaw, roll)}}]}
+
+
+def laser_scan(scan: Any) -> dict[str, Any]:
+    """``sensor_msgs/msg/LaserScan`` of a ``wcdrive.plant.lidar.LaserScan`` (stamped at
+    its first beam, as the driver stamps it)."""
+    return {"header": _header(scan.stamp, scan.frame_id), "angle_min": scan.angle_min,
+            "angle_max": scan.angle_max, "angle_increment": scan.angle_increment,
+            "time_increment": scan.time_increment, "scan_time": scan.scan_time,
+            "range_min": scan.range_min, "range_max": scan.range_max,
+            "ranges": np.asarray(scan.ranges, dtype=np.float32),
+            "intensities": np.asarray(scan.intensities, dtype=np.float32)}
+
+
+def occupancy_grid(t: float, grid: Any, frame: str = MAP_FRAME) -> dict[str, Any]:
+    """``nav_msgs/msg/OccupancyGrid`` of a ``wcdrive.plant.rosmap.OccupancyGrid`` (as
+    map_server publishes it: ``map_load_time`` the stamp, the origin's yaw as a
+    quaternion)."""
+    height, width = grid.data.shape
+    x0, y0, yaw = grid.origin
+    return {"header": _header(t, frame),
+            "info": {"map_load_time": stamp(t), "resolution": float(grid.resolution), "width": width,
+                     "height": height, "origin": {"position": _v3(x0, y0), "orientation": _quaternion(yaw)}},
+            "data": np.asarray(grid.data, dtype=np.int8).reshape(-1)}
+
+
 def tf(t: float, x: float, y: float, yaw: float, frame: str = ODOM_FRAME,
        child: str = BASE_FRAME) -> dict[str, Any]:
     """``tf2_msgs/msg/TFMessage`` with one transform, ``frame`` -> ``child``."""
@@ -182,39 +291,94 @@ class Sink(Protocol):
 
 
 class McapSink:
-    """Writes ROS 2 messages into an MCAP file (``mcap-ros2-support``'s writer, CDR,
-    zstd chunks). ``log_time`` and ``publish_time`` are the messages' stamps."""
+    """Writes ROS 2 messages into an MCAP file as Jazzy's rosbag2 MCAP storage writes
+    one: profile ``ros2``; a ``ros2msg`` schema per type (its full definition, from the
+    type store); a ``cdr`` channel per topic whose metadata holds
+    ``offered_qos_profiles`` (``QOS``, in bag version 9's YAML) and
+    ``topic_type_hash`` (RIHS01); zstd chunks; and at the end the ``rosbag2`` metadata
+    record whose ``serialized_metadata`` is the bag's metadata (what metadata.yaml
+    holds), so that rosbag2 reads the QoS as version 9's. ``log_time`` and
+    ``publish_time`` are the messages' stamps."""
 
     def __init__(self, path: str | Path) -> None:
-        from mcap_ros2.writer import Writer
+        from mcap.writer import CompressionType, Writer
 
         self.path = Path(path)
         self._file = self.path.open("wb")
-        self._writer = Writer(self._file)
-        self._schemas: dict[str, Any] = {}
+        self._writer = Writer(self._file, compression=CompressionType.ZSTD)
+        self._writer.start(profile="ros2", library=f"wcdrive (rosbag2 {ROS_DISTRO} layout)")
+        self._schemas: dict[str, int] = {}
+        self._channels: dict[str, tuple[int, Callable[[dict[str, Any]], bytes]]] = {}
+        self._counts: dict[str, int] = {}
+        self._first: int | None = None
+        self._last = 0
         self._lock = threading.Lock()
         self._closed = False
 
+    def _channel(self, topic: str) -> tuple[int, Callable[[dict[str, Any]], bytes]]:
+        typename = TOPICS[topic]
+        schema = self._schemas.get(typename)
+        if schema is None:
+            schema = self._schemas[typename] = self._writer.register_schema(
+                typename, "ros2msg", msgdef(typename).encode())
+        channel = self._writer.register_channel(topic, "cdr", schema, {
+            "offered_qos_profiles": _yaml([qos(topic).profile()]),
+            "topic_type_hash": type_hash(typename)})
+        encode = encoder(typename)
+        self._channels[topic] = (channel, encode)
+        self._counts[topic] = 0
+        return channel, encode
+
     def publish(self, topic: str, message: dict[str, Any], log_time: float) -> None:
         """One message on ``topic`` (a key of ``TOPICS``)."""
-        typename = TOPICS[topic]
         ns = max(0, round(log_time * 1e9))
         with self._lock:
             if self._closed:
                 return
-            schema = self._schemas.get(typename)
-            if schema is None:
-                schema = self._schemas[typename] = self._writer.register_msgdef(typename, msgdef(typename))
-            self._writer.write_message(topic, schema, message, log_time=ns, publish_time=ns)
+            channel, encode = self._channels.get(topic) or self._channel(topic)
+            self._writer.add_message(channel, log_time=ns, data=encode(message), publish_time=ns)
+            self._counts[topic] += 1
+            self._first = ns if self._first is None else min(self._first, ns)
+            self._last = max(self._last, ns)
+
+    def metadata(self) -> dict[str, Any]:
+        """The bag's metadata so far, as rosbag2 (version 9) writes it."""
+        start = self._first or 0
+        duration = max(0, self._last - start)
+        count = sum(self._counts.values())
+        return {
+            "version": 9, "storage_identifier": "mcap",
+            "duration": {"nanoseconds": duration}, "starting_time": {"nanoseconds_since_epoch": start},
+            "message_count": count,
+            "topics_with_message_count": [
+                {"topic_metadata": {"name": topic, "type": TOPICS[topic], "serialization_format": "cdr",
+                                    "offered_qos_profiles": [qos(topic).profile()],
+                                    "type_description_hash": type_hash(TOPICS[topic])},
+                 "message_count": n} for topic, n in self._counts.items()],
+            "compression_format": "", "compression_mode": "",
+            "relative_file_paths": [self.path.name],
+            "files": [{"path": self.path.name, "starting_time": {"nanoseconds_since_epoch": start},
+                       "duration": {"nanoseconds": duration}, "message_count": count}],
+            "custom_data": {}, "ros_distro": ROS_DISTRO,
+        }
 
     def close(self) -> None:
-        """Finishes the file (its summary and index). Safe to call twice."""
+        """Finishes the file (the rosbag2 metadata record, the summary and index). Safe
+        to call twice."""
         with self._lock:
             if self._closed:
                 return
             self._closed = True
+            self._writer.add_metadata("rosbag2", {"serialized_metadata": _yaml(self.metadata())})
             self._writer.finish()
             self._file.close()
+
+
+def _yaml(value: Any) -> str:
+    """``value`` as block-style YAML (keys in the order given), as yaml-cpp dumps it."""
+    import yaml
+
+    return str(yaml.safe_dump(value, default_flow_style=False, sort_keys=False)).rstrip("\n")
 
 
 class LiveSink:
@@ -244,17 +408,14 @@ class LiveSink:
         return int(self.server.port)
 
     def _channel(self, topic: str) -> tuple[Any, Callable[[dict[str, Any]], bytes]]:
-        from mcap_ros2._dynamic import serialize_dynamic
-
         typename = TOPICS[topic]
         channel = self._channels.get(topic)
         if channel is None:
-            text = msgdef(typename)
-            schema = self._foxglove.Schema(name=typename, encoding="ros2msg", data=text.encode())
+            schema = self._foxglove.Schema(name=typename, encoding="ros2msg", data=msgdef(typename).encode())
             channel = self._foxglove.Channel(topic, schema=schema, message_encoding="cdr",
                                              context=self._context)
             self._channels[topic] = channel
-            self._encoders[topic] = serialize_dynamic(typename, text)[typename]
+            self._encoders[topic] = encoder(typename)
         return channel, self._encoders[topic]
 
     def publish(self, topic: str, message: dict[str, Any], log_time: float) -> None:
@@ -310,12 +471,12 @@ class ChairPublisher:
         """Bytes the host wrote: a velocity or wheel command is a ``/cmd_vel``."""
         t = self._monotonic() + self._wall
         if m := _CMDVEL.search(data):
-            self.sink.publish("/cmd_vel", twist(float(m[1]), float(m[2])), t)
+            self.sink.publish("/cmd_vel", twist_stamped(t, float(m[1]), float(m[2])), t)
         elif m := _WHEEL.search(data):
             r = float(m[2]) * (-1 if m[1] == b"n" else 1)
             left = float(m[4]) * (-1 if m[3] == b"n" else 1)
-            self.sink.publish("/cmd_vel", twist(0.5 * self._radius * (r + left),
-                                                self._radius * (r - left) / self._base), t)
+            self.sink.publish("/cmd_vel", twist_stamped(t, 0.5 * self._radius * (r + left),
+                                                        self._radius * (r - left) / self._base), t)
 
     def read(self, data: bytes) -> None:
         """Bytes the host read: each whole line is a ``/diagnostics/serial``."""

@@ -8,8 +8,17 @@ cycle of the control tick, or of the line's last byte, over 16 MHz). Per control
 counts; seed 000's ekf.yaml covariances), ``/tf``, ``/joint_states`` (wheel angles from
 the counts, the firmware's filtered speeds), ``/ground_truth`` (the plant's pose, its
 twist from consecutive poses) and ``/odometry/filtered`` (the EKF on wheel velocities,
-when the run has one); ``/imu`` per gyro sample (400 Hz); ``/cmd_vel`` per velocity
-command the host sent; ``/diagnostics/serial`` per line the board sent.
+when the run has one); ``/imu`` per gyro sample (400 Hz); ``/cmd_vel``
+(``TwistStamped``) per velocity command the host sent; ``/diagnostics/serial`` per line
+the board sent.
+
+A run among walls adds ``/map`` at 0 s, once (latched: ``bridge.QOS``): the world's ROS
+map, or a hand-written world drawn into 5 cm cells (``World.occupancy``), in the world's
+``map`` frame, where the chair started at the scenario's ``start``. A run with a lidar
+adds ``/tf_static`` at 0 s, once (latched): base_link -> laser, the mount's offset, yaw
+and the laser frame's roll (pi for a head-down mount whose driver is not told); and
+``/scan`` per turn of the head (10 Hz), stamped at its first beam as the driver stamps
+it, with the driver's ``time_increment`` and ``scan_time``.
 """
 
 from __future__ import annotations
@@ -25,6 +34,7 @@ import numpy as np
 
 from wcdrive.host.odometry import UNUSED, OdometryParams
 from wcdrive.plant.params import ChairParams
+from wcdrive.plant.world import World
 from wcdrive.ros2 import bridge as ros2
 from wcdrive.sim.result import SimResult
 
@@ -75,13 +85,33 @@ def _imu(result: SimResult, params: ChairParams) -> Iterator[Message]:
         yield float(t), "/imu", ros2.imu(float(t), float(rate), variance)
 
 
+def _static(result: SimResult) -> Iterator[Message]:
+    """``/map`` and ``/tf_static`` at 0 s (module docstring)."""
+    world = result.world
+    if world is not None and world.walled:
+        grid = world.grid if world.grid is not None else World(world.segments, world.circles).occupancy()
+        yield 0.0, "/map", ros2.occupancy_grid(0.0, grid)
+    if result.lidar is not None:
+        lidar = result.lidar.lidar
+        m = lidar.mount
+        yield 0.0, "/tf_static", ros2.tf_static(0.0, lidar.frame_id, m.x, m.y, m.z, math.radians(m.yaw_deg),
+                                                 m.tf_roll)
+
+
+def _scans(result: SimResult) -> Iterator[Message]:
+    for scan in [] if result.lidar is None else result.lidar.scans:
+        yield scan.stamp, "/scan", ros2.laser_scan(scan)
+
+
 def messages(result: SimResult, params: ChairParams | None = None) -> Iterator[Message]:
     """(board time s, topic, message) for every message of the run, in time order."""
     params = params or ChairParams()
     streams = [
+        _static(result),
         _ticks(result, params),
         _imu(result, params),
-        ((t, "/cmd_vel", ros2.twist(v, w)) for t, v, w in result.link.cmd_vel),
+        _scans(result),
+        ((t, "/cmd_vel", ros2.twist_stamped(t, v, w)) for t, v, w in result.link.cmd_vel),
         ((t, "/diagnostics/serial", ros2.serial_line(t, line)) for t, line in result.link.lines),
     ]
     yield from heapq.merge(*streams, key=lambda m: m[0])

@@ -48,6 +48,7 @@ from wcdrive.hil.traces import Trace
 from wcdrive.plant import Gyro, Plant
 from wcdrive.plant.encoders import EdgeTrain
 from wcdrive.plant.faults import Fault
+from wcdrive.plant.raycast import ScanPipe
 from wcdrive.plant.world import World
 from wcdrive.sim.host import Pilot, SimHost
 from wcdrive.sim.result import (
@@ -547,17 +548,23 @@ def run(scenario: Scenario, *, backend: str | Backend = "port", seed: int = 0, d
     commands = [(round(t * F_CPU), data) for t, data in scenario.host_commands()
                 if t < scenario.duration and not (closed and t >= 0.02)]   # closed: params only
     wire = wire_schedule(commands, scenario.faults)
-    scanner = None
+    scanner, pipe = None, None
     if scenario.lidar is not None:        # no walls: every beam without a return
+        pipe = ScanPipe.open()            # the turns made on a C thread (None: none to be had)
         scanner = ScanRecorder(scenario.lidar, scenario.world or World(), plant,
-                               np.random.default_rng([seed, _LIDAR_STREAM]))
+                               np.random.default_rng([seed, _LIDAR_STREAM]), pipe)
     rig = Rig(plant, gyro, host, pilot, TickLog(), LineLog(), wire, scenario.faults, dt,
               round(scenario.duration * F_CPU), progress, scanner)
     wall0 = time.perf_counter()
-    with cyclic_gc_paused():
-        ran = chosen.run(rig)
-        if scanner is not None:
-            scanner.poll()                    # a turn that ended with the run's last step
+    try:
+        with cyclic_gc_paused():
+            ran = chosen.run(rig)
+            if scanner is not None:
+                scanner.poll()                # a turn that ended with the run's last step
+                scanner.finish()
+    finally:
+        if pipe is not None:
+            pipe.close()
     wall = time.perf_counter() - wall0
     goal = None
     if pilot is not None:

@@ -7,8 +7,11 @@ and follow each other at the model's ``scan_hz``; once the plant has stepped pas
 turn's end, the recorder takes the plant's motion log and makes the turn from it
 (``wcdrive.plant.lidar.MotionTrack``): the poses integrated from the pose the plant
 had at the last poll before the turn began (its ground truth, so no drift builds up
-over a run), and the beams cast from them in C (``Lidar.scan``). A turn still under
-way when the run ends is not published, as the driver publishes none. The motion log
+over a run), and the beams cast from them in C (``Lidar.scan``). Given a ``ScanPipe``,
+each turn is made on its C thread while the run goes on, and collected when the next
+turn is due (``Lidar.start_scan``: its noise drawn at once, so the scans are the same
+with a pipe or without). A turn still under way when the run ends is not published, as
+the driver publishes none; ``finish`` collects the last. The motion log
 it took goes back to the runner (``motion``), which joins it to what is left at the
 end: the run's ground truth is the same with the lidar on or off.
 """
@@ -20,7 +23,8 @@ import math
 import numpy as np
 
 from wcdrive.plant.chair import Plant
-from wcdrive.plant.lidar import LaserScan, Lidar, MotionTrack
+from wcdrive.plant.lidar import LaserScan, Lidar, MotionTrack, PendingScan
+from wcdrive.plant.raycast import ScanPipe
 from wcdrive.plant.world import World
 
 #: s: a poll this close after a turn's end counts as at it (the plant's clock is a sum of steps).
@@ -42,10 +46,12 @@ class ScanRecorder:
     """Takes ``lidar``'s scans of ``world`` as ``plant`` moves (module docstring);
     ``rng`` draws the range noise (None: none)."""
 
-    def __init__(self, lidar: Lidar, world: World, plant: Plant, rng: np.random.Generator | None) -> None:
-        self.lidar, self.world, self.plant, self.rng = lidar, world, plant, rng
+    def __init__(self, lidar: Lidar, world: World, plant: Plant, rng: np.random.Generator | None,
+                 pipe: ScanPipe | None = None) -> None:
+        self.lidar, self.world, self.plant, self.rng, self.pipe = lidar, world, plant, rng, pipe
         self.period = 1.0 / lidar.model.scan_hz
         self.scans: list[LaserScan] = []
+        self._pending: list[PendingScan] = []
         self._taken: list[np.ndarray] = []         # every motion log row taken, in order
         self._rows: list[np.ndarray] = []          # those after the anchor
         self._anchor = (plant.pose, plant.time)    # a true pose at or before the next turn's start
@@ -68,9 +74,10 @@ class ScanRecorder:
         log = np.concatenate(self._rows) if len(self._rows) > 1 else rows
         pose, t_anchor = self._anchor
         track = MotionTrack(pose, t_anchor, log)
+        self.finish()
         while now >= self._next_end - _EPS:
             t0 = self._turn * self.period
-            self.scans.append(self.lidar.scan(self.world, track, t0, self.rng))
+            self._pending.append(self.lidar.start_scan(self.world, track, t0, self.rng, self.pipe))
             self._turn += 1
             self._next_end = (self._turn + 1) * self.period
         # The next turn started before now: the anchor is the last knot at or before its
@@ -82,6 +89,11 @@ class ScanRecorder:
                          (float(x[k]), float(y[k]), float(heading[k])))
         self._anchor = (_compose(plant.pose, back), float(t[k]))
         self._rows = [log[k:]] if k < len(log) else []
+
+    def finish(self) -> None:
+        """Collects the turns still being made (``scans`` has them all after)."""
+        self.scans += [p.result() for p in self._pending]
+        self._pending = []
 
     def motion(self) -> list[np.ndarray]:
         """The motion log rows taken so far (the runner joins them to the rest)."""
