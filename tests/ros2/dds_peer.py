@@ -69,6 +69,10 @@ MSGS = {
                             "float64[9] angular_velocity_covariance\n"
                             "geometry_msgs/Vector3 linear_acceleration\n"
                             "float64[9] linear_acceleration_covariance"),
+    "sensor_msgs/msg/LaserScan": ("std_msgs/Header header\nfloat32 angle_min\nfloat32 angle_max\n"
+                                  "float32 angle_increment\nfloat32 time_increment\nfloat32 scan_time\n"
+                                  "float32 range_min\nfloat32 range_max\nfloat32[] ranges\n"
+                                  "float32[] intensities"),
     "diagnostic_msgs/msg/KeyValue": "string key\nstring value",
     "diagnostic_msgs/msg/DiagnosticStatus": ("byte OK=0\nbyte WARN=1\nbyte ERROR=2\n"
                                              "byte STALE=3\nbyte level\nstring name\nstring message\n"
@@ -321,6 +325,7 @@ def main() -> None:
     peer.read("rt/joint_states", "sensor_msgs/msg/JointState", reliable)
     peer.read("rt/imu", "sensor_msgs/msg/Imu", qos(False, depth=50))
     peer.read("rt/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", reliable)
+    peer.read("rt/scan", "sensor_msgs/msg/LaserScan", qos(False, depth=5))
     peer.read("ros_discovery_info", "rmw_dds_common/msg/ParticipantEntitiesInfo",
               qos(True, transient=True, depth=1))
     if args.mode == "twist":
@@ -363,6 +368,7 @@ def main() -> None:
                                   for m in r["rt/tf_static"] for t in m.transforms})
     result["joint_names"] = sorted({n for m in r["rt/joint_states"] for n in m.name})
     result["imu_rates"] = [m.angular_velocity.z for m in r["rt/imu"]][-5:]
+    result["scans"] = [[m.header.frame_id, list(m.ranges), m.angle_increment] for m in r["rt/scan"]][-1:]
     result["diagnostics"] = sorted({s.name for m in r["rt/diagnostics"] for s in m.status})
     result["cmd_vel_diag"] = [{kv.key: kv.value for kv in s.values} for m in r["rt/diagnostics"]
                               for s in m.status if s.name == "wcdrive: cmd_vel"][-1:]

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import time
 from collections.abc import Iterator
 from typing import Any
 
@@ -33,6 +34,7 @@ EXPECTED_QOS = {
     ("pub", "rt/joint_states", "sensor_msgs::msg::dds_::JointState_"): (True, False, 10),
     ("pub", "rt/imu", "sensor_msgs::msg::dds_::Imu_"): (False, False, 5),
     ("pub", "rt/diagnostics", "diagnostic_msgs::msg::dds_::DiagnosticArray_"): (True, False, 10),
+    ("pub", "rt/scan", "sensor_msgs::msg::dds_::LaserScan_"): (False, False, 5),
     ("pub", "ros_discovery_info",
      "rmw_dds_common::msg::dds_::ParticipantEntitiesInfo_"): (True, True, 1),
     ("sub", "rt/cmd_vel", "geometry_msgs::msg::dds_::TwistStamped_"): (True, False, 10),
@@ -59,6 +61,22 @@ def ros_type(dds_type: str) -> str:
     return f"{package}/{kind}/{message[:-1]}"
 
 
+class FakeScan:
+    """A ``ScanSource``: eight ranges of 1.5 m in frame ``laser``, at most 5 a second."""
+
+    def __init__(self) -> None:
+        self.last = 0.0
+
+    def scan(self) -> dict[str, Any] | None:
+        now = time.time()
+        if now - self.last < 0.2:
+            return None
+        self.last = now
+        return {"header": {"stamp": {"sec": int(now), "nanosec": int(now % 1 * 1e9)}, "frame_id": "laser"},
+                "angle_min": -math.pi / 4, "angle_max": math.pi / 4, "angle_increment": math.pi / 14,
+                "range_min": 0.1, "range_max": 8.0, "ranges": [1.5] * 8}
+
+
 @pytest.fixture(scope="module")
 def square() -> Iterator[dict[str, Any]]:
     """The bridge on ``sim://`` here; the peer drives the square. The peer's summary,
@@ -66,7 +84,7 @@ def square() -> Iterator[dict[str, Any]]:
     domain = fresh_domain()
     tap = ImuTap()
     chair = wcdrive.connect("sim://", ros=tap)
-    node = ChairNode(chair, RosNode("wcdrive", domain=domain), Options(), imu=tap)
+    node = ChairNode(chair, RosNode("wcdrive", domain=domain), Options(scan=FakeScan()), imu=tap)
     here: dict[tuple[int, int], Any] = {}
     try:
         node.start()
@@ -147,6 +165,8 @@ def test_every_topic_arrives(square: dict[str, Any]) -> None:
     assert peer["tf"] == [["odom", "base_link"]]
     assert peer["tf_static"] == [["base_link", "imu_link"]]
     assert peer["joint_names"] == ["left_wheel_joint", "right_wheel_joint"]
+    assert counts["rt/scan"] >= 10                             # the scan source plugs in
+    assert peer["scans"][-1][0] == "laser" and peer["scans"][-1][1] == [1.5] * 8
     assert peer["diagnostics"] == ["wcdrive: TLM", "wcdrive: cmd_vel", "wcdrive: e-stop",
                                    "wcdrive: faults", "wcdrive: link"]
     assert int(peer["cmd_vel_diag"][-1]["accepted"]) > 100
@@ -154,7 +174,7 @@ def test_every_topic_arrives(square: dict[str, Any]) -> None:
 
 def test_ros_discovery_info_names_the_node_and_its_endpoints(square: dict[str, Any]) -> None:
     """What ``ros2 node list`` reads: node ``/wcdrive`` of the bridge's participant,
-    with a GID for each reader (3) and each writer on an ``rt/`` topic (6)."""
+    with a GID for each reader (3) and each writer on an ``rt/`` topic (7)."""
     nodes = square["peer"]["nodes"]
     writers = sum(1 for e in square["peer"]["endpoints"]
                   if e["kind"] == "pub" and e["topic"].startswith("rt/"))
