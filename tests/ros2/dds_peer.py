@@ -413,7 +413,7 @@ def forward(writer: Any, seconds: float) -> None:
 
 
 def bad_commands(peer: Peer, writer: Any, estop: Any, reset: Any) -> dict[str, Any]:
-    """Stale, non-finite and out-of-range commands, each for 1 s at 20 Hz, then good
+    """Stale, non-finite and out-of-range commands, each for 0.6 s at 20 Hz, then good
     ones, then /estop and good ones again, then /estop_reset and good ones: the
     largest /odom speed of the last half second of each."""
     from cyclonedds._clayer import ddspy_write
@@ -429,18 +429,18 @@ def bad_commands(peer: Peer, writer: Any, estop: Any, reset: Any) -> dict[str, A
         odoms = peer.received["rt/odom"]
         return max(abs(o.twist.twist.linear.x) for o in odoms[-10:]) if odoms else -1.0
 
-    out = {"stale": send(0.4, 0.0, age=5.0), "nan": send(float("nan"), 0.0),
-           "inf": send(0.0, float("inf")), "too_fast": send(50.0, 0.0),
-           "good": send(0.4, 0.0, seconds=1.5)}
+    out = {"stale": send(0.4, 0.0, age=5.0, seconds=0.6), "nan": send(float("nan"), 0.0, seconds=0.6),
+           "inf": send(0.0, float("inf"), seconds=0.6), "too_fast": send(50.0, 0.0, seconds=0.6),
+           "good": send(0.4, 0.0, seconds=1.2)}
     estop.write(idl("std_msgs/msg/Bool")(data=True))
     time.sleep(0.2)
     send(0.0, 0.0, seconds=0.2)
-    out["after_estop"] = send(0.4, 0.0, seconds=1.5)
+    out["after_estop"] = send(0.4, 0.0, seconds=1.0)
     print("estop held", flush=True, file=sys.stderr)
     time.sleep(0.5)                                         # the test reads the latch here
     reset.write(idl("std_msgs/msg/Empty")(structure_needs_at_least_one_member=0))
     send(0.0, 0.0, seconds=1.0)                             # the board resets once parked
-    out["after_reset"] = send(0.4, 0.0, seconds=1.5)
+    out["after_reset"] = send(0.4, 0.0, seconds=1.2)
     return out
 
 

@@ -34,7 +34,7 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--address", required=True)
     ap.add_argument("--domain", type=int, required=True)
-    ap.add_argument("--timeout", type=float, default=6.0)
+    ap.add_argument("--timeout", type=float, default=4.0)
     args = ap.parse_args()
     result: dict[str, dict[str, bool]] = {}
     for mode, network in (("default", False), ("network", True)):

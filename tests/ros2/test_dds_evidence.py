@@ -79,11 +79,11 @@ class FakeScan:
 
 @pytest.fixture(scope="module")
 def square() -> Iterator[dict[str, Any]]:
-    """The bridge on ``sim://`` here; the peer drives the square. The peer's summary,
+    """The bridge on ``sim://`` (at twice real time) here; the peer drives the square. The peer's summary,
     the odometry each tick had here (by stamp), the gate's counts and the node's GID."""
     domain = fresh_domain()
     tap = ImuTap()
-    chair = wcdrive.connect("sim://", ros=tap)
+    chair = wcdrive.connect("sim://?speed=2", ros=tap)          # twice real time: a shorter test
     node = ChairNode(chair, RosNode("wcdrive", domain=domain), Options(scan=FakeScan()), imu=tap)
     here: dict[tuple[int, int], Any] = {}
     try:
@@ -232,11 +232,11 @@ def test_the_eddie_is_driven_the_same_way() -> None:
     node = ChairNode(eddie, RosNode("wcdrive", domain=domain), Options())
     try:
         node.start()
-        run_peer(domain, "forward", "--seconds", "3")
+        run_peer(domain, "forward", "--seconds", "2")
         moved = eddie.odometry.pose.x
         counts = dict(node.gate.counts)
     finally:
         node.close()
         eddie.close()
-    assert moved > 0.3, moved                       # 0.3 m/s for 3 s, less the ramp
-    assert counts["accepted"] >= 40 and counts.get("refused", 0) == 0, counts
+    assert moved > 0.2, moved                       # 0.3 m/s for 2 s, less the ramp
+    assert counts["accepted"] >= 25 and counts.get("refused", 0) == 0, counts

@@ -146,12 +146,12 @@ def bad() -> Iterator[dict[str, Any]]:
 
 
 def test_stale_non_finite_and_out_of_range_cmd_vel_never_drive(bad: dict[str, Any]) -> None:
-    """Each bad kind for 1 s at 20 Hz leaves /odom's speed at zero; good ones then drive."""
+    """Each bad kind for 0.6 s at 20 Hz leaves /odom's speed at zero; good ones then drive."""
     peer, counts = bad["peer"], bad["counts"]
     for kind in ("stale", "nan", "inf", "too_fast"):
         assert 0.0 <= peer[kind] < 0.01, (kind, peer)
     assert peer["good"] > 0.2, peer
-    assert counts["stale"] >= 10 and counts["non_finite"] >= 20 and counts["out_of_range"] >= 10, counts
+    assert counts["stale"] >= 6 and counts["non_finite"] >= 12 and counts["out_of_range"] >= 6, counts
 
 
 def test_estop_latches_and_drops_cmd_vel_until_estop_reset(bad: dict[str, Any]) -> None:
