@@ -3,7 +3,8 @@
 - By default the bridge is reachable from this host only: a participant bound to a
   non-loopback address does not see it, one on 127.0.0.1 does, and ``network=True``
   makes it visible on that address (in a network namespace the test makes, with a
-  veth interface, when ``unshare -n`` works; else on this host's own address).
+  veth interface, when ``unshare -rn`` works, as root or in a user namespace; else on
+  this host's own address).
 - Stale, non-finite and out-of-range ``/cmd_vel`` samples are dropped and counted;
   ``/estop`` latches and then every ``/cmd_vel`` is dropped.
 - A DDS stack that is missing or cannot start, and multicast that does not work, fail
@@ -53,13 +54,13 @@ def _host_address() -> str | None:
 def _reach(domain: int) -> dict[str, Any]:
     """``reach_probe.py`` in a network namespace of its own, else on this host."""
     if shutil.which("unshare") and shutil.which("ip") and subprocess.run(
-            ["unshare", "-n", "sh", "-c", NETNS + "true"], capture_output=True).returncode == 0:
-        command = ["unshare", "-n", "sh", "-c",
+            ["unshare", "-rn", "sh", "-c", NETNS + "true"], capture_output=True).returncode == 0:
+        command = ["unshare", "-rn", "sh", "-c",
                    NETNS + f"exec {sys.executable} {PROBE} --address 198.51.100.1 --domain {domain}"]
     else:
         address = _host_address()
         if address is None:
-            pytest.skip("no network namespace (unshare -n, ip) and no non-loopback address here")
+            pytest.skip("no network namespace (unshare -rn, ip) and no non-loopback address here")
         command = [sys.executable, str(PROBE), "--address", address, "--domain", str(domain)]
     out = subprocess.run(command, capture_output=True, text=True, timeout=90, cwd=REPO)
     assert out.returncode == 0, out.stderr[-3000:]
@@ -192,14 +193,14 @@ def test_a_dds_stack_that_cannot_start_is_named() -> None:
 def test_blocked_multicast_is_named() -> None:
     """In a namespace with only loopback (no multicast route), ``--network`` without
     ``--peer`` stops at the multicast check."""
-    if subprocess.run(["unshare", "-n", "true"], capture_output=True).returncode != 0:
+    if subprocess.run(["unshare", "-rn", "true"], capture_output=True).returncode != 0:
         with pytest.raises(WcdriveConnectionError, match="multicast"):
             multicast.check("203.0.113.9")        # not an address of this host
         return
     code = ("from wcdrive.tools.cli import main; import sys; "
             "sys.exit(main(['ros2', '--network', '--seconds', '1']))")
     shell = f"ip link set lo up && exec {sys.executable} -c \"{code}\""
-    out = subprocess.run(["unshare", "-n", "sh", "-c", shell],
+    out = subprocess.run(["unshare", "-rn", "sh", "-c", shell],
                          capture_output=True, text=True, timeout=60, cwd=REPO)
     assert out.returncode == 3, out
     assert "multicast does not work here" in out.stderr and "--peer" in out.stderr, out.stderr
