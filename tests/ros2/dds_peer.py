@@ -175,7 +175,8 @@ def describe(sample: Any) -> dict[str, Any]:
     durability = q[Policy.Durability]
     history = q[Policy.History]
     user = q[Policy.Userdata] if Policy.Userdata in q else None
-    return {"topic": sample.topic_name, "type": sample.type_name,
+    return {"topic": sample.topic_name, "type": sample.type_name, "key": sample.key.bytes.hex(),
+            "participant": sample.participant_key.bytes.hex(),
             "reliable": not isinstance(reliability, type(Policy.Reliability.BestEffort))
             and "BestEffort" not in repr(reliability),
             "transient_local": "TransientLocal" in repr(durability),
@@ -372,8 +373,8 @@ def main() -> None:
     result["diagnostics"] = sorted({s.name for m in r["rt/diagnostics"] for s in m.status})
     result["cmd_vel_diag"] = [{kv.key: kv.value for kv in s.values} for m in r["rt/diagnostics"]
                               for s in m.status if s.name == "wcdrive: cmd_vel"][-1:]
-    result["nodes"] = [[n.node_namespace, n.node_name, len(n.reader_gid_seq), len(n.writer_gid_seq),
-                        bytes(info.gid.data).hex()]
+    result["nodes"] = [[n.node_namespace, n.node_name, sorted(bytes(g.data).hex() for g in n.reader_gid_seq),
+                        sorted(bytes(g.data).hex() for g in n.writer_gid_seq), bytes(info.gid.data).hex()]
                        for info in r["ros_discovery_info"] for n in info.node_entities_info_seq]
     print(json.dumps(result))
 

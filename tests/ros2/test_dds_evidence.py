@@ -80,7 +80,7 @@ class FakeScan:
 @pytest.fixture(scope="module")
 def square() -> Iterator[dict[str, Any]]:
     """The bridge on ``sim://`` (at twice real time) here; the peer drives the square. The peer's summary,
-    the odometry each tick had here (by stamp), the gate's counts and the node's GID."""
+    the odometry each tick had here (by stamp) and the gate's counts."""
     domain = fresh_domain()
     tap = ImuTap()
     chair = wcdrive.connect("sim://?speed=2", ros=tap)          # twice real time: a shorter test
@@ -94,13 +94,12 @@ def square() -> Iterator[dict[str, Any]]:
             here[(ns // 1_000_000_000, ns % 1_000_000_000)] = chair.odometry
 
         chair.on_telemetry(record)
-        guid = node.ros.guid.hex()
         peer = run_peer(domain, "square")
         counts = dict(node.gate.counts)
     finally:
         node.close()
         chair.close()
-    yield {"peer": peer, "here": here, "counts": counts, "guid": guid}
+    yield {"peer": peer, "here": here, "counts": counts}
 
 
 def test_the_chair_drives_a_square_from_a_20hz_cmd_vel_stream(square: dict[str, Any]) -> None:
@@ -173,12 +172,17 @@ def test_every_topic_arrives(square: dict[str, Any]) -> None:
 
 
 def test_ros_discovery_info_names_the_node_and_its_endpoints(square: dict[str, Any]) -> None:
-    """What ``ros2 node list`` reads: node ``/wcdrive`` of the bridge's participant,
-    with a GID for each reader (3) and each writer on an ``rt/`` topic (7)."""
-    nodes = square["peer"]["nodes"]
-    writers = sum(1 for e in square["peer"]["endpoints"]
-                  if e["kind"] == "pub" and e["topic"].startswith("rt/"))
-    assert nodes[-1] == ["/", "wcdrive", 3, writers, square["guid"]]
+    """What ``ros2 node list`` and ``ros2 node info`` read: node ``/wcdrive``, its
+    participant's GID and the GIDs of its readers and its writers on ``rt/`` topics,
+    each the DDS GUID the peer's own discovery gives that entity."""
+    endpoints = square["peer"]["endpoints"]
+    namespace, name, readers, writers, gid = square["peer"]["nodes"][-1]
+    assert (namespace, name) == ("/", "wcdrive")
+    assert {e["participant"] for e in endpoints} == {gid}
+    assert readers == sorted(e["key"] for e in endpoints if e["kind"] == "sub")
+    assert writers == sorted(e["key"] for e in endpoints
+                             if e["kind"] == "pub" and e["topic"].startswith("rt/"))
+    assert len(readers) == 3 and len(writers) == 7
 
 
 def test_twist_stamped_is_byte_for_byte_a_jazzy_publishers() -> None:

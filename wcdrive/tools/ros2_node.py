@@ -104,7 +104,7 @@ def run(args: argparse.Namespace) -> int:
         chair = wcdrive.connect(args.url, ros=tap) if tap is not None else wcdrive.connect(args.url)
         with chair:
             sim_time = {"on": True, "off": False}.get(args.sim_time, faster_than_real_time(args.url))
-            options = Options(name=args.name, twist=args.twist, publish_tf=not args.no_tf,
+            options = Options(twist=args.twist, publish_tf=not args.no_tf,
                               cmd_timeout=args.cmd_timeout, max_age=args.max_age, sim_time=sim_time)
             node = ChairNode(chair, ros, options, imu=tap).start()
             try:

@@ -27,7 +27,7 @@ import math
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Protocol
 
 from wcdrive.errors import WcdriveError
@@ -93,7 +93,6 @@ class ScanSource(Protocol):
 class Options:
     """How the node behaves (``wcdrive ros2``'s flags)."""
 
-    name: str = "wcdrive"
     twist: bool = False
     publish_tf: bool = True
     cmd_timeout: float = 0.5
@@ -104,7 +103,6 @@ class Options:
     odom_frame: str = messages.ODOM_FRAME
     base_frame: str = messages.BASE_FRAME
     scan: ScanSource | None = None
-    extra: dict[str, Any] = field(default_factory=dict)
 
 
 def wheel_radians(robot: Robot) -> Callable[[Telemetry], tuple[float, float]]:
@@ -120,7 +118,9 @@ def wheel_radians(robot: Robot) -> Callable[[Telemetry], tuple[float, float]]:
 
 
 def limits(robot: Robot) -> tuple[float, float]:
-    """The largest ``|linear|`` (m/s) and ``|angular|`` (rad/s) a command may ask."""
+    """The largest ``|linear|`` (m/s) and ``|angular|`` (rad/s) a command may ask: the
+    protocol's, for either robot (the Eddie's own limit, 32767 positions/s, is far
+    beyond what it can do)."""
     from wcdrive.protocol.codec import MAX_ANGULAR, MAX_LINEAR
 
     return MAX_LINEAR, MAX_ANGULAR
