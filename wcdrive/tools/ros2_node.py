@@ -57,7 +57,8 @@ def faster_than_real_time(url: str) -> bool:
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Adds ``ros2`` to the ``wcdrive`` command's subcommands."""
     p = sub.add_parser("ros2", help="the chair as a ROS 2 node on DDS (no ROS install needed)",
-                       description=(__doc__ or "").split("\n\n")[0])
+                       description="The chair (any URL connect() takes) as a ROS 2 node on DDS, "
+                                   "without a ROS install: docs/ros2.md.")
     p.add_argument("--url", default="sim://", help="the robot: any URL connect() takes (default sim://)")
     p.add_argument("--name", default="wcdrive", help="the node's name (default wcdrive)")
     p.add_argument("--domain", type=int, help="the ROS 2 domain (default $ROS_DOMAIN_ID, else 0)")
