@@ -21,3 +21,26 @@ def test_faster_than_real_time() -> None:
     for url in ("sim://", "sim://?speed=1", "sim://?speed=0.5", "simavr://?realtime=1",
                 "/dev/ttyACM0", "socket://host:1?speed=9"):
         assert not faster_than_real_time(url), url
+
+
+def test_the_flags_choose_the_topics() -> None:
+    """``--no-tf`` drops ``/tf``; ``/imu`` needs a gyro tap, ``/scan`` a scan source,
+    ``/clock`` sim time; ``--twist`` makes ``/cmd_vel`` a plain Twist reader."""
+    from tests.ros2.conftest import fresh_domain
+    from wcdrive.ros2.dds.graph import RosNode
+    from wcdrive.ros2.dds.node import ChairNode, ImuTap, Options
+
+    class Idle:                        # a Robot that never moves (start() is not called)
+        link_ok = True
+
+    ros = RosNode("wcdrive", domain=fresh_domain())
+    try:
+        plain = ChairNode(Idle(), ros, Options(publish_tf=False))       # type: ignore[arg-type]
+        assert sorted(plain.published) == ["/diagnostics", "/joint_states", "/odom", "/tf_static"]
+        full = ChairNode(Idle(), ros, Options(twist=True, sim_time=True, scan=Idle()),  # type: ignore[arg-type]
+                         imu=ImuTap())
+        assert sorted(full.published) == ["/clock", "/diagnostics", "/imu", "/joint_states", "/odom",
+                                          "/scan", "/tf", "/tf_static"]
+        assert full._cmd_type == "geometry_msgs/msg/Twist" and plain._cmd_type.endswith("TwistStamped")
+    finally:
+        ros.close()

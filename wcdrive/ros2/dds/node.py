@@ -185,6 +185,11 @@ class ChairNode:
         if imu is not None:
             imu.callback = self._on_imu
 
+    @property
+    def published(self) -> list[str]:
+        """The ROS topics this node publishes (``TOPICS`` less those not wanted)."""
+        return list(self._pub)
+
     def _wanted(self, name: str, imu: ImuTap | None) -> bool:
         o = self.options
         return {"/tf": o.publish_tf, "/imu": imu is not None, "/scan": o.scan is not None,
