@@ -215,3 +215,12 @@ def test_network_on_a_real_device_says_anyone_can_drive_it() -> None:
                      "--domain", str(fresh_domain()))
     assert quiet.returncode == 0, quiet.stderr
     assert "ANY node" not in quiet.stderr
+
+
+def test_cyclonedds_uri_cannot_widen_the_bridge(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The bridge's configuration is its own: a ``CYCLONEDDS_URI`` naming an address no
+    interface has (which Cyclone refuses to start with) changes nothing."""
+    monkeypatch.setenv("CYCLONEDDS_URI", '<CycloneDDS><Domain><General><Interfaces><NetworkInterface '
+                       'address="203.0.113.9"/></Interfaces></General></Domain></CycloneDDS>')
+    out = _wcdrive("ros2", "--seconds", "0.2", "--domain", str(fresh_domain()))
+    assert out.returncode == 0, out.stderr
