@@ -33,6 +33,7 @@ from tests.tools.test_identify import HELD_OUT, blocks_run
 from wcdrive.plant import Plant
 from wcdrive.plant.identify import FITTED, Fit, Run, degraded, identify, with_motor_constant
 from wcdrive.plant.params import ChairParams, chair_toml
+from wcdrive.protocol.codec import Event, LineDecoder
 from wcdrive.tools.bench import run_scenario
 from wcdrive.tools.identify import predict, run_of
 
@@ -97,17 +98,23 @@ def main() -> int:
     tmp = Path(tempfile.mkdtemp(prefix="wcdrive-identify-"))
     held_scenario = tmp / "held_out.toml"
     held_scenario.write_text(HELD_OUT)
+    print(f"recordings in {tmp}")
     print("Secret chairs: error of each fitted figure against the secret, % (the fit's standard "
-          "uncertainty, %),\nfrom 45 s on blocks + ident_floor (43 s + settling) on sim://")
+          "uncertainty, %),\nfrom 45 s on blocks + ident_floor (43 s + settling) on sim:// at 10x real time")
     print(header())
     first: tuple[ChairParams, list[Run], Path] | None = None
     predictions = []
     for name, factors in list(CHAIRS.items())[:1 if args.quick else None]:
         truth = chair(factors)
         secret = chair_file(truth, tmp / f"secret_{name[0]}.toml")
-        url = f"sim://?speed=40&chair={secret}"
-        floor = run_of(run_scenario("ident_floor", url, speed=40.0), name="ident_floor")
-        held = run_of(run_scenario(str(held_scenario), url, speed=40.0), name="held_out")
+        url = f"sim://?speed=10&chair={secret}"
+        recording = run_scenario("ident_floor", url, speed=10.0)
+        recording.save(tmp / f"ident_floor_{name[0]}.wcrec.json")
+        floor = run_of(recording, name="ident_floor")
+        held = run_of(run_scenario(str(held_scenario), url, speed=10.0), name="held_out")
+        events = [m.name for m in LineDecoder().feed(recording.received_bytes) if isinstance(m, Event)]
+        print(f"{'':<26}ident_floor: {len(floor.millis)} ticks, {floor.duration:.1f} s, board events: "
+              f"{', '.join(sorted(set(events)))}")
         runs = [blocks_run(truth), floor]
         fit, seconds = timed_fit(runs)
         print(row(name, fit, truth, seconds))

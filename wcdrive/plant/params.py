@@ -246,12 +246,8 @@ def chair_overrides(table: dict[str, object], where: str = "[chair]") -> dict[st
     return out
 
 
-def load_chair(path: str | Path) -> ChairParams:
-    """The ``ChairParams`` of a chair file: a TOML file whose ``[chair]`` table overrides
-    the defaults, as a scenario's does (what ``wcdrive bench identify`` writes, and what
-    ``sim://?chair=`` and ``simavr://?chair=`` load). Other tables in the file are left
-    alone. ``ChairFileError`` when the file is missing, not TOML, has no ``[chair]``
-    table or a key that ``chair_overrides`` refuses."""
+def load_chair_overrides(path: str | Path) -> dict[str, object]:
+    """The checked ``[chair]`` table of a chair file (``load_chair``), as overrides."""
     path = Path(path)
     try:
         data = tomllib.loads(path.read_text())
@@ -262,7 +258,16 @@ def load_chair(path: str | Path) -> ChairParams:
     table = data.get("chair")
     if not isinstance(table, dict):
         raise ChairFileError(f"{path}: no [chair] table")
-    return dataclasses.replace(ChairParams(), **chair_overrides(table, f"{path}: [chair]"))  # type: ignore[arg-type]
+    return chair_overrides(table, f"{path}: [chair]")
+
+
+def load_chair(path: str | Path) -> ChairParams:
+    """The ``ChairParams`` of a chair file: a TOML file whose ``[chair]`` table overrides
+    the defaults, as a scenario's does (what ``wcdrive bench identify`` writes, and what
+    ``sim://?chair=`` and ``simavr://?chair=`` load). Other tables in the file are left
+    alone. ``ChairFileError`` when the file is missing, not TOML, has no ``[chair]``
+    table or a key that ``chair_overrides`` refuses."""
+    return dataclasses.replace(ChairParams(), **load_chair_overrides(path))  # type: ignore[arg-type]
 
 
 def chair_toml(overrides: Mapping[str, object], comments: dict[str, str] | None = None,

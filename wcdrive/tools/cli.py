@@ -30,6 +30,7 @@ arguments or files, 3 connection, 4 timeout, 5 protocol, 6 command refused, 7 bu
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import sys
@@ -96,6 +97,13 @@ def _sim(args: argparse.Namespace) -> int:
     names = [p.stem for p in scenario.bundled()] if args.all else (args.scenario or ["square"])
     if args.robot == "eddie":
         return _sim_eddie(args, names)
+    from wcdrive.plant.params import ChairFileError, load_chair_overrides
+
+    try:                                   # a chair file; a scenario's own [chair] keys win
+        chair = load_chair_overrides(args.chair) if args.chair else {}
+    except ChairFileError as exc:
+        print(f"wcdrive sim: {exc}", file=sys.stderr)
+        return 2
     results = []
     for name in names:
         try:
@@ -103,6 +111,8 @@ def _sim(args: argparse.Namespace) -> int:
         except scenario.ScenarioError as exc:
             print(f"wcdrive sim: {exc}", file=sys.stderr)
             return 2
+        if chair:
+            sc = dataclasses.replace(sc, chair={**chair, **sc.chair})  # type: ignore[dict-item]
         with console.Bar(sc.name, 1.0, console.progress_enabled(args.json)) as progress:
             result = runner.run(sc, backend=args.backend, seed=args.seed, dt=args.dt, progress=progress,
                                 ekf=args.ekf or bool(args.mcap or args.live))
@@ -287,6 +297,8 @@ def parser() -> argparse.ArgumentParser:
     sim.add_argument("--no-plots", action="store_true", help="write no PNG plots")
     sim.add_argument("--seed", type=int, default=0, help="gyro noise seed")
     sim.add_argument("--dt", type=float, default=0.001, help="physics step in s (default 0.001)")
+    sim.add_argument("--chair", help="a chair file (wcdrive bench identify --out): its [chair] table "
+                     "for the plant; a scenario's own [chair] keys win")
     sim.add_argument("--ekf", action="store_true",
                      help="also run the host's two EKFs (docs/odometry.md) on the 400 Hz gyro and "
                           "report odom_ekf_*: about 25 times slower (--mcap and --live imply it)")
