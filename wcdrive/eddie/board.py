@@ -3,12 +3,12 @@
 ``EddieLoop`` is the deterministic closed loop (no threads): bytes in with ``send``,
 ``run_until(t)`` advances simulated time in 1 ms plant steps with a Position
 Controller iteration every 20 ms (the source's ``PDLoop``), the sensors read from the
-plant's pose before each iteration, replies out with ``take_output``. A received byte
-is handled 1/11520 s (10 bits at 115200 baud) after the one before it, its reply
-leaves at once, except after the firmware's waits (``PING`` 25 ms, ``STOP 0``
-20 ms), which hold the reply and the bytes behind it. ``EddieSimBoard`` is one paced
-to the wall clock (times ``speed``) in a background thread: what ``wceddie://`` and
-``wcdrive pty --eddie`` open.
+plant's pose before each iteration (against its walls and its ``world``), replies out
+with ``take_output``. A received byte is handled 1/11520 s (10 bits at 115200 baud)
+after the one before it, its reply leaves at once, except after the firmware's waits
+(``PING`` 25 ms, ``STOP 0`` 20 ms), which hold the reply and the bytes behind it.
+``EddieSimBoard`` is one paced to the wall clock (times ``speed``) in a background
+thread: what ``wceddie://`` and ``wcdrive pty --eddie`` open.
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ from wcdrive.eddie.firmware import DIVISOR, MAX_ON_TIME, EddieFirmware
 from wcdrive.eddie.geometry import positions
 from wcdrive.eddie.plant import RangeSensors, add_wall, eddie_params
 from wcdrive.plant import ChairParams, Plant
+from wcdrive.plant.world import World
 
 BYTE_S = 10.0 / 115200.0
 STEP_S = 0.001
@@ -34,13 +35,13 @@ class EddieLoop:
 
     def __init__(self, params: ChairParams | None = None, *, walls: Sequence[Wall] = (),
                  start: tuple[float, float, float] = (0.0, 0.0, 0.0), seed: int = 0,
-                 eol: str = "firmware") -> None:
+                 eol: str = "firmware", world: World | None = None) -> None:
         self.params = params or eddie_params()
         x, y, th = start
         self.plant = Plant(self.params, x=x, y=y, heading=th)
         for a, b in walls:
             add_wall(self.plant.space, a, b)
-        self.sensors = RangeSensors(self.plant.space, seed)
+        self.sensors = RangeSensors(self.plant.space, seed, world)
         self.firmware = EddieFirmware(eol=eol)
         self.ms = 0                      # simulated time in whole plant steps
         self._rx: deque[tuple[float, int]] = deque()
@@ -106,10 +107,10 @@ class EddieSimBoard(ThreadedBoard):
 
     def __init__(self, params: ChairParams | None = None, *, speed: float = 1.0, seed: int = 0,
                  walls: Sequence[Wall] = (), start: tuple[float, float, float] = (0.0, 0.0, 0.0),
-                 eol: str = "firmware") -> None:
+                 eol: str = "firmware", world: World | None = None) -> None:
         self.clock = WallClock(speed)
         super().__init__("wceddie")
-        self.loop = EddieLoop(params, walls=walls, start=start, seed=seed, eol=eol)
+        self.loop = EddieLoop(params, walls=walls, start=start, seed=seed, eol=eol, world=world)
         self.plant = self.loop.plant
 
     @property

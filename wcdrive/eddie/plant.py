@@ -7,7 +7,9 @@ Eddie's figures. From the seed: 36 positions per wheel revolution, 6-inch tyres
 robot of Eddie's size (an 18 kg base with 12 V gear motors), not measured: the mass,
 the drive train (top speed 1.0 m/s at full power on the flat) and the tyres.
 
-Walls are pymunk static segments in the plant's ``space`` (``add_wall``); the chassis
+Walls are pymunk static segments in the plant's ``space`` (``add_wall``), and a
+``wcdrive.plant.world.World`` (a scenario's ``[world]``: a ROS map, walls, boxes,
+circles), which the sensors see through its ray cast (``World.cast``); the chassis
 has no shape, so walls stop only the sensors' rays, not the robot (a collision is
 a test failure, not a simulated event).
 
@@ -49,6 +51,7 @@ from wcdrive.eddie.geometry import (
     ir_volts,
 )
 from wcdrive.plant.params import ChairParams
+from wcdrive.plant.world import World
 
 
 def eddie_params(wheel_separation: float = WHEEL_SEPARATION, **changes: Any) -> ChairParams:
@@ -76,10 +79,11 @@ def add_wall(space: pymunk.Space, a: tuple[float, float], b: tuple[float, float]
 
 class RangeSensors:
     """The PING))) and IR sensors of the module docstring, against the walls in
-    ``space``; deterministic for a seed."""
+    ``space`` and the ``world`` (the nearer of the two); deterministic for a seed."""
 
-    def __init__(self, space: pymunk.Space, seed: int = 0) -> None:
+    def __init__(self, space: pymunk.Space, seed: int = 0, world: World | None = None) -> None:
         self.space = space
+        self.world = world
         self._rng = np.random.default_rng(seed + 1001)
 
     def _ray(self, pose: tuple[float, float, float], mount: Mount, extra: float, reach: float
@@ -90,7 +94,10 @@ class RangeSensors:
         a = th + mount.yaw + extra
         end = (ox + reach * math.cos(a), oy + reach * math.sin(a))
         hit = self.space.segment_query_first((ox, oy), end, 0.0, pymunk.ShapeFilter())
-        return None if hit is None else hit.alpha * reach
+        best = math.inf if hit is None else hit.alpha * reach
+        if self.world is not None:
+            best = min(best, float(self.world.cast(np.array([ox, oy]), np.array([a]), reach)[0]))
+        return None if math.isinf(best) else best
 
     def ping(self, pose: tuple[float, float, float]) -> dict[int, float | None]:
         """Each PING))) pin's measured distance (m), None without an echo in range."""

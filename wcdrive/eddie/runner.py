@@ -11,9 +11,14 @@ odometry's error at the end and the largest along the way.
 What does not carry over from the Mega's scenarios, and is reported, not faked:
 ``ppm`` segments (no RC input on Eddie: silence), ``[[fault]]`` and ``[params]`` (the
 Mega's), ``[chair]`` (the Mega's ChairParams; Eddie's come from ``[eddie]``, e.g.
-``wheel_separation = 0.3``), ``[world]`` (Eddie drives on the flat). A scenario may
-place walls for the range sensors:
-``[[wall]]`` tables with ``a = [x, y]`` and ``b = [x, y]`` in metres.
+``wheel_separation = 0.3``), ``[world]``'s floor grades (Eddie drives on the flat),
+``[lidar]`` (Eddie has none). A scenario may place walls for the range sensors:
+``[[wall]]`` tables with ``a = [x, y]`` and ``b = [x, y]`` in metres, and the
+``[world]`` table's ``map``, ``walls``, ``boxes``, ``circles`` and ``file``
+(``wcdrive.plant.world``), which the PING))) and IR sensors see through the world's
+ray cast; its ``start`` places Eddie (the odometry starts at its own 0, 0, 0 and is
+compared placed at the start). Neither kind of wall stops Eddie's chassis: only the
+sensors' rays.
 """
 
 from __future__ import annotations
@@ -24,6 +29,7 @@ import tomllib
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+import numpy as np
 import pymunk
 
 from wcdrive.eddie.board import EddieLoop, Wall
@@ -100,7 +106,7 @@ def run(sc: Scenario, *, seed: int = 0) -> EddieResult:
     """Runs ``sc`` on the simulated Eddie (module docstring)."""
     walls, overrides = _extras(sc)
     params = eddie_params(**overrides)
-    loop = EddieLoop(params, walls=walls, seed=seed)
+    loop = EddieLoop(params, walls=walls, seed=seed, world=sc.world, start=sc.start)
     odo = WheelOdometry(OdometryParams(wheel_radius=WHEEL_RADIUS, wheelbase=params.wheelbase,
                                        counts_per_rev=POSITIONS_PER_REV))
     notes = sorted({f"{s.kind} segments are silence on Eddie" for s in sc.segments if s.kind == "ppm"})
@@ -111,7 +117,9 @@ def run(sc: Scenario, *, seed: int = 0) -> EddieResult:
     if sc.chair:
         notes.append("[chair] is the Mega's ChairParams: ignored (Eddie's: [eddie])")
     if not sc.terrain.flat:
-        notes.append("[world] not modelled on Eddie: a flat floor")
+        notes.append("[world] grades not modelled on Eddie: a flat floor")
+    if sc.lidar is not None:
+        notes.append("[lidar] not on Eddie: ignored")
     # the host's timeline: (time, command pair or None for silence)
     plan: list[tuple[float, tuple[int, int] | None]] = []
     t = 0.02
@@ -151,7 +159,7 @@ def run(sc: Scenario, *, seed: int = 0) -> EddieResult:
         if loop.time >= next_poll:
             loop.send(b"DIST\r")
             polls += 1
-            if walls and polls % 5 == 0:
+            if (walls or sc.world is not None) and polls % 5 == 0:
                 loop.send(b"PING\r")
             next_poll += 1.0 / POLL_HZ
         loop.run_until(step_end)
@@ -161,7 +169,8 @@ def run(sc: Scenario, *, seed: int = 0) -> EddieResult:
                     left, right = signed(line[0:8].decode(), 32), signed(line[9:17].decode(), 32)
                     est = odo.update(when, -left, right)
                     x, y, _ = loop.plant.pose
-                    max_error = max(max_error, math.hypot(est.pose.x - x, est.pose.y - y))
+                    ex, ey, _ = _placed(sc.start, (est.pose.x, est.pose.y, est.pose.theta))
+                    max_error = max(max_error, math.hypot(ex - x, ey - y))
                 elif len(line) == 15 and line.count(b" ") == 3:      # PING: four 3-digit values
                     values = [int(v, 16) * PING_M_PER_UNIT for v in line.split() if int(v, 16)]
                     if values and (nearest is None or min(values) < nearest[0]):
@@ -170,19 +179,31 @@ def run(sc: Scenario, *, seed: int = 0) -> EddieResult:
         path += math.hypot(pose[0] - prev[0], pose[1] - prev[1])
         prev = pose
     x, y, th = loop.plant.pose
-    o = odo.pose
+    ox, oy, oth = _placed(sc.start, (odo.pose.x, odo.pose.y, odo.pose.theta))
     return EddieResult(
-        name=sc.name, duration=end, truth=(x, y, th), odometry=(o.x, o.y, o.theta),
-        final_error_m=math.hypot(o.x - x, o.y - y),
-        final_heading_error_deg=abs(math.degrees(math.remainder(o.theta - th, 2 * math.pi))),
+        name=sc.name, duration=end, truth=(x, y, th), odometry=(ox, oy, oth),
+        final_error_m=math.hypot(ox - x, oy - y),
+        final_heading_error_deg=abs(math.degrees(math.remainder(oth - th, 2 * math.pi))),
         max_error_m=max_error, path_length_m=path, deadman_stops=deadman, nearest_ping=nearest,
         notes=notes)
 
 
+Pose = tuple[float, float, float]
+
+
+def _placed(start: Pose, pose: Pose) -> Pose:
+    """An odometry pose (from its own 0, 0, 0) in the map frame of a start at ``start``."""
+    x0, y0, th0 = start
+    c, s = math.cos(th0), math.sin(th0)
+    return x0 + c * pose[0] - s * pose[1], y0 + s * pose[0] + c * pose[1], pose[2] + th0
+
+
 def _true_ping(loop: EddieLoop) -> float:
-    """The nearest wall straight ahead of the PING))) sensors, noise-free (m)."""
+    """The nearest wall (``[[wall]]`` or ``[world]``) straight ahead of the PING)))
+    sensors, noise-free (m)."""
     x, y, th = loop.plant.pose
     best = math.inf
+    world = loop.sensors.world
     for mount in PING_MOUNTS.values():
         ox = x + mount.ahead * math.cos(th) - mount.left * math.sin(th)
         oy = y + mount.ahead * math.sin(th) + mount.left * math.cos(th)
@@ -190,6 +211,8 @@ def _true_ping(loop: EddieLoop) -> float:
         hit = loop.plant.space.segment_query_first((ox, oy), far, 0.0, pymunk.ShapeFilter())
         if hit is not None:
             best = min(best, hit.alpha * 5)
+        if world is not None:
+            best = min(best, float(world.cast_exact(np.array([ox, oy]), np.array([th]), 5.0)[0]))
     return best
 
 
