@@ -20,6 +20,12 @@ cast" section, measured side by side in one run:
     python benchmarks/lidar_speed.py               # 30 simulated s, 5 runs each
     python benchmarks/lidar_speed.py --quick       # 10 s, 2 runs
 
+* the same side by side on the scenario runner (``wcdrive.sim.runner.run``: the
+  port, the host, the plant, with the lidar's turns made by ``ScanRecorder`` on a scan
+  thread): the bundled ``corridor_lidar`` and ``room_lidar`` with their ``[lidar]``
+  table and without it, alternating, ``--runs`` times each, medians
+  (``--runner-only``: this part alone).
+
 The scan thread gains only where the machine's second core is free.
 """
 
@@ -212,13 +218,50 @@ def scan_cost(world: World, offset: tuple[float, float], repeat: int) -> dict[st
     }
 
 
+def runner_side_by_side(runs: int) -> dict[str, dict[str, float]]:
+    """Per bundled lidar scenario: the runner's median real-time factor with the lidar
+    on and off, the simulated seconds and the scans a run."""
+    import dataclasses
+
+    from wcdrive.sim import runner, scenario
+
+    out = {}
+    for name in ("corridor_lidar", "room_lidar"):
+        sc = scenario.load(name)
+        off = dataclasses.replace(sc, lidar=None)
+        first = runner.run(sc)                                 # a warm-up (the grid built)
+        rtf: dict[str, list[float]] = {"off": [], "on": []}
+        for _ in range(runs):
+            rtf["off"].append(runner.run(off).real_time_factor)
+            rtf["on"].append(runner.run(sc).real_time_factor)
+        assert first.lidar is not None
+        out[name] = {mode: statistics.median(v) for mode, v in rtf.items()} | {
+            "seconds": first.duration, "scans": float(len(first.lidar.scans))}
+    return out
+
+
+def print_runner(runs: int) -> None:
+    rows = runner_side_by_side(runs)
+    print(f"\nthe scenario runner (port, host, plant; the turns on a scan thread), median of {runs}:")
+    print("| scenario | simulated | scans | lidar off | on | on / off | the lidar per turn |")
+    print("|---|---|---|---|---|---|---|")
+    for name, r in rows.items():
+        per_turn = (r["seconds"] / r["on"] - r["seconds"] / r["off"]) / r["scans"] * 1e3
+        print(f"| {name} | {r['seconds']:.1f} s | {r['scans']:.0f} | {r['off']:.0f}x | {r['on']:.0f}x "
+              f"| {r['on'] / r['off']:.3f} | {per_turn:.2f} ms |")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seconds", type=float, default=30.0, help="simulated seconds a drive")
     ap.add_argument("--runs", type=int, default=5, help="drives each way, each world")
     ap.add_argument("--quick", action="store_true", help="10 s, 2 runs")
+    ap.add_argument("--runner-only", action="store_true", help="only the scenario runner's side by side")
     args = ap.parse_args()
     seconds, runs = (10.0, 2) if args.quick else (args.seconds, args.runs)
+    if args.runner_only:
+        print_runner(runs)
+        return
     costs = {name: scan_cost(world, WORLDS[name], 3 if args.quick else 5) for name, world in worlds().items()}
     print("one S3 turn (3,200 rays from a moving chair), best of several:")
     print("| world | segments, circles | grid | C grid | numpy | pymunk "
@@ -254,6 +297,7 @@ def main() -> None:
     drift = max(r["drift"] for r in rtf.values())
     print(f"(the pose integrated from the motion log is within {drift * 1e3:.2f} mm of the plant's at each "
           "turn's end)")
+    print_runner(runs)
 
 
 if __name__ == "__main__":

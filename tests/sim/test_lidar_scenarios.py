@@ -17,7 +17,7 @@ import pytest
 from wcdrive.plant.lidar import SEED_MOUNT, LaserScan
 from wcdrive.plant.world import World
 from wcdrive.sim import runner, scenario
-from wcdrive.sim.report import to_json
+from wcdrive.sim.report import table, to_json
 from wcdrive.sim.scenario import BUNDLED, ScenarioError
 
 CORRIDOR = BUNDLED / "worlds" / "hospital_corridor.yaml"
@@ -230,6 +230,7 @@ def test_json_summarises_the_scans(still) -> None:
     assert m["lidar_first_stamp_s"] == 0.0 and m["lidar_last_stamp_s"] == pytest.approx(0.9)
     assert m["lidar_return_fraction"] == 1.0                  # a closed corridor: every beam returns
     assert m["lidar_nearest_m"] == pytest.approx(1.0, abs=6 * SIGMA)    # the least of 32,400 draws
+    assert "  lidar: rplidar_s3 at (0.20, 0.00, 0.30) m, yaw 0 deg, 10 scans of 3240 beams" in table(still)
 
 
 def test_the_corridor_lidar_scenario() -> None:

@@ -13,8 +13,9 @@ def table(result: SimResult) -> str:
     """What ``wcdrive sim`` prints for a run: ground truth against the three odometries,
     tracking error, caster work, the board's line counts, (simavr backend) the
     differences between the port and the firmware, the floor when it is not level, the
-    start pose and the collisions with the walls when the scenario has them, the
-    figures after a fault and after the last stop, and the board's events."""
+    start pose and the collisions with the walls when the scenario has them, the lidar
+    and its scans, the figures after a fault and after the last stop, and the board's
+    events."""
     m = result.metrics()
     rows = [
         ("", "x (m)", "y (m)", "heading (deg)", "pos. error (m)", "heading error (deg)"),
@@ -85,6 +86,13 @@ def table(result: SimResult) -> str:
         for c in world.contacts[:10]:
             lines.append(f"  {c.time:8.3f} s  collision at ({c.x:.3f}, {c.y:.3f}), impact "
                          f"{c.impact:.1f} N s, {c.duration:.3f} s touching")
+    if result.lidar is not None:
+        lidar, scans = result.lidar.lidar, result.lidar.scans
+        mount = lidar.mount
+        beams = sorted({len(scan.ranges) for scan in scans})
+        lines.append(f"  lidar: {lidar.model.name} at ({mount.x:.2f}, {mount.y:.2f}, {mount.z:.2f}) m, "
+                     f"yaw {mount.yaw_deg:g} deg" + (", head down" if mount.inverted else "")
+                     + f", {len(scans)} scans of {'/'.join(str(b) for b in beams) or 0} beams")
     stop = result.stop_metrics()
     if stop["stop_at_s"] is not None:
         drift = stop["drift_parked_m"]
