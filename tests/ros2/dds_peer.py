@@ -432,7 +432,7 @@ def bad_commands(peer: Peer, writer: Any, estop: Any, reset: Any) -> dict[str, A
 
     out = {"stale": send(0.4, 0.0, age=5.0, seconds=0.6), "nan": send(float("nan"), 0.0, seconds=0.6),
            "inf": send(0.0, float("inf"), seconds=0.6), "too_fast": send(50.0, 0.0, seconds=0.6),
-           "good": send(0.4, 0.0, seconds=1.2)}
+           "good": send(0.4, 0.0, seconds=1.5)}
     estop.write(idl("std_msgs/msg/Bool")(data=True))
     time.sleep(0.2)
     send(0.0, 0.0, seconds=0.2)
@@ -441,7 +441,7 @@ def bad_commands(peer: Peer, writer: Any, estop: Any, reset: Any) -> dict[str, A
     time.sleep(0.5)                                         # the test reads the latch here
     reset.write(idl("std_msgs/msg/Empty")(structure_needs_at_least_one_member=0))
     send(0.0, 0.0, seconds=1.0)                             # the board resets once parked
-    out["after_reset"] = send(0.4, 0.0, seconds=1.2)
+    out["after_reset"] = send(0.4, 0.0, seconds=1.5)
     return out
 
 

@@ -151,7 +151,7 @@ def test_stale_non_finite_and_out_of_range_cmd_vel_never_drive(bad: dict[str, An
     peer, counts = bad["peer"], bad["counts"]
     for kind in ("stale", "nan", "inf", "too_fast"):
         assert 0.0 <= peer[kind] < 0.01, (kind, peer)
-    assert peer["good"] > 0.2, peer
+    assert peer["good"] > 0.1, peer
     assert counts["stale"] >= 6 and counts["non_finite"] >= 12 and counts["out_of_range"] >= 6, counts
 
 
@@ -159,7 +159,7 @@ def test_estop_latches_and_drops_cmd_vel_until_estop_reset(bad: dict[str, Any]) 
     assert bad["latched_during"], bad["peer"]
     assert bad["peer"]["after_estop"] < 0.01, bad["peer"]
     assert bad["counts"]["estop"] >= 10, bad["counts"]
-    assert bad["peer"]["after_reset"] > 0.2, bad["peer"]          # /estop_reset, then it drives
+    assert bad["peer"]["after_reset"] > 0.1, bad["peer"]          # /estop_reset, then it drives
     assert not bad["latched"]
 
 
