@@ -46,7 +46,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -365,34 +365,34 @@ def identify(runs: Sequence[Run], start: ChairParams | None = None) -> Fit:
         return residuals(params_of(x), runs)
 
     bounds = (x0 - math.log(5.0), x0 + math.log(5.0))
-    # From far off the whole fit can settle in a false valley (a heavier chair with
-    # weaker motors and more rolling resistance, say), so it is built up: the motor
-    # constant alone (every steady speed), then with the current limit, then all; each
-    # stage least squares, from each of ``BODY_STARTS`` on the floor alone (with runs on
-    # blocks the inertia is known, and the one start found the chairs of
-    # benchmarks/identify.py), the best kept; then again with the robust loss.
-    best: tuple[float, np.ndarray] | None = None
-    for mass, crr in BODY_STARTS if floor and not blocks else BODY_STARTS[:1]:
-        x = x0.copy()
-        for i, n in enumerate(names):
-            x[i] += math.log({"chair_mass": mass, "rolling_resistance": crr}.get(n, 1.0))
-        for stage in STAGES:
-            free = [i for i, n in enumerate(names) if n in stage or stage == ()]
-
-            def part(y: np.ndarray, free: list[int] = free, x: np.ndarray = x) -> np.ndarray:
-                z = x.copy()
-                z[free] = y
-                return fun(z)
-
-            step = least_squares(part, x[free], x_scale=0.1, diff_step=1e-4, xtol=1e-10, ftol=1e-10,
-                                 bounds=(bounds[0][free], bounds[1][free]))
-            x = x.copy()
-            x[free] = step.x
-            cost = float(step.cost)
-        if best is None or cost < best[0]:
-            best = (cost, x)
-    assert best is not None
-    x = best[1]
+    # From far off the whole fit can settle in a false valley (a heavier chair with a
+    # larger current limit and wheel inertia, say), so it is built up: the runs on
+    # blocks alone fix the motor and the wheel (the motor constant alone first, then
+    # with the current limit, then all of theirs); the runs on the floor then the body,
+    # from each of ``BODY_STARTS``, the rest held (on the floor alone: in the same stages
+    # as on blocks, the body freed last), the best kept; then all figures on all runs,
+    # least squares and again with the robust loss.
+    x = x0.copy()
+    block_runs = [r for r in runs if r.blocks]
+    floor_runs = [r for r in runs if not r.blocks]
+    if block_runs:
+        _, x = _staged(lambda z: residuals(params_of(z), block_runs), x, names,
+                       [tuple(n for n in stage or BLOCKS_FITS if n in BLOCKS_FITS) for stage in STAGES],
+                       bounds)
+    if floor_runs:
+        body = ("chair_mass", "rolling_resistance")
+        stages = [body] if block_runs else [*STAGES[:-1], ()]
+        best: tuple[float, np.ndarray] | None = None
+        for mass, crr in BODY_STARTS:
+            y = x.copy()
+            for i, n in enumerate(names):
+                y[i] += math.log({"chair_mass": mass, "rolling_resistance": crr}.get(n, 1.0))
+            found = _staged(lambda z: residuals(params_of(z), floor_runs), y, names, stages, bounds)
+            if best is None or found[0] < best[0]:
+                best = found
+        assert best is not None
+        x = best[1]
+    x = least_squares(fun, x, x_scale=0.1, diff_step=1e-4, xtol=1e-10, ftol=1e-10, bounds=bounds).x
     result = least_squares(fun, x, x_scale=0.1, diff_step=1e-4, xtol=1e-10, ftol=1e-10,
                            loss="soft_l1", f_scale=ROBUST_SCALE, bounds=bounds)
     fitted = params_of(result.x)
@@ -428,6 +428,32 @@ def identify(runs: Sequence[Run], start: ChairParams | None = None) -> Fit:
     if blocks:
         fit.wheel_factor = wheel_factors(fitted, [r for r in runs if r.blocks])
     return fit
+
+
+def _staged(fun: Callable[[np.ndarray], np.ndarray], x: np.ndarray, names: Sequence[str],
+            stages: Sequence[tuple[str, ...]], bounds: tuple[np.ndarray, np.ndarray]
+            ) -> tuple[float, np.ndarray]:
+    """Least squares of ``fun`` from ``x`` in ``stages``: each frees the figures it names
+    (``()``: all), the others held where the last stage left them. Returns the last
+    stage's cost and ``x``."""
+    cost = math.inf
+    x = x.copy()
+    for stage in stages:
+        free = [i for i, n in enumerate(names) if n in stage or stage == ()]
+        if not free:
+            continue
+
+        def part(y: np.ndarray, free: list[int] = free, x: np.ndarray = x) -> np.ndarray:
+            z = x.copy()
+            z[free] = y
+            return fun(z)
+
+        step = least_squares(part, x[free], x_scale=0.1, diff_step=1e-4, xtol=1e-10, ftol=1e-10,
+                             bounds=(bounds[0][free], bounds[1][free]))
+        x = x.copy()
+        x[free] = step.x
+        cost = float(step.cost)
+    return cost, x
 
 
 def _uncertainty_scale(runs: Sequence[Run], fun: np.ndarray, counts_per_rev: int) -> float:
