@@ -241,3 +241,16 @@ def test_the_corridor_lidar_scenario() -> None:
     assert len(scans) == math.floor(result.duration * 10 + 1e-9)
     assert {len(s.ranges) for s in scans} == {3240}
     assert np.all(np.diff([s.stamp for s in scans]) > 0)
+
+
+def test_on_simavr_as_on_the_port(tmp_path: Path) -> None:
+    """The compiled firmware drives the same plant: the same turns, the same noise
+    draws, the ranges the same but where the two runs' poses (a tenth of a millimetre
+    apart) put a beam on either side of an edge."""
+    sc = scenario.load(_corridor(tmp_path, segments="[[segment]]\ncmdvel = [0.4, 0.2]\nduration = 1.0\n"))
+    simavr, port = runner.run(sc, backend="simavr"), runner.run(sc)
+    assert simavr.firmware_differences == 0
+    assert len(simavr.lidar.scans) == len(port.lidar.scans) == 10
+    gap = np.concatenate([np.abs(a.ranges - b.ranges) for a, b in zip(simavr.lidar.scans, port.lidar.scans,
+                                                                      strict=True)])
+    assert np.mean(gap < 0.01) > 0.98
