@@ -80,3 +80,36 @@ def test_the_soak_sees_a_host_that_leaks(monkeypatch: pytest.MonkeyPatch) -> Non
     monkeypatch.setattr(codec.LineDecoder, "feed", leaky)
     report = soak.soak("sim", 0.2, 50.0, 3)
     assert any(f.startswith("host memory grew") for f in report.failures), report.failures
+
+
+def test_a_line_a_reset_cuts_short_counts_as_sent() -> None:
+    """On ``simavr://`` a line's bytes reach the link as they leave the UART, so a board
+    reset can fall inside one; the host's decoder then counts the cut line on its own
+    (split from the ``BOOT:`` after it), and the soak must count it as sent too. The
+    same bytes through the host's decoder: the counts agree."""
+    from wcdrive.protocol.codec import LineDecoder, board_frame
+
+    soak = _load("soak")
+    first, second = board_frame(b"ENC:1,2", 0), board_frame(b"ENC:3,4", 1)
+    chunks = [first, second[:6], b"BOOT:reset\n"]
+
+    class Board:
+        def __init__(self) -> None:
+            self.left = list(chunks)
+
+        def _advance(self) -> bytes:
+            return self.left.pop(0) if self.left else b""
+
+    class Port:
+        def reset_input_buffer(self) -> None:
+            pass
+
+    board = Board()
+    sent = soak.SentLines(board, Port())
+    decoder = LineDecoder()
+    decoder.framed = True
+    for _ in range(2):
+        decoder.feed(board._advance())
+    sent.reset()                                  # the DTR pulse: the second line is cut
+    decoder.feed(board._advance())
+    assert (sent.count, sent.cut) == (3, 1) == (decoder.stats.total, decoder.stats.bad_crc)
