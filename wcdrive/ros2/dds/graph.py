@@ -62,6 +62,8 @@ class Publisher:
         self.writer, self.msgtype = writer, msgtype
 
     def publish(self, message: Any) -> None:
+        """Writes ``message`` (an instance of the topic's IDL class, or a dict of its
+        fields) on the topic."""
         from wcdrive.ros2.dds import types
 
         sample = message if isinstance(message, types.idl_class(self.msgtype)) else types.build(

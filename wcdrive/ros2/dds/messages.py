@@ -31,10 +31,12 @@ def seconds(time: dict[str, int]) -> float:
 
 
 def header(t: float, frame: str) -> dict[str, Any]:
+    """A ``std_msgs/msg/Header`` stamped ``t`` seconds in ``frame``."""
     return {"stamp": stamp(t), "frame_id": frame}
 
 
 def quaternion(yaw: float) -> dict[str, float]:
+    """A ``geometry_msgs/msg/Quaternion`` turned ``yaw`` rad about z."""
     return {"x": 0.0, "y": 0.0, "z": math.sin(0.5 * yaw), "w": math.cos(0.5 * yaw)}
 
 

@@ -149,10 +149,12 @@ class ImuTap:
         self.callback: Callable[[dict[str, Any]], None] | None = None
 
     def publish(self, topic: str, message: Any, log_time: float) -> None:
+        """Hands an ``/imu`` message to ``callback``; every other topic is dropped."""
         if topic == "/imu" and self.callback is not None:
             self.callback(_as_dict(message))
 
     def close(self) -> None:
+        """Hands nothing more on."""
         self.callback = None
 
 
