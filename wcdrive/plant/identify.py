@@ -63,6 +63,8 @@ STAGES: tuple[tuple[str, ...], ...] = (("motor_constant",), ("motor_constant", "
 #: The body's starting points, as factors on the start's (chair_mass, rolling_resistance):
 #: the floor's false valleys run along a heavier chair rolling more easily and back.
 BODY_STARTS = ((1.0, 1.0), (1.4, 0.7), (0.7, 1.4))
+#: On the floor alone, each of those from these factors on the start's motor constant too.
+MOTOR_STARTS = (1.0, 0.8, 1.25)
 #: Which runs tell each fitted figure.
 BLOCKS_FITS = ("motor_constant", "wheel_inertia", "current_limit")
 FLOOR_FITS = ("motor_constant", "current_limit", "chair_mass", "rolling_resistance")
@@ -386,10 +388,13 @@ def identify(runs: Sequence[Run], start: ChairParams | None = None) -> Fit:
         body = ("chair_mass", "rolling_resistance")
         stages = [body] if block_runs else [*STAGES[:-1], ()]
         best: tuple[float, np.ndarray] | None = None
-        for mass, crr in BODY_STARTS:
+        starts = [(1.0, m, c) for m, c in BODY_STARTS] if block_runs else \
+            [(k, m, c) for k in MOTOR_STARTS for m, c in BODY_STARTS]
+        for k, mass, crr in starts:
             y = x.copy()
             for i, n in enumerate(names):
-                y[i] += math.log({"chair_mass": mass, "rolling_resistance": crr}.get(n, 1.0))
+                y[i] += math.log({"motor_constant": k, "chair_mass": mass,
+                                  "rolling_resistance": crr}.get(n, 1.0))
             found = _staged(lambda z: residuals(params_of(z), floor_runs), y, names, stages, bounds)
             if best is None or found[0] < best[0]:
                 best = found
