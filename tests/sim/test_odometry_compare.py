@@ -39,8 +39,8 @@ def wet(tmp_path_factory: pytest.TempPathFactory):
 def test_icp_beats_the_wheels_under_slip(wet) -> None:
     m = wet.metrics()
     assert m["collisions"] == 0
-    errors = compare(wet, only=("wheel", "ekf", "icp"))
-    wheel, ekf, icp = errors["wheel"], errors["ekf"], errors["icp"]
+    errors = compare(wet, only=("wheel", "ekf", "icp", "fused"))
+    wheel, ekf, icp, fused = errors["wheel"], errors["ekf"], errors["icp"], errors["fused"]
     print({k: dataclasses.asdict(v) for k, v in errors.items()})
     assert wheel.final_m > 0.08                                  # the slip shows in the wheels
     assert icp.final_m < 0.5 * wheel.final_m and icp.final_m < 0.05
@@ -48,6 +48,7 @@ def test_icp_beats_the_wheels_under_slip(wet) -> None:
     assert abs(icp.heading_deg) < 1.0 < abs(wheel.heading_deg)
     assert icp.fallbacks is not None and icp.fallbacks <= 0.05 * icp.scans
     assert abs(ekf.heading_deg) < 0.5                            # the gyro holds the heading
+    assert fused.final_m < 0.5 * wheel.final_m and fused.final_m < 0.05 and abs(fused.heading_deg) < 0.5
 
 
 def test_a_mount_turned_the_wrong_way_is_seen(wet) -> None:
@@ -69,4 +70,4 @@ def test_without_slip_the_wheels_are_exact_and_icp_within_centimetres(tmp_path: 
 
 
 def test_the_estimates_are_seed_002s() -> None:
-    assert list(ESTIMATES) == ["wheel", "ekf", "icp", "icp_ekf"]
+    assert list(ESTIMATES) == ["wheel", "ekf", "icp", "icp_ekf", "fused"]

@@ -3,7 +3,7 @@ lidar odometry seeded by the wheels, and ICP seeded by the EKF ("ICP + EKF"), ea
 against the plant's ground truth.
 
     result = runner.run(scenario.load("room_lidar"), ekf=True)
-    table = compare(result)               # {"wheel": Errors, "ekf": ..., "icp": ..., "icp_ekf": ...}
+    table = compare(result)               # {"wheel": Errors, "ekf": ..., "icp": ..., "fused": ...}
 
 The estimates:
 
@@ -14,7 +14,13 @@ The estimates:
   before from the wheel odometry's pose change between their stamps (the guess, and
   the fallback when ICP fails or jumps);
 - ``icp_ekf``: the same, the EKF's pose change as the guess and the fallback (seed
-  002's part 2: "EKF values as the initial guess").
+  002's part 2: "EKF values as the initial guess");
+- ``fused``: ICP fused into an EKF (``Ekf2D``, seed 002's scheme, run again over the
+  run's gyro samples and the wheels' speeds from the board's counts): each scan, ICP
+  aligns it from the EKF's pose change since the scan before, and the step it finds,
+  put on the EKF's pose then, is fused as a pose (x, y, yaw; ``ICP_STEP_VARIANCE``),
+  as robot_localization's ``differential`` mode fuses a second odometry; a step ICP
+  fell back on is not fused.
 
 Each is compared at every scan's stamp (the turn's first beam: the scans are
 distorted by the motion over their turn, and nothing de-skews them) with the truth
@@ -30,12 +36,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from wcdrive.sim.icp import IcpOdometry, Pose2D, relative
+from wcdrive.host.odometry import GyroIntegrator
+from wcdrive.plant.params import ChairParams
+from wcdrive.sim.icp import IcpOdometry, Pose2D, compose, relative
+from wcdrive.sim.localization import Ekf2D, EkfConfig
 from wcdrive.sim.result import SimResult, placed
 
 #: The estimates compared, in the table's order, with their labels.
 ESTIMATES = {"wheel": "wheel odometry", "ekf": "EKF (wheel velocities + gyro)",
-             "icp": "ICP (wheel guess)", "icp_ekf": "ICP + EKF (EKF guess)"}
+             "icp": "ICP (wheel guess)", "icp_ekf": "ICP + EKF (EKF guess)",
+             "fused": "EKF fusing ICP"}
+#: The variance of each ICP step fused into the EKF (``fused``): x, y (m^2), yaw (rad^2):
+#: 1 cm and 0.3 deg, about three times the steps' own spread (docs/odometry.md).
+ICP_STEP_VARIANCE = (1e-4, 1e-4, 2.5e-5)
 
 
 @dataclass(frozen=True)
@@ -88,7 +101,53 @@ def estimates(result: SimResult, only: tuple[str, ...] = tuple(ESTIMATES), **icp
     for name, guesses in (("icp", wheel), ("icp_ekf", ekf)):
         if name in only:
             poses[name], fallbacks[name] = _icp(result, guesses, **icp_options)
+    if "fused" in only:
+        poses["fused"], fallbacks["fused"] = _fused(result, **icp_options)
     return stamps, {k: v for k, v in poses.items() if k in only}, fallbacks
+
+
+def _fused(result: SimResult, **options: object) -> tuple[np.ndarray, int]:
+    """The ``fused`` estimate (module docstring) at the scans' stamps, and the steps
+    ICP fell back on; the wheels' figures are ``ChairParams``' defaults."""
+    assert result.lidar is not None
+    params = ChairParams()
+    options = dict(options)
+    mount = options.pop("mount", result.lidar.lidar.mount)
+    odom = IcpOdometry(mount, **options)                      # type: ignore[arg-type]
+    ekf = Ekf2D(EkfConfig.wheel_velocities())
+    gyro = GyroIntegrator()
+    board = result.board
+    per_count = 2.0 * math.pi / params.counts_per_rev * params.wheel_radius
+    scans = result.lidar.scans
+    # every source in time order: gyro samples (0), control ticks (1), scans (2)
+    events = sorted([(float(t), 0, i) for i, t in enumerate(result.odometry.gyro_time)]
+                    + [(float(t), 1, i) for i, t in enumerate(board.tick_time) if i > 0]
+                    + [(s.stamp, 2, i) for i, s in enumerate(scans)])
+    out: list[Pose2D] = []
+    last: Pose2D = (0.0, 0.0, 0.0)
+    for t, kind, i in events:
+        if kind == 0:
+            rate = float(result.odometry.gyro_rate[i])
+            gyro.add(t, rate)
+            ekf.imu(t, gyro.heading, rate)
+        elif kind == 1:
+            dt = float(board.tick_time[i] - board.tick_time[i - 1])
+            if dt <= 0:
+                continue
+            left = -float(board.counts[i, 0] - board.counts[i - 1, 0]) * per_count
+            right = float(board.counts[i, 1] - board.counts[i - 1, 1]) * per_count
+            ekf.odometry(t, 0.0, 0.0, 0.0, 0.5 * (left + right) / dt, (right - left) / params.wheelbase / dt)
+        else:
+            ekf.predict(t)
+            prior = ekf.pose
+            before, start = odom.fallbacks, odom.pose
+            odom.update(scans[i], (0.0, 0.0, 0.0) if i == 0 else relative(last, prior))
+            if i > 0 and odom.fallbacks == before:
+                x, y, yaw = compose(last, relative(start, odom.pose))
+                ekf.pose_measurement(t, x, y, yaw, ICP_STEP_VARIANCE)
+            last = ekf.pose
+            out.append(last)
+    return np.array(out), odom.fallbacks
 
 
 def compare(result: SimResult, only: tuple[str, ...] = tuple(ESTIMATES), **icp_options: object

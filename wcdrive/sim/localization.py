@@ -185,3 +185,10 @@ class Ekf2D:
         """A gyro sample at ``t`` (``yaw`` its integral): fuses ``imu0_config``'s states."""
         self.predict(t)
         self._fuse(self._imu_states, {YAW: yaw, VYAW: vyaw}, self._imu_var)
+
+    def pose_measurement(self, t: float, x: float, y: float, yaw: float,
+                         variance: tuple[float, float, float]) -> None:
+        """A pose at ``t`` from a third source (scan matching: ``wcdrive.sim.compare``),
+        ``x``, ``y`` and ``yaw`` fused with the given variances (m^2, m^2, rad^2)."""
+        self.predict(t)
+        self._fuse([X, Y, YAW], {X: x, Y: y, YAW: yaw}, dict(zip((X, Y, YAW), variance, strict=True)))
