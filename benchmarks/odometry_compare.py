@@ -1,7 +1,8 @@
 """Seed 002's odometry comparison on the bundled worlds (docs/odometry.md, "Odometry
 against the truth"): wheel odometry, the EKF (wheel velocities and the gyro), ICP on
-the RPLidar S3's scans seeded by the wheels, and ICP seeded by the EKF ("ICP + EKF"),
-each against the plant's ground truth (``wcdrive.sim.compare``), with and without
+the RPLidar S3's scans seeded by the wheels, ICP seeded by the EKF ("ICP + EKF"), and
+ICP fused into the EKF (each ICP step a pose measurement), each against the plant's
+ground truth (``wcdrive.sim.compare``), with and without
 wheel slip:
 
 * ``corridor_lidar``: 10 m down the hospital corridor at 0.5 m/s, closed loop;
@@ -74,7 +75,7 @@ def main() -> None:
             notes.append(f"{world}, {label}: {metrics0['simulated_s']} s simulated, {e.scans} scans, "
                          f"collisions {metrics0['collisions']}, true goal error "
                          f"{statistics.median(goal) * 1e3:.0f} mm (median of {len(runs)}), "
-                         f"ICP of both kinds {icp_s:.1f} s (seed 0)")
+                         f"the three ICP estimates {icp_s:.1f} s (seed 0)")
     print()
     print(f"seed 0; the final error's range over seeds {seeds[0]} to {seeds[-1]} in brackets")
     for note in notes:
