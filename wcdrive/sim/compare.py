@@ -19,8 +19,8 @@ The estimates:
   run's gyro samples and the wheels' speeds from the board's counts): each scan, ICP
   aligns it from the EKF's pose change since the scan before, and the step it finds,
   put on the EKF's pose then, is fused as a pose (x, y, yaw; ``ICP_STEP_VARIANCE``),
-  as robot_localization's ``differential`` mode fuses a second odometry; a step ICP
-  fell back on is not fused.
+  much as robot_localization's ``differential`` mode fuses a second odometry's
+  changes; a step ICP fell back on is not fused.
 
 Each is compared at every scan's stamp (the turn's first beam: the scans are
 distorted by the motion over their turn, and nothing de-skews them) with the truth
@@ -47,7 +47,7 @@ ESTIMATES = {"wheel": "wheel odometry", "ekf": "EKF (wheel velocities + gyro)",
              "icp": "ICP (wheel guess)", "icp_ekf": "ICP + EKF (EKF guess)",
              "fused": "EKF fusing ICP"}
 #: The variance of each ICP step fused into the EKF (``fused``): x, y (m^2), yaw (rad^2):
-#: 1 cm and 0.3 deg, about three times the steps' own spread (docs/odometry.md).
+#: 1 cm and 0.3 deg of spread, chosen, not measured.
 ICP_STEP_VARIANCE = (1e-4, 1e-4, 2.5e-5)
 
 
