@@ -542,7 +542,7 @@ def wheel_factors(p: ChairParams, runs: Sequence[Run]) -> dict[str, tuple[float,
     return out
 
 
-def degraded(run: Run, rng: np.random.Generator, *, quantum: int = 1, counts_per_rev: int = 10000,
+def degraded(run: Run, rng: np.random.Generator, *, quantum: int = 1, counts_per_rev: int | None = None,
              late: float = 0.0, late_ms: int = 2, drop: float = 0.0) -> Run:
     """``run`` as a poorer recording would give it: the counts floored to multiples of
     ``quantum`` (a coarser encoder); a share ``late`` of the ticks stamped up to
@@ -550,8 +550,9 @@ def degraded(run: Run, rng: np.random.Generator, *, quantum: int = 1, counts_per
     counts: the board's own lines cannot, as ``millis`` and the counts are taken in
     the same tick, but a logger that stamps lines as they arrive would); a share
     ``drop`` of the ticks lost (not the first)."""
-    step = 2.0 * math.pi * quantum / counts_per_rev
-    angle = np.floor(np.round(run.angle / (2.0 * math.pi / counts_per_rev)) / quantum) * step
+    cpr = counts_per_rev or ChairParams().counts_per_rev
+    step = 2.0 * math.pi * quantum / cpr
+    angle = np.floor(np.round(run.angle / (2.0 * math.pi / cpr)) / quantum) * step
     millis = run.millis.copy()
     shifted = rng.random(len(millis)) < late
     shifted[0] = False
