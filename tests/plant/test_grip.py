@@ -10,6 +10,7 @@ patch's longitudinal stiffness (``tyre_contact_stiffness``, 2e5 N/m), c its damp
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -159,3 +160,19 @@ def test_a_steady_pull_is_held_by_the_patch_without_slip(use_kernel: bool) -> No
     assert plant.left.force > 5.0
     assert abs(plant.left.slip) < 1e-6
     assert plant.s.defl[0] * P.tyre_contact_stiffness == pytest.approx(plant.left.force, rel=1e-6)
+
+
+@BACKENDS
+def test_a_wheel_without_grip_spins_up_to_its_motors_no_load_speed(use_kernel: bool) -> None:
+    """A drive wheel on ice (friction 0) at full duty: no tyre force, so its equation is
+    ``j dw/dt = k1 v - (k2 + b) w`` once the current is off its limit, and it settles at
+    ``w = k1 v / (k2 + b)``, the motor's no-load speed through the gear. It must not run
+    away on the current limit's torque it had at the start (the limit is solved again
+    while the patch slides). The other wheel grips and stands (duty 0)."""
+    plant = Plant(dataclasses.replace(P, friction_right=0.0), use_kernel=use_kernel)
+    plant.set_drive(0, 1, 255, 1)
+    plant.advance(8000)
+    s = plant.s
+    no_load = s.k1 * s.volts[1] / (s.k2 + s.b)
+    assert plant.right.speed == pytest.approx(no_load, rel=1e-3)
+    assert abs(plant.right.current) < s.i_max_r / s.res

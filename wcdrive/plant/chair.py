@@ -804,14 +804,15 @@ class Plant:
             w = (j_dt * speed + tau + r * ce * ground - r * f0 + tb) / (j_dt + b + r * r * ce)
         force = f0 + ce * (r * w - ground)
         if abs(force) > fmax:
+            # The patch slides: the wheel's speed is solved again under the sliding
+            # force, and with it whether the motor is at its current limit (a wheel
+            # that loses its grip speeds up, its back-EMF takes the current off the limit).
             force = math.copysign(fmax, force)
+            w = (j_dt * speed + k1v - r * force + tb) / (j_dt + s.k2 + b)
+            limited = abs(volts - s.ke_g * w) > s.i_max_r
             if limited:
+                tau = math.copysign(s.tau_max, volts - s.ke_g * w)
                 w = (j_dt * speed + tau - r * force + tb) / (j_dt + b)
-            else:
-                w = (j_dt * speed + k1v - r * force + tb) / (j_dt + s.k2 + b)
-                if abs(volts - s.ke_g * w) > s.i_max_r:
-                    tau = math.copysign(s.tau_max, volts - s.ke_g * w)
-                    w = (j_dt * speed + tau - r * force + tb) / (j_dt + b)
         s.speed[i] = w
         s.angle[i] += w * dt
         s.current[i] = (volts - s.ke_g * w) / s.res

@@ -174,15 +174,13 @@ static double wheel(chair_t *c, int i, double ground, double dt) {
     }
     double force = f0 + ce * (r * w - ground);
     if (fabs(force) > fmax) {
+        /* the patch slides: speed and current limit solved again (Plant._wheel) */
         force = copysign(fmax, force);
+        w = (j_dt * speed + k1v - r * force + tb) / (j_dt + c->k2 + b);
+        limited = fabs(volts - c->ke_g * w) > c->i_max_r;
         if (limited) {
+            tau = copysign(c->tau_max, volts - c->ke_g * w);
             w = (j_dt * speed + tau - r * force + tb) / (j_dt + b);
-        } else {
-            w = (j_dt * speed + k1v - r * force + tb) / (j_dt + c->k2 + b);
-            if (fabs(volts - c->ke_g * w) > c->i_max_r) {
-                tau = copysign(c->tau_max, volts - c->ke_g * w);
-                w = (j_dt * speed + tau - r * force + tb) / (j_dt + b);
-            }
         }
     }
     c->speed[i] = w;
