@@ -1,8 +1,8 @@
 """``wcdrive bench identify`` on a chair whose figures it is not told: the simulated
 board (``sim://?chair=secret.toml``) drives ``ident_floor`` with every fitted figure
 30 % off the defaults, the wheels on blocks are the identification's own wheel model
-driven open loop (the plant's wheel cannot run on blocks: docs/bench.md, "Known
-limits"), and the fit must find each identifiable figure within 5 %, predict a held-out
+driven open loop (the board-driven blocks run is test_identify_blocks_board.py's), and
+the fit must find each identifiable figure within 5 %, predict a held-out
 30 s run within 0.2 rad/s RMS and 5x better than the default plant, and with a poorer
 recording still do so or say which figure it could not pin down. The long figures:
 benchmarks/identify.py."""
