@@ -45,6 +45,7 @@ from __future__ import annotations
 import argparse
 import collections
 import gc
+import gzip
 import json
 import math
 import random
@@ -168,14 +169,14 @@ class InputRecord:
 
 
 def replay(path: Path, seed: int, until_s: float | None = None) -> PortLoop:
-    """The board of a soak run with ``--record path``, run again from its recorded
-    input up to ``until_s`` (its end by default): the same ``PortLoop`` state, its
+    """The board of a soak run with ``--record path`` (gzipped too, ``.gz``), run again
+    from its recorded input up to ``until_s`` (its end by default): the same ``PortLoop`` state, its
     output in ``take_output()``. ``wcsim://``'s board is a ``PortLoop`` with a gyro
     seeded by the URL's seed."""
     params = ChairParams()
     loop = PortLoop(Plant(params), Gyro(params, seed, history=GYRO_HISTORY))
     end = None if until_s is None else round(until_s * F_CPU)
-    with path.open() as f:
+    with (gzip.open(path, "rt") if path.suffix == ".gz" else path.open()) as f:
         for line in f:
             entry = json.loads(line)
             if end is not None and entry["c"] > end:
