@@ -69,7 +69,8 @@ from wcdrive.host.telemetry import Reset, Telemetry
 from wcdrive.plant import ChairParams, Gyro, Plant
 from wcdrive.protocol.codec import Event, LineStats
 
-#: bytes the host may grow by from the 10-minute mark to the end.
+#: bytes the host may grow by from half-way to the end (from the 10-minute mark when
+#: half-way comes first).
 MEMORY_BOUND = 300_000
 #: s of board time between ticks beyond which a gap is reported.
 TICK_GAP = 0.060
