@@ -170,11 +170,13 @@ def stamp(seconds: float) -> dict[str, int]:
     return {"sec": ns // 1_000_000_000, "nanosec": ns % 1_000_000_000}
 
 
-def _header(seconds: float, frame: str) -> dict[str, Any]:
+def header(seconds: float, frame: str) -> dict[str, Any]:
+    """A ``std_msgs/msg/Header`` stamped ``seconds`` in ``frame``."""
     return {"stamp": stamp(seconds), "frame_id": frame}
 
 
-def _quaternion(yaw: float) -> dict[str, float]:
+def quaternion(yaw: float) -> dict[str, float]:
+    """A ``geometry_msgs/msg/Quaternion`` turned ``yaw`` rad about z."""
     return {"x": 0.0, "y": 0.0, "z": math.sin(0.5 * yaw), "w": math.cos(0.5 * yaw)}
 
 
@@ -192,8 +194,8 @@ def odometry(t: float, x: float, y: float, yaw: float, linear: float, angular: f
              pose_covariance: np.ndarray | None = None, twist_covariance: np.ndarray | None = None,
              frame: str = ODOM_FRAME, child: str = BASE_FRAME) -> dict[str, Any]:
     """``nav_msgs/msg/Odometry`` (covariances: 6x6, the ekf.yaml layout)."""
-    return {"header": _header(t, frame), "child_frame_id": child,
-            "pose": {"pose": {"position": _v3(x, y), "orientation": _quaternion(yaw)},
+    return {"header": header(t, frame), "child_frame_id": child,
+            "pose": {"pose": {"position": _v3(x, y), "orientation": quaternion(yaw)},
                      "covariance": _cov(pose_covariance, 36)},
             "twist": {"twist": {"linear": _v3(linear), "angular": _v3(z=angular)},
                       "covariance": _cov(twist_covariance, 36)}}
@@ -203,7 +205,7 @@ def imu(t: float, rate: float, rate_variance: float, frame: str = BASE_FRAME) ->
     """``sensor_msgs/msg/Imu`` of a z-gyro: no orientation, no acceleration (their
     covariances' first element -1, REP 145)."""
     unknown = [-1.0] + [0.0] * 8
-    return {"header": _header(t, frame), "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0},
+    return {"header": header(t, frame), "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0},
             "orientation_covariance": unknown, "angular_velocity": _v3(z=rate),
             "angular_velocity_covariance": [1e6, 0, 0, 0, 1e6, 0, 0, 0, rate_variance],
             "linear_acceleration": _v3(), "linear_acceleration_covariance": list(unknown)}
@@ -216,7 +218,7 @@ def twist(linear: float, angular: float) -> dict[str, Any]:
 
 def twist_stamped(t: float, linear: float, angular: float, frame: str = BASE_FRAME) -> dict[str, Any]:
     """``geometry_msgs/msg/TwistStamped`` (``/cmd_vel`` in Jazzy)."""
-    return {"header": _header(t, frame), "twist": twist(linear, angular)}
+    return {"header": header(t, frame), "twist": twist(linear, angular)}
 
 
 def _rotation(yaw: float, roll: float = 0.0) -> dict[str, float]:
@@ -229,14 +231,14 @@ def tf_static(t: float, child: str, x: float, y: float, z: float, yaw: float, ro
               frame: str = BASE_FRAME) -> dict[str, Any]:
     """``tf2_msgs/msg/TFMessage`` for ``/tf_static``: ``frame`` -> ``child`` at (x, y, z),
     turned by ``yaw`` about z after ``roll`` about x (rad)."""
-    return {"transforms": [{"header": _header(t, frame), "child_frame_id": child,
+    return {"transforms": [{"header": header(t, frame), "child_frame_id": child,
                             "transform": {"translation": _v3(x, y, z), "rotation": _rotation(yaw, roll)}}]}
 
 
 def laser_scan(scan: Any) -> dict[str, Any]:
     """``sensor_msgs/msg/LaserScan`` of a ``wcdrive.plant.lidar.LaserScan`` (stamped at
     its first beam, as the driver stamps it)."""
-    return {"header": _header(scan.stamp, scan.frame_id), "angle_min": scan.angle_min,
+    return {"header": header(scan.stamp, scan.frame_id), "angle_min": scan.angle_min,
             "angle_max": scan.angle_max, "angle_increment": scan.angle_increment,
             "time_increment": scan.time_increment, "scan_time": scan.scan_time,
             "range_min": scan.range_min, "range_max": scan.range_max,
@@ -250,22 +252,23 @@ def occupancy_grid(t: float, grid: Any, frame: str = MAP_FRAME) -> dict[str, Any
     quaternion)."""
     height, width = grid.data.shape
     x0, y0, yaw = grid.origin
-    return {"header": _header(t, frame),
+    return {"header": header(t, frame),
             "info": {"map_load_time": stamp(t), "resolution": float(grid.resolution), "width": width,
-                     "height": height, "origin": {"position": _v3(x0, y0), "orientation": _quaternion(yaw)}},
+                     "height": height, "origin": {"position": _v3(x0, y0), "orientation": quaternion(yaw)}},
             "data": np.asarray(grid.data, dtype=np.int8).reshape(-1)}
 
 
 def tf(t: float, x: float, y: float, yaw: float, frame: str = ODOM_FRAME,
        child: str = BASE_FRAME) -> dict[str, Any]:
     """``tf2_msgs/msg/TFMessage`` with one transform, ``frame`` -> ``child``."""
-    return {"transforms": [{"header": _header(t, frame), "child_frame_id": child,
-                            "transform": {"translation": _v3(x, y), "rotation": _quaternion(yaw)}}]}
+    return {"transforms": [{"header": header(t, frame), "child_frame_id": child,
+                            "transform": {"translation": _v3(x, y), "rotation": quaternion(yaw)}}]}
 
 
-def joint_state(t: float, positions: tuple[float, float], velocities: tuple[float, float]) -> dict[str, Any]:
+def joint_state(t: float, positions: tuple[float, float], velocities: tuple[float, float],
+                frame: str = BASE_FRAME) -> dict[str, Any]:
     """``sensor_msgs/msg/JointState`` of the two wheels (rad, rad/s, forward positive)."""
-    return {"header": _header(t, BASE_FRAME), "name": list(WHEEL_JOINTS),
+    return {"header": header(t, frame), "name": list(WHEEL_JOINTS),
             "position": [float(p) for p in positions], "velocity": [float(v) for v in velocities],
             "effort": []}
 
@@ -274,7 +277,7 @@ def serial_line(t: float, line: str, hardware_id: str = "wcdrive") -> dict[str, 
     """``diagnostic_msgs/msg/DiagnosticArray`` carrying one raw line from the board;
     level WARN (1) for ``ERR:``/``EVT:`` lines, OK (0) otherwise."""
     level = 1 if line.startswith(("ERR:", "EVT:")) else 0
-    return {"header": _header(t, ""), "status": [{"level": level, "name": "wcdrive/serial",
+    return {"header": header(t, ""), "status": [{"level": level, "name": "wcdrive/serial",
                                                    "message": line, "hardware_id": hardware_id,
                                                    "values": []}]}
 
