@@ -9,6 +9,10 @@ dead motor goes undetected.
   0.5 to 2.68 m/s, turns 0 to 0.8 rad/s, on the level and 4 degrees up and down. Any
   ``EVT:FAULT``, ``EVT:ROLLAWAY``, ``EVT:OVERSPEED`` or ``EVT:STALLED_ON_GRADE`` is a
   false alarm. The same drives without the silence tell the watchdog's share.
+* **Turning on a slope.** A healthy chair turns for 10 s at 0.2, 0.4 and 0.8 rad/s
+  either way, at 0.3 to 1.5 m/s, on 2 and 4 degree slopes, starting with the slope's
+  downhill ahead, to the left, behind and to the right: it faces up, across and down
+  the slope in turn. Any alarm is a false alarm.
 * **Detection.** ``motor_dead`` on one side 2.5 s into a 15 s drive: speeds 0.3 to
   1.5 m/s, straight and turning, on the level, 1:12 down, 2 degrees up. The first alarm
   after the fault, and where none came, how far the chair went and turned after it.
@@ -67,6 +71,19 @@ def false_alarms(tmp: Path) -> list[dict[str, object]]:
     return rows
 
 
+def slope_turns(tmp: Path) -> list[dict[str, object]]:
+    """The healthy turns on a slope."""
+    rows = []
+    for speed, turn, sign, slope, heading in itertools.product([0.3, 0.5, 1.0, 1.5], [0.2, 0.4, 0.8], [1, -1],
+                                                                [2.0, 4.0], [0.0, 90.0, 180.0, 270.0]):
+        text = _head(slope, heading) + f"[[segment]]\ncmdvel = [{speed}, {sign * turn}]\nduration = 10.0\n"
+        r = _run(tmp, text)
+        found = _alarms(r)
+        rows.append({"speed": speed, "turn": sign * turn, "slope_deg": slope, "downhill_heading_deg": heading,
+                     "alarms": [line for _, line in found], "first_alarm_s": found[0][0] if found else None})
+    return rows
+
+
 DEAD_GRADES = {"level": (0.0, 0.0), "1:12 down": (math.degrees(math.atan(1 / 12)), 0.0),
                "2 deg up": (2.0, 180.0)}
 
@@ -93,12 +110,16 @@ def detection(tmp: Path) -> list[dict[str, object]]:
     return rows
 
 
-def summary(fa: list[dict[str, object]], det: list[dict[str, object]]) -> str:
+def summary(fa: list[dict[str, object]], det: list[dict[str, object]], turns: list[dict[str, object]]) -> str:
     """The figures as Markdown."""
     out = ["| false alarms | drives | with an alarm |", "|---|---:|---:|"]
     for label, silent in (("no silence", False), ("watchdog stop, then on", True)):
         rows = [r for r in fa if (r["gap"] != 0.0) == silent]
         out.append(f"| {label} | {len(rows)} | {sum(bool(r['alarms']) for r in rows)} |")
+    for slope in (2.0, 4.0):
+        rows = [r for r in turns if r["slope_deg"] == slope]
+        out.append(f"| turning 10 s on a {slope:g} degree slope | {len(rows)} | "
+                   f"{sum(bool(r['alarms']) for r in rows)} |")
     out += ["", "| dead motor at (m/s) | drives | within 1 s | within 4 s | within 12.5 s | never |",
             "|---:|---:|---:|---:|---:|---:|"]
     for speed in sorted({float(r["speed"]) for r in det}):  # type: ignore[arg-type]
@@ -116,17 +137,21 @@ def main() -> None:
     ap.add_argument("--cases", action="store_true", help="list the false alarms and the missed dead motors")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as d:
-        fa, det = false_alarms(Path(d)), detection(Path(d))
+        fa, det, turns = false_alarms(Path(d)), detection(Path(d)), slope_turns(Path(d))
     if args.json:
-        print(json.dumps({"false_alarms": fa, "detection": det}, indent=1))
+        print(json.dumps({"false_alarms": fa, "detection": det, "slope_turns": turns}, indent=1))
         return
-    print(summary(fa, det))
+    print(summary(fa, det, turns))
     if args.cases:
         print()
         for r in fa:
             if r["alarms"]:
                 print(f"false alarm: {r['speed']} m/s, turn {r['turn']}, gap {r['gap']} s, {r['grade']}: "
                       f"{r['alarms']}")
+        for r in turns:
+            if r["alarms"]:
+                print(f"false alarm turning: {r['speed']} m/s, turn {r['turn']}, {r['slope_deg']} deg, "
+                      f"downhill at {r['downhill_heading_deg']} deg: {r['alarms']} at {r['first_alarm_s']} s")
         for r in det:
             if r["detected_after_s"] is None:
                 print(f"missed: {r['side']} dead at {r['speed']} m/s, turn {r['turn']}, {r['grade']}: "

@@ -617,12 +617,18 @@ static void emergencyHalt() {
 // from it, any gain in speed, or the wheel turning faster than its setpoint starts over:
 // a wheel being slowed to its setpoint (a sharp change of course) runs on a low duty, and
 // its return to the duty that holds the setpoint is no effort without progress.
+// The other wheel straining too (otherRising: effortRising) starts over as well: both
+// wheels held back is the chair's load (a grade, a turn it resists), not one motor. While
+// the other wheel turns WC_FAULT_EFFORT_OVERRUN beyond its setpoint (otherSetpoint) its
+// way, the chair is not following the command (its momentum, a slope, a wheel that
+// brakes late), and this wheel's effort goes into turning it: the count starts over.
 static bool noEffect(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, float measured,
-                     float other, uint8_t& effortPwm, float& effortSpeed, float& effortSetpoint,
-                     uint8_t& effortTicks) {
+                     float other, float otherSetpoint, bool otherRising, uint8_t& effortPwm,
+                     float& effortSpeed, float& effortSetpoint, uint8_t& effortTicks) {
   float progress = setpoint > 0.0f ? measured : -measured;
   bool toward = setpoint != 0.0f && (appliedDir == HIGH) == (setpoint > 0.0f);
-  if (!toward || setpoint != effortSetpoint || progress > effortSpeed || progress > fabs(setpoint)) {
+  if (!toward || setpoint != effortSetpoint || progress > effortSpeed || progress > fabs(setpoint) ||
+      otherRising) {
     effortSetpoint = setpoint;
     effortSpeed = progress;
     effortPwm = appliedPwm;
@@ -633,8 +639,18 @@ static bool noEffect(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, flo
   bool shortfall = fabs(measured) < WC_FAULT_EFFORT_SHORTFALL_MOTOR * fabs(setpoint);
   float otherProgress = setpoint > 0.0f ? other : -other;
   bool trails = progress < (otherProgress > 0.0f ? otherProgress : 0.0f) + WC_FAULT_EFFORT_LEAD;
-  effortTicks = shortfall && trails && appliedPwm >= effortPwm + WC_FAULT_EFFORT_PWM ? effortTicks + 1 : 0;
+  bool otherOverruns = otherSetpoint != 0.0f &&
+                       (otherSetpoint > 0.0f ? other : -other) > fabs(otherSetpoint) + WC_FAULT_EFFORT_OVERRUN;
+  effortTicks = shortfall && trails && !otherOverruns && appliedPwm >= effortPwm + WC_FAULT_EFFORT_PWM
+                    ? effortTicks + 1
+                    : 0;
   return effortTicks >= WC_FAULT_EFFORT_TICKS;
+}
+
+// Straining without gain: driven WC_FAULT_EFFORT_PWM or more above the lowest duty
+// since its effort reference (taken toward a setpoint; any gain in speed renews it).
+static bool effortRising(uint8_t appliedPwm, uint8_t effortPwm, float effortSetpoint) {
+  return effortSetpoint != 0.0f && appliedPwm >= effortPwm + WC_FAULT_EFFORT_PWM;
 }
 
 // Running away: braked at WC_FAULT_RUNAWAY_PWM or more against its measured motion,
@@ -692,9 +708,10 @@ static bool straining(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, fl
 
 static uint8_t checkWheel(int32_t delta, uint32_t illegal, uint8_t storm, uint8_t appliedPwm,
                           uint8_t appliedDir, float setpoint, float measured, float other,
-                          uint8_t& stallTicks, uint8_t& reverseTicks, uint8_t& runawayTicks,
-                          uint8_t& effortPwm, float& effortSpeed, float& effortSetpoint,
-                          uint8_t& effortTicks, float prevMeasured) {
+                          float otherSetpoint, bool otherRising, uint8_t& stallTicks,
+                          uint8_t& reverseTicks, uint8_t& runawayTicks, uint8_t& effortPwm,
+                          float& effortSpeed, float& effortSetpoint, uint8_t& effortTicks,
+                          float prevMeasured) {
   if (storm || illegal >= WC_FAULT_ILLEGAL_PER_TICK) return WHEEL_IMPLAUSIBLE;
   bool driven = appliedPwm >= WC_FAULT_STALL_PWM && setpoint != 0.0f &&
                 (appliedDir == HIGH) == (setpoint > 0.0f);
@@ -710,8 +727,8 @@ static uint8_t checkWheel(int32_t delta, uint32_t illegal, uint8_t storm, uint8_
   if (reverseTicks >= WC_FAULT_REVERSE_TICKS) return WHEEL_REVERSED;
   runawayTicks = runsAway(appliedPwm, appliedDir, setpoint, measured, prevMeasured) ? runawayTicks + 1 : 0;
   if (runawayTicks >= WC_FAULT_RUNAWAY_TICKS) return WHEEL_REVERSED;
-  if (noEffect(appliedPwm, appliedDir, setpoint, measured, other, effortPwm, effortSpeed,
-               effortSetpoint, effortTicks)) {
+  if (noEffect(appliedPwm, appliedDir, setpoint, measured, other, otherSetpoint, otherRising,
+               effortPwm, effortSpeed, effortSetpoint, effortTicks)) {
     return WHEEL_NO_EFFECT;
   }
   return (stalled || against) ? WHEEL_SUSPECT : WHEEL_OK;
@@ -870,12 +887,16 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
   if (faultFlags == 0) {
     bool strainL = straining(pwmL, dirL, setpointL, filtVelL);
     bool strainR = straining(pwmR, dirR, setpointR, filtVelR);
+    // The other wheel's duty risen too, short of the chair's limit (straining: that is
+    // atLimit's, a grade): the load is shared, not one motor's.
+    bool risingL = !strainL && effortRising(pwmL, effortPwmL, effortSetpointL);
+    bool risingR = !strainR && effortRising(pwmR, effortPwmR, effortSetpointR);
     checkL = checkWheel(deltaL, illDeltaL, stormTickL, pwmL, dirL, setpointL, filtVelL, filtVelR,
-                        stallTicksL, reverseTicksL, runawayTicksL, effortPwmL, effortSpeedL,
+                        setpointR, risingR, stallTicksL, reverseTicksL, runawayTicksL, effortPwmL, effortSpeedL,
                         effortSetpointL, effortTicksL, prevMeasL);
     checkR = checkWheel(deltaR, illDeltaR, stormTickR, pwmR, dirR, setpointR, filtVelR, filtVelL,
-                        stallTicksR, reverseTicksR, runawayTicksR, effortPwmR, effortSpeedR,
-                        effortSetpointR, effortTicksR, prevMeasR);
+                        setpointL, risingL, stallTicksR, reverseTicksR, runawayTicksR, effortPwmR,
+                        effortSpeedR, effortSetpointR, effortTicksR, prevMeasR);
     // Driving only: a held wheel that runs away is a fault (a reversed encoder turns the
     // hold into positive feedback), whatever the other wheel does.
     bool limitL = !holding && atLimit(checkL, strainR, reverseTicksR, runawayTicksR, effortTicksR);

@@ -94,6 +94,7 @@
 #define WC_FAULT_EFFORT_SHORTFALL_MOTOR 0.95f // ...while the wheel turns slower than this fraction of its setpoint (the motor rule; a dead motor's wheel dragged at speed keeps most of its setpoint, a healthy one at steady speed keeps more: 92 % at 1 m/s on the level)
 #define WC_FAULT_EFFORT_LEAD 0.5f  // rad/s: ...while turning its way no faster than this beyond the other wheel (or beyond standing, when the other turns against it): a dead motor's wheel is only dragged, and trails the wheel that drags it
 #define WC_FAULT_EFFORT_TICKS 4    // consecutive ticks of that effort without progress: the motor fault
+#define WC_FAULT_EFFORT_OVERRUN 0.5f // rad/s: ...nor while the other wheel turns this much beyond its setpoint its way: the chair does not follow the command (momentum, a slope), and the wheel's effort goes into it
 #define WC_FAULT_ILLEGAL_PER_TICK 4 // illegal transitions in one tick: implausible encoder
 #define WC_STORM_EDGES 80          // edges of one encoder in one Timer0 period (1.024 ms) that mask it: 78,000 edges/s, > 2.5x top speed, above the 70,000 every edge is counted at
 #define WC_STORM_COMPARE 128       // OCR0A: the Timer0 count at which each storm window starts

@@ -20,12 +20,16 @@ from wcdrive.firmware.control import WHEEL_STALLED, check_wheel, no_effect
 SETPOINT = 2.85   # rad/s toward which the duty rises
 
 
-def _ticks_to_trip(measured: float, other: float, setpoint: float = SETPOINT, ticks: int = 40) -> int | None:
-    """The tick at which the rule trips, the duty rising 2 a tick from 80, or None."""
+def _ticks_to_trip(measured: float, other: float, setpoint: float = SETPOINT, ticks: int = 40,
+                   other_setpoint: float | None = None, other_rising: bool = False) -> int | None:
+    """The tick at which the rule trips, the duty rising 2 a tick from 80, or None. The
+    other wheel holds ``other_setpoint`` (its speed by default) and strains or not."""
     direction = C.HIGH if setpoint > 0.0 else C.LOW
     effort = (0, 0.0, 0.0, 0)
+    held = other if other_setpoint is None else other_setpoint
     for k in range(ticks):
-        tripped, effort = no_effect(80 + 2 * k, direction, setpoint, measured, other, effort)
+        tripped, effort = no_effect(80 + 2 * k, direction, setpoint, measured, other, held, other_rising,
+                                    effort)
         if tripped:
             return k
     return None
@@ -61,6 +65,27 @@ def test_the_lead_is_taken_the_way_of_the_setpoint() -> None:
     assert _ticks_to_trip(-1.45, -1.6, setpoint=-SETPOINT) is not None
 
 
+def test_a_wheel_whose_partner_strains_too_is_the_chairs_load() -> None:
+    """Both wheels' duties up without a gain (the other's by FAULT_EFFORT_PWM): a
+    grade or a turn holds the chair back, not one motor. The reference starts over each
+    such tick, so the count never runs."""
+    assert _ticks_to_trip(1.45, 1.6) is not None
+    assert _ticks_to_trip(1.45, 1.6, other_rising=True) is None
+
+
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_a_wheel_whose_partner_runs_beyond_its_setpoint_is_not_counted(sign: float) -> None:
+    """The other wheel FAULT_EFFORT_OVERRUN or more beyond its own setpoint its way (the
+    chair not following its command: momentum, a slope): not counted; a little less
+    beyond it, counted. Either way round."""
+    margin = float(C.FAULT_EFFORT_OVERRUN)
+    beyond = _ticks_to_trip(sign * 1.45, sign * 1.6, setpoint=sign * SETPOINT,
+                            other_setpoint=sign * (1.6 - margin - 0.01))
+    within = _ticks_to_trip(sign * 1.45, sign * 1.6, setpoint=sign * SETPOINT,
+                            other_setpoint=sign * (1.6 - margin + 0.01))
+    assert (beyond, within is not None) == (None, True)
+
+
 def _after_slowing(duties: list[int], held: float = 1.87, setpoint: float = 2.02) -> int | None:
     """A wheel slowed from 3.5 rad/s toward ``setpoint`` on a duty of 17 (a sharp change
     of course: the other wheel ahead at 2.8 rad/s), the duty rising to 34 as it comes
@@ -68,9 +93,9 @@ def _after_slowing(duties: list[int], held: float = 1.87, setpoint: float = 2.02
     which the rule trips, or None."""
     effort = (0, 0.0, 0.0, 0)
     for k, duty in enumerate([17] * 8 + [24, 30, 34]):
-        _, effort = no_effect(duty, C.HIGH, setpoint, 3.5 - 0.14 * k, 2.8, effort)
+        _, effort = no_effect(duty, C.HIGH, setpoint, 3.5 - 0.14 * k, 2.8, 2.8, False, effort)
     for k, duty in enumerate(duties):
-        tripped, effort = no_effect(duty, C.HIGH, setpoint, held, 2.8, effort)
+        tripped, effort = no_effect(duty, C.HIGH, setpoint, held, 2.8, 2.8, False, effort)
         if tripped:
             return k
     return None
@@ -95,8 +120,8 @@ def _ticks_to_stall(prev_measured: float, setpoint: float = -0.89, ticks: int = 
     direction = C.HIGH if setpoint > 0.0 else C.LOW
     stall = 0
     for k in range(ticks):
-        verdict, stall, _, _, _ = check_wheel(0, 0, 0, 31, direction, setpoint, 0.0, 0.0, stall, 0, 0,
-                                              (0, 0.0, 0.0, 0), prev_measured)
+        verdict, stall, _, _, _ = check_wheel(0, 0, 0, 31, direction, setpoint, 0.0, 0.0, 0.0, False,
+                                              stall, 0, 0, (0, 0.0, 0.0, 0), prev_measured)
         if verdict == WHEEL_STALLED:
             return k + 1
     return None

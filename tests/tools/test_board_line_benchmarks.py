@@ -113,3 +113,17 @@ def test_a_line_a_reset_cuts_short_counts_as_sent() -> None:
     sent.reset()                                  # the DTR pulse: the second line is cut
     decoder.feed(board._advance())
     assert (sent.count, sent.cut) == (3, 1) == (decoder.stats.total, decoder.stats.bad_crc)
+
+
+def test_the_soaks_slow_change_of_course_runs_again_without_a_fault() -> None:
+    """The 24 h soak's first false ``FAULT,MOTOR_R`` (seed 1, 2,602 s in: the right
+    wheel's duty rose 53 to 73 at 93 % of its setpoint while the left, ramped down at a
+    low ``max_accel``, ran 1 rad/s beyond its own), its input kept in
+    ``benchmarks/data``: the board runs it again, to the record's end, without a fault.
+    The motor rule without its ``FAULT_EFFORT_OVERRUN`` latches it again."""
+    soak = _load("soak")
+    loop = soak.replay(BENCHMARKS / "data" / "soak_seed1_motor_r.jsonl.gz", 1)
+    lines = b"".join(out for _, out in loop.take_output()).split(b"\n")
+    assert loop.fw.state.faultFlags == 0
+    assert not [line for line in lines if b"EVT:FAULT" in line]
+    assert loop.plant.pose != (0.0, 0.0, 0.0)

@@ -144,12 +144,12 @@ static int arg_int(PyObject *o, int64_t *out) {
 
 static struct {
     double alpha, one_minus_alpha, cpr, two_pi, pid_out_max, pwm_scale, still_speed,
-        brake_done_speed, reverse_speed, reverse_approach, runaway_gain, effort_shortfall, effort_shortfall_motor, effort_lead,
+        brake_done_speed, reverse_speed, reverse_approach, runaway_gain, effort_shortfall, effort_shortfall_motor, effort_lead, effort_overrun,
         overspeed_margin, overspeed_gain,
         pivot_start_speed,
         pivot_speed, rounding2;
     int64_t control_period_ms, tx_credit_max, tx_credit_per_ms, stall_pwm, stall_ticks, stall_ticks_turning,
-        reverse_ticks, runaway_pwm, runaway_ticks, effort_pwm, effort_ticks, illegal_per_tick, still_ticks, pivot_ticks,
+        reverse_ticks, runaway_pwm, runaway_ticks, effort_pwm, effort_ticks, grade_pwm, illegal_per_tick, still_ticks, pivot_ticks,
         hold_deadband, overspeed_pwm, overspeed_ticks,
         high, low, pivot_none, pivot_stopping, pivot_rotating, untrusted_l, untrusted_r;
 } K;
@@ -220,10 +220,11 @@ typedef struct {
 
 /* no_effect: whether it tripped; *e the new reference */
 static int no_effect(int64_t pwm, int64_t dir, double setpoint, double measured, double other,
-                     Effort *e) {
+                     double other_setpoint, int other_rising, Effort *e) {
     double progress = setpoint > 0.0 ? measured : -measured;
     int toward = setpoint != 0.0 && ((dir == K.high) == (setpoint > 0.0));
-    if (!toward || setpoint != e->setpoint || progress > e->speed || progress > fabs(setpoint)) {
+    if (!toward || setpoint != e->setpoint || progress > e->speed || progress > fabs(setpoint)
+        || other_rising) {
         e->pwm = pwm;
         e->speed = progress;
         e->setpoint = setpoint;
@@ -235,8 +236,23 @@ static int no_effect(int64_t pwm, int64_t dir, double setpoint, double measured,
     int shortfall = fabs(measured) < f_mul(K.effort_shortfall_motor, fabs(setpoint));
     double other_progress = setpoint > 0.0 ? other : -other;
     int trails = progress < f_add(other_progress > 0.0 ? other_progress : 0.0, K.effort_lead);
-    e->ticks = (shortfall && trails && pwm >= e->pwm + K.effort_pwm) ? ((e->ticks + 1) & 0xFF) : 0;
+    int other_overruns = other_setpoint != 0.0
+        && (other_setpoint > 0.0 ? other : -other) > f_add(fabs(other_setpoint), K.effort_overrun);
+    e->ticks = (shortfall && trails && !other_overruns && pwm >= e->pwm + K.effort_pwm)
+                   ? ((e->ticks + 1) & 0xFF) : 0;
     return e->ticks >= K.effort_ticks;
+}
+
+/* straining: driven at GRADE_PWM or more toward a setpoint it runs short of */
+static int straining(int64_t pwm, int64_t dir, double setpoint, double measured) {
+    double progress = setpoint > 0.0 ? measured : -measured;
+    return setpoint != 0.0 && ((dir == K.high) == (setpoint > 0.0)) && pwm >= K.grade_pwm
+           && progress < f_mul(K.effort_shortfall, fabs(setpoint));
+}
+
+/* effort_rising: driven EFFORT_PWM above the lowest duty since its reference */
+static int effort_rising(int64_t pwm, int64_t effort_pwm, double effort_setpoint) {
+    return effort_setpoint != 0.0 && pwm >= effort_pwm + K.effort_pwm;
 }
 
 /* runs_away */
@@ -275,7 +291,8 @@ static int overspeed_run(int over, double measured, double prev_measured, int64_
 /* check_wheel: WHEEL_OK, WHEEL_SUSPECT or WHEEL_FAULT (any fault: the Python tick
  * latches it) */
 static int check_wheel(int64_t delta, int64_t illegal, int64_t storm, int64_t pwm, int64_t dir,
-                       double setpoint, double measured, double other, int64_t *stall, int64_t *reverse,
+                       double setpoint, double measured, double other, double other_setpoint,
+                       int other_rising, int64_t *stall, int64_t *reverse,
                        int64_t *runaway, Effort *e, double prev_measured) {
     if (storm || illegal >= K.illegal_per_tick)
         return WHEEL_FAULT;
@@ -294,7 +311,7 @@ static int check_wheel(int64_t delta, int64_t illegal, int64_t storm, int64_t pw
     *runaway = runs_away(pwm, dir, setpoint, measured, prev_measured) ? ((*runaway + 1) & 0xFF) : 0;
     if (*runaway >= K.runaway_ticks)
         return WHEEL_FAULT;
-    if (no_effect(pwm, dir, setpoint, measured, other, e))
+    if (no_effect(pwm, dir, setpoint, measured, other, other_setpoint, other_rising, e))
         return WHEEL_FAULT;
     return (stalled || against) ? WHEEL_SUSPECT : WHEEL_OK;
 }
@@ -470,10 +487,14 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
         int64_t stall_r = I(stallTicksR), rev_r = I(reverseTicksR), run_r = I(runawayTicksR);
         Effort el = { I(effortPwmL), I(effortTicksL), D(effortSpeedL), D(effortSetpointL) };
         Effort er = { I(effortPwmR), I(effortTicksR), D(effortSpeedR), D(effortSetpointR) };
-        check_l = check_wheel(delta_l, ill_l, I(stormTickL), I(pwmL), I(dirL), D(setpointL),
-                              D(filtVelL), D(filtVelR), &stall_l, &rev_l, &run_l, &el, D(prevMeasL));
-        check_r = check_wheel(delta_r, ill_r, I(stormTickR), I(pwmR), I(dirR), D(setpointR),
-                              D(filtVelR), D(filtVelL), &stall_r, &rev_r, &run_r, &er, D(prevMeasR));
+        int rising_l = !straining(I(pwmL), I(dirL), D(setpointL), D(filtVelL))
+                       && effort_rising(I(pwmL), I(effortPwmL), D(effortSetpointL));
+        int rising_r = !straining(I(pwmR), I(dirR), D(setpointR), D(filtVelR))
+                       && effort_rising(I(pwmR), I(effortPwmR), D(effortSetpointR));
+        check_l = check_wheel(delta_l, ill_l, I(stormTickL), I(pwmL), I(dirL), D(setpointL), D(filtVelL),
+                              D(filtVelR), D(setpointR), rising_r, &stall_l, &rev_l, &run_l, &el, D(prevMeasL));
+        check_r = check_wheel(delta_r, ill_r, I(stormTickR), I(pwmR), I(dirR), D(setpointR), D(filtVelR),
+                              D(filtVelL), D(setpointL), rising_l, &stall_r, &rev_r, &run_r, &er, D(prevMeasR));
         if (check_l == WHEEL_FAULT || check_r == WHEEL_FAULT)
             Py_RETURN_NONE;
         SETI(stallTicksL, stall_l); SETI(reverseTicksL, rev_l);
@@ -724,6 +745,7 @@ static PyObject *bind(PyObject *self, PyObject *args) {
           && const_double(consts, "FAULT_EFFORT_SHORTFALL", &k.effort_shortfall)
           && const_double(consts, "FAULT_EFFORT_SHORTFALL_MOTOR", &k.effort_shortfall_motor)
           && const_double(consts, "FAULT_EFFORT_LEAD", &k.effort_lead)
+          && const_double(consts, "FAULT_EFFORT_OVERRUN", &k.effort_overrun)
           && const_double(consts, "PIVOT_START_SPEED", &k.pivot_start_speed)
           && const_double(consts, "PIVOT_SPEED", &k.pivot_speed)
           && const_double(consts, "ROUNDING_2", &k.rounding2)
@@ -737,6 +759,7 @@ static PyObject *bind(PyObject *self, PyObject *args) {
           && const_int(consts, "FAULT_RUNAWAY_PWM", &k.runaway_pwm)
           && const_int(consts, "FAULT_RUNAWAY_TICKS", &k.runaway_ticks)
           && const_int(consts, "FAULT_EFFORT_PWM", &k.effort_pwm)
+          && const_int(consts, "GRADE_PWM", &k.grade_pwm)
           && const_int(consts, "FAULT_EFFORT_TICKS", &k.effort_ticks)
           && const_int(consts, "FAULT_ILLEGAL_PER_TICK", &k.illegal_per_tick)
           && const_int(consts, "STILL_TICKS", &k.still_ticks)
