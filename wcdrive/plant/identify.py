@@ -38,7 +38,8 @@ the occupant is held. Then, with ``FITTED``:
   fitted only when a run on blocks is given.
 
 Each fitted figure has a standard uncertainty from the fit's Jacobian (residuals taken
-as independent: an underestimate where they are correlated); one beyond
+as independent: an underestimate where they are correlated), widened to half the spread
+of the fits from other starts that end within ``RIVAL`` of the best cost; one beyond
 ``PIN_LIMIT`` is reported as not pinned down.
 """
 
@@ -60,10 +61,16 @@ from wcdrive.plant.params import ChairParams
 FITTED = ("motor_constant", "wheel_inertia", "current_limit", "chair_mass", "rolling_resistance")
 #: The fit's stages: the figures each frees (``()``: all of them).
 STAGES: tuple[tuple[str, ...], ...] = (("motor_constant",), ("motor_constant", "current_limit"), ())
-#: The body's starting points, as factors on the start's (chair_mass, rolling_resistance):
-#: the floor's false valleys run along a heavier chair rolling more easily and back.
-BODY_STARTS = ((1.0, 1.0), (1.4, 0.7), (0.7, 1.4))
-#: On the floor alone, each of those from these factors on the start's motor constant too.
+#: The body's scan: factors on the start's chair_mass and rolling_resistance, every pair
+#: simulated once on the floor's runs; the fit starts from the ``BODY_KEEP`` pairs of
+#: lowest cost. The floor's cost is rugged (a wheel starting to slip at full duty moves
+#: by a tick as the body changes), with false valleys a few % across.
+BODY_SCAN = tuple(float(f) for f in np.geomspace(0.5, 2.0, 8))
+BODY_KEEP = 3
+#: A start that ends within this factor of the best cost is a rival: where the rivals
+#: disagree on a figure, half their spread counts in its uncertainty.
+RIVAL = 1.1
+#: On the floor alone, the scan from each of these factors on the start's motor constant.
 MOTOR_STARTS = (1.0, 0.8, 1.25)
 #: Which runs tell each fitted figure.
 BLOCKS_FITS = ("motor_constant", "wheel_inertia", "current_limit")
@@ -374,8 +381,9 @@ def identify(runs: Sequence[Run], start: ChairParams | None = None) -> Fit:
     # larger current limit and wheel inertia, say), so it is built up: the runs on
     # blocks alone fix the motor and the wheel (the motor constant alone first, then
     # with the current limit, then all of theirs); the runs on the floor then the body,
-    # from each of ``BODY_STARTS``, the rest held (on the floor alone: in the same stages
-    # as on blocks, the body freed last), the best kept; then all figures on all runs,
+    # the rest held (on the floor alone: in the same stages as on blocks, the body freed
+    # last), from the best ``BODY_KEEP`` points of the ``BODY_SCAN`` grid (on the floor
+    # alone: at each of ``MOTOR_STARTS``), the best kept; then all figures on all runs,
     # least squares and again with the robust loss.
     x = x0.copy()
     block_runs = [r for r in runs if r.blocks]
@@ -384,22 +392,20 @@ def identify(runs: Sequence[Run], start: ChairParams | None = None) -> Fit:
         _, x = _staged(lambda z: residuals(params_of(z), block_runs), x, names,
                        [tuple(n for n in stage or BLOCKS_FITS if n in BLOCKS_FITS) for stage in STAGES],
                        bounds)
+    spread: dict[str, float] = {}
     if floor_runs:
-        body = ("chair_mass", "rolling_resistance")
-        stages = [body] if block_runs else [*STAGES[:-1], ()]
-        best: tuple[float, np.ndarray] | None = None
-        starts = [(1.0, m, c) for m, c in BODY_STARTS] if block_runs else \
-            [(k, m, c) for k in MOTOR_STARTS for m, c in BODY_STARTS]
-        for k, mass, crr in starts:
-            y = x.copy()
-            for i, n in enumerate(names):
-                y[i] += math.log({"motor_constant": k, "chair_mass": mass,
-                                  "rolling_resistance": crr}.get(n, 1.0))
-            found = _staged(lambda z: residuals(params_of(z), floor_runs), y, names, stages, bounds)
-            if best is None or found[0] < best[0]:
-                best = found
-        assert best is not None
+        def floor_fun(z: np.ndarray) -> np.ndarray:
+            return residuals(params_of(z), floor_runs)
+
+        stages = [("chair_mass", "rolling_resistance")] if block_runs else [*STAGES[:-1], ()]
+        found = [_staged(floor_fun, y, names, stages, bounds)
+                 for k in ((1.0,) if block_runs else MOTOR_STARTS)
+                 for y in _body_starts(floor_fun, x, names, k)]
+        best = min(found, key=lambda f: f[0])
         x = best[1]
+        rivals = np.array([f[1] for f in found if f[0] <= RIVAL * best[0]])
+        spread = {n: float(np.exp(0.5 * (rivals[:, i].max() - rivals[:, i].min())) - 1.0)
+                  for i, n in enumerate(names)}
     x = least_squares(fun, x, x_scale=0.1, diff_step=1e-4, xtol=1e-10, ftol=1e-10, bounds=bounds).x
     result = least_squares(fun, x, x_scale=0.1, diff_step=1e-4, xtol=1e-10, ftol=1e-10,
                            loss="soft_l1", f_scale=ROBUST_SCALE, bounds=bounds)
@@ -425,6 +431,12 @@ def identify(runs: Sequence[Run], start: ChairParams | None = None) -> Fit:
         rel = np.sqrt(rel**2 + (shift * prior) ** 2)
         notes.append(f"the uncertainties include {name}'s, held at {value(start, name):.4g} "
                      f"(taken as uncertain by {100 * prior:.0f} %)")
+    # rival starts that disagree: the runs cannot tell their minima apart
+    rel = np.array([max(float(r), spread.get(n, 0.0)) for n, r in zip(names, rel, strict=True)])
+    wide = [n for n in names if spread.get(n, 0.0) > PIN_LIMIT]
+    if wide:
+        notes.append("fits from different starts ended in different minima of about the same "
+                     "cost: their spread counts in the uncertainties of " + ", ".join(wide))
     sigma = {n: abs(values[n]) * float(r) for n, r in zip(names, rel, strict=True)}
     if any(math.isinf(s) for s in sigma.values()):
         notes.append("some figure has no effect on these runs (its column of the Jacobian is zero)")
@@ -436,6 +448,29 @@ def identify(runs: Sequence[Run], start: ChairParams | None = None) -> Fit:
     if blocks:
         fit.wheel_factor = wheel_factors(fitted, [r for r in runs if r.blocks])
     return fit
+
+
+def _body_starts(fun: Callable[[np.ndarray], np.ndarray], x: np.ndarray, names: Sequence[str],
+                 motor: float) -> list[np.ndarray]:
+    """The ``BODY_KEEP`` points of lowest cost of ``fun`` on the ``BODY_SCAN`` grid: ``x``
+    with its motor constant times ``motor`` and its chair_mass and rolling_resistance
+    times each pair of the grid's factors."""
+    at = {n: i for i, n in enumerate(names)}
+    base = x.copy()
+    base[at["motor_constant"]] += math.log(motor)
+    scanned: list[tuple[float, np.ndarray]] = []
+    for mass in BODY_SCAN:
+        for crr in BODY_SCAN:
+            y = base.copy()
+            y[at["chair_mass"]] += math.log(mass)
+            y[at["rolling_resistance"]] += math.log(crr)
+            try:
+                r = fun(y)
+            except ValueError:                  # no top speed gives the motor constant
+                continue
+            scanned.append((float(0.5 * r @ r), y))
+    scanned.sort(key=lambda c: c[0])
+    return [y for _, y in scanned[:BODY_KEEP]]
 
 
 def _staged(fun: Callable[[np.ndarray], np.ndarray], x: np.ndarray, names: Sequence[str],
