@@ -18,6 +18,10 @@ URLs map onto pyserial (the query goes to the handler, which alone parses it):
 - on both, ``chair=chair.toml`` gives the plant the ``[chair]`` table of that file in
   place of the default figures (``wcdrive.plant.params.load_chair``; ``wcdrive bench
   identify`` fits one to recordings of a real chair, docs/bench.md);
+- on both, ``world=W`` puts the chair among walls it collides with (a map_server YAML,
+  a hand-written world's TOML, or a bundled world: hospital_corridor, furnished_room),
+  ``start=x,y,heading_deg`` its pose there, and ``lidar=rplidar_s3`` an RPLidar S3 on it
+  (the seed's mount): ``chair.scan()`` and ``chair.on_scan(cb)`` give its scans;
 - ``can://<interface>/<channel>`` -> ``wccan://``: a chair behind a ``wcdrive can-gateway``;
 - any ``scheme://`` pyserial opens (``wcsim://``, ``socket://``, ``rfc2217://``);
 - a device path such as ``/dev/ttyACM0``: opened exclusively (a second program gets
@@ -147,6 +151,12 @@ def _board_clock(port: Port) -> Callable[[], float | None] | None:
     return lambda: board.reported_time
 
 
+def _scan_source(port: Port) -> Any:
+    """A simulated board's lidar (``BoardLidar``), for ``Wheelchair.scan``; None for a
+    board without one, a device, a pty or a CAN link."""
+    return getattr(getattr(port, "board", None), "lidar", None)
+
+
 def _default_link_timeout(port: Port) -> float:
     """``LINK_TIMEOUT``: on a simulated board's own clock when it has one (the session
     counts the silence there, ``_board_clock``), so at any ``speed`` and however far
@@ -228,7 +238,7 @@ def connect(url: str = "sim://", *, boot_timeout: float = 10.0, record: bool | s
         options.setdefault("reopen", reopen)
     chair = Wheelchair(first, legacy=legacy,
                        link_timeout=_default_link_timeout(port) if link_timeout is None else link_timeout,
-                       board_clock=_board_clock(port), **options)
+                       board_clock=_board_clock(port), scan_source=_scan_source(port), **options)
     if publisher is not None:
         publisher.attach(chair, getattr(port, "board", None))
     try:

@@ -16,10 +16,13 @@ from __future__ import annotations
 import math
 
 from wcdrive.avr.uart import UART_BYTE_CYCLES
+from wcdrive.boards.board_lidar import BoardLidar
 from wcdrive.boards.port_loop import F_CPU, PortLoop
 from wcdrive.boards.receive_buffer import DEFAULT_CAPACITY
 from wcdrive.boards.threaded import ThreadedBoard, WallClock
 from wcdrive.plant import ChairParams, Gyro, Plant
+from wcdrive.plant.lidar import Lidar
+from wcdrive.plant.world import World
 
 #: Simulated time between two looks at the wall clock.
 STEP_S = 0.002
@@ -43,13 +46,19 @@ def rx_capacity(speed: float) -> int:
 
 class SimulatedBoard(ThreadedBoard):
     """The port and the plant (``PortLoop``) as a live board, paced to the wall clock
-    times ``speed``; what ``wcsim://`` opens."""
+    times ``speed``; what ``wcsim://`` opens. ``world``: the walls it drives among
+    (collisions included), ``start`` its pose there (x, y m, heading rad); ``lidar``: a
+    lidar on the chair (``BoardLidar``, its noise from ``seed``)."""
 
-    def __init__(self, params: ChairParams | None = None, *, speed: float = 1.0, seed: int = 0) -> None:
+    def __init__(self, params: ChairParams | None = None, *, speed: float = 1.0, seed: int = 0,
+                 world: World | None = None, start: tuple[float, float, float] = (0.0, 0.0, 0.0),
+                 lidar: Lidar | None = None) -> None:
         self.clock = WallClock(speed)
         super().__init__("wcsim", rx_capacity(speed))
         self.params = params or ChairParams()
-        self.plant = Plant(self.params)
+        self.plant = Plant(self.params, x=start[0], y=start[1], heading=start[2], world=world)
+        if lidar is not None:
+            self.lidar = BoardLidar(lidar, world or World(), self.plant, seed)
         # a live board runs for hours: its gyro keeps the newest 10 s of samples
         self.loop = PortLoop(self.plant, Gyro(self.params, seed, history=GYRO_HISTORY))
 

@@ -4,14 +4,19 @@ Subclasses say how to take bytes (``_send``), how to advance the simulation one
 step and what it sent meanwhile (``_advance``), how long to wait between steps
 (``_pause``) and how to release what they hold (``_shutdown``). ``SimulatedBoard``
 (the port + plant) and ``wcdrive.boards.simavr.mega_board.MegaBoard`` (the ELF in simavr) are two.
+A board with a ``lidar`` (``BoardLidar``) has it polled after each step, under the lock.
 """
 
 from __future__ import annotations
 
 import threading
 import time
+from typing import TYPE_CHECKING
 
 from wcdrive.boards.receive_buffer import DEFAULT_CAPACITY, ReceiveBuffer
+
+if TYPE_CHECKING:
+    from wcdrive.boards.board_lidar import BoardLidar
 
 #: A board's thread that ends no step for this long (wall time) is taken as hung:
 #: ``reported_time`` is None, and a host falls back to its own clock for the link.
@@ -30,6 +35,8 @@ class ThreadedBoard:
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
         self._reported: float | None = None
         self._reported_at = time.monotonic()      # the wall time of the last step's end
+        #: the lidar on the board's chair, if it has one (its scans: ``lidar.take()``)
+        self.lidar: BoardLidar | None = None
 
     # ---- for subclasses -----------------------------------------------------------
     def _send(self, data: bytes) -> None:
@@ -138,6 +145,8 @@ class ThreadedBoard:
                 out = self._advance()
                 if out:
                     self._rx.put(out)            # under the lock: a reset sees whole steps
+                if self.lidar is not None:
+                    self.lidar.poll()
                 self._reported = self._clock()
                 self._reported_at = time.monotonic()
             pause = self._pause()

@@ -28,7 +28,7 @@ import time
 import weakref
 from collections.abc import Callable, Iterator
 from types import FrameType
-from typing import Literal, overload
+from typing import TYPE_CHECKING, Literal, overload
 
 import numpy as np
 
@@ -46,6 +46,7 @@ from wcdrive.errors import (
 from wcdrive.host.boardclock import BoardClock
 from wcdrive.host.odometry import OdometryEstimate
 from wcdrive.host.requests import Request
+from wcdrive.host.scan_feed import ScanFeed, ScanSource
 from wcdrive.host.session import Session
 from wcdrive.host.telemetry import LinkEvent, LinkLost, LinkRestored, Reset, Telemetry, TelemetryHub
 from wcdrive.protocol.codec import (
@@ -61,6 +62,9 @@ from wcdrive.protocol.codec import (
 from wcdrive.protocol.spec import integer
 from wcdrive.transports.port import Port
 from wcdrive.transports.recording import Recording
+
+if TYPE_CHECKING:                     # the host side loads no simulator
+    from wcdrive.plant.lidar import LaserScan, Lidar
 
 __all__ = ["LINK_TIMEOUT", "LinkEvent", "LinkLost", "LinkRestored", "Reset", "Telemetry", "Wheelchair",
            "install_signal_handlers", "stop_all"]
@@ -160,6 +164,8 @@ class Wheelchair:
     - ``stop_on_signals``: install the ``SIGTERM``/``SIGHUP`` handler that stops every
       chair before the process dies (module docstring).
     - ``on_close`` runs after the port is closed.
+    - ``scan_source``: the chair's lidar, where its scans come from (``connect`` passes
+      a simulated board's ``BoardLidar``); ``scan`` and ``on_scan`` read them.
     """
 
     def __init__(self, port: Port, *, name: str | None = None, odometry_method: str = "position",
@@ -167,8 +173,13 @@ class Wheelchair:
                  reopen: Callable[[], Port] | None = None, reconnect_timeout: float = 60.0,
                  legacy: bool = False, link_timeout: float = LINK_TIMEOUT,
                  stop_on_signals: bool = True,
-                 board_clock: Callable[[], float | None] | None = None) -> None:
+                 board_clock: Callable[[], float | None] | None = None,
+                 scan_source: ScanSource | None = None) -> None:
         self._hub = TelemetryHub(odometry_method)
+        self._scans: ScanFeed | None = None
+        if scan_source is not None:
+            self._scans = ScanFeed(scan_source, self._hub.clock)
+            self._hub.on_telemetry(self._scans.poll)
         self._session = session = Session(
             port, self._hub.deliver, name=name, reopen=reopen, reconnect_timeout=reconnect_timeout,
             legacy=legacy, link_timeout=link_timeout, on_link=self._hub.deliver_link,
@@ -557,6 +568,41 @@ class Wheelchair:
         thread = threading.Thread(target=run, name="wcdrive-odometry", daemon=True)
         thread.start()
         return thread
+
+    # ---- the lidar ------------------------------------------------------------------------
+    @property
+    def has_lidar(self) -> bool:
+        """Whether the chair has a lidar whose scans reach the host (``sim://`` and
+        ``simavr://`` with ``lidar=``)."""
+        return self._scans is not None
+
+    @property
+    def lidar(self) -> Lidar | None:
+        """The chair's lidar: its model (``model.scan_hz``, ``beams``) and its mount on
+        the chair (``mount``: base_link -> ``frame_id``); None without one."""
+        return None if self._scans is None else self._scans.lidar
+
+    def scan(self, timeout: float = 1.0) -> LaserScan:
+        """The newest lidar scan that ``scan`` has not returned yet (a
+        ``sensor_msgs/LaserScan``'s fields, ``stamp`` in host seconds as the odometry's),
+        waiting up to ``timeout`` s for one. ``WcdriveError`` when the chair has no lidar,
+        ``WcdriveTimeoutError`` when no scan came."""
+        feed = self._lidar()
+        scan = feed.wait(timeout)
+        if scan is None:
+            raise WcdriveTimeoutError(f"{self.url}: no lidar scan within {timeout:g} s")
+        return scan
+
+    def on_scan(self, callback: Callable[[LaserScan], None]) -> None:
+        """Calls ``callback`` with every lidar scan, oldest first, from the reader thread
+        (at most a tick after its turn ended). ``WcdriveError`` when the chair has no lidar."""
+        self._lidar().on_scan(callback)
+
+    def _lidar(self) -> ScanFeed:
+        if self._scans is None:
+            raise WcdriveError(f"{self.url}: this chair has no lidar (on sim:// or simavr://, add "
+                               "?lidar=rplidar_s3, and a world=)")
+        return self._scans
 
     # ---- lifecycle -------------------------------------------------------------------
     @property

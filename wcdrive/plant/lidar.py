@@ -191,6 +191,9 @@ class LaserScan:
     intensities: np.ndarray
     #: ground truth for tests: each published beam's time (NaN: no sample filled it)
     beam_time: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))
+    #: the first beam's time on the board's clock when ``stamp`` is a host time
+    #: (``Wheelchair.scan``; NaN otherwise)
+    board_stamp: float = math.nan
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, LaserScan):

@@ -32,6 +32,7 @@ from __future__ import annotations
 import functools
 import itertools
 import math
+import tomllib
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -40,7 +41,11 @@ from typing import Any
 import numpy as np
 
 from wcdrive.plant.raycast import RayGrid
-from wcdrive.plant.rosmap import OCCUPIED, OccupancyGrid, load_map
+from wcdrive.plant.rosmap import OCCUPIED, MapFileError, OccupancyGrid, load_map
+
+#: The worlds that come with wcdrive (the scenarios' ``worlds`` folder): a hospital
+#: corridor (a map_server map) and a furnished room (hand-written).
+BUNDLED_WORLDS = Path(__file__).resolve().parents[1] / "sim" / "scenarios" / "worlds"
 
 
 class WorldError(ValueError):
@@ -142,6 +147,30 @@ class World:
             grid = load_map((base or Path.cwd()) / str(table["map"]))
             seg = np.concatenate((seg, grid_outline(grid)))
         return cls(seg, np.asarray(circles, dtype=float).reshape(-1, 3), grid)
+
+    @classmethod
+    def from_file(cls, path: str | Path) -> World:
+        """A world from its file: a map_server YAML (``.yaml``/``.yml``, its occupied
+        cells), or a hand-written world's TOML file (the geometry keys of
+        ``from_table``, and ``name`` and ``description``; its ``map`` relative to it).
+        ``WorldError`` says what is wrong with it (``OSError`` when it cannot be read)."""
+        path = Path(path)
+        if path.suffix in (".yaml", ".yml"):
+            try:
+                return cls.from_grid(load_map(path))
+            except MapFileError as exc:
+                raise WorldError(f"{path}: {exc}") from exc
+        if path.suffix != ".toml":
+            raise WorldError(f"{path}: a world is a map_server YAML (.yaml) or a TOML file (.toml)")
+        try:
+            data = tomllib.loads(path.read_text())
+        except tomllib.TOMLDecodeError as exc:
+            raise WorldError(f"{path}: not valid TOML: {exc}") from exc
+        table = {k: v for k, v in data.items() if k not in ("name", "description")}
+        try:
+            return cls.from_table(table, path.parent)
+        except (MapFileError, TypeError, ValueError) as exc:
+            raise WorldError(f"{path}: {exc}") from exc
 
     def occupancy(self, resolution: float = 0.05, margin: float = 0.5) -> OccupancyGrid:
         """The world as a ROS map (``/map``): the map it came from, if any; else its

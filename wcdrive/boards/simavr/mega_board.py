@@ -17,11 +17,14 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TypeVar
 
+from wcdrive.boards.board_lidar import BoardLidar
 from wcdrive.boards.sim_board import GYRO_HISTORY
 from wcdrive.boards.simavr.plant_on_pins import PlantOnPins
 from wcdrive.boards.simavr.virtual_mega import Reset, VirtualMega
 from wcdrive.boards.threaded import ThreadedBoard
 from wcdrive.plant import ChairParams, Gyro, Plant
+from wcdrive.plant.lidar import Lidar
+from wcdrive.plant.world import World
 
 __all__ = ["MegaBoard"]
 
@@ -39,8 +42,10 @@ class MegaBoard(ThreadedBoard):
 
     def __init__(self, elf: str | Path | None = None, *, realtime: bool = False,
                  plant: ChairParams | bool = True, speed: float = 1.0,
-                 mega: VirtualMega | None = None) -> None:
-        """``mega``: a Mega made elsewhere (``BootloaderMega``) in place of ``VirtualMega(elf)``."""
+                 mega: VirtualMega | None = None, world: World | None = None,
+                 start: tuple[float, float, float] = (0.0, 0.0, 0.0), lidar: Lidar | None = None) -> None:
+        """``mega``: a Mega made elsewhere (``BootloaderMega``) in place of ``VirtualMega(elf)``.
+        ``world``, ``start`` and ``lidar`` as ``SimulatedBoard``'s (with a plant)."""
         if not speed > 0:
             raise ValueError(f"speed must be positive, got {speed}")
         super().__init__("virtual-mega")
@@ -57,9 +62,13 @@ class MegaBoard(ThreadedBoard):
         self._pins: PlantOnPins | None = None
         if plant:
             params = plant if isinstance(plant, ChairParams) else ChairParams()
-            self.plant = Plant(params)
+            self.plant = Plant(params, x=start[0], y=start[1], heading=start[2], world=world)
             # a live board runs for hours: its gyro keeps the newest samples only
             self._pins = PlantOnPins(self.mega, self.plant, Gyro(params, 0, history=GYRO_HISTORY))
+            if lidar is not None:
+                self.lidar = BoardLidar(lidar, world or World(), self.plant)
+        elif world is not None or lidar is not None:
+            raise ValueError("a board without a plant has no world and no lidar")
         #: Called by the board's thread after each step (``STEP_S`` of simulated time),
         #: under the board's lock, with the UART bytes the firmware sent in that step as
         #: ``(cycle, byte)``: a probe for measurements (PWM, the plant) at the step's end.

@@ -3,10 +3,12 @@
 Publishes (``TOPICS``; QoS from ``qos``): ``/odom`` (``robot.odometry`` at every
 telemetry tick, with its covariances), ``/tf`` odom -> base_link (same tick; off with
 ``publish_tf=False`` when an EKF owns that transform), ``/tf_static`` (base_link ->
-imu_link, once, transient local), ``/joint_states`` (the wheels), ``/diagnostics``
+imu_link, and base_link -> laser for a robot with a lidar; once, transient local),
+``/joint_states`` (the wheels), ``/diagnostics``
 (link, e-stop, faults, the board's ``TLM:`` line, the ``/cmd_vel`` tallies; 1 Hz),
 ``/imu`` when an ``imu`` source is given (the simulated board's gyro: ``ImuTap``),
-``/scan`` when a ``ScanSource`` is given (no URL backend has one yet), and ``/clock``
+``/scan`` when a ``ScanSource`` is given or the robot has a lidar (``sim://`` and
+``simavr://`` with ``lidar=``: ``RobotScans``, each turn of the head), and ``/clock``
 with ``sim_time`` (the board's clock, for a backend run faster than real time; every
 stamp is then on that clock).
 
@@ -33,6 +35,7 @@ from typing import Any, Protocol
 from wcdrive.errors import WcdriveError
 from wcdrive.host.robot import Robot
 from wcdrive.host.telemetry import Telemetry
+from wcdrive.ros2.bridge import laser_scan, tf_static
 from wcdrive.ros2.dds import messages, qos
 from wcdrive.ros2.dds.cmdvel import CmdVelGate
 from wcdrive.ros2.dds.graph import RosNode
@@ -68,7 +71,8 @@ TOPICS: tuple[Topic, ...] = (
     Topic("/tf_static", TF, qos.TF_STATIC, "pub", "once"),
     Topic("/joint_states", JOINTS, qos.DEFAULT, "pub", "with /odom"),
     Topic("/imu", IMU, qos.SENSOR_DATA, "pub", "each gyro sample (400 Hz, sim:// and simavr://)"),
-    Topic("/scan", SCAN, qos.SENSOR_DATA, "pub", "a scan source's rate (none wired yet)"),
+    Topic("/scan", SCAN, qos.SENSOR_DATA, "pub",
+          "each turn of the lidar (10 Hz, sim:// and simavr:// with lidar=)"),
     Topic("/diagnostics", DIAGNOSTICS, qos.DEFAULT, "pub", "1 Hz"),
     Topic("/clock", CLOCK, qos.CLOCK, "pub", "with /odom, only with --sim-time"),
     Topic("/cmd_vel", TWIST_STAMPED, qos.DEFAULT, "sub", "the publisher's (>= 2 Hz to keep moving)"),
@@ -87,6 +91,29 @@ class ScanSource(Protocol):
 
     def scan(self) -> dict[str, Any] | None:
         """The newest scan not yet returned, or None."""
+
+
+class RobotScans:
+    """A ``ScanSource`` of a robot with a lidar (``Wheelchair.on_scan``): its newest scan,
+    stamped at its first beam on the node's clock (``stamp(host_s, board_s)``)."""
+
+    def __init__(self, robot: Any, stamp: Callable[[float, float], float]) -> None:
+        self._stamp = stamp
+        self._lock = threading.Lock()
+        self._latest: Any = None
+        robot.on_scan(self._on_scan)
+
+    def _on_scan(self, scan: Any) -> None:
+        with self._lock:
+            self._latest = scan
+
+    def scan(self) -> dict[str, Any] | None:
+        """``ScanSource.scan``."""
+        with self._lock:
+            scan, self._latest = self._latest, None
+        if scan is None:
+            return None
+        return laser_scan(dataclasses.replace(scan, stamp=self._stamp(scan.stamp, scan.board_stamp)))
 
 
 @dataclass
@@ -180,6 +207,9 @@ class ChairNode:
             if topic.direction != "pub" or not self._wanted(topic.name, imu):
                 continue
             self._pub[topic.name] = ros.publisher(topic.name, topic.msgtype, topic.profile)
+        if o.scan is None and getattr(robot, "has_lidar", False):
+            o.scan = RobotScans(robot, self._scan_stamp)
+            self._pub["/scan"] = ros.publisher("/scan", SCAN, qos.SENSOR_DATA)
         self._cmd_type = TWIST if o.twist else TWIST_STAMPED
         self._cmd_reader = ros.subscription("/cmd_vel", self._cmd_type, qos.DEFAULT)
         self._estop_reader = ros.subscription("/estop", BOOL, qos.DEFAULT)
@@ -204,6 +234,11 @@ class ChairNode:
             return self._last_board_time
         return time.monotonic() + self._wall
 
+    def _scan_stamp(self, host_s: float, board_s: float) -> float:
+        """A scan's stamp: its board time with ``sim_time``, else its host time on the
+        wall clock's epoch (as ``stamp``'s)."""
+        return board_s if self.options.sim_time else host_s + self._wall
+
     def stamp(self, tel: Telemetry) -> float:
         """The stamp (s) of the messages of tick ``tel``: its board time with
         ``sim_time``, else the host time it maps to, on the wall clock's epoch."""
@@ -216,8 +251,13 @@ class ChairNode:
     def start(self) -> ChairNode:
         """Publishes ``/tf_static``, then follows the robot's ticks and ``/cmd_vel``."""
         o = self.options
-        self._pub["/tf_static"].publish({"transforms": [
-            messages.transform(self.now(), o.base_frame, messages.IMU_FRAME)]})
+        statics = [messages.transform(self.now(), o.base_frame, messages.IMU_FRAME)]
+        lidar = getattr(self.robot, "lidar", None)
+        if lidar is not None:
+            m = lidar.mount
+            statics += tf_static(self.now(), lidar.frame_id, m.x, m.y, m.z, math.radians(m.yaw_deg),
+                                 m.tf_roll, o.base_frame)["transforms"]
+        self._pub["/tf_static"].publish({"transforms": statics})
         self.robot.on_telemetry(self._on_tick)
         self._thread = threading.Thread(target=self._run, name="wcdrive-ros2", daemon=True)
         self._thread.start()

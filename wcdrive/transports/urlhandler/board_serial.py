@@ -7,13 +7,18 @@ else. Baud rate and framing settings are accepted and ignored, as on a USB CDC p
 
 from __future__ import annotations
 
+import math
 import time
 import urllib.parse
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Protocol
 
 from serial.serialutil import PortNotOpenError, SerialBase, SerialException, to_bytes
+
+from wcdrive.plant.lidar import MODELS, SEED_MOUNT, Lidar
+from wcdrive.plant.world import BUNDLED_WORLDS, World
 
 
 class BoardLike(Protocol):
@@ -67,6 +72,45 @@ def speed_option(text: str) -> float:
 def flag_option(text: str) -> bool:
     """``0``/``false`` off, anything else on."""
     return text not in ("0", "false")
+
+
+def world_option(text: str) -> World:
+    """A world's file (``World.from_file``: a map_server YAML or a hand-written world's
+    TOML), or the name of a bundled one (``BUNDLED_WORLDS``: hospital_corridor,
+    furnished_room)."""
+    path = Path(text)
+    if not path.suffix and len(path.parts) == 1:
+        found = sorted(BUNDLED_WORLDS.glob(f"{text}.*"))
+        found = [p for p in found if p.suffix in (".yaml", ".toml")]
+        if not found:
+            names = sorted({p.stem for p in BUNDLED_WORLDS.glob("*") if p.suffix in (".yaml", ".toml")})
+            raise ValueError(f"no bundled world of that name ({', '.join(names)}), nor a file")
+        path = found[0]
+    try:
+        return World.from_file(path)
+    except OSError as exc:
+        raise ValueError(f"cannot read {path}: {exc.strerror or exc}") from exc
+
+
+def start_option(text: str) -> tuple[float, float, float]:
+    """``x,y,heading_deg``: the chair's start pose in the world (m, m, degrees); returned
+    with the heading in radians."""
+    parts = text.split(",")
+    try:
+        values = [float(v) for v in parts]
+    except ValueError:
+        values = []
+    if len(values) != 3 or not all(math.isfinite(v) for v in values):
+        raise ValueError("start is x,y,heading_deg: three finite numbers")
+    return values[0], values[1], math.radians(values[2])
+
+
+def lidar_option(text: str) -> Lidar:
+    """A lidar model's name (``wcdrive.plant.lidar.MODELS``: rplidar_s3), on the seed's
+    mount (``SEED_MOUNT``: 0.20 m ahead of the axle, 0.30 m up)."""
+    if text not in MODELS:
+        raise ValueError(f"must be one of {', '.join(MODELS)}")
+    return Lidar(MODELS[text], SEED_MOUNT)
 
 
 def choice_option(*choices: str) -> Callable[[str], str]:

@@ -1,7 +1,8 @@
-"""``wcavr://[path/to.elf][?realtime=0&speed=S&plant=0&chair=chair.toml]``: the compiled
-firmware in simavr as a pyserial port, the pymunk chair behind its pins (``plant=0``:
-wheels still; ``chair``: a chair file whose ``[chair]`` table replaces the plant's
-default parameters, ``wcdrive.plant.params.load_chair``).
+"""``wcavr://[path/to.elf][?realtime=0&speed=S&plant=0&chair=chair.toml&world=W&start=x,y,deg``
+``&lidar=rplidar_s3]``: the compiled firmware in simavr as a pyserial port, the pymunk chair behind its pins
+(``plant=0``: wheels still; ``chair``: a chair file whose ``[chair]`` table replaces
+the plant's default parameters, ``wcdrive.plant.params.load_chair``; ``world``,
+``start`` and ``lidar`` as ``wcsim://``'s).
 
 The virtual Mega runs at real time by default, as a real board does, so that a
 program paced by the wall clock sees the chair a real one would be. ``speed=S`` runs
@@ -19,13 +20,18 @@ from wcdrive.transports.urlhandler.board_serial import (
     BoardSerial,
     Option,
     flag_option,
+    lidar_option,
     speed_option,
+    start_option,
     url_options,
+    world_option,
 )
 
-USAGE = "wcavr://[elf][?realtime=0&speed=S&plant=0&chair=chair.toml]"
+USAGE = "wcavr://[elf][?realtime=0&speed=S&plant=0&chair=chair.toml&world=W&start=x,y,deg&lidar=rplidar_s3]"
 OPTIONS = {"realtime": Option(True, flag_option), "speed": Option(1.0, speed_option),
-           "plant": Option(True, flag_option), "chair": Option(None, load_chair)}
+           "plant": Option(True, flag_option), "chair": Option(None, load_chair),
+           "world": Option(None, world_option), "start": Option((0.0, 0.0, 0.0), start_option),
+           "lidar": Option(None, lidar_option)}
 
 
 class Serial(BoardSerial):
@@ -39,6 +45,9 @@ class Serial(BoardSerial):
             raise SerialException("wcavr://: realtime=0 runs flat out; give speed= or realtime=0, not both")
         if not o["plant"] and "chair" in given:
             raise SerialException("wcavr://: plant=0 has no chair; give chair= or plant=0, not both")
+        if not o["plant"] and given & {"world", "start", "lidar"}:
+            raise SerialException("wcavr://: plant=0 has no chair to put in a world or carry a lidar")
         elf = (parts.netloc + parts.path) or None
         plant = o["chair"] if o["plant"] and o["chair"] is not None else o["plant"]
-        return MegaBoard(elf, realtime=o["realtime"], speed=o["speed"], plant=plant)
+        return MegaBoard(elf, realtime=o["realtime"], speed=o["speed"], plant=plant, world=o["world"],
+                         start=o["start"], lidar=o["lidar"])
