@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import wcdrive.plant.identify as identify_module
 from wcdrive.boards.port_loop import F_CPU
 from wcdrive.plant.identify import (
     FITTED,
@@ -249,21 +250,43 @@ def test_on_blocks_alone_the_body_is_held_and_said_so(runs: list[Run]) -> None:
     assert all(abs(e) < 0.01 for e in _errors(fit).values()), _errors(fit)
 
 
-def test_a_chair_with_every_figure_30_percent_low_is_found_or_flagged() -> None:
+def low_chair() -> ChairParams:
+    """Every fitted figure and the viscous friction 30 % below the default."""
+    d = ChairParams()
+    low = dataclasses.replace(d, **{n: getattr(d, n) * 0.7 for n in [*FACTORS, *NUISANCE]
+                                    if n != "motor_constant"})
+    return with_motor_constant(low, d.motor_constant * 0.7)
+
+
+@pytest.fixture(scope="module")
+def low_runs() -> list[Run]:
+    truth = low_chair()
+    return [blocks_run(truth), run_of(stepped_recording("ident_floor", truth), name="ident_floor")]
+
+
+def test_a_chair_with_every_figure_30_percent_low_is_found_or_flagged(low_runs: list[Run]) -> None:
     """The floor's cost is rugged, with false valleys near the true body: from the
     three fixed body starts this recording's fit ended at mass +15.7 %, rolling
     resistance -5.9 %, unflagged. The body's scan finds each figure within 5 % or the fit
     says which it could not pin down; from a single start it does neither."""
-    d = ChairParams()
-    low = dataclasses.replace(d, **{n: getattr(d, n) * 0.7 for n in [*FACTORS, *NUISANCE]
-                                    if n != "motor_constant"})
-    truth = with_motor_constant(low, d.motor_constant * 0.7)
-    runs = [blocks_run(truth), run_of(stepped_recording("ident_floor", truth), name="ident_floor")]
-    fit = identify(runs)
+    truth = low_chair()
+    fit = identify(low_runs)
     errors = {n: v / float(getattr(truth, n)) - 1.0 for n, v in fit.values.items()}
     missed = {n: e for n, e in errors.items() if abs(e) >= 0.05 and n not in fit.unpinned}
     assert not missed, fit.report()
     assert abs(errors["rolling_resistance"]) < 0.05 or "rolling_resistance" in fit.unpinned
+
+
+def test_rival_minima_that_disagree_are_flagged(low_runs: list[Run],
+                                               monkeypatch: pytest.MonkeyPatch) -> None:
+    """Starts at the true body (0.7) and at the default's (1.0), every end counted as a
+    rival: the default's ends in a false valley, and the body's figures are flagged."""
+    monkeypatch.setattr(identify_module, "BODY_SCAN", (0.7, 1.0))
+    monkeypatch.setattr(identify_module, "BODY_KEEP", 4)
+    monkeypatch.setattr(identify_module, "RIVAL", 1e9)
+    fit = identify(low_runs)
+    assert {"chair_mass", "rolling_resistance"} <= set(fit.unpinned), fit.report()
+    assert any("different minima" in note for note in fit.notes)
 
 
 def test_a_poorer_recording_still_meets_the_goals_or_says_what_it_missed(runs: list[Run]) -> None:
