@@ -394,16 +394,16 @@ class LiveSink:
 
         self._foxglove = foxglove
         self._context = foxglove.Context()
-        self.server = foxglove.start_server(name=name, host=host, port=port, context=self._context)
         self._channels: dict[str, Any] = {}
         self._encoders: dict[str, Callable[[dict[str, Any]], bytes]] = {}
         self._lock = threading.Lock()
         self._closed = False
-        # Every channel before any client: one made while a client is connected is
-        # advertised before the server knows it, and a quick subscribe to it is refused
-        # ("Unknown channel ID", foxglove-sdk 0.30).
+        # Every channel before the server starts, so before any client: one made while a
+        # client is connected is advertised before the server knows it, and a quick
+        # subscribe to it is refused ("Unknown channel ID", foxglove-sdk 0.30).
         for topic in TOPICS:
             self._channel(topic)
+        self.server = foxglove.start_server(name=name, host=host, port=port, context=self._context)
 
     @property
     def port(self) -> int:

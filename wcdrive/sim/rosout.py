@@ -130,17 +130,33 @@ def write_mcap(result: SimResult, path: str | Path, params: ChairParams | None =
     return counts
 
 
+#: s of the board's clock between two repeats of the latched messages in ``serve``.
+LATCHED_REPEAT_S = 1.0
+
+
 def serve(result: SimResult, sink: ros2.Sink, params: ChairParams | None = None,
           speed: float = 1.0) -> int:
     """Publishes the run on ``sink`` paced by the board's clock (``speed`` times the
-    wall clock; 0: as fast as it goes); returns the number of messages."""
+    wall clock; 0: as fast as it goes); returns the number of messages. A live view has
+    no latching: a client that connects after ``/map`` and ``/tf_static`` went out would
+    never draw the map nor place the laser, so the latched topics' last messages go out
+    again every ``LATCHED_REPEAT_S`` s of the run."""
     start = time.monotonic()
     n = 0
+    latched: dict[str, dict] = {}
+    repeat_at = LATCHED_REPEAT_S
     for t, topic, msg in messages(result, params):
         if speed > 0:
             delay = start + t / speed - time.monotonic()
             if delay > 0:
                 time.sleep(delay)
+        while latched and t >= repeat_at:
+            for name, again in latched.items():
+                sink.publish(name, again, repeat_at)
+                n += 1
+            repeat_at += LATCHED_REPEAT_S
+        if ros2.qos(topic).transient_local:
+            latched[topic] = msg
         sink.publish(topic, msg, t)
         n += 1
     return n
