@@ -265,10 +265,10 @@ def low_runs() -> list[Run]:
 
 
 def test_a_chair_with_every_figure_30_percent_low_is_found_or_flagged(low_runs: list[Run]) -> None:
-    """The floor's cost is rugged, with false valleys near the true body: from the
-    three fixed body starts this recording's fit ended at mass +15.7 %, rolling
-    resistance -5.9 %, unflagged. The body's scan finds each figure within 5 % or the fit
-    says which it could not pin down; from a single start it does neither."""
+    """The floor's cost in plain least squares is rugged, with false valleys near the
+    true body: from the three fixed body starts this recording's fit ended at mass
+    +15.7 %, rolling resistance -5.9 %, unflagged. With the robust loss and the body's
+    scan each figure is within 5 % or the fit says which it could not pin down."""
     truth = low_chair()
     fit = identify(low_runs)
     errors = {n: v / float(getattr(truth, n)) - 1.0 for n, v in fit.values.items()}
@@ -279,8 +279,10 @@ def test_a_chair_with_every_figure_30_percent_low_is_found_or_flagged(low_runs: 
 
 def test_rival_minima_that_disagree_are_flagged(low_runs: list[Run],
                                                monkeypatch: pytest.MonkeyPatch) -> None:
-    """Starts at the true body (0.7) and at the default's (1.0), every end counted as a
-    rival: the default's ends in a false valley, and the body's figures are flagged."""
+    """Plain least squares from the true body (0.7) and from the default's (1.0), every
+    end counted as a rival: the default's ends in a false valley, and the body's
+    figures are flagged."""
+    monkeypatch.setattr(identify_module, "BODY_LOSS", "linear")
     monkeypatch.setattr(identify_module, "BODY_SCAN", (0.7, 1.0))
     monkeypatch.setattr(identify_module, "BODY_KEEP", 4)
     monkeypatch.setattr(identify_module, "RIVAL", 1e9)

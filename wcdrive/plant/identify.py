@@ -46,6 +46,7 @@ of the fits from other starts that end within ``RIVAL`` of the best cost; one be
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -63,14 +64,17 @@ FITTED = ("motor_constant", "wheel_inertia", "current_limit", "chair_mass", "rol
 STAGES: tuple[tuple[str, ...], ...] = (("motor_constant",), ("motor_constant", "current_limit"), ())
 #: The body's scan: factors on the start's chair_mass and rolling_resistance, every pair
 #: simulated once on the floor's runs; the fit starts from the ``BODY_KEEP`` pairs of
-#: lowest cost. The floor's cost is rugged (a wheel starting to slip at full duty moves
-#: by a tick as the body changes), with false valleys a few % across.
+#: lowest robust cost. The floor's cost is rugged (a wheel starting to slip at full duty
+#: moves by a tick as the body changes), with false valleys a few % across.
 BODY_SCAN = tuple(float(f) for f in np.geomspace(0.5, 2.0, 8))
-BODY_KEEP = 3
-#: A start that ends within this factor of the best cost is a rival: where the rivals
-#: disagree on a figure, half their spread counts in its uncertainty.
+BODY_KEEP = 5
+#: The body's fits' loss: the robust loss of the final fit, under which a few ticks
+#: around the slip cannot carve the false valleys that they carve in plain least squares.
+BODY_LOSS = "soft_l1"
+#: A start that ends within this factor of the best robust cost is a rival: where the
+#: rivals disagree on a figure, half their spread counts in its uncertainty.
 RIVAL = 1.1
-#: On the floor alone, the scan from each of these factors on the start's motor constant.
+#: On the floor alone, the scan at each of these factors on the start's motor constant.
 MOTOR_STARTS = (1.0, 0.8, 1.25)
 #: Which runs tell each fitted figure.
 BLOCKS_FITS = ("motor_constant", "wheel_inertia", "current_limit")
@@ -382,9 +386,9 @@ def identify(runs: Sequence[Run], start: ChairParams | None = None) -> Fit:
     # blocks alone fix the motor and the wheel (the motor constant alone first, then
     # with the current limit, then all of theirs); the runs on the floor then the body,
     # the rest held (on the floor alone: in the same stages as on blocks, the body freed
-    # last), from the best ``BODY_KEEP`` points of the ``BODY_SCAN`` grid (on the floor
-    # alone: at each of ``MOTOR_STARTS``), the best kept; then all figures on all runs,
-    # least squares and again with the robust loss.
+    # last), with ``BODY_LOSS``, from the best ``BODY_KEEP`` points of the ``BODY_SCAN``
+    # grid (on the floor alone: of its points at each of ``MOTOR_STARTS``), the best
+    # kept; then all figures on all runs, least squares and again with the robust loss.
     x = x0.copy()
     block_runs = [r for r in runs if r.blocks]
     floor_runs = [r for r in runs if not r.blocks]
@@ -398,9 +402,8 @@ def identify(runs: Sequence[Run], start: ChairParams | None = None) -> Fit:
             return residuals(params_of(z), floor_runs)
 
         stages = [("chair_mass", "rolling_resistance")] if block_runs else [*STAGES[:-1], ()]
-        found = [_staged(floor_fun, y, names, stages, bounds)
-                 for k in ((1.0,) if block_runs else MOTOR_STARTS)
-                 for y in _body_starts(floor_fun, x, names, k)]
+        found = [_staged(floor_fun, y, names, stages, bounds, BODY_LOSS)
+                 for y in _body_starts(floor_fun, x, names, (1.0,) if block_runs else MOTOR_STARTS)]
         best = min(found, key=lambda f: f[0])
         x = best[1]
         rivals = np.array([f[1] for f in found if f[0] <= RIVAL * best[0]])
@@ -451,34 +454,39 @@ def identify(runs: Sequence[Run], start: ChairParams | None = None) -> Fit:
 
 
 def _body_starts(fun: Callable[[np.ndarray], np.ndarray], x: np.ndarray, names: Sequence[str],
-                 motor: float) -> list[np.ndarray]:
-    """The ``BODY_KEEP`` points of lowest cost of ``fun`` on the ``BODY_SCAN`` grid: ``x``
-    with its motor constant times ``motor`` and its chair_mass and rolling_resistance
-    times each pair of the grid's factors."""
+                 motors: Sequence[float]) -> list[np.ndarray]:
+    """The ``BODY_KEEP`` points of lowest robust cost (``_robust_cost``) of ``fun`` on
+    the ``BODY_SCAN`` grid: ``x`` with its motor constant times each of ``motors`` and
+    its chair_mass and rolling_resistance times each pair of the grid's factors."""
     at = {n: i for i, n in enumerate(names)}
-    base = x.copy()
-    base[at["motor_constant"]] += math.log(motor)
     scanned: list[tuple[float, np.ndarray]] = []
-    for mass in BODY_SCAN:
-        for crr in BODY_SCAN:
-            y = base.copy()
-            y[at["chair_mass"]] += math.log(mass)
-            y[at["rolling_resistance"]] += math.log(crr)
-            try:
-                r = fun(y)
-            except ValueError:                  # no top speed gives the motor constant
-                continue
-            scanned.append((float(0.5 * r @ r), y))
+    for motor, mass, crr in itertools.product(motors, BODY_SCAN, BODY_SCAN):
+        y = x.copy()
+        y[at["motor_constant"]] += math.log(motor)
+        y[at["chair_mass"]] += math.log(mass)
+        y[at["rolling_resistance"]] += math.log(crr)
+        try:
+            r = fun(y)
+        except ValueError:                      # no top speed gives the motor constant
+            continue
+        scanned.append((_robust_cost(r), y))
     scanned.sort(key=lambda c: c[0])
     return [y for _, y in scanned[:BODY_KEEP]]
 
 
+def _robust_cost(r: np.ndarray) -> float:
+    """``least_squares``' cost of the residuals ``r`` with its soft L1 loss at
+    ``ROBUST_SCALE``."""
+    z = (r / ROBUST_SCALE) ** 2
+    return float(ROBUST_SCALE**2 * np.sum(np.sqrt(1.0 + z) - 1.0))
+
+
 def _staged(fun: Callable[[np.ndarray], np.ndarray], x: np.ndarray, names: Sequence[str],
-            stages: Sequence[tuple[str, ...]], bounds: tuple[np.ndarray, np.ndarray]
-            ) -> tuple[float, np.ndarray]:
-    """Least squares of ``fun`` from ``x`` in ``stages``: each frees the figures it names
-    (``()``: all), the others held where the last stage left them. Returns the last
-    stage's cost and ``x``."""
+            stages: Sequence[tuple[str, ...]], bounds: tuple[np.ndarray, np.ndarray],
+            loss: str = "linear") -> tuple[float, np.ndarray]:
+    """Least squares of ``fun`` from ``x`` in ``stages`` with ``loss`` (``"soft_l1"``: at
+    ``ROBUST_SCALE``): each frees the figures it names (``()``: all), the others held
+    where the last stage left them. Returns the last stage's cost and ``x``."""
     cost = math.inf
     x = x.copy()
     for stage in stages:
@@ -492,7 +500,8 @@ def _staged(fun: Callable[[np.ndarray], np.ndarray], x: np.ndarray, names: Seque
             return fun(z)
 
         step = least_squares(part, x[free], x_scale=0.1, diff_step=1e-4, xtol=1e-10, ftol=1e-10,
-                             bounds=(bounds[0][free], bounds[1][free]))
+                             bounds=(bounds[0][free], bounds[1][free]), loss=loss,
+                             f_scale=ROBUST_SCALE)
         x = x.copy()
         x[free] = step.x
         cost = float(step.cost)
