@@ -85,7 +85,7 @@ def slope_turns(tmp: Path) -> list[dict[str, object]]:
 
 
 DEAD_GRADES = {"level": (0.0, 0.0), "1:12 down": (math.degrees(math.atan(1 / 12)), 0.0),
-               "2 deg up": (2.0, 180.0)}
+               "2 deg up": (2.0, 180.0), "4 deg down": (4.0, 0.0), "4 deg across": (4.0, 90.0)}
 
 
 def detection(tmp: Path) -> list[dict[str, object]]:

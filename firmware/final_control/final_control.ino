@@ -617,13 +617,15 @@ static void emergencyHalt() {
 // from it, any gain in speed, or the wheel turning faster than its setpoint starts over:
 // a wheel being slowed to its setpoint (a sharp change of course) runs on a low duty, and
 // its return to the duty that holds the setpoint is no effort without progress.
-// The other wheel straining too (otherRising: effortRising) starts over as well: both
-// wheels held back is the chair's load (a grade, a turn it resists), not one motor. While
-// the other wheel turns WC_FAULT_EFFORT_OVERRUN beyond its setpoint (otherSetpoint) its
-// way, the chair is not following the command (its momentum, a slope, a wheel that
-// brakes late), and this wheel's effort goes into turning it: the count starts over.
+// The other wheel showing effort without progress too (otherRising: effortRising)
+// starts over as well: both wheels held back is the chair's load (a grade, a turn it
+// resists), not one motor; a dead motor's partner keeps its setpoint while it drags it.
+// While the other wheel's own motor drives it on beyond its setpoint (otherOverruns:
+// overruns), the chair is not following the command, and this wheel's effort goes into
+// turning it: the count starts over. (A partner carried beyond its setpoint by a slope
+// is braked, not driven: it stops nothing.)
 static bool noEffect(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, float measured,
-                     float other, float otherSetpoint, bool otherRising, uint8_t& effortPwm,
+                     float other, bool otherRising, bool otherOverruns, uint8_t& effortPwm,
                      float& effortSpeed, float& effortSetpoint, uint8_t& effortTicks) {
   float progress = setpoint > 0.0f ? measured : -measured;
   bool toward = setpoint != 0.0f && (appliedDir == HIGH) == (setpoint > 0.0f);
@@ -639,18 +641,27 @@ static bool noEffect(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, flo
   bool shortfall = fabs(measured) < WC_FAULT_EFFORT_SHORTFALL_MOTOR * fabs(setpoint);
   float otherProgress = setpoint > 0.0f ? other : -other;
   bool trails = progress < (otherProgress > 0.0f ? otherProgress : 0.0f) + WC_FAULT_EFFORT_LEAD;
-  bool otherOverruns = otherSetpoint != 0.0f &&
-                       (otherSetpoint > 0.0f ? other : -other) > fabs(otherSetpoint) + WC_FAULT_EFFORT_OVERRUN;
   effortTicks = shortfall && trails && !otherOverruns && appliedPwm >= effortPwm + WC_FAULT_EFFORT_PWM
                     ? effortTicks + 1
                     : 0;
   return effortTicks >= WC_FAULT_EFFORT_TICKS;
 }
 
-// Straining without gain: driven WC_FAULT_EFFORT_PWM or more above the lowest duty
-// since its effort reference (taken toward a setpoint; any gain in speed renews it).
-static bool effortRising(uint8_t appliedPwm, uint8_t effortPwm, float effortSetpoint) {
-  return effortSetpoint != 0.0f && appliedPwm >= effortPwm + WC_FAULT_EFFORT_PWM;
+// Effort without progress too: driven WC_FAULT_EFFORT_PWM or more above the lowest duty
+// since its effort reference (taken toward a setpoint; any gain in speed renews it) and
+// slower than WC_FAULT_EFFORT_SHORTFALL_MOTOR of its setpoint.
+static bool effortRising(uint8_t appliedPwm, uint8_t effortPwm, float effortSetpoint,
+                         float setpoint, float measured) {
+  return effortSetpoint != 0.0f && appliedPwm >= effortPwm + WC_FAULT_EFFORT_PWM &&
+         fabs(measured) < WC_FAULT_EFFORT_SHORTFALL_MOTOR * fabs(setpoint);
+}
+
+// Driven on beyond its setpoint: a duty toward the setpoint (not braking) while the wheel
+// turns WC_FAULT_EFFORT_OVERRUN or more beyond it that way.
+static bool overruns(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, float measured) {
+  float progress = setpoint > 0.0f ? measured : -measured;
+  return setpoint != 0.0f && appliedPwm > 0 && (appliedDir == HIGH) == (setpoint > 0.0f) &&
+         progress > fabs(setpoint) + WC_FAULT_EFFORT_OVERRUN;
 }
 
 // Running away: braked at WC_FAULT_RUNAWAY_PWM or more against its measured motion,
@@ -708,7 +719,7 @@ static bool straining(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, fl
 
 static uint8_t checkWheel(int32_t delta, uint32_t illegal, uint8_t storm, uint8_t appliedPwm,
                           uint8_t appliedDir, float setpoint, float measured, float other,
-                          float otherSetpoint, bool otherRising, uint8_t& stallTicks,
+                          bool otherRising, bool otherOverruns, uint8_t& stallTicks,
                           uint8_t& reverseTicks, uint8_t& runawayTicks, uint8_t& effortPwm,
                           float& effortSpeed, float& effortSetpoint, uint8_t& effortTicks,
                           float prevMeasured) {
@@ -727,7 +738,7 @@ static uint8_t checkWheel(int32_t delta, uint32_t illegal, uint8_t storm, uint8_
   if (reverseTicks >= WC_FAULT_REVERSE_TICKS) return WHEEL_REVERSED;
   runawayTicks = runsAway(appliedPwm, appliedDir, setpoint, measured, prevMeasured) ? runawayTicks + 1 : 0;
   if (runawayTicks >= WC_FAULT_RUNAWAY_TICKS) return WHEEL_REVERSED;
-  if (noEffect(appliedPwm, appliedDir, setpoint, measured, other, otherSetpoint, otherRising,
+  if (noEffect(appliedPwm, appliedDir, setpoint, measured, other, otherRising, otherOverruns,
                effortPwm, effortSpeed, effortSetpoint, effortTicks)) {
     return WHEEL_NO_EFFECT;
   }
@@ -887,15 +898,17 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
   if (faultFlags == 0) {
     bool strainL = straining(pwmL, dirL, setpointL, filtVelL);
     bool strainR = straining(pwmR, dirR, setpointR, filtVelR);
-    // The other wheel's duty risen too, short of the chair's limit (straining: that is
-    // atLimit's, a grade): the load is shared, not one motor's.
-    bool risingL = !strainL && effortRising(pwmL, effortPwmL, effortSetpointL);
-    bool risingR = !strainR && effortRising(pwmR, effortPwmR, effortSetpointR);
+    // The other wheel's effort without progress, short of the chair's limit (straining:
+    // that is atLimit's, a grade): the load is shared, not one motor's.
+    bool risingL = !strainL && effortRising(pwmL, effortPwmL, effortSetpointL, setpointL, filtVelL);
+    bool risingR = !strainR && effortRising(pwmR, effortPwmR, effortSetpointR, setpointR, filtVelR);
+    bool overrunL = overruns(pwmL, dirL, setpointL, filtVelL);
+    bool overrunR = overruns(pwmR, dirR, setpointR, filtVelR);
     checkL = checkWheel(deltaL, illDeltaL, stormTickL, pwmL, dirL, setpointL, filtVelL, filtVelR,
-                        setpointR, risingR, stallTicksL, reverseTicksL, runawayTicksL, effortPwmL, effortSpeedL,
+                        risingR, overrunR, stallTicksL, reverseTicksL, runawayTicksL, effortPwmL, effortSpeedL,
                         effortSetpointL, effortTicksL, prevMeasL);
     checkR = checkWheel(deltaR, illDeltaR, stormTickR, pwmR, dirR, setpointR, filtVelR, filtVelL,
-                        setpointL, risingL, stallTicksR, reverseTicksR, runawayTicksR, effortPwmR,
+                        risingL, overrunL, stallTicksR, reverseTicksR, runawayTicksR, effortPwmR,
                         effortSpeedR, effortSetpointR, effortTicksR, prevMeasR);
     // Driving only: a held wheel that runs away is a fault (a reversed encoder turns the
     // hold into positive feedback), whatever the other wheel does.

@@ -15,21 +15,21 @@ from __future__ import annotations
 import pytest
 
 from wcdrive.firmware import constants as C
-from wcdrive.firmware.control import WHEEL_STALLED, check_wheel, no_effect
+from wcdrive.firmware.control import WHEEL_STALLED, check_wheel, effort_rising, no_effect, overruns
 
 SETPOINT = 2.85   # rad/s toward which the duty rises
 
 
 def _ticks_to_trip(measured: float, other: float, setpoint: float = SETPOINT, ticks: int = 40,
-                   other_setpoint: float | None = None, other_rising: bool = False) -> int | None:
+                   other_rising: bool = False, other_overruns: bool = False) -> int | None:
     """The tick at which the rule trips, the duty rising 2 a tick from 80, or None. The
-    other wheel holds ``other_setpoint`` (its speed by default) and strains or not."""
+    other wheel shows effort without progress or not, and is driven on beyond its
+    setpoint or not."""
     direction = C.HIGH if setpoint > 0.0 else C.LOW
     effort = (0, 0.0, 0.0, 0)
-    held = other if other_setpoint is None else other_setpoint
     for k in range(ticks):
-        tripped, effort = no_effect(80 + 2 * k, direction, setpoint, measured, other, held, other_rising,
-                                    effort)
+        tripped, effort = no_effect(80 + 2 * k, direction, setpoint, measured, other, other_rising,
+                                    other_overruns, effort)
         if tripped:
             return k
     return None
@@ -73,17 +73,32 @@ def test_a_wheel_whose_partner_strains_too_is_the_chairs_load() -> None:
     assert _ticks_to_trip(1.45, 1.6, other_rising=True) is None
 
 
-@pytest.mark.parametrize("sign", [1.0, -1.0])
-def test_a_wheel_whose_partner_runs_beyond_its_setpoint_is_not_counted(sign: float) -> None:
-    """The other wheel FAULT_EFFORT_OVERRUN or more beyond its own setpoint its way (the
-    chair not following its command: momentum, a slope): not counted; a little less
-    beyond it, counted. Either way round."""
-    margin = float(C.FAULT_EFFORT_OVERRUN)
-    beyond = _ticks_to_trip(sign * 1.45, sign * 1.6, setpoint=sign * SETPOINT,
-                            other_setpoint=sign * (1.6 - margin - 0.01))
-    within = _ticks_to_trip(sign * 1.45, sign * 1.6, setpoint=sign * SETPOINT,
-                            other_setpoint=sign * (1.6 - margin + 0.01))
-    assert (beyond, within is not None) == (None, True)
+def test_a_wheel_whose_partner_is_driven_beyond_its_setpoint_is_not_counted() -> None:
+    """The other wheel's own motor driving it on beyond its setpoint: the chair does not
+    follow the command, and this wheel's effort goes into turning it."""
+    assert _ticks_to_trip(1.45, 1.6, other_overruns=True) is None
+
+
+@pytest.mark.parametrize(("pwm", "direction", "setpoint", "measured", "expected"), [
+    (43, C.HIGH, 2.79, 3.77, True),            # the soak's left wheel: driven on, 1 rad/s beyond
+    (43, C.LOW, 2.79, 3.77, False),            # braked beyond it (a slope carries it): no
+    (0, C.HIGH, 2.79, 3.77, False),            # coasting: no
+    (43, C.HIGH, 2.79, 3.20, False),           # less than FAULT_EFFORT_OVERRUN beyond: no
+    (43, C.LOW, -2.79, -3.77, True),           # the same backwards
+])
+def test_overruns_is_a_wheel_its_own_motor_drives_beyond_its_setpoint(
+        pwm: int, direction: int, setpoint: float, measured: float, expected: bool) -> None:
+    assert overruns(pwm, direction, setpoint, measured) is expected
+
+
+@pytest.mark.parametrize(("pwm", "measured", "expected"), [
+    (75, 3.9, True),       # duty 20 above its lowest (55), at 82 % of its setpoint
+    (74, 3.9, False),      # 19 above
+    (75, 4.6, False),      # at 96 %: it keeps its setpoint, dragging a dead partner
+])
+def test_effort_rising_is_effort_without_progress_short_of_the_setpoint(
+        pwm: int, measured: float, expected: bool) -> None:
+    assert effort_rising(pwm, 55, 4.777, 4.777, measured) is expected
 
 
 def _after_slowing(duties: list[int], held: float = 1.87, setpoint: float = 2.02) -> int | None:
@@ -93,9 +108,9 @@ def _after_slowing(duties: list[int], held: float = 1.87, setpoint: float = 2.02
     which the rule trips, or None."""
     effort = (0, 0.0, 0.0, 0)
     for k, duty in enumerate([17] * 8 + [24, 30, 34]):
-        _, effort = no_effect(duty, C.HIGH, setpoint, 3.5 - 0.14 * k, 2.8, 2.8, False, effort)
+        _, effort = no_effect(duty, C.HIGH, setpoint, 3.5 - 0.14 * k, 2.8, False, False, effort)
     for k, duty in enumerate(duties):
-        tripped, effort = no_effect(duty, C.HIGH, setpoint, held, 2.8, 2.8, False, effort)
+        tripped, effort = no_effect(duty, C.HIGH, setpoint, held, 2.8, False, False, effort)
         if tripped:
             return k
     return None
@@ -120,7 +135,7 @@ def _ticks_to_stall(prev_measured: float, setpoint: float = -0.89, ticks: int = 
     direction = C.HIGH if setpoint > 0.0 else C.LOW
     stall = 0
     for k in range(ticks):
-        verdict, stall, _, _, _ = check_wheel(0, 0, 0, 31, direction, setpoint, 0.0, 0.0, 0.0, False,
+        verdict, stall, _, _, _ = check_wheel(0, 0, 0, 31, direction, setpoint, 0.0, 0.0, False, False,
                                               stall, 0, 0, (0, 0.0, 0.0, 0), prev_measured)
         if verdict == WHEEL_STALLED:
             return k + 1

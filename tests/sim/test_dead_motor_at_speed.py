@@ -36,3 +36,22 @@ def test_a_motor_dead_at_speed_latches_its_fault_and_the_chair_stops(tmp_path: P
     assert faults[0][0] - r.fault_at <= 1.5
     # the plant at rest at the end, the motors unpowered or holding
     assert np.all(np.abs(r.truth.wheel_speed[-5:]) < 0.05), r.truth.wheel_speed[-5:]
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_motor_dead_going_down_a_slope_is_caught_though_its_partner_strains(tmp_path: Path,
+                                                                              backend: str) -> None:
+    """1.5 m/s straight down 4 degrees, the left motor dead: its partner's duty climbs
+    while it drags it, at 96 to 99 % of its setpoint. That is no effort without
+    progress (``effortRising`` counts only below ``FAULT_EFFORT_SHORTFALL_MOTOR``), so it
+    does not excuse the dead wheel: ``MOTOR_L`` within 6 s (5.25 s), the chair stopped."""
+    path = tmp_path / "dead_downhill.toml"
+    path.write_text(f'name = "dead_downhill"\nsettle_s = 0.5\nhost_rate_hz = 10\n'
+                    f"[world]\nslope_deg = 4.0\ndownhill_heading_deg = 0.0\n"
+                    f"[[segment]]\ncmdvel = [1.5, 0.0]\nduration = 10.0\n"
+                    f'[[fault]]\nat = {DEAD_AT}\nkind = "motor_dead"\nside = "left"\n')
+    r = checked_run(scenario.load(str(path)), backend)
+    assert r.fault_at is not None
+    faults = [(t, line) for t, line in r.link.events if line.startswith("EVT:FAULT")]
+    assert faults and faults[0][1] == "EVT:FAULT,MOTOR_L", r.link.events
+    assert faults[0][0] - r.fault_at <= 6.0

@@ -65,14 +65,15 @@ Effort = tuple[int, float, float, int]
 
 
 def no_effect(applied_pwm: int, applied_dir: int, setpoint: float, measured: float, other: float,
-              other_setpoint: float, other_rising: bool, effort: Effort) -> tuple[bool, Effort]:
+              other_rising: bool, other_overruns: bool, effort: Effort) -> tuple[bool, Effort]:
     """``noEffect``: effort without progress, by a wheel that trails ``other`` (the other
     wheel's measured speed), as a dragged one does, judged from where the wheel last
     turned faster than its setpoint (being slowed to it). ``effort`` is (lowest duty,
     speed toward the setpoint, setpoint, ticks) of the reference; returns (tripped, the
-    new one). The other wheel straining too (``other_rising``) starts the reference over;
-    the other wheel FAULT_EFFORT_OVERRUN beyond ``other_setpoint`` its way starts the
-    count over: the chair's load, or a chair not following its command, not one motor."""
+    new one). The other wheel straining too (``other_rising``: ``effort_rising``) starts
+    the reference over; the other wheel driven on beyond its setpoint (``other_overruns``:
+    ``overruns``) starts the count over: the chair's load, or a chair not following its
+    command, not one motor."""
     effort_pwm, effort_speed, effort_setpoint, ticks = effort
     progress = measured if setpoint > 0.0 else -measured
     toward = setpoint != 0.0 and (applied_dir == C.HIGH) == (setpoint > 0.0)
@@ -83,17 +84,26 @@ def no_effect(applied_pwm: int, applied_dir: int, setpoint: float, measured: flo
     shortfall = abs(measured) < mul(C.FAULT_EFFORT_SHORTFALL_MOTOR, abs(setpoint))
     other_progress = other if setpoint > 0.0 else -other
     trails = progress < add(max(other_progress, 0.0), C.FAULT_EFFORT_LEAD)
-    other_overruns = other_setpoint != 0.0 and (
-        (other if other_setpoint > 0.0 else -other) > add(abs(other_setpoint), C.FAULT_EFFORT_OVERRUN))
     ticks = ((ticks + 1) & 0xFF if shortfall and trails and not other_overruns
              and applied_pwm >= effort_pwm + C.FAULT_EFFORT_PWM else 0)
     return ticks >= C.FAULT_EFFORT_TICKS, (effort_pwm, effort_speed, effort_setpoint, ticks)
 
 
-def effort_rising(applied_pwm: int, effort_pwm: int, effort_setpoint: float) -> bool:
-    """``effortRising``: straining without gain, driven FAULT_EFFORT_PWM or more above
-    the lowest duty since its effort reference (taken toward a setpoint)."""
-    return effort_setpoint != 0.0 and applied_pwm >= effort_pwm + C.FAULT_EFFORT_PWM
+def effort_rising(applied_pwm: int, effort_pwm: int, effort_setpoint: float, setpoint: float,
+                  measured: float) -> bool:
+    """``effortRising``: effort without progress too, driven FAULT_EFFORT_PWM or more
+    above the lowest duty since its effort reference (taken toward a setpoint) and slower
+    than FAULT_EFFORT_SHORTFALL_MOTOR of its setpoint."""
+    return (effort_setpoint != 0.0 and applied_pwm >= effort_pwm + C.FAULT_EFFORT_PWM
+            and abs(measured) < mul(C.FAULT_EFFORT_SHORTFALL_MOTOR, abs(setpoint)))
+
+
+def overruns(applied_pwm: int, applied_dir: int, setpoint: float, measured: float) -> bool:
+    """``overruns``: driven toward its setpoint (not braked) while turning
+    FAULT_EFFORT_OVERRUN or more beyond it that way."""
+    progress = measured if setpoint > 0.0 else -measured
+    return (setpoint != 0.0 and applied_pwm > 0 and (applied_dir == C.HIGH) == (setpoint > 0.0)
+            and progress > add(abs(setpoint), C.FAULT_EFFORT_OVERRUN))
 
 
 def runs_away(applied_pwm: int, applied_dir: int, setpoint: float, measured: float,
@@ -154,8 +164,8 @@ def at_limit(check: int, other_strains: bool, other_reverse: int, other_runaway:
 
 
 def check_wheel(delta: int, illegal: int, storm: int, applied_pwm: int, applied_dir: int,
-                setpoint: float, measured: float, other: float, other_setpoint: float,
-                other_rising: bool, stall_ticks: int, reverse_ticks: int, runaway_ticks: int,
+                setpoint: float, measured: float, other: float, other_rising: bool,
+                other_overruns: bool, stall_ticks: int, reverse_ticks: int, runaway_ticks: int,
                 effort: Effort, prev_measured: float) -> tuple[int, int, int, int, Effort]:
     """``checkWheel``: ``(verdict, stall ticks, reverse ticks, runaway ticks, effort
     reference)`` for one wheel over the interval that ended: WHEEL_OK, WHEEL_SUSPECT
@@ -186,8 +196,8 @@ def check_wheel(delta: int, illegal: int, storm: int, applied_pwm: int, applied_
     runaway_ticks = (runaway_ticks + 1) & 0xFF if running else 0
     if runaway_ticks >= C.FAULT_RUNAWAY_TICKS:
         return WHEEL_REVERSED, stall_ticks, reverse_ticks, runaway_ticks, effort
-    tripped, effort = no_effect(applied_pwm, applied_dir, setpoint, measured, other, other_setpoint,
-                                other_rising, effort)
+    tripped, effort = no_effect(applied_pwm, applied_dir, setpoint, measured, other, other_rising,
+                                other_overruns, effort)
     if tripped:
         return WHEEL_NO_EFFECT, stall_ticks, reverse_ticks, runaway_ticks, effort
     verdict = WHEEL_SUSPECT if stalled or against else WHEEL_OK
@@ -218,16 +228,20 @@ def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_
         return WHEEL_OK, WHEEL_OK, False, False
     strain_l = straining(s.pwmL, s.dirL, s.setpointL, s.filtVelL)
     strain_r = straining(s.pwmR, s.dirR, s.setpointR, s.filtVelR)
-    rising_l = not strain_l and effort_rising(s.pwmL, s.effortPwmL, s.effortSetpointL)
-    rising_r = not strain_r and effort_rising(s.pwmR, s.effortPwmR, s.effortSetpointR)
+    rising_l = not strain_l and effort_rising(s.pwmL, s.effortPwmL, s.effortSetpointL, s.setpointL,
+                                              s.filtVelL)
+    rising_r = not strain_r and effort_rising(s.pwmR, s.effortPwmR, s.effortSetpointR, s.setpointR,
+                                              s.filtVelR)
+    overrun_l = overruns(s.pwmL, s.dirL, s.setpointL, s.filtVelL)
+    overrun_r = overruns(s.pwmR, s.dirR, s.setpointR, s.filtVelR)
     check_l, s.stallTicksL, s.reverseTicksL, s.runawayTicksL, effort_l = check_wheel(
         delta_l, ill_l, s.stormTickL, s.pwmL, s.dirL, s.setpointL, s.filtVelL, s.filtVelR,
-        s.setpointR, rising_r, s.stallTicksL, s.reverseTicksL, s.runawayTicksL,
+        rising_r, overrun_r, s.stallTicksL, s.reverseTicksL, s.runawayTicksL,
         (s.effortPwmL, s.effortSpeedL, s.effortSetpointL, s.effortTicksL), s.prevMeasL)
     s.effortPwmL, s.effortSpeedL, s.effortSetpointL, s.effortTicksL = effort_l
     check_r, s.stallTicksR, s.reverseTicksR, s.runawayTicksR, effort_r = check_wheel(
         delta_r, ill_r, s.stormTickR, s.pwmR, s.dirR, s.setpointR, s.filtVelR, s.filtVelL,
-        s.setpointL, rising_l, s.stallTicksR, s.reverseTicksR, s.runawayTicksR,
+        rising_l, overrun_l, s.stallTicksR, s.reverseTicksR, s.runawayTicksR,
         (s.effortPwmR, s.effortSpeedR, s.effortSetpointR, s.effortTicksR), s.prevMeasR)
     s.effortPwmR, s.effortSpeedR, s.effortSetpointR, s.effortTicksR = effort_r
     # Driving only: a held wheel that runs away is a fault (a reversed encoder turns the

@@ -220,7 +220,7 @@ typedef struct {
 
 /* no_effect: whether it tripped; *e the new reference */
 static int no_effect(int64_t pwm, int64_t dir, double setpoint, double measured, double other,
-                     double other_setpoint, int other_rising, Effort *e) {
+                     int other_rising, int other_overruns, Effort *e) {
     double progress = setpoint > 0.0 ? measured : -measured;
     int toward = setpoint != 0.0 && ((dir == K.high) == (setpoint > 0.0));
     if (!toward || setpoint != e->setpoint || progress > e->speed || progress > fabs(setpoint)
@@ -236,8 +236,6 @@ static int no_effect(int64_t pwm, int64_t dir, double setpoint, double measured,
     int shortfall = fabs(measured) < f_mul(K.effort_shortfall_motor, fabs(setpoint));
     double other_progress = setpoint > 0.0 ? other : -other;
     int trails = progress < f_add(other_progress > 0.0 ? other_progress : 0.0, K.effort_lead);
-    int other_overruns = other_setpoint != 0.0
-        && (other_setpoint > 0.0 ? other : -other) > f_add(fabs(other_setpoint), K.effort_overrun);
     e->ticks = (shortfall && trails && !other_overruns && pwm >= e->pwm + K.effort_pwm)
                    ? ((e->ticks + 1) & 0xFF) : 0;
     return e->ticks >= K.effort_ticks;
@@ -250,9 +248,19 @@ static int straining(int64_t pwm, int64_t dir, double setpoint, double measured)
            && progress < f_mul(K.effort_shortfall, fabs(setpoint));
 }
 
-/* effort_rising: driven EFFORT_PWM above the lowest duty since its reference */
-static int effort_rising(int64_t pwm, int64_t effort_pwm, double effort_setpoint) {
-    return effort_setpoint != 0.0 && pwm >= effort_pwm + K.effort_pwm;
+/* effort_rising: driven EFFORT_PWM above the lowest duty since its reference, short of
+ * EFFORT_SHORTFALL_MOTOR of its setpoint */
+static int effort_rising(int64_t pwm, int64_t effort_pwm, double effort_setpoint, double setpoint,
+                         double measured) {
+    return effort_setpoint != 0.0 && pwm >= effort_pwm + K.effort_pwm
+           && fabs(measured) < f_mul(K.effort_shortfall_motor, fabs(setpoint));
+}
+
+/* overruns: driven toward its setpoint while EFFORT_OVERRUN beyond it */
+static int overruns(int64_t pwm, int64_t dir, double setpoint, double measured) {
+    double progress = setpoint > 0.0 ? measured : -measured;
+    return setpoint != 0.0 && pwm > 0 && ((dir == K.high) == (setpoint > 0.0))
+           && progress > f_add(fabs(setpoint), K.effort_overrun);
 }
 
 /* runs_away */
@@ -291,8 +299,8 @@ static int overspeed_run(int over, double measured, double prev_measured, int64_
 /* check_wheel: WHEEL_OK, WHEEL_SUSPECT or WHEEL_FAULT (any fault: the Python tick
  * latches it) */
 static int check_wheel(int64_t delta, int64_t illegal, int64_t storm, int64_t pwm, int64_t dir,
-                       double setpoint, double measured, double other, double other_setpoint,
-                       int other_rising, int64_t *stall, int64_t *reverse,
+                       double setpoint, double measured, double other, int other_rising,
+                       int other_overruns, int64_t *stall, int64_t *reverse,
                        int64_t *runaway, Effort *e, double prev_measured) {
     if (storm || illegal >= K.illegal_per_tick)
         return WHEEL_FAULT;
@@ -311,7 +319,7 @@ static int check_wheel(int64_t delta, int64_t illegal, int64_t storm, int64_t pw
     *runaway = runs_away(pwm, dir, setpoint, measured, prev_measured) ? ((*runaway + 1) & 0xFF) : 0;
     if (*runaway >= K.runaway_ticks)
         return WHEEL_FAULT;
-    if (no_effect(pwm, dir, setpoint, measured, other, other_setpoint, other_rising, e))
+    if (no_effect(pwm, dir, setpoint, measured, other, other_rising, other_overruns, e))
         return WHEEL_FAULT;
     return (stalled || against) ? WHEEL_SUSPECT : WHEEL_OK;
 }
@@ -488,13 +496,15 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
         Effort el = { I(effortPwmL), I(effortTicksL), D(effortSpeedL), D(effortSetpointL) };
         Effort er = { I(effortPwmR), I(effortTicksR), D(effortSpeedR), D(effortSetpointR) };
         int rising_l = !straining(I(pwmL), I(dirL), D(setpointL), D(filtVelL))
-                       && effort_rising(I(pwmL), I(effortPwmL), D(effortSetpointL));
+                       && effort_rising(I(pwmL), I(effortPwmL), D(effortSetpointL), D(setpointL), D(filtVelL));
         int rising_r = !straining(I(pwmR), I(dirR), D(setpointR), D(filtVelR))
-                       && effort_rising(I(pwmR), I(effortPwmR), D(effortSetpointR));
+                       && effort_rising(I(pwmR), I(effortPwmR), D(effortSetpointR), D(setpointR), D(filtVelR));
+        int overrun_l = overruns(I(pwmL), I(dirL), D(setpointL), D(filtVelL));
+        int overrun_r = overruns(I(pwmR), I(dirR), D(setpointR), D(filtVelR));
         check_l = check_wheel(delta_l, ill_l, I(stormTickL), I(pwmL), I(dirL), D(setpointL), D(filtVelL),
-                              D(filtVelR), D(setpointR), rising_r, &stall_l, &rev_l, &run_l, &el, D(prevMeasL));
+                              D(filtVelR), rising_r, overrun_r, &stall_l, &rev_l, &run_l, &el, D(prevMeasL));
         check_r = check_wheel(delta_r, ill_r, I(stormTickR), I(pwmR), I(dirR), D(setpointR), D(filtVelR),
-                              D(filtVelL), D(setpointL), rising_l, &stall_r, &rev_r, &run_r, &er, D(prevMeasR));
+                              D(filtVelL), rising_l, overrun_l, &stall_r, &rev_r, &run_r, &er, D(prevMeasR));
         if (check_l == WHEEL_FAULT || check_r == WHEEL_FAULT)
             Py_RETURN_NONE;
         SETI(stallTicksL, stall_l); SETI(reverseTicksL, rev_l);
