@@ -158,8 +158,8 @@ class World:
         if path.suffix in (".yaml", ".yml"):
             try:
                 return cls.from_grid(load_map(path))
-            except MapFileError as exc:
-                raise WorldError(f"{path}: {exc}") from exc
+            except MapFileError as exc:             # it names the file already
+                raise WorldError(str(exc)) from exc
         if path.suffix != ".toml":
             raise WorldError(f"{path}: a world is a map_server YAML (.yaml) or a TOML file (.toml)")
         try:

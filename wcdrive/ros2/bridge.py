@@ -522,8 +522,13 @@ class ChairPublisher:
             w, now = plant.yaw_rate, plant.time
             samples: list[tuple[float, float]] = []
             if gyro is not None:
-                samples = list(zip(gyro.times[self._gyro_seen:], gyro.rates[self._gyro_seen:], strict=True))
-                self._gyro_seen = len(gyro.times)
+                # the gyro keeps its newest samples only (a History): count every one it took
+                times, rates = gyro.times, gyro.rates
+                total = getattr(times, "dropped", 0) + len(times)
+                new = min(total - self._gyro_seen, len(times))
+                if new > 0:
+                    samples = list(zip(times[-new:], rates[-new:], strict=True))
+                self._gyro_seen = total
         clock = chair.board_clock
         t = clock.to_host(now) + self._wall
         self.sink.publish("/ground_truth", odometry(t, x, y, th, v, w), t)

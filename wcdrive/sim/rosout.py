@@ -144,7 +144,7 @@ def serve(result: SimResult, sink: ros2.Sink, params: ChairParams | None = None,
     start = time.monotonic()
     n = 0
     latched: dict[str, dict] = {}
-    repeat_at = LATCHED_REPEAT_S
+    repeat_at = math.inf
     for t, topic, msg in messages(result, params):
         if speed > 0:
             delay = start + t / speed - time.monotonic()
@@ -156,6 +156,8 @@ def serve(result: SimResult, sink: ros2.Sink, params: ChairParams | None = None,
                 n += 1
             repeat_at += LATCHED_REPEAT_S
         if ros2.qos(topic).transient_local:
+            if not latched:
+                repeat_at = t + LATCHED_REPEAT_S
             latched[topic] = msg
         sink.publish(topic, msg, t)
         n += 1

@@ -13,12 +13,13 @@ import urllib.parse
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 from serial.serialutil import PortNotOpenError, SerialBase, SerialException, to_bytes
 
-from wcdrive.plant.lidar import MODELS, SEED_MOUNT, Lidar
-from wcdrive.plant.world import BUNDLED_WORLDS, World
+if TYPE_CHECKING:                     # a real chair's link (can://) loads no simulator
+    from wcdrive.plant.lidar import Lidar
+    from wcdrive.plant.world import World
 
 
 class BoardLike(Protocol):
@@ -78,8 +79,12 @@ def world_option(text: str) -> World:
     """A world's file (``World.from_file``: a map_server YAML or a hand-written world's
     TOML), or the name of a bundled one (``BUNDLED_WORLDS``: hospital_corridor,
     furnished_room)."""
+    from wcdrive.plant.world import BUNDLED_WORLDS, World
+
     path = Path(text)
     if not path.suffix and len(path.parts) == 1:
+        if any(c in text for c in "*?["):
+            raise ValueError("a world's name has no wildcards")
         found = sorted(BUNDLED_WORLDS.glob(f"{text}.*"))
         found = [p for p in found if p.suffix in (".yaml", ".toml")]
         if not found:
@@ -108,9 +113,16 @@ def start_option(text: str) -> tuple[float, float, float]:
 def lidar_option(text: str) -> Lidar:
     """A lidar model's name (``wcdrive.plant.lidar.MODELS``: rplidar_s3), on the seed's
     mount (``SEED_MOUNT``: 0.20 m ahead of the axle, 0.30 m up)."""
+    from wcdrive.plant.lidar import MODELS, SEED_MOUNT, Lidar
+
     if text not in MODELS:
         raise ValueError(f"must be one of {', '.join(MODELS)}")
     return Lidar(MODELS[text], SEED_MOUNT)
+
+
+def overlapping(scheme: str, exc: ValueError) -> SerialException:
+    """A board whose chair cannot stand where ``start`` puts it in its world."""
+    return SerialException(f"{scheme}://: {exc}: give start=x,y,heading_deg where the chair stands free")
 
 
 def choice_option(*choices: str) -> Callable[[str], str]:

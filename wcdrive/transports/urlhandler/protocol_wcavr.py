@@ -21,6 +21,7 @@ from wcdrive.transports.urlhandler.board_serial import (
     Option,
     flag_option,
     lidar_option,
+    overlapping,
     speed_option,
     start_option,
     url_options,
@@ -49,5 +50,10 @@ class Serial(BoardSerial):
             raise SerialException("wcavr://: plant=0 has no chair to put in a world or carry a lidar")
         elf = (parts.netloc + parts.path) or None
         plant = o["chair"] if o["plant"] and o["chair"] is not None else o["plant"]
-        return MegaBoard(elf, realtime=o["realtime"], speed=o["speed"], plant=plant, world=o["world"],
-                         start=o["start"], lidar=o["lidar"])
+        try:
+            return MegaBoard(elf, realtime=o["realtime"], speed=o["speed"], plant=plant, world=o["world"],
+                             start=o["start"], lidar=o["lidar"])
+        except ValueError as exc:
+            if o["world"] is None:
+                raise
+            raise overlapping("wcavr", exc) from exc

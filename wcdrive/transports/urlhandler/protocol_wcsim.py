@@ -20,6 +20,7 @@ from wcdrive.transports.urlhandler.board_serial import (
     BoardSerial,
     Option,
     lidar_option,
+    overlapping,
     speed_option,
     start_option,
     url_options,
@@ -37,5 +38,10 @@ class Serial(BoardSerial):
 
     def _open_board(self, url: str) -> SimulatedBoard:
         _, o, _ = url_options(url, "wcsim", USAGE, OPTIONS)
-        return SimulatedBoard(o["chair"], speed=o["speed"], seed=o["seed"], world=o["world"],
-                              start=o["start"], lidar=o["lidar"])
+        try:
+            return SimulatedBoard(o["chair"], speed=o["speed"], seed=o["seed"], world=o["world"],
+                                  start=o["start"], lidar=o["lidar"])
+        except ValueError as exc:
+            if o["world"] is None:
+                raise
+            raise overlapping("wcsim", exc) from exc
