@@ -477,3 +477,31 @@ def test_failures_on_a_live_chair_name_it(rig) -> None:
 def test_the_session_counts_hello_waits_as_a_backoff() -> None:
     waits = Handshake.HELLO_WAITS
     assert len(waits) == 3 and all(b > a for a, b in itertools.pairwise(waits))
+
+
+def test_a_latch_decided_while_the_estop_is_released_does_not_follow_the_reset() -> None:
+    """The host holds the e-stop; the board's hello answer is read just after
+    ``reset_estop`` sent ``reset`` and before its ACK (a 24 h soak met it after a board
+    reset): the host must not latch the e-stop again behind the reset, or the chair is
+    stopped again the moment the caller released it. Watched on the board."""
+    with wcdrive.connect("sim://") as chair:
+        chair.estop()
+        session = chair._session
+        board = session.port.board
+        tracker = session.tracker
+        write = tracker._write
+        late: list[threading.Thread] = []
+
+        def write_then_greet(data: bytes) -> None:
+            write(data)
+            if b":reset*" in data and not late:       # the hello answer, read now
+                late.append(threading.Thread(target=session._greeted))
+                late[0].start()
+
+        tracker._write = write_then_greet
+        chair.reset_estop(timeout=10)
+        late[0].join(timeout=2)
+        time.sleep(0.3)                               # an e-stop sent after it reaches the board
+        assert not board.loop.fw.state.estopLatched
+        assert not chair.estop_latched
+        chair.set_velocity(0.2, 0.0)                  # motion is taken

@@ -14,19 +14,21 @@ from wcdrive.transports.urlhandler.board_serial import url_options
 def test_defaults_and_given_values() -> None:
     parts, values, given = url_options("wcsim://?seed=7", "wcsim", protocol_wcsim.USAGE,
                                        protocol_wcsim.OPTIONS)
-    assert values == {"speed": 1.0, "seed": 7, "chair": None} and given == {"seed"}
+    assert values == {"speed": 1.0, "seed": 7, "chair": None, "world": None, "start": (0.0, 0.0, 0.0),
+                      "lidar": None} and given == {"seed"}
     parts, values, given = url_options("wcavr:///tmp/a.elf?plant=0&realtime=false", "wcavr",
                                        protocol_wcavr.USAGE, protocol_wcavr.OPTIONS)
     assert parts.path == "/tmp/a.elf" and values == {"realtime": False, "speed": 1.0, "plant": False,
-                                                     "chair": None}
+                                                     "chair": None, "world": None,
+                                                     "start": (0.0, 0.0, 0.0), "lidar": None}
     _, values, _ = url_options("wceddie://?eol=tolerant&speed=2.5", "wceddie", protocol_wceddie.USAGE,
                                protocol_wceddie.OPTIONS)
     assert values == {"speed": 2.5, "seed": 0, "eol": "tolerant"}
 
 
 @pytest.mark.parametrize(("url", "message"), [
-    ("wcavr://?speed=2", r"expected wcsim://\[\?speed=S&seed=N&chair=chair.toml\], got 'wcavr://\?speed=2'"),
-    ("wcsim://?colour=red", r"wcsim://: unknown option 'colour' \(wcsim://\[\?speed=S&seed=N&chair=chair.toml\]\)"),
+    ("wcavr://?speed=2", r"expected wcsim://\[\?speed=S&seed=N&chair=chair.toml&world=W.*\], got 'wcavr://\?speed=2'"),
+    ("wcsim://?colour=red", r"wcsim://: unknown option 'colour' \(wcsim://\[\?speed=S&seed=N&chair=chair.toml&world=W"),
     ("wcsim://?speed=fast", r"wcsim://: speed='fast': could not convert"),
     ("wcsim://?speed=5000", r"speed='5000': speed must be within 0.01 .. 1000"),
     ("wcsim://?seed=1.5", r"seed='1.5'"),

@@ -130,6 +130,10 @@ class Session:
             on_link=on_link, events=self.events, errors=self.errors,
             wake=self._wake_requests, on_restored=self._link_restored,
             pace=lambda now: self.handshake.step(now), bytes_waiting=self.wire.bytes_waiting)
+        #: Held while the host decides to latch the e-stop again and sends it, and while
+        #: ``Wheelchair.reset_estop`` lets go of it: a latch decided before the release
+        #: goes out before the reset, none after it.
+        self.estop_lock = threading.Lock()
         self.tracker = RequestTracker(self.name, self.wire.write, self.wire.lock,
                                       lambda: self.link.lost, self.errors)
         self.handshake = Handshake(self.name, lambda: self.tracker.send_frame(HELLO_COMMAND),
@@ -285,7 +289,9 @@ class Session:
         self.board.note_telemetry(msg)
         self.tracker.note_telemetry(msg)
         if self.board.estop_lost(msg):
-            self._relatch_estop()
+            with self.estop_lock:
+                if self.board.estop_held:
+                    self._relatch_estop()
         self._flush_feedback(msg)
 
     def _on_feedback(self, now: float, msg: Feedback) -> None:
@@ -344,8 +350,9 @@ class Session:
     # ---- the e-stop the host holds -------------------------------------------------------
     def _greeted(self) -> None:
         """The board answered the handshake's hello: it boots without an e-stop."""
-        if self.board.estop_held:
-            self._relatch_estop()
+        with self.estop_lock:
+            if self.board.estop_held:
+                self._relatch_estop()
 
     def _link_restored(self) -> None:
         """Lines flow again: an e-stop sent while the link was down may not have
@@ -359,8 +366,9 @@ class Session:
     def _relatch_estop(self) -> None:
         """The host holds the e-stop but the board has not latched it (it reset, or the
         e-stop went out while the link was down): latch it there, as a request (sent
-        again only when the board shows it did not get it). The first frame goes out at
-        once, from this thread (the reader); a thread of its own awaits the answer."""
+        again only when the board shows it did not get it, and while the host still
+        holds it). The first frame goes out at once, from this thread (the reader; the
+        caller holds ``estop_lock``); a thread of its own awaits the answer."""
         request = Request.estop()
         try:
             tracked = self.tracker.begin(request)
@@ -370,7 +378,8 @@ class Session:
 
         def finish() -> None:
             try:
-                self.tracker.finish(request, tracked)
+                self.tracker.finish(request, tracked, guard=self.estop_lock,
+                                    wanted=lambda: self.board.estop_held)
             except WcdriveError as exc:
                 self.errors.append(f"e-stop not re-latched: {exc}")
 

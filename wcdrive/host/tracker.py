@@ -16,6 +16,7 @@ so a TLM line that reports a later frame proves that an earlier one arrived.
 
 from __future__ import annotations
 
+import contextlib
 import enum
 import logging
 import threading
@@ -181,11 +182,13 @@ class RequestTracker:
             raise
         return tracked
 
-    def finish(self, request: Request, tracked: _InFlight) -> object | None:
+    def finish(self, request: Request, tracked: _InFlight, guard: threading.Lock | None = None,
+               wanted: Callable[[], bool] | None = None) -> object | None:
         """The outcome of ``request``, sent by ``begin`` as ``tracked``, as ``request``
-        would give it (raising as it does)."""
+        would give it (raising as it does). ``wanted``: whether it is still to be sent
+        again, asked under ``guard`` with the sending (None once it is not)."""
         try:
-            return self._exchange(request, tracked, sent=True)
+            return self._exchange(request, tracked, sent=True, guard=guard, wanted=wanted)
         finally:
             self._forget(tracked)
 
@@ -199,7 +202,9 @@ class RequestTracker:
         with self._lock:
             self._requests.pop(tracked.seq, None)
 
-    def _exchange(self, request: Request, tracked: _InFlight, sent: bool = False) -> object | None:
+    def _exchange(self, request: Request, tracked: _InFlight, sent: bool = False,
+                  guard: threading.Lock | None = None, wanted: Callable[[], bool] | None = None
+                  ) -> object | None:
         """Sends ``request`` as ``tracked`` (unless ``sent``: its first frame went out
         already) and awaits its outcome, sending it again while the board shows it did
         not get it."""
@@ -207,7 +212,10 @@ class RequestTracker:
         deadline = time.monotonic() + self.REQUEST_TIMEOUT * (self.REQUEST_TRIES + 1)
         for _ in range(self.REQUEST_TRIES):
             if not sent:
-                self._send(command, tracked)
+                with guard if guard is not None else contextlib.nullcontext():
+                    if wanted is not None and not wanted():
+                        return None
+                    self._send(command, tracked)
             sent = False
             outcome = self._await(tracked, deadline)
             if outcome is _Outcome.ANSWERED:

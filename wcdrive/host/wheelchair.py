@@ -390,16 +390,28 @@ class Wheelchair:
             raise WcdriveProtocolError(f"{self.url} speaks protocol v1 (legacy): there is no "
                                        "e-stop to reset")
         self._require_link("reset")
+        session = self._session
+        # Let go of the e-stop before the reset goes out: a latch the host decided on
+        # after this (a hello answered late, a restored link) would follow the reset on
+        # the wire and latch the board again behind the caller's back.
+        with session.estop_lock:
+            held = session.board.estop_held
+            session.board.estop_held = False
         deadline = time.monotonic() + timeout
-        while True:
-            try:
-                self._session.request(Request.reset())
-                self._session.board.estop_released()  # the last TLM predates the reset
-                return
-            except WcdriveCommandError as exc:
-                if exc.reason != "busy" or time.monotonic() > deadline:
-                    raise
-            time.sleep(0.05)
+        try:
+            while True:
+                try:
+                    session.request(Request.reset())
+                    session.board.estop_released()  # the last TLM predates the reset
+                    return
+                except WcdriveCommandError as exc:
+                    if exc.reason != "busy" or time.monotonic() > deadline:
+                        raise
+                time.sleep(0.05)
+        except BaseException:
+            with session.estop_lock:                # not released: the host holds it again
+                session.board.estop_held = session.board.estop_held or held
+            raise
 
     @property
     def faults(self) -> tuple[str, ...]:
