@@ -167,19 +167,23 @@ ISR(INT2_vect, ISR_ALIASOF(INT3_vect));
 // again.
 static void unmaskEncoders() {
   ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
+    // The pins are read last, the interrupts already on (taken once this block ends): an
+    // edge before the read is in the state read, one after it sets its flag and is
+    // taken from that state. (Read first, an edge between the read and the unmask was
+    // lost, and the next one counted as an illegal transition.)
     if (stormL) {
-      GPIOR1 = (uint8_t)(readEncoderL() << 2);
-      stormEdgesL = WC_STORM_EDGES;
-      stormL = 0;
       EIFR = _BV(INTF4) | _BV(INTF5);
       EIMSK |= _BV(INT4) | _BV(INT5);
+      stormEdgesL = WC_STORM_EDGES;
+      stormL = 0;
+      GPIOR1 = (uint8_t)(readEncoderL() << 2);
     }
     if (stormR) {
-      GPIOR2 = (uint8_t)(readEncoderR() << 2);
-      stormEdgesR = WC_STORM_EDGES;
-      stormR = 0;
       EIFR = _BV(INTF2) | _BV(INTF3);
       EIMSK |= _BV(INT2) | _BV(INT3);
+      stormEdgesR = WC_STORM_EDGES;
+      stormR = 0;
+      GPIOR2 = (uint8_t)(readEncoderR() << 2);
     }
   }
 }
