@@ -176,7 +176,7 @@ SEED_MOUNT = LidarMount(x=0.20, y=0.0, z=0.30)
 class LaserScan:
     """The fields of ``sensor_msgs/LaserScan`` a driver fills (``stamp`` in simulated s).
     Two scans are equal when every field is (the arrays element by element, a NaN
-    beam time equal to a NaN)."""
+    beam time or board stamp equal to a NaN)."""
 
     stamp: float
     frame_id: str
@@ -198,7 +198,8 @@ class LaserScan:
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, LaserScan):
             return NotImplemented
-        return all(np.array_equal(a, b, equal_nan=True) if isinstance(a, np.ndarray) else a == b
+        return all(np.array_equal(a, b, equal_nan=True) if isinstance(a, np.ndarray)
+                   else a == b or (isinstance(a, float) and isinstance(b, float) and a != a and b != b)
                    for a, b in ((getattr(self, f.name), getattr(other, f.name)) for f in fields(self)))
 
     __hash__ = None  # type: ignore[assignment]
