@@ -43,8 +43,6 @@ class BoardLidar:
         self._lock = threading.Lock()
         #: scans made but never taken, the board's buffer being full
         self.dropped = 0
-        #: scans made so far
-        self.made = 0
 
     def poll(self) -> None:
         """Makes the turns that ended (the board's thread, after a step)."""
@@ -56,7 +54,6 @@ class BoardLidar:
             overflow = len(self._ready) + len(new) - (self._ready.maxlen or 0)
             self.dropped += max(0, overflow)
             self._ready.extend(new)
-            self.made += len(new)
 
     def take(self) -> list[LaserScan]:
         """The scans made since the last ``take``, oldest first (any thread)."""

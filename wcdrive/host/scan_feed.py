@@ -47,8 +47,6 @@ class ScanFeed:
         self._latest: LaserScan | None = None
         self._returned: LaserScan | None = None
         self._callbacks: list[Callable[[LaserScan], None]] = []
-        #: scans received so far
-        self.count = 0
 
     def poll(self, _tick: Any = None) -> None:
         """Takes the new scans (the reader thread, at each tick; ``_tick`` unused)."""
@@ -58,7 +56,6 @@ class ScanFeed:
             return
         with self._cond:
             self._latest = new[-1]
-            self.count += len(new)
             callbacks = list(self._callbacks)
             self._cond.notify_all()
         for scan in new:
@@ -69,12 +66,6 @@ class ScanFeed:
         """Calls ``callback`` with every scan, from the reader thread, oldest first."""
         with self._cond:
             self._callbacks.append(callback)
-
-    @property
-    def latest(self) -> LaserScan | None:
-        """The newest scan received (None before the first)."""
-        with self._cond:
-            return self._latest
 
     def wait(self, timeout: float) -> LaserScan | None:
         """The newest scan that ``wait`` has not returned yet, waiting up to ``timeout``

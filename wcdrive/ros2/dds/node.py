@@ -202,14 +202,13 @@ class ChairNode:
         self._thread: threading.Thread | None = None
         self.estop_held = False
         self.errors: list[str] = []
+        if o.scan is None and getattr(robot, "has_lidar", False):
+            o.scan = RobotScans(robot, self._scan_stamp)
         self._pub: dict[str, Any] = {}
         for topic in TOPICS:
             if topic.direction != "pub" or not self._wanted(topic.name, imu):
                 continue
             self._pub[topic.name] = ros.publisher(topic.name, topic.msgtype, topic.profile)
-        if o.scan is None and getattr(robot, "has_lidar", False):
-            o.scan = RobotScans(robot, self._scan_stamp)
-            self._pub["/scan"] = ros.publisher("/scan", SCAN, qos.SENSOR_DATA)
         self._cmd_type = TWIST if o.twist else TWIST_STAMPED
         self._cmd_reader = ros.subscription("/cmd_vel", self._cmd_type, qos.DEFAULT)
         self._estop_reader = ros.subscription("/estop", BOOL, qos.DEFAULT)

@@ -13,7 +13,7 @@ import urllib.parse
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 
 from serial.serialutil import PortNotOpenError, SerialBase, SerialException, to_bytes
 
@@ -51,6 +51,9 @@ class BoardLike(Protocol):
     @property
     def rx_dropped(self) -> int:
         """Bytes received and dropped because the receive buffer was full."""
+
+
+_B = TypeVar("_B")
 
 
 @dataclass(frozen=True)
@@ -120,9 +123,23 @@ def lidar_option(text: str) -> Lidar:
     return Lidar(MODELS[text], SEED_MOUNT)
 
 
-def overlapping(scheme: str, exc: ValueError) -> SerialException:
-    """A board whose chair cannot stand where ``start`` puts it in its world."""
-    return SerialException(f"{scheme}://: {exc}: give start=x,y,heading_deg where the chair stands free")
+#: The options that put a simulated board's chair in a world (``wcsim://``, ``wcavr://``).
+PLACE_USAGE = "world=W&start=x,y,deg&lidar=rplidar_s3"
+PLACE_OPTIONS = {"world": Option(None, world_option), "start": Option((0.0, 0.0, 0.0), start_option),
+                 "lidar": Option(None, lidar_option)}
+
+
+def placed(scheme: str, options: Mapping[str, Any], make: Callable[..., _B]) -> _B:
+    """The board ``make`` builds with the ``PLACE_OPTIONS`` of ``options`` as keywords; a
+    chair that cannot stand where ``start`` puts it in its ``world`` is a
+    ``SerialException`` that says to give another start."""
+    try:
+        return make(**{name: options[name] for name in PLACE_OPTIONS})
+    except ValueError as exc:
+        if options["world"] is None:
+            raise
+        raise SerialException(f"{scheme}://: {exc}: give start=x,y,heading_deg where the chair stands free"
+                              ) from exc
 
 
 def choice_option(*choices: str) -> Callable[[str], str]:

@@ -17,22 +17,19 @@ from serial.serialutil import SerialException
 
 from wcdrive.plant.params import load_chair
 from wcdrive.transports.urlhandler.board_serial import (
+    PLACE_OPTIONS,
+    PLACE_USAGE,
     BoardSerial,
     Option,
     flag_option,
-    lidar_option,
-    overlapping,
+    placed,
     speed_option,
-    start_option,
     url_options,
-    world_option,
 )
 
-USAGE = "wcavr://[elf][?realtime=0&speed=S&plant=0&chair=chair.toml&world=W&start=x,y,deg&lidar=rplidar_s3]"
+USAGE = f"wcavr://[elf][?realtime=0&speed=S&plant=0&chair=chair.toml&{PLACE_USAGE}]"
 OPTIONS = {"realtime": Option(True, flag_option), "speed": Option(1.0, speed_option),
-           "plant": Option(True, flag_option), "chair": Option(None, load_chair),
-           "world": Option(None, world_option), "start": Option((0.0, 0.0, 0.0), start_option),
-           "lidar": Option(None, lidar_option)}
+           "plant": Option(True, flag_option), "chair": Option(None, load_chair), **PLACE_OPTIONS}
 
 
 class Serial(BoardSerial):
@@ -46,14 +43,9 @@ class Serial(BoardSerial):
             raise SerialException("wcavr://: realtime=0 runs flat out; give speed= or realtime=0, not both")
         if not o["plant"] and "chair" in given:
             raise SerialException("wcavr://: plant=0 has no chair; give chair= or plant=0, not both")
-        if not o["plant"] and given & {"world", "start", "lidar"}:
+        if not o["plant"] and given & PLACE_OPTIONS.keys():
             raise SerialException("wcavr://: plant=0 has no chair to put in a world or carry a lidar")
         elf = (parts.netloc + parts.path) or None
         plant = o["chair"] if o["plant"] and o["chair"] is not None else o["plant"]
-        try:
-            return MegaBoard(elf, realtime=o["realtime"], speed=o["speed"], plant=plant, world=o["world"],
-                             start=o["start"], lidar=o["lidar"])
-        except ValueError as exc:
-            if o["world"] is None:
-                raise
-            raise overlapping("wcavr", exc) from exc
+        return placed("wcavr", o, lambda **place: MegaBoard(elf, realtime=o["realtime"], speed=o["speed"],
+                                                            plant=plant, **place))

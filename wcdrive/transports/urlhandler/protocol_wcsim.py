@@ -17,20 +17,18 @@ from __future__ import annotations
 from wcdrive.boards.sim_board import SimulatedBoard
 from wcdrive.plant.params import load_chair
 from wcdrive.transports.urlhandler.board_serial import (
+    PLACE_OPTIONS,
+    PLACE_USAGE,
     BoardSerial,
     Option,
-    lidar_option,
-    overlapping,
+    placed,
     speed_option,
-    start_option,
     url_options,
-    world_option,
 )
 
-USAGE = "wcsim://[?speed=S&seed=N&chair=chair.toml&world=W&start=x,y,deg&lidar=rplidar_s3]"
+USAGE = f"wcsim://[?speed=S&seed=N&chair=chair.toml&{PLACE_USAGE}]"
 OPTIONS = {"speed": Option(1.0, speed_option), "seed": Option(0, int), "chair": Option(None, load_chair),
-           "world": Option(None, world_option), "start": Option((0.0, 0.0, 0.0), start_option),
-           "lidar": Option(None, lidar_option)}
+           **PLACE_OPTIONS}
 
 
 class Serial(BoardSerial):
@@ -38,10 +36,5 @@ class Serial(BoardSerial):
 
     def _open_board(self, url: str) -> SimulatedBoard:
         _, o, _ = url_options(url, "wcsim", USAGE, OPTIONS)
-        try:
-            return SimulatedBoard(o["chair"], speed=o["speed"], seed=o["seed"], world=o["world"],
-                                  start=o["start"], lidar=o["lidar"])
-        except ValueError as exc:
-            if o["world"] is None:
-                raise
-            raise overlapping("wcsim", exc) from exc
+        return placed("wcsim", o, lambda **place: SimulatedBoard(o["chair"], speed=o["speed"], seed=o["seed"],
+                                                                 **place))
