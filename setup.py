@@ -44,6 +44,24 @@ DATA_FILES = ["*.toml", "*.md", "*.dbc", "*.ino", "*.h", "Makefile"]
 #: The C helpers. -ffp-contract=off: each binary32 operation rounds once, as on the AVR
 #: (no fused multiply-add), which the port's bit-exactness needs.
 _FLAGS = ["-O2", "-ffp-contract=off"]
+
+
+def _numpy_random() -> dict[str, list]:
+    """The ray cast's build options for drawing a lidar's noise with numpy's own C
+    generators (``libnpyrandom.a``, as wcdrive.plant.raycast.numpy_random finds them);
+    none where the build has no such numpy."""
+    try:
+        import numpy
+    except ImportError:
+        return {}
+    include = Path(numpy.get_include())
+    lib = Path(numpy.__file__).parent / "random" / "lib" / "libnpyrandom.a"
+    if not ((include / "numpy" / "random" / "bitgen.h").exists() and lib.exists()):
+        return {}
+    return {"define_macros": [("WC_NPYRANDOM", "1")], "include_dirs": [str(include)],
+            "extra_objects": [str(lib)]}
+
+
 NATIVE = [
     Extension("wcdrive.avr._f32_fast", ["wcdrive/avr/csrc/f32_fast.c"], extra_compile_args=_FLAGS,
               optional=True),
@@ -53,7 +71,7 @@ NATIVE = [
     Extension("wcdrive.plant._chair_kernel", ["wcdrive/plant/csrc/chair_kernel.c"],
               extra_compile_args=_FLAGS, libraries=["m"], optional=True),
     Extension("wcdrive.plant._raycast", ["wcdrive/plant/csrc/raycast.c"],
-              extra_compile_args=_FLAGS, libraries=["m", "pthread"], optional=True),
+              extra_compile_args=_FLAGS, libraries=["m", "pthread"], optional=True, **_numpy_random()),
 ]
 
 

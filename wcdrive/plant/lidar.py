@@ -68,7 +68,7 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
-from wcdrive.plant.raycast import ScanJob, ScanPipe, Turn, integrate_motion
+from wcdrive.plant.raycast import ScanJob, ScanPipe, Turn, draws_in_c, integrate_motion
 from wcdrive.plant.world import World
 
 #: (times (K,)) -> (x, y, heading) arrays (K,) of the chair's base in the map frame.
@@ -107,8 +107,14 @@ class MotionTrack:
 
     @functools.cached_property
     def knots(self) -> Knots:
-        """The knots, integrated in C (``knots_numpy`` without the C helper)."""
+        """The knots, integrated in C (``knots_numpy`` without the C helper), or those a
+        C scan of this track integrated."""
         return integrate_motion(self.start, self.t0, self.log) or self.knots_numpy()
+
+    def _integrated(self, job: ScanJob) -> None:
+        """Keeps the knots of a scan job made from this track (the same figures as
+        ``integrate_motion``'s, the same C from the same log) as ``knots``."""
+        self.__dict__.setdefault("knots", job.knots)
 
     def __call__(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         t, x, y, heading = self.knots
@@ -205,10 +211,6 @@ class LaserScan:
     __hash__ = None  # type: ignore[assignment]
 
 
-def _made(job: ScanJob) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    return job.ranges, job.intensities, job.beam_time
-
-
 class PendingScan:
     """A scan being made (``Lidar.start_scan``); ``result`` waits for it."""
 
@@ -292,16 +294,18 @@ class Lidar:
 
     def _job(self, world: World, pose_at: PoseAt, t0: float, rng: np.random.Generator | None
              ) -> ScanJob | None:
-        """The C scan's job for that turn (its noise drawn now), or None without the C
-        helper."""
+        """The C scan's job for that turn, or None without the C helper: its noise drawn
+        by the job from ``rng`` where the C scan can (``draws_in_c``), else now."""
         grid = world.ray_grid
         if grid is None:
             return None
-        noise = self._noise(rng)
+        draw = rng if rng is not None and self.model.range_sigma > 0 and draws_in_c() else None
+        noise = None if draw is not None else self._noise(rng)
         if isinstance(pose_at, MotionTrack):
-            return ScanJob(grid, self._turn, t0, noise, motion=(pose_at.start, pose_at.log))
+            return ScanJob(grid, self._turn, t0, noise, motion=(pose_at.start, pose_at.log),
+                           motion_t0=pose_at.t0, draw=draw)
         times = self.times(t0)
-        return ScanJob(grid, self._turn, t0, noise, knots=(times, *pose_at(times)))
+        return ScanJob(grid, self._turn, t0, noise, knots=(times, *pose_at(times)), draw=draw)
 
     def scan(self, world: World, pose_at: PoseAt, t0: float, rng: np.random.Generator | None = None
              ) -> LaserScan:
@@ -312,21 +316,24 @@ class Lidar:
         if job is None:
             return self.scan_numpy(world, pose_at, t0, rng)
         job.run()
-        return self._message(t0, job.ranges, job.intensities, job.beam_time)
+        return self._made(t0, job, pose_at)
 
     def start_scan(self, world: World, pose_at: PoseAt, t0: float, rng: np.random.Generator | None,
                    pipe: ScanPipe | None) -> PendingScan:
-        """``scan`` made on ``pipe``'s thread: its noise drawn and its poses asked for
-        now, the rest while the caller runs on; ``result()`` waits for it. Without a
-        pipe (``ScanPipe.open()`` gives None where there is none) the scan is made now."""
+        """``scan`` made on ``pipe``'s thread: its poses asked for now, the rest while
+        the caller runs on; ``result()`` waits for it. Its noise is drawn from ``rng`` on
+        that thread where the C scan can (``draws_in_c``), in the order the turns were
+        started, else now: ``rng`` is not to be drawn from elsewhere while a scan is
+        pending. Without a pipe (``ScanPipe.open()`` gives None where there is none)
+        the scan is made now."""
         job = self._job(world, pose_at, t0, rng)
         if job is None:
             return PendingScan(self.scan_numpy(world, pose_at, t0, rng))
         if pipe is None:
             job.run()
-            return PendingScan(self._message(t0, *_made(job)))
+            return PendingScan(self._made(t0, job, pose_at))
         pipe.submit(job)
-        return PendingScan(None, lambda: self._message(t0, *_made(pipe.wait(job))))
+        return PendingScan(None, lambda: self._made(t0, pipe.wait(job), pose_at))
 
     def scan_numpy(self, world: World, pose_at: PoseAt, t0: float, rng: np.random.Generator | None = None
                    ) -> LaserScan:
@@ -353,6 +360,12 @@ class Lidar:
         ranges = np.where(bins_q2 == 0, np.float32(np.inf), ranges).astype(np.float32)
         intensities = np.where(bins_q2 == 0, 0.0, m.intensity).astype(np.float32)
         return self._message(t0, ranges, intensities, bins_t)
+
+    def _made(self, t0: float, job: ScanJob, pose_at: PoseAt) -> LaserScan:
+        """The scan of a job made (a ``MotionTrack`` keeping the knots it integrated)."""
+        if isinstance(pose_at, MotionTrack) and job.integrated:
+            pose_at._integrated(job)
+        return self._message(t0, job.ranges, job.intensities, job.beam_time)
 
     def _message(self, t0: float, ranges: np.ndarray, intensities: np.ndarray, beam_time: np.ndarray
                  ) -> LaserScan:

@@ -37,6 +37,7 @@ Knots = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
 _SOURCE = Path(__file__).resolve().parent / "csrc" / "raycast.c"
 _lib: ctypes.CDLL | bool | None = None
+_draws: bool | None = None
 _P = ctypes.c_void_p
 _I = ctypes.c_int32
 _D = ctypes.c_double
@@ -46,6 +47,8 @@ _D = ctypes.c_double
 CELL_FACTOR = 1.0
 #: Cells along a side at most.
 MAX_CELLS = 2048
+#: A turn's fan: its direction bins (0: each of its rays walks the grid instead).
+FAN_BINS = 512
 
 
 class GridStruct(ctypes.Structure):
@@ -53,7 +56,8 @@ class GridStruct(ctypes.Structure):
 
     _fields_ = [("seg", _P), ("n_seg", _I), ("circ", _P), ("n_circ", _I),
                 ("minx", _D), ("miny", _D), ("cs", _D), ("inv_cs", _D), ("nx", _I), ("ny", _I),
-                ("eps", _D), ("start", _P), ("items", _P), ("rec", _P), ("seg_end", _P)]
+                ("eps", _D), ("start", _P), ("items", _P), ("rec", _P), ("seg_end", _P), ("item_rec", _P),
+                ("fan_bins", _I), ("scale", _D)]
 
 
 class TurnStruct(ctypes.Structure):
@@ -72,7 +76,8 @@ JobStruct._fields_ = [("grid", _P), ("lidar", _P), ("t0", _D), ("n", _I), ("kt",
                       ("kh", _P), ("log", _P), ("log_rows", _I), ("log_stride", _I), ("start_x", _D),
                       ("start_y", _D), ("start_h", _D), ("noise", _P), ("q2", _P), ("ranges", _P),
                       ("intensities", _P), ("beam_time", _P), ("state", _I), ("next_chunk", _I),
-                      ("chunks_left", _I), ("next", ctypes.POINTER(JobStruct))]
+                      ("chunks_left", _I), ("next", ctypes.POINTER(JobStruct)), ("rays", _P), ("bitgen", _P),
+                      ("draws", _P), ("log_t0", _D)]
 
 
 class Turn:
@@ -107,8 +112,12 @@ def load_raycast() -> ctypes.CDLL | None:
     global _lib
     if _lib is None:
         try:
-            lib, how = library("wcdrive.plant._raycast", _SOURCE, "raycast", ("-lm", "-lpthread"),
-                               ("-O2", "-ffp-contract=off"))
+            libs: tuple[str, ...] = ("-lm", "-lpthread")
+            flags: tuple[str, ...] = ("-O2", "-ffp-contract=off")
+            npyrandom = numpy_random()
+            if npyrandom is not None:
+                libs, flags = (str(npyrandom[1]), *libs), (*flags, "-DWC_NPYRANDOM", f"-I{npyrandom[0]}")
+            lib, how = library("wcdrive.plant._raycast", _SOURCE, "raycast", libs, flags)
             grid = ctypes.POINTER(GridStruct)
             lib.rc_count.argtypes = [grid, _P]
             lib.rc_count.restype = None
@@ -128,12 +137,34 @@ def load_raycast() -> ctypes.CDLL | None:
                 getattr(lib, name).restype = None
             lib.rc_pipe_close.argtypes = [_P]
             lib.rc_pipe_close.restype = None
+            lib.rc_draws.argtypes = []
+            lib.rc_draws.restype = _I
             _lib = lib
             record("ray cast", how)
         except (BuildError, OSError) as exc:            # OSError: no writable cache
             record("ray cast", f"Python ({exc})".splitlines()[0])
             _lib = False
     return _lib if isinstance(_lib, ctypes.CDLL) else None
+
+
+def numpy_random() -> tuple[Path, Path] | None:
+    """numpy's C headers and its ``libnpyrandom.a`` (its generators' C code, which the C
+    scan links to draw a turn's noise as ``Generator.standard_normal`` does), None
+    where this numpy ships no such library."""
+    include = Path(np.get_include())
+    lib = Path(np.__file__).parent / "random" / "lib" / "libnpyrandom.a"
+    if (include / "numpy" / "random" / "bitgen.h").exists() and lib.exists():
+        return include, lib
+    return None
+
+
+def draws_in_c() -> bool:
+    """Whether the C scan draws a turn's noise itself (``ScanJob``'s ``draw``)."""
+    global _draws
+    if _draws is None:
+        lib = load_raycast()
+        _draws = lib is not None and bool(lib.rc_draws())
+    return _draws
 
 
 def _address(a: np.ndarray) -> int:
@@ -145,7 +176,7 @@ class RayGrid:
     through it. Build it with ``build``."""
 
     def __init__(self, lib: ctypes.CDLL, segments: np.ndarray, circles: np.ndarray,
-                 cell_factor: float = CELL_FACTOR) -> None:
+                 cell_factor: float = CELL_FACTOR, fan_bins: int | None = None) -> None:
         self._lib = lib
         self.segments = np.ascontiguousarray(segments, dtype=float).reshape(-1, 4).copy()
         self.circles = np.ascontiguousarray(circles, dtype=float).reshape(-1, 3).copy()
@@ -176,7 +207,7 @@ class RayGrid:
         self._items = np.zeros(0, dtype=np.int32)
         self._struct = GridStruct(_address(seg), len(seg), _address(circ), len(circ),
                                   *self.corner, cs, 1.0 / cs, nx, ny, self.eps,
-                                  _address(self._start), 0, None, None)
+                                  _address(self._start), 0, None, None, None, 0, scale)
         ref = ctypes.byref(self._struct)
         counts = np.zeros(nx * ny, dtype=np.int32)
         lib.rc_count(ref, _address(counts))
@@ -197,15 +228,34 @@ class RayGrid:
         self._seg_end = (self._start[:-1] + segs_before[self._start[1:]] - segs_before[self._start[:-1]]
                          ).astype(np.int32)
         self._struct.rec, self._struct.seg_end = _address(self._rec), _address(self._seg_end)
+        # the items' records in the items' order, for a turn's fan
+        self._item_rec = np.zeros((n, 4))
+        self._item_rec[:len(seg)] = records
+        self._item_rec[len(seg):, :3] = circ
+        self._struct.item_rec = _address(self._item_rec)
+        self.fan_bins = FAN_BINS if fan_bins is None else fan_bins
+
+    @property
+    def fan_bins(self) -> int:
+        """A turn's direction bins: each ray tests only the items its bin lists, in
+        rising order of their least distance from the turn's origins (0: each ray walks
+        the grid instead; the figures are the same)."""
+        return int(self._struct.fan_bins)
+
+    @fan_bins.setter
+    def fan_bins(self, bins: int) -> None:
+        if not 0 <= bins <= 1 << 20:
+            raise ValueError(f"fan bins: 0 to {1 << 20}, not {bins}")
+        self._struct.fan_bins = bins
 
     @classmethod
-    def build(cls, segments: np.ndarray, circles: np.ndarray, cell_factor: float = CELL_FACTOR
-              ) -> RayGrid | None:
+    def build(cls, segments: np.ndarray, circles: np.ndarray, cell_factor: float = CELL_FACTOR,
+              fan_bins: int | None = None) -> RayGrid | None:
         """The grid over that geometry; None without the C helper or without geometry."""
         lib = load_raycast()
         if lib is None or len(segments) + len(circles) == 0:
             return None
-        return cls(lib, segments, circles, cell_factor)
+        return cls(lib, segments, circles, cell_factor, fan_bins)
 
     def cast(self, ox: np.ndarray, oy: np.ndarray, dx: np.ndarray, dy: np.ndarray,
              max_range: float = math.inf) -> np.ndarray:
@@ -258,15 +308,22 @@ def integrate_motion(start: tuple[float, float, float], t0: float, log: np.ndarr
 class ScanJob:
     """One lidar turn for the C scan (``RayGrid.scan``), its inputs and outputs held
     here while C reads and writes them: the poses from ``knots`` (times, x, y,
-    heading) or from ``motion``, a motion log's start pose and rows (``MotionTrack``),
-    whose knots the job integrates (``knots`` once run). ``run`` makes it now; a
-    ``ScanPipe`` makes it on its thread."""
+    heading) or from ``motion``, a motion log's start pose (at ``motion_t0``, ``t0``
+    if None) and rows (``MotionTrack``), whose knots the job integrates (``knots``
+    once run); the noise ``noise`` (standard
+    normal draws, one a sample), or drawn by the job from ``draw`` (where
+    ``draws_in_c()``: ``Generator.standard_normal``'s draws, made in C when the job is
+    made, the generator the job's until then; jobs on one pipe draw in the order
+    submitted). ``run`` makes it now; a ``ScanPipe`` makes it on its thread."""
 
     def __init__(self, grid: RayGrid, turn: Turn, t0: float, noise: np.ndarray | None, *,
                  knots: Knots | None = None,
-                 motion: tuple[tuple[float, float, float], np.ndarray] | None = None) -> None:
+                 motion: tuple[tuple[float, float, float], np.ndarray] | None = None,
+                 motion_t0: float | None = None, draw: np.random.Generator | None = None) -> None:
         if (knots is None) == (motion is None):
             raise ValueError("a scan job's poses: knots or a motion log, one of them")
+        if draw is not None and noise is not None:
+            raise ValueError("a scan job's noise: given, or drawn, not both")
         self._grid, self._turn = grid, turn
         s = JobStruct(grid=ctypes.addressof(grid._struct), lidar=ctypes.addressof(turn.struct), t0=t0)
         self._log: np.ndarray | None = None
@@ -280,29 +337,48 @@ class ScanJob:
             s.log = _address(self._log) if rows else None
             s.log_rows, s.log_stride = rows, self._log.shape[1]
             s.start_x, s.start_y, s.start_h = start
+            s.log_t0 = t0 if motion_t0 is None else motion_t0
         else:
             assert knots is not None
             k = [np.ascontiguousarray(a, dtype=float) for a in knots]
             if len(k) != 4 or len(k[0]) == 0 or not all(a.shape == k[0].shape for a in k) or k[0].ndim != 1:
                 raise ValueError("knots: four arrays of one length, one knot at least")
             self._knots = np.stack(k)
-        s.n = self._knots.shape[1]
-        s.kt, s.kx, s.ky, s.kh = (_address(self._knots[i]) for i in range(4))
+        s.n = n = self._knots.shape[1]
+        at = _address(self._knots)              # (4, n), C-ordered: a row every 8 n bytes
+        s.kt, s.kx, s.ky, s.kh = at, at + 8 * n, at + 16 * n, at + 24 * n
         self._noise = None
         if noise is not None:
             self._noise = np.ascontiguousarray(noise, dtype=float)
             if len(self._noise) < turn.samples:
                 raise ValueError(f"noise: {turn.samples} draws needed, {len(self._noise)} given")
             s.noise = _address(self._noise)
+        self._draw = draw
+        samples, beams = turn.samples, turn.beams
+        # the outputs (and the draws) in two blocks, of 8 and of 4 byte figures
+        wide = np.empty(beams + (samples if draw is not None else 0))
+        narrow = np.empty(samples + 2 * beams, dtype=np.float32)
+        at8, at4 = _address(wide), _address(narrow)
+        if draw is not None:
+            if not grid._lib.rc_draws():
+                raise ValueError("this C scan cannot draw its noise: draw it with numpy")
+            self._noise = wide[beams:]
+            s.bitgen = draw.bit_generator.ctypes.bit_generator.value
+            s.draws = at8 + 8 * beams
         #: each sample's quarter millimetres (0: none)
-        self.q2 = np.empty(turn.samples, dtype=np.int32)
+        self.q2 = narrow[:samples].view(np.int32)
         #: the published ranges (float32 m, inf for none), intensities, beam times (NaN for none)
-        self.ranges = np.empty(turn.beams, dtype=np.float32)
-        self.intensities = np.empty(turn.beams, dtype=np.float32)
-        self.beam_time = np.empty(turn.beams)
-        s.q2, s.ranges = _address(self.q2), _address(self.ranges)
-        s.intensities, s.beam_time = _address(self.intensities), _address(self.beam_time)
+        self.ranges = narrow[samples:samples + beams]
+        self.intensities = narrow[samples + beams:]
+        self.beam_time = wide[:beams]
+        s.q2, s.ranges, s.intensities = at4, at4 + 4 * samples, at4 + 4 * (samples + beams)
+        s.beam_time = at8
         self.struct = s
+
+    @property
+    def integrated(self) -> bool:
+        """Whether the job integrates a motion log into its knots."""
+        return self._log is not None
 
     @property
     def knots(self) -> Knots:

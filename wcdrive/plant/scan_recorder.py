@@ -48,6 +48,21 @@ def _relative(a: tuple[float, float, float], b: tuple[float, float, float]) -> t
     return (c * dx + s * dy, -s * dx + c * dy, b[2] - a[2])
 
 
+class _Anchor:
+    """The anchor at knot ``k`` of ``track``, whose last knot is where the plant was
+    (``pose``)."""
+
+    def __init__(self, track: MotionTrack, k: int, pose: tuple[float, float, float]) -> None:
+        self.track, self.k, self.at_end = track, k, pose
+
+    def pose(self) -> tuple[tuple[float, float, float], float]:
+        t, x, y, heading = self.track.knots
+        k = self.k
+        back = _relative((float(x[-1]), float(y[-1]), float(heading[-1])),
+                         (float(x[k]), float(y[k]), float(heading[k])))
+        return _compose(self.at_end, back), float(t[k])
+
+
 class ScanRecorder:
     """Takes ``lidar``'s scans of ``world`` as ``plant`` moves (module docstring);
     ``rng`` draws the range noise (None: none)."""
@@ -61,7 +76,9 @@ class ScanRecorder:
         self._pending: list[PendingScan] = []
         self._taken: list[np.ndarray] = []         # every motion log row taken, in order
         self._rows: list[np.ndarray] = []          # those after the anchor
-        self._anchor = (plant.pose, plant.time)    # a true pose at or before the next turn's start
+        # a true pose at or before the next turn's start, or what it is worked out from
+        # once the turns that integrate its track are made
+        self._anchor: tuple[tuple[float, float, float], float] | _Anchor = (plant.pose, plant.time)
         self._turn = 0
         self._next_end = self.period
 
@@ -80,9 +97,10 @@ class ScanRecorder:
             self._taken.append(rows)
         self._rows.append(rows)
         log = np.concatenate(self._rows) if len(self._rows) > 1 else rows
-        pose, t_anchor = self._anchor
-        track = MotionTrack(pose, t_anchor, log)
         self.finish()
+        anchor = self._anchor
+        pose, t_anchor = anchor.pose() if isinstance(anchor, _Anchor) else anchor
+        track = MotionTrack(pose, t_anchor, log)
         while now >= self._next_end - _EPS:
             t0 = self._turn * self.period
             self._pending.append(self.lidar.start_scan(self.world, track, t0, self.rng, self.pipe))
@@ -90,12 +108,12 @@ class ScanRecorder:
             self._next_end = (self._turn + 1) * self.period
         # The next turn started before now: the anchor is the last knot at or before its
         # start, placed by the plant's true pose now and the motion integrated between the
-        # two (so the integration's error never builds up from one turn to the next).
-        t, x, y, heading = track.knots
-        k = max(0, int(np.searchsorted(t, self._turn * self.period + _EPS, side="right")) - 1)
-        back = _relative((float(x[-1]), float(y[-1]), float(heading[-1])),
-                         (float(x[k]), float(y[k]), float(heading[k])))
-        self._anchor = (_compose(plant.pose, back), float(t[k]))
+        # two (so the integration's error never builds up from one turn to the next); the
+        # knots are those the turns just started integrate, read once they are made.
+        start = self._turn * self.period + _EPS
+        k = int(t_anchor <= start) + int(np.searchsorted(log[:, 0], start, side="right")) - 1
+        k = max(0, k)
+        self._anchor = _Anchor(track, k, plant.pose)
         self._rows = [log[k:]] if k < len(log) else []
 
     def finish(self) -> None:

@@ -26,6 +26,13 @@
 #include <stddef.h>
 #include <stdint.h>
 #include <stdlib.h>
+#include <time.h>
+#ifdef WC_NPYRANDOM
+/* numpy's own generator of standard normal draws (its libnpyrandom.a), on a
+ * numpy.random.Generator's bit generator: the very draws of Generator.standard_normal */
+#include <numpy/random/bitgen.h>
+double random_standard_normal(bitgen_t *bitgen_state);
+#endif
 
 /* fmin and fmax of figures that are never NaN (libm's calls cost more than the walk's steps) */
 static inline double min2(double a, double b) { return a < b ? a : b; }
@@ -47,6 +54,10 @@ typedef struct {
      * circle); a cell's segments come first, up to seg_end[c] */
     const double *rec;
     const int32_t *seg_end;
+    /* the items' records again, in the items' order (a turn's fan reads them) */
+    const double *item_rec;
+    int32_t fan_bins;       /* a turn's fan: its direction bins (0: each ray walks the grid) */
+    double scale;           /* the geometry's largest coordinate, 1 at least */
 } rc_grid;
 
 static int seg_touches_box(const double *s, double bx0, double by0, double bx1, double by1,
@@ -122,6 +133,46 @@ void rc_count(const rc_grid *g, int32_t *counts) { bin(g, counts, 0); }
 /* next: a copy of the cells' starts (start[0 .. nx * ny)), used up. */
 void rc_fill(const rc_grid *g, int32_t *next) { bin(g, next, g->items); }
 
+/* best, or the distance along the ray (ox, oy) + t (dx, dy) at which it meets the
+ * segment whose record is s (x0, y0, x1 - x0, y1 - y0), if that is less */
+static inline double meet_segment(const double *s, double ox, double oy, double dx, double dy, double best) {
+    double ex = s[2], ey = s[3];
+    double denom = dx * ey - dy * ex;
+    if (denom == 0.0)
+        return best;
+    double wx = s[0] - ox, wy = s[1] - oy;
+    double tn = wx * ey - wy * ex, un = wx * dy - wy * dx;
+    /* the quotients' signs and sizes without dividing, with margins that keep every
+     * candidate the divided figures would take */
+    double a = fabs(denom), st = denom < 0.0 ? -tn : tn, su = denom < 0.0 ? -un : un;
+    if (st < -a * 0x1p-1000 || su < -a * 0x1p-1000 || su > a * (1.0 + 0x1p-50)
+            || st > best * a * (1.0 + 0x1p-50))
+        return best;
+    double t = tn / denom;
+    /* u = un / denom is within 0 .. 1 wherever 0 <= su <= a: divided only outside */
+    if (!(su >= 0.0 && su <= a)) {
+        double u = un / denom;
+        if (!(u >= 0.0 && u <= 1.0))
+            return best;
+    }
+    return t >= 0.0 && t < best ? t : best;
+}
+
+/* the same for the circle whose record is q (x, y, r, 0): its near root, or its far
+ * one from inside */
+static inline double meet_circle(const double *q, double ox, double oy, double dx, double dy, double best) {
+    double fx = ox - q[0], fy = oy - q[1], r = q[2];
+    double b = fx * dx + fy * dy;
+    double cc = fx * fx + fy * fy - r * r;
+    double disc = b * b - cc;
+    if (!(disc >= 0.0))
+        return best;
+    double root = sqrt(disc);
+    double t_near = -b - root, t_far = -b + root;
+    double t = t_near >= 0.0 ? t_near : t_far;
+    return t >= 0.0 && t < best ? t : best;
+}
+
 static double cast_one(const rc_grid *g, double ox, double oy, double dx, double dy, double max_range) {
     if (!(isfinite(ox) && isfinite(oy) && isfinite(dx) && isfinite(dy)))
         return INFINITY;
@@ -176,39 +227,10 @@ static double cast_one(const rc_grid *g, double ox, double oy, double dx, double
         int32_t c = iy * g->nx + ix;
         /* the cell's segments, then its circles, each a record of four */
         int32_t i = g->start[c], mid = g->seg_end[c], end = g->start[c + 1];
-        for (; i < mid; i++) {
-            const double *s = g->rec + 4 * (ptrdiff_t)i;
-            double ex = s[2], ey = s[3];
-            double denom = dx * ey - dy * ex;
-            if (denom == 0.0)
-                continue;
-            double wx = s[0] - ox, wy = s[1] - oy;
-            double tn = wx * ey - wy * ex, un = wx * dy - wy * dx;
-            /* the quotients' signs and sizes without dividing, with margins that keep
-             * every candidate the divided figures would take */
-            double a = fabs(denom), st = denom < 0.0 ? -tn : tn, su = denom < 0.0 ? -un : un;
-            if (st < -a * 0x1p-1000 || su < -a * 0x1p-1000 || su > a * (1.0 + 0x1p-50)
-                    || st > best * a * (1.0 + 0x1p-50))
-                continue;
-            double t = tn / denom;
-            double u = un / denom;
-            if (t >= 0.0 && u >= 0.0 && u <= 1.0 && t < best)
-                best = t;
-        }
-        for (; i < end; i++) {
-            const double *q = g->rec + 4 * (ptrdiff_t)i;
-            double fx = ox - q[0], fy = oy - q[1], r = q[2];
-            double b = fx * dx + fy * dy;
-            double cc = fx * fx + fy * fy - r * r;
-            double disc = b * b - cc;
-            if (!(disc >= 0.0))
-                continue;
-            double root = sqrt(disc);
-            double t_near = -b - root, t_far = -b + root;
-            double t = t_near >= 0.0 ? t_near : t_far;
-            if (t >= 0.0 && t < best)
-                best = t;
-        }
+        for (; i < mid; i++)
+            best = meet_segment(g->rec + 4 * (ptrdiff_t)i, ox, oy, dx, dy, best);
+        for (; i < end; i++)
+            best = meet_circle(g->rec + 4 * (ptrdiff_t)i, ox, oy, dx, dy, best);
         if (best <= texit || texit > limit)
             break;
         /* the step across x or across y, chosen without a branch (which way it goes
@@ -255,6 +277,308 @@ static void small_rotation(double d, double *c, double *s) {
     *s = d * (1.0 - d2 * (1.0 / 6 - d2 * (1.0 / 120 - d2 * (1.0 / 5040 - d2 * (1.0 / 362880)))));
 }
 
+/* A turn's fan: the items its rays can meet, listed by the ray's direction.
+ *
+ * Directions are pseudo-angles: (x, y) -> [0, 4), rising with the angle, a quarter
+ * turn a unit, at 1/2 to 1 unit a radian (so an angle widened by w radians is widened
+ * by w units at most). The circle of directions is cut into `bins` bins, and those into
+ * FAN_GROUPS groups. A ray goes to its direction's bin; a lidar's head turns steadily,
+ * so the rays of one group come from a short stretch of the turn, and their origins
+ * lie within a small radius of a centre (the box around them: its middle, its half
+ * diagonal).
+ *
+ * A ray from within radius R of a centre meets an item only along a direction within
+ * the item's angle seen from the centre widened by asin(R / d), d the item's distance
+ * from the centre, and at least d - R from its origin (its `near`). So each item goes
+ * into the bins of each group its angle reaches (first from the centre and radius of
+ * all the turn's rays, then from the group's own), and a bin lists its items in rising
+ * order of their near from the whole turn's centre, each entry bounded by the least
+ * near (from its group's centre) of it and every later one. A ray tests its bin's
+ * entries in order until the nearest hit found is below the next entry's bound: it
+ * meets the same first item as the walk, at the same distance, as both test it alike.
+ * An item within R (and rounding) of a centre is in every bin of that group, near 0.
+ */
+#ifndef FAN_GROUPS
+#define FAN_GROUPS 8
+#endif
+#define FAN_LEVEL 0.01       /* m: the steps in which items are ordered by their near */
+#ifndef FAN_LEVELS
+#define FAN_LEVELS 1024
+#endif
+
+/* a figure at or above asin(x), 0 <= x < 1: its tangent */
+static inline double asin_above(double x) {
+    return x / sqrt(1.0 - x * x) * (1.0 + 1e-9);
+}
+
+/* floor(x) for |x| < 2^31, as an integer (libm's floor is a call) */
+static inline int32_t floor_int(double x) {
+    int32_t i = (int32_t)x;
+    return i - (x < (double)i);
+}
+
+static inline double pseudo_angle(double x, double y) {
+    double p = y / (fabs(x) + fabs(y));     /* -1 .. 1 */
+    return x < 0.0 ? 2.0 - p : p < 0.0 ? 4.0 + p : p;
+}
+
+/* An item's angle from (cx, cy) widened for `radius`, in pseudo-angle units lo .. hi
+ * (hi - lo >= 4: every direction), and its near. */
+static void item_extent(const rc_grid *g, int32_t k, double cx, double cy, double radius, double margin,
+                        double *lo, double *hi, double *near) {
+    const double *r = g->item_rec + 4 * (ptrdiff_t)k;
+    double d, half, ang_lo, ang_hi;
+    double ax = r[0] - cx, ay = r[1] - cy;
+    if (k < g->n_seg) {
+        double ex = r[2], ey = r[3];
+        double bx = ax + ex, by = ay + ey;
+        double len2 = ex * ex + ey * ey;
+        double u = len2 > 0.0 ? -(ax * ex + ay * ey) / len2 : 0.0;
+        u = u < 0.0 ? 0.0 : u > 1.0 ? 1.0 : u;
+        double px = ax + u * ex, py = ay + u * ey;
+        d = sqrt(px * px + py * py);
+        *near = d - radius - 2.0 * margin;
+        if (!(*near > 0.0)) {
+            *lo = 0.0; *hi = 4.0; *near = 0.0;
+            return;
+        }
+        double pa = pseudo_angle(ax, ay), pb = pseudo_angle(bx, by);
+        if (ax * by - ay * bx >= 0.0) {     /* b counterclockwise of a */
+            ang_lo = pa; ang_hi = pb;
+        } else {
+            ang_lo = pb; ang_hi = pa;
+        }
+        if (ang_hi < ang_lo)
+            ang_hi += 4.0;
+        half = 0.0;
+    } else {
+        double dc = sqrt(ax * ax + ay * ay);
+        d = dc - r[2];
+        *near = d - radius - 2.0 * margin;
+        if (!(*near > 0.0)) {
+            *lo = 0.0; *hi = 4.0; *near = 0.0;
+            return;
+        }
+        ang_lo = ang_hi = pseudo_angle(ax, ay);
+        half = asin_above(r[2] / (dc - radius - margin));   /* the circle's half angle from an origin */
+    }
+    double w = asin_above((radius + margin) / (d - margin)) + 1e-9;
+    *lo = ang_lo - half - w;
+    *hi = ang_hi + half + w;
+}
+
+/* A turn's rays (its samples' origins and directions, as cast) and its fan. */
+typedef struct {
+    double *ox, *oy, *dx, *dy;
+    int32_t *bin;               /* each ray's bin; -1: the ray walks the grid */
+    int32_t bins;               /* 0: no fan, every ray walks the grid */
+    int32_t *start;             /* bins + 1: bin b's entries are start[b] .. start[b + 1] */
+    int32_t *entry;             /* the entries' items */
+    double *bound;              /* the entries' bounds */
+} rc_rays;
+
+/* one item's bins in one group: lo .. hi, its near from the group's centre */
+typedef struct {
+    int32_t item, lo, hi;
+    double near;
+} fan_span;
+
+typedef struct {
+    fan_span *at;
+    size_t n, cap;
+} fan_spans;
+
+static int spans_add(fan_spans *s, int32_t item, int32_t lo, int32_t hi, double near) {
+    if (s->n == s->cap) {
+        size_t cap = s->cap ? 2 * s->cap : 1024;
+        fan_span *at = realloc(s->at, cap * sizeof *at);
+        if (!at)
+            return 0;
+        s->at = at;
+        s->cap = cap;
+    }
+    s->at[s->n++] = (fan_span){item, lo, hi, near};
+    return 1;
+}
+
+/* The fan of the rays (their bins set, -1 for a ray with no finite figures); 0 when
+ * it cannot be had (every ray then walks the grid). */
+static int fan_build(rc_rays *w, const rc_grid *g, int32_t samples) {
+    int32_t bins = w->bins, per_group = bins / FAN_GROUPS;
+    double box[FAN_GROUPS][4], all[4] = {INFINITY, INFINITY, -INFINITY, -INFINITY};
+    double gcx[FAN_GROUPS], gcy[FAN_GROUPS], grad[FAN_GROUPS];
+    int32_t used[FAN_GROUPS] = {0};
+    for (int32_t q = 0; q < FAN_GROUPS; q++) {
+        box[q][0] = box[q][1] = INFINITY;
+        box[q][2] = box[q][3] = -INFINITY;
+    }
+    double per_unit = bins * 0.25;
+    /* the rays' bins, and the box around each group's origins (kept in hand while
+     * the rays stay in one group, as they mostly do) */
+    int32_t at = -1;
+    double x0 = INFINITY, y0 = INFINITY, x1 = -INFINITY, y1 = -INFINITY;
+    for (int32_t j = 0; j <= samples; j++) {
+        int32_t b = -1, q = -1;
+        if (j < samples) {
+            double ox = w->ox[j], oy = w->oy[j], dx = w->dx[j], dy = w->dy[j];
+            if (!(isfinite(ox) && isfinite(oy) && isfinite(dx) && isfinite(dy)) || (dx == 0.0 && dy == 0.0)) {
+                w->bin[j] = -1;
+                continue;
+            }
+            b = (int32_t)(pseudo_angle(dx, dy) * per_unit);
+            b = b < 0 ? 0 : b >= bins ? bins - 1 : b;
+            w->bin[j] = b;
+            q = b / per_group;
+            if (q == at) {
+                x0 = min2(x0, ox); y0 = min2(y0, oy);
+                x1 = max2(x1, ox); y1 = max2(y1, oy);
+                continue;
+            }
+        }
+        if (at >= 0) {
+            double *r = box[at];
+            r[0] = min2(r[0], x0); r[1] = min2(r[1], y0);
+            r[2] = max2(r[2], x1); r[3] = max2(r[3], y1);
+            used[at] = 1;
+        }
+        if (j < samples) {
+            at = q;
+            x0 = x1 = w->ox[j];
+            y0 = y1 = w->oy[j];
+        }
+    }
+    for (int32_t q = 0; q < FAN_GROUPS; q++) {
+        if (!used[q])
+            continue;
+        all[0] = min2(all[0], box[q][0]); all[1] = min2(all[1], box[q][1]);
+        all[2] = max2(all[2], box[q][2]); all[3] = max2(all[3], box[q][3]);
+        gcx[q] = 0.5 * (box[q][0] + box[q][2]);
+        gcy[q] = 0.5 * (box[q][1] + box[q][3]);
+        grad[q] = 0.5 * hypot(box[q][2] - box[q][0], box[q][3] - box[q][1]) * (1.0 + 1e-9);
+    }
+    w->start = 0; w->entry = 0; w->bound = 0;
+    if (!(all[0] <= all[2]))
+        return 0;                   /* no ray with a bin */
+    double cx = 0.5 * (all[0] + all[2]), cy = 0.5 * (all[1] + all[3]);
+    double radius = 0.5 * hypot(all[2] - all[0], all[3] - all[1]) * (1.0 + 1e-9);
+    double margin = 1e-9 * g->scale;
+    int32_t items = g->n_seg + g->n_circ;
+    /* the items in rising order of their near from the turn's centre */
+    int32_t *level = malloc(sizeof(int32_t) * ((size_t)items * 2 + FAN_LEVELS + 1));
+    double *lo = malloc(sizeof(double) * (size_t)items * 2);
+    fan_spans spans = {0, 0, 0};
+    w->start = calloc((size_t)bins + 1, sizeof(int32_t));
+    if (!level || !lo || !w->start)
+        goto fail;
+    int32_t *order = level + items, *level_start = order + items;
+    double *hi = lo + items;
+    for (int32_t v = 0; v <= FAN_LEVELS; v++)
+        level_start[v] = 0;
+    for (int32_t k = 0; k < items; k++) {
+        double near;
+        item_extent(g, k, cx, cy, radius, margin, &lo[k], &hi[k], &near);
+        double v = near * (1.0 / FAN_LEVEL);
+        level[k] = !(v < FAN_LEVELS - 1) ? FAN_LEVELS - 1 : (int32_t)v;
+        level_start[level[k] + 1]++;
+    }
+    for (int32_t v = 0; v < FAN_LEVELS; v++)
+        level_start[v + 1] += level_start[v];
+    for (int32_t k = 0; k < items; k++)
+        order[level_start[level[k]]++] = k;
+    /* each item's spans: the groups its angle from the turn's centre reaches, and in
+     * each the bins of its angle from the group's centre */
+    for (int32_t i = 0; i < items; i++) {
+        int32_t k = order[i];
+        int32_t q0 = 0, nq = FAN_GROUPS;
+        if (hi[k] - lo[k] < 4.0) {
+            int32_t f0 = floor_int(lo[k] * (FAN_GROUPS / 4.0)), f1 = floor_int(hi[k] * (FAN_GROUPS / 4.0));
+            nq = f1 - f0 + 1;
+            nq = nq > FAN_GROUPS ? FAN_GROUPS : nq;
+            q0 = ((f0 % FAN_GROUPS) + FAN_GROUPS) % FAN_GROUPS;
+        }
+        for (int32_t m = 0, q = q0; m < nq; m++, q = q + 1 == FAN_GROUPS ? 0 : q + 1) {
+            if (!used[q])
+                continue;
+            double glo, ghi, near;
+            item_extent(g, k, gcx[q], gcy[q], grad[q], margin, &glo, &ghi, &near);
+            int32_t first = q * per_group, last = first + per_group - 1;
+            if (!(ghi - glo < 4.0)) {
+                if (!spans_add(&spans, k, first, last, near))
+                    goto fail;
+                continue;
+            }
+            /* the bins glo .. ghi, unwrapped, met with the group's bins a turn apart */
+            int32_t bl = floor_int(glo * per_unit), bh = floor_int(ghi * per_unit);
+            int32_t turn = bl >= 0 ? bl / bins : -((-bl + bins - 1) / bins);
+            for (; turn * bins <= bh; turn++) {
+                int32_t a = bl > first + turn * bins ? bl : first + turn * bins;
+                int32_t b = bh < last + turn * bins ? bh : last + turn * bins;
+                if (a <= b && !spans_add(&spans, k, a - turn * bins, b - turn * bins, near))
+                    goto fail;
+            }
+        }
+    }
+    for (size_t s = 0; s < spans.n; s++)
+        for (int32_t b = spans.at[s].lo; b <= spans.at[s].hi; b++)
+            w->start[b + 1]++;
+    for (int32_t b = 0; b < bins; b++)
+        w->start[b + 1] += w->start[b];
+    size_t entries = (size_t)w->start[bins];
+    w->entry = malloc(sizeof(int32_t) * (entries ? entries : 1));
+    w->bound = malloc(sizeof(double) * (entries ? entries : 1));
+    if (!w->entry || !w->bound)
+        goto fail;
+    int32_t *cursor = w->bin + samples;     /* the workspace's room for it (rays_open) */
+    for (int32_t b = 0; b < bins; b++)
+        cursor[b] = w->start[b];
+    for (size_t s = 0; s < spans.n; s++) {
+        const fan_span *p = spans.at + s;
+        for (int32_t b = p->lo; b <= p->hi; b++) {
+            w->entry[cursor[b]] = p->item;
+            w->bound[cursor[b]++] = p->near;
+        }
+    }
+    /* each entry's bound: the least near of it and every later entry in its bin */
+    for (int32_t b = 0; b < bins; b++) {
+        double least = INFINITY;
+        for (int32_t i = w->start[b + 1] - 1; i >= w->start[b]; i--) {
+            least = min2(least, w->bound[i]);
+            w->bound[i] = least;
+        }
+    }
+    free(spans.at);
+    free(level);
+    free(lo);
+    return 1;
+fail:
+    free(spans.at);
+    free(level);
+    free(lo);
+    free(w->start);
+    free(w->entry);
+    free(w->bound);
+    w->start = 0; w->entry = 0; w->bound = 0;
+    return 0;
+}
+
+/* ray j's figure: cast_one's (max_range inf), from the fan where the ray has a bin */
+static double rays_cast(const rc_rays *w, const rc_grid *g, int32_t j) {
+    double ox = w->ox[j], oy = w->oy[j], dx = w->dx[j], dy = w->dy[j];
+    int32_t b = w->start ? w->bin[j] : -1;
+    if (b < 0)
+        return cast_one(g, ox, oy, dx, dy, INFINITY);
+    double best = INFINITY;
+    const double *rec = g->item_rec;
+    for (int32_t i = w->start[b], end = w->start[b + 1]; i < end; i++) {
+        if (best < w->bound[i])
+            break;
+        int32_t k = w->entry[i];
+        best = k < g->n_seg ? meet_segment(rec + 4 * (ptrdiff_t)k, ox, oy, dx, dy, best)
+                            : meet_circle(rec + 4 * (ptrdiff_t)k, ox, oy, dx, dy, best);
+    }
+    return best + 0.0;
+}
+
 /* The chair's poses from the pose at t0 and the plant's motion log (rows of `stride`
  * doubles: time, forward, lateral, yaw rate, ...): knots t, x, y, h (n + 1 each), as
  * wcdrive.plant.lidar.MotionTrack integrates them (the heading's step at its midpoint). */
@@ -285,9 +609,9 @@ void rc_integrate(double t0, double x0, double y0, double h0, int32_t n, const d
  * intensities and beam_time (the time of the sample in each bin, NaN for none), each
  * `beams` long. q2: `samples` int32, each sample's quarter millimetres. */
 /* rc_scan's samples j0 .. j1 - 1, into q2 */
-static void scan_samples(const rc_grid *g, const rc_lidar *L, double t0, int32_t n, const double *kt,
-                         const double *kx, const double *ky, const double *kh, const double *noise,
-                         int32_t j0, int32_t j1, int32_t *q2) {
+static void turn_rays(const rc_lidar *L, double t0, int32_t n, const double *kt, const double *kx,
+                      const double *ky, const double *kh, int32_t j0, int32_t j1, double *rox, double *roy,
+                      double *rdx, double *rdy) {
     /* the last knot at or before the first sample (0 for none) */
     int32_t k = 0;
     if (j0 < j1) {
@@ -343,14 +667,86 @@ static void scan_samples(const rc_grid *g, const rc_lidar *L, double t0, int32_t
         double ox = x + c * L->mount_x - s * L->mount_y;
         double oy = y + s * L->mount_x + c * L->mount_y;
         const double *d = L->device + 2 * j;
-        double dx = c * d[0] - s * d[1], dy = s * d[0] + c * d[1];
-        double r = cast_one(g, ox, oy, dx, dy, INFINITY);
-        if (noise)
-            r = r + (0.0 + L->sigma * noise[j]);
-        /* to the nearest quarter millimetre, ties to even (2^52 added and taken off:
-         * the default rounding, for 0 <= r * 4000 < 2^51) */
-        q2[j] = isfinite(r) && r >= L->device_min && r <= L->range_max
-                ? (int32_t)((r * 4000.0 + 0x1p52) - 0x1p52) : 0;
+        rox[j - j0] = ox;
+        roy[j - j0] = oy;
+        rdx[j - j0] = c * d[0] - s * d[1];
+        rdy[j - j0] = s * d[0] + c * d[1];
+    }
+}
+
+/* sample j's quarter millimetres from its ray's figure r: its noise added
+ * (noise[j] * sigma, none without `noise`), to the nearest quarter millimetre, ties to
+ * even (2^52 added and taken off: the default rounding, for 0 <= r * 4000 < 2^51), 0
+ * below device_min or above range_max */
+static inline int32_t quarter_mm(const rc_lidar *L, const double *noise, int32_t j, double r) {
+    if (noise)
+        r = r + (0.0 + L->sigma * noise[j]);
+    return isfinite(r) && r >= L->device_min && r <= L->range_max
+           ? (int32_t)((r * 4000.0 + 0x1p52) - 0x1p52) : 0;
+}
+
+/* A turn's rays in a workspace of its own (NULL when it cannot be had), with room
+ * for a fan of `bins` bins (0: none) */
+static rc_rays *rays_open(int32_t samples, int32_t bins) {
+    rc_rays *w = calloc(1, sizeof *w);
+    if (!w)
+        return 0;
+    w->ox = malloc(sizeof(double) * 4 * (size_t)(samples > 0 ? samples : 1));
+    w->bin = malloc(sizeof(int32_t) * ((size_t)samples + (size_t)bins + 1));
+    if (!w->ox || !w->bin) {
+        free(w->ox);
+        free(w->bin);
+        free(w);
+        return 0;
+    }
+    w->oy = w->ox + samples;
+    w->dx = w->oy + samples;
+    w->dy = w->dx + samples;
+    w->bins = bins;
+    return w;
+}
+
+static void rays_close(rc_rays *w) {
+    if (!w)
+        return;
+    free(w->ox);
+    free(w->bin);
+    free(w->start);
+    free(w->entry);
+    free(w->bound);
+    free(w);
+}
+
+/* The turn's rays and fan: a workspace, NULL when none could be had. */
+static rc_rays *rays_make(const rc_grid *g, const rc_lidar *L, double t0, int32_t n, const double *kt,
+                          const double *kx, const double *ky, const double *kh) {
+    int32_t bins = g->item_rec && g->fan_bins >= FAN_GROUPS ? g->fan_bins / FAN_GROUPS * FAN_GROUPS : 0;
+    rc_rays *w = rays_open(L->samples, bins);
+    if (!w)
+        return 0;
+    turn_rays(L, t0, n, kt, kx, ky, kh, 0, L->samples, w->ox, w->oy, w->dx, w->dy);
+    if (bins && !fan_build(w, g, L->samples))
+        w->bins = 0;
+    return w;
+}
+
+/* samples j0 .. j1 - 1 into q2: from the rays in w, or without w, each pose made and
+ * its ray walked a few at a time */
+static void scan_samples(const rc_grid *g, const rc_rays *w, const rc_lidar *L, double t0, int32_t n,
+                         const double *kt, const double *kx, const double *ky, const double *kh,
+                         const double *noise, int32_t j0, int32_t j1, int32_t *q2) {
+    if (w) {
+        for (int32_t j = j0; j < j1; j++)
+            q2[j] = quarter_mm(L, noise, j, rays_cast(w, g, j));
+        return;
+    }
+    enum { FEW = 64 };
+    double ox[FEW], oy[FEW], dx[FEW], dy[FEW];
+    for (int32_t a = j0; a < j1; a += FEW) {
+        int32_t b = a + FEW < j1 ? a + FEW : j1;
+        turn_rays(L, t0, n, kt, kx, ky, kh, a, b, ox, oy, dx, dy);
+        for (int32_t j = a; j < b; j++)
+            q2[j] = quarter_mm(L, noise, j, cast_one(g, ox[j - a], oy[j - a], dx[j - a], dy[j - a], INFINITY));
     }
 }
 
@@ -393,13 +789,16 @@ static void bin_samples(const rc_lidar *L, double t0, const int32_t *q2, float *
 void rc_scan(const rc_grid *g, const rc_lidar *L, double t0, int32_t n, const double *kt,
              const double *kx, const double *ky, const double *kh, const double *noise,
              int32_t *q2, float *ranges, float *intensities, double *beam_time) {
-    scan_samples(g, L, t0, n, kt, kx, ky, kh, noise, 0, L->samples, q2);
+    rc_rays *w = rays_make(g, L, t0, n, kt, kx, ky, kh);
+    scan_samples(g, w, L, t0, n, kt, kx, ky, kh, noise, 0, L->samples, q2);
+    rays_close(w);
     bin_samples(L, t0, q2, ranges, intensities, beam_time);
 }
 
 /* One turn to make: its poses from knots kt, kx, ky, kh (n of them) or, with `log`,
- * from the motion log's rows integrated from (start_x, start_y, start_h) at t0 into
- * them (n = log_rows + 1, the knots written); then rc_scan into q2 .. beam_time.
+ * from the motion log's rows integrated from (start_x, start_y, start_h) at log_t0
+ * into them (n = log_rows + 1, the knots written); then rc_scan from t0 into q2 ..
+ * beam_time.
  * The rest is the pipe's: where the job is (JOB_QUEUED .. JOB_DONE), its samples
  * handed out in chunks (the next to hand out, those not finished), the queue. */
 typedef struct rc_job {
@@ -417,7 +816,35 @@ typedef struct rc_job {
     double *beam_time;
     int32_t state, next_chunk, chunks_left;
     struct rc_job *next;
+    rc_rays *rays;          /* the turn's rays and fan while its chunks are made (NULL: none) */
+    /* with `bitgen` (a numpy bit generator, where rc_draws() is 1), the job draws its
+     * noise into `draws` (samples) first: its standard normal draws, in the order the
+     * jobs were submitted; `noise` is then `draws` */
+    void *bitgen;
+    double *draws;
+    double log_t0;          /* the time of the motion log's start pose */
 } rc_job;
+
+/* 1 where jobs can draw their noise (numpy's generator linked in) */
+int32_t rc_draws(void) {
+#ifdef WC_NPYRANDOM
+    return 1;
+#else
+    return 0;
+#endif
+}
+
+static void draw_job(rc_job *job) {
+#ifdef WC_NPYRANDOM
+    if (job->bitgen && job->draws) {
+        for (int32_t j = 0; j < job->lidar->samples; j++)
+            job->draws[j] = random_standard_normal((bitgen_t *)job->bitgen);
+        job->noise = job->draws;
+    }
+#else
+    (void)job;
+#endif
+}
 
 enum { JOB_QUEUED, JOB_STARTING, JOB_CHUNKS, JOB_DONE };
 /* samples in a chunk: a few tens of microseconds of work */
@@ -425,21 +852,29 @@ enum { JOB_QUEUED, JOB_STARTING, JOB_CHUNKS, JOB_DONE };
 
 static void integrate_job(rc_job *job) {
     if (job->log)
-        rc_integrate(job->t0, job->start_x, job->start_y, job->start_h, job->log_rows, job->log,
+        rc_integrate(job->log_t0, job->start_x, job->start_y, job->start_h, job->log_rows, job->log,
                      job->log_stride, job->kt, job->kx, job->ky, job->kh);
 }
 
 static void scan_chunk(rc_job *job, int32_t chunk) {
     int32_t j0 = chunk * CHUNK, j1 = j0 + CHUNK < job->lidar->samples ? j0 + CHUNK : job->lidar->samples;
-    scan_samples(job->grid, job->lidar, job->t0, job->n, job->kt, job->kx, job->ky, job->kh, job->noise,
-                 j0, j1, job->q2);
+    scan_samples(job->grid, job->rays, job->lidar, job->t0, job->n, job->kt, job->kx, job->ky, job->kh,
+                 job->noise, j0, j1, job->q2);
+}
+
+/* the job's rays and fan (once its poses' knots are integrated) */
+static void rays_job(rc_job *job) {
+    job->rays = rays_make(job->grid, job->lidar, job->t0, job->n, job->kt, job->kx, job->ky, job->kh);
 }
 
 static void bin_job(rc_job *job) {
+    rays_close(job->rays);
+    job->rays = 0;
     bin_samples(job->lidar, job->t0, job->q2, job->ranges, job->intensities, job->beam_time);
 }
 
 void rc_run(rc_job *job) {
+    draw_job(job);
     integrate_job(job);
     rc_scan(job->grid, job->lidar, job->t0, job->n, job->kt, job->kx, job->ky, job->kh, job->noise,
             job->q2, job->ranges, job->intensities, job->beam_time);
@@ -453,10 +888,42 @@ void rc_run(rc_job *job) {
 typedef struct {
     pthread_t thread;
     pthread_mutex_t lock;
+    pthread_mutex_t draw_lock;  /* held while a job draws: jobs start, and draw, in order */
     pthread_cond_t work, finished;
     rc_job *head, *tail;
     int closing;
+    int32_t queued;         /* jobs queued: read without the lock by the idle thread */
 } rc_pipe;
+
+/* ns: how long the idle thread watches for a job before it sleeps. Waking a sleeping
+ * thread costs the submitter 15 to 20 us on this project's machine (a virtual one);
+ * turns that follow each other within it find the thread awake. */
+#ifndef PIPE_AWAKE_NS
+#define PIPE_AWAKE_NS 300000
+#endif
+
+static int64_t monotonic_ns(void) {
+    struct timespec t;
+    clock_gettime(CLOCK_MONOTONIC, &t);
+    return (int64_t)t.tv_sec * 1000000000 + t.tv_nsec;
+}
+
+/* With the lock held (and held again on return): waits awake up to PIPE_AWAKE_NS for
+ * a job to be queued, or the pipe closed. */
+static void stay_awake(rc_pipe *p) {
+    pthread_mutex_unlock(&p->lock);
+    int64_t until = monotonic_ns() + PIPE_AWAKE_NS;
+    while (!__atomic_load_n(&p->queued, __ATOMIC_ACQUIRE) && !__atomic_load_n(&p->closing, __ATOMIC_ACQUIRE)) {
+        for (int i = 0; i < 64; i++) {
+#if defined(__x86_64__) || defined(__i386__)
+            __builtin_ia32_pause();
+#endif
+        }
+        if (monotonic_ns() > until)
+            break;
+    }
+    pthread_mutex_lock(&p->lock);
+}
 
 /* With the lock held (and held again on return): makes the job's chunks not yet
  * handed out; whoever finishes its last chunk bins it and marks it done. */
@@ -476,8 +943,8 @@ static void make_chunks(rc_pipe *p, rc_job *job) {
     }
 }
 
-/* With the lock held: takes a queued job out of the queue, integrates its poses and
- * opens its chunks. */
+/* With the lock held: takes the queue's first job out of it, draws its noise,
+ * integrates its poses, makes its rays and fan and opens its chunks. */
 static void start_job(rc_pipe *p, rc_job *job) {
     rc_job **at = &p->head, *before = 0;
     while (*at && *at != job) {
@@ -488,10 +955,16 @@ static void start_job(rc_pipe *p, rc_job *job) {
         *at = job->next;
         if (p->tail == job)
             p->tail = before;
+        __atomic_store_n(&p->queued, p->queued - 1, __ATOMIC_RELEASE);
     }
     job->state = JOB_STARTING;
+    /* the draws in the order the jobs started (a later start waits here, the lock held) */
+    pthread_mutex_lock(&p->draw_lock);
     pthread_mutex_unlock(&p->lock);
+    draw_job(job);
+    pthread_mutex_unlock(&p->draw_lock);
     integrate_job(job);
+    rays_job(job);
     pthread_mutex_lock(&p->lock);
     job->next_chunk = 0;
     job->chunks_left = (job->lidar->samples + CHUNK - 1) / CHUNK;
@@ -509,6 +982,8 @@ static void *pipe_main(void *arg) {
     rc_pipe *p = arg;
     pthread_mutex_lock(&p->lock);
     for (;;) {
+        if (!p->head && !p->closing)
+            stay_awake(p);
         while (!p->head && !p->closing)
             pthread_cond_wait(&p->work, &p->lock);
         rc_job *job = p->head;
@@ -530,9 +1005,15 @@ rc_pipe *rc_pipe_open(void) {
         free(p);
         return 0;
     }
+    if (pthread_mutex_init(&p->draw_lock, 0) != 0) {
+        pthread_mutex_destroy(&p->lock);
+        free(p);
+        return 0;
+    }
     if (pthread_cond_init(&p->work, 0) != 0 || pthread_cond_init(&p->finished, 0) != 0
             || pthread_create(&p->thread, 0, pipe_main, p) != 0) {
         /* the conditions need no destroying here: neither was waited on */
+        pthread_mutex_destroy(&p->draw_lock);
         pthread_mutex_destroy(&p->lock);
         free(p);
         return 0;
@@ -549,6 +1030,7 @@ void rc_pipe_submit(rc_pipe *p, rc_job *job) {
     else
         p->head = job;
     p->tail = job;
+    __atomic_store_n(&p->queued, p->queued + 1, __ATOMIC_RELEASE);
     pthread_cond_signal(&p->work);
     pthread_mutex_unlock(&p->lock);
 }
@@ -557,8 +1039,15 @@ void rc_pipe_submit(rc_pipe *p, rc_job *job) {
 void rc_pipe_wait(rc_pipe *p, rc_job *job) {
     pthread_mutex_lock(&p->lock);
     while (job->state != JOB_DONE) {
-        if (job->state == JOB_QUEUED)
-            start_job(p, job);
+        if (job->state == JOB_QUEUED) {
+            /* the jobs start in order: those queued before it first */
+            rc_job *first = p->head;
+            start_job(p, first);
+            if (first != job) {
+                make_chunks(p, first);
+                continue;
+            }
+        }
         make_chunks(p, job);
         if (job->state != JOB_DONE)
             pthread_cond_wait(&p->finished, &p->lock);
@@ -569,12 +1058,13 @@ void rc_pipe_wait(rc_pipe *p, rc_job *job) {
 /* Runs the jobs still queued, stops the thread and frees the pipe. */
 void rc_pipe_close(rc_pipe *p) {
     pthread_mutex_lock(&p->lock);
-    p->closing = 1;
+    __atomic_store_n(&p->closing, 1, __ATOMIC_RELEASE);
     pthread_cond_signal(&p->work);
     pthread_mutex_unlock(&p->lock);
     pthread_join(p->thread, 0);
     pthread_cond_destroy(&p->work);
     pthread_cond_destroy(&p->finished);
+    pthread_mutex_destroy(&p->draw_lock);
     pthread_mutex_destroy(&p->lock);
     free(p);
 }
