@@ -893,20 +893,26 @@ typedef struct {
     rc_job *head, *tail;
     int closing;
     int32_t queued;         /* jobs queued: read without the lock by the idle thread */
+    int64_t idle_ns;        /* how long the thread was last idle before a job came */
 } rc_pipe;
 
 /* ns: how long the idle thread watches for a job before it sleeps. Waking a sleeping
  * thread costs the submitter 15 to 20 us on this project's machine (a virtual one);
- * turns that follow each other within it find the thread awake. */
+ * turns that follow each other within it find the thread awake. It watches only
+ * while jobs have come within that time: where they come further apart (a slower
+ * caller, say one that shares its core with other work), watching would only take a
+ * core from the rest, and the thread sleeps at once. */
 #ifndef PIPE_AWAKE_NS
-#define PIPE_AWAKE_NS 300000
+#define PIPE_AWAKE_NS 100000
 #endif
 
-static int64_t monotonic_ns(void) {
+static int64_t clock_ns(clockid_t clock) {
     struct timespec t;
-    clock_gettime(CLOCK_MONOTONIC, &t);
+    clock_gettime(clock, &t);
     return (int64_t)t.tv_sec * 1000000000 + t.tv_nsec;
 }
+
+static int64_t monotonic_ns(void) { return clock_ns(CLOCK_MONOTONIC); }
 
 /* With the lock held (and held again on return): waits awake up to PIPE_AWAKE_NS for
  * a job to be queued, or the pipe closed. */
@@ -982,10 +988,14 @@ static void *pipe_main(void *arg) {
     rc_pipe *p = arg;
     pthread_mutex_lock(&p->lock);
     for (;;) {
-        if (!p->head && !p->closing)
-            stay_awake(p);
-        while (!p->head && !p->closing)
-            pthread_cond_wait(&p->work, &p->lock);
+        if (!p->head && !p->closing) {
+            int64_t idle = monotonic_ns();
+            if (p->idle_ns <= PIPE_AWAKE_NS)
+                stay_awake(p);
+            while (!p->head && !p->closing)
+                pthread_cond_wait(&p->work, &p->lock);
+            p->idle_ns = monotonic_ns() - idle;
+        }
         rc_job *job = p->head;
         if (!job)
             break;                                  /* closing, and nothing left to do */
