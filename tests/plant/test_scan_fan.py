@@ -9,6 +9,7 @@ integrated from its own start."""
 from __future__ import annotations
 
 import math
+import resource
 
 import numpy as np
 import pytest
@@ -16,7 +17,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from wcdrive.plant.lidar import Lidar, LidarMount, MotionTrack
-from wcdrive.plant.raycast import RayGrid, ScanJob, draws_in_c
+from wcdrive.plant.raycast import MAX_FAN_BINS, RayGrid, ScanJob, Turn, draws_in_c
 from wcdrive.plant.world import World
 
 from .test_lidar_scan import ROOM, SANDBOX, _log, _same_scan
@@ -126,9 +127,50 @@ def test_non_finite_poses_walk_as_before() -> None:
 def test_fan_bins_out_of_range_are_refused() -> None:
     grid = ROOM.ray_grid
     assert grid is not None
-    with pytest.raises(ValueError, match="fan bins"):
-        grid.fan_bins = -1
+    for bins in (-1, MAX_FAN_BINS + 1):
+        with pytest.raises(ValueError, match="fan bins"):
+            grid.fan_bins = bins
     assert grid.fan_bins == 512
+
+
+def test_a_fan_too_large_to_build_walks() -> None:
+    """1,500 rings around the lidar, each in every bin, at the most bins: 98 million
+    entries, past the fan's limit; the turn walks the grid (the same figures)."""
+    rings = np.column_stack((np.zeros((1500, 2)), np.linspace(0.5, 30.0, 1500)))
+    world = World(np.zeros((0, 4)), rings)
+    grid = world.ray_grid
+    assert grid is not None
+    lidar = Lidar()
+    track = MotionTrack((0.0, 0.0, 0.0), 0.0, _log(0.0, 100, 0.4, 0.0, 0.5))
+    walk = _q2(grid, lidar, track, 0.0, 0)
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    assert np.array_equal(_q2(grid, lidar, track, 0.0, MAX_FAN_BINS), walk)
+    assert (walk > 0).all()                             # the innermost ring all round
+    # no fan of 1.2 GB was made
+    assert resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - peak < 300_000   # kB
+
+
+def test_directions_not_of_unit_length_walk() -> None:
+    """A turn whose directions are 2 m long: the fan's bounds are for unit ones, so
+    those rays walk the grid, which gives their figures in its own units. Long walls
+    across each other: an item listed early can be met far off."""
+    rng = np.random.default_rng(1)
+    grid = World(rng.uniform(-5, 5, (200, 4)), np.zeros((0, 3))).ray_grid
+    assert grid is not None
+    m = Lidar().model
+    angle = np.arange(m.samples) * 2 * math.pi / m.samples
+    turn = Turn(m.sample_hz, 2.0 * np.column_stack((np.cos(angle), np.sin(angle))),
+                np.arange(m.samples) * m.beams // m.samples, m.beams, 1, (0.3, 0.0), 0.0, 0.05, 40.0, 47.0,
+                False)
+    track = MotionTrack((0.0, 0.0, 0.0), 0.0, _log(0.0, 100, 0.4, 0.0, 0.5))
+    q2 = []
+    for bins in (0, 512):
+        grid.fan_bins = bins
+        job = ScanJob(grid, turn, 0.0, None, motion=(track.start, track.log))
+        job.run()
+        q2.append(job.q2)
+    grid.fan_bins = 512
+    assert (q2[0] > 0).mean() > 0.1 and np.array_equal(q2[0], q2[1])
 
 
 @pytest.mark.skipif(not draws_in_c(), reason="this numpy ships no libnpyrandom.a")

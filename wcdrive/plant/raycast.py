@@ -1,6 +1,9 @@
 """The lidar's fast ray cast: ``csrc/raycast.c`` walking a uniform grid of cells over a
 world's segments and circles, giving the distances of ``World.cast_exact`` (the numpy
-reference) bit for bit, a few hundred times faster on a ROS map's outline.
+reference) bit for bit, a few hundred times faster on a ROS map's outline. A lidar's
+turn casts its rays through a fan instead (``RayGrid.fan_bins``): the items listed by
+the direction in which the turn's rays can meet them, nearest first, so a ray tests
+one or two; the same figures as the walk, about twice as fast on the map's outline.
 
 The one exception is where the reference's own figure is rounding noise: a ray within
 an ulp of parallel to a segment whose line runs through the ray's origin gets t = 0
@@ -49,6 +52,8 @@ CELL_FACTOR = 1.0
 MAX_CELLS = 2048
 #: A turn's fan: its direction bins (0: each of its rays walks the grid instead).
 FAN_BINS = 512
+#: A fan's bins at most.
+MAX_FAN_BINS = 1 << 16
 
 
 class GridStruct(ctypes.Structure):
@@ -239,13 +244,16 @@ class RayGrid:
     def fan_bins(self) -> int:
         """A turn's direction bins: each ray tests only the items its bin lists, in
         rising order of their least distance from the turn's origins (0: each ray walks
-        the grid instead; the figures are the same)."""
+        the grid instead; the figures are the same). A turn of fewer samples than twice
+        the world's items walks the grid (the fan's cost grows with the world's items:
+        on a large map the walk is the faster), as does a ray whose direction is not a
+        unit vector."""
         return int(self._struct.fan_bins)
 
     @fan_bins.setter
     def fan_bins(self, bins: int) -> None:
-        if not 0 <= bins <= 1 << 20:
-            raise ValueError(f"fan bins: 0 to {1 << 20}, not {bins}")
+        if not 0 <= bins <= MAX_FAN_BINS:
+            raise ValueError(f"fan bins: 0 to {MAX_FAN_BINS}, not {bins}")
         self._struct.fan_bins = bins
 
     @classmethod
@@ -355,24 +363,26 @@ class ScanJob:
             s.noise = _address(self._noise)
         self._draw = draw
         samples, beams = turn.samples, turn.beams
-        # the outputs (and the draws) in two blocks, of 8 and of 4 byte figures
-        wide = np.empty(beams + (samples if draw is not None else 0))
-        narrow = np.empty(samples + 2 * beams, dtype=np.float32)
-        at8, at4 = _address(wide), _address(narrow)
+        # three blocks: what a scan publishes (ranges and intensities; the beam times),
+        # and the job's own (the samples' quarter millimetres and the draws)
+        published = np.empty(2 * beams, dtype=np.float32)
+        self.beam_time = np.empty(beams)
+        own = np.empty(samples if draw is not None else 0, dtype=np.float64)
+        q2 = np.empty(samples, dtype=np.int32)
+        at = _address(published)
         if draw is not None:
             if not grid._lib.rc_draws():
                 raise ValueError("this C scan cannot draw its noise: draw it with numpy")
-            self._noise = wide[beams:]
+            self._noise = own
             s.bitgen = draw.bit_generator.ctypes.bit_generator.value
-            s.draws = at8 + 8 * beams
+            s.draws = _address(own)
         #: each sample's quarter millimetres (0: none)
-        self.q2 = narrow[:samples].view(np.int32)
+        self.q2 = q2
         #: the published ranges (float32 m, inf for none), intensities, beam times (NaN for none)
-        self.ranges = narrow[samples:samples + beams]
-        self.intensities = narrow[samples + beams:]
-        self.beam_time = wide[:beams]
-        s.q2, s.ranges, s.intensities = at4, at4 + 4 * samples, at4 + 4 * (samples + beams)
-        s.beam_time = at8
+        self.ranges = published[:beams]
+        self.intensities = published[beams:]
+        s.q2, s.ranges, s.intensities = _address(q2), at, at + 4 * beams
+        s.beam_time = _address(self.beam_time)
         self.struct = s
 
     @property
