@@ -11,10 +11,12 @@ cast" section, measured side by side in one run:
   on it); on tb3_sandbox's map and on a hand-written room; the three alternate,
   ``--runs`` times each, medians;
 * one turn's cost, best of several: the C cast of its 3,200 rays from a moving chair
-  (``World.cast``), with numpy (``World.cast_exact``) and with pymunk
-  (``Space.segment_query_first`` per ray, static radius-0 segments and circles), how
-  far each lands from the C cast; the whole ``Lidar.scan`` and its parts (the noise
-  draws, the C turn with its poses integrated, the rest: Python), and the reference
+  (``World.cast``: each ray walking the grid), with numpy (``World.cast_exact``) and
+  with pymunk (``Space.segment_query_first`` per ray, static radius-0 segments and
+  circles), how far each lands from the C cast; the whole ``Lidar.scan`` and its
+  parts (the C turn with its poses integrated and its fan of direction bins, the
+  same turn with each ray walking the grid, its noise drawn in C with numpy's own
+  generator, the rest: Python), numpy's draws, and the reference
   ``Lidar.scan_numpy`` (numpy poses, noise and bins around ``World.cast``).
 
     python benchmarks/lidar_speed.py               # 30 simulated s, 5 runs each
@@ -23,8 +25,9 @@ cast" section, measured side by side in one run:
 * the same side by side on the scenario runner (``wcdrive.sim.runner.run``: the
   port, the host, the plant, with the lidar's turns made by ``ScanRecorder`` on a scan
   thread): the bundled ``corridor_lidar`` and ``room_lidar`` with their ``[lidar]``
-  table and without it, alternating, ``--runs`` times each, medians
-  (``--runner-only``: this part alone).
+  table and without it, and with each ray walking the grid, alternating, ``--runs``
+  times each, medians (``--runner-only``: this part alone; ``--busy``: again with
+  another process keeping one core busy).
 
 The scan thread gains only where the machine's second core is free.
 """
@@ -34,6 +37,7 @@ from __future__ import annotations
 import argparse
 import math
 import statistics
+import subprocess
 import sys
 import time
 from collections.abc import Callable
@@ -46,7 +50,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from wcdrive.plant.lidar import Lidar, LidarMount, MotionTrack, PendingScan  # noqa: E402
-from wcdrive.plant.raycast import ScanJob, ScanPipe  # noqa: E402
+from wcdrive.plant.raycast import ScanJob, ScanPipe, draws_in_c  # noqa: E402
 from wcdrive.plant.rosmap import load_map  # noqa: E402
 from wcdrive.plant.world import World  # noqa: E402
 from wcdrive.testing.stepped import SteppedChair  # noqa: E402
@@ -61,14 +65,20 @@ ROOM = {
 }
 #: Where the chair starts in each world (its own frame starts at 0, 0, 0), and the drive:
 #: a circle of 0.8 m radius at 0.4 m/s.
-WORLDS = {"tb3_sandbox": (0.5, 0.3), "room": (0.0, 0.0)}
+WORLDS = {"tb3_sandbox": (0.5, 0.3), "room": (0.0, 0.0), "tb3_sandbox_3x3": (0.5, 0.3)}
 SPEED, TURN = 0.4, 0.5
 LIDAR = Lidar(mount=LidarMount(x=0.30, z=0.45))
 
 
 def worlds() -> dict[str, World]:
-    sandbox = load_map(ROOT / "tests" / "data" / "rosmaps" / "tb3_sandbox.yaml")
-    return {"tb3_sandbox": World.from_grid(sandbox), "room": World.from_table(ROOM)}
+    """tb3_sandbox's outline, the room, and nine copies of the outline side by side (a
+    world of more items than half a turn's samples: its turns walk the grid)."""
+    sandbox = World.from_grid(load_map(ROOT / "tests" / "data" / "rosmaps" / "tb3_sandbox.yaml"))
+    seg = sandbox.segments
+    step = seg.max(axis=0)[:2] - seg.min(axis=0)[:2] + 0.5
+    tiles = [seg + np.tile(step * (i, j), 2) for i in range(-1, 2) for j in range(-1, 2)]
+    return {"tb3_sandbox": sandbox, "room": World.from_table(ROOM),
+            "tb3_sandbox_3x3": World(np.concatenate(tiles), np.zeros((0, 3)))}
 
 
 MODES = ("off", "on", "thread")
@@ -201,6 +211,16 @@ def scan_cost(world: World, offset: tuple[float, float], repeat: int) -> dict[st
     rng = np.random.default_rng(0)
     job = ScanJob(grid, LIDAR._turn, 0.0, rng.standard_normal(LIDAR.model.samples),
                   motion=(track.start, track.log))
+    drawing = ScanJob(grid, LIDAR._turn, 0.0, None, motion=(track.start, track.log),
+                      draw=rng) if draws_in_c() else job
+    fan = grid.fan_bins
+
+    def walk() -> None:
+        grid.fan_bins = 0
+        try:
+            job.run()
+        finally:
+            grid.fan_bins = fan
     return {
         "segments": len(world.segments), "circles": len(world.circles),
         "cells": grid.shape[0] * grid.shape[1], "cell_m": grid.cell,
@@ -211,6 +231,8 @@ def scan_cost(world: World, offset: tuple[float, float], repeat: int) -> dict[st
                             10 * repeat),
         "noise_ms": _best_ms(lambda: rng.standard_normal(LIDAR.model.samples), 10 * repeat),
         "turn_ms": _best_ms(job.run, 10 * repeat),
+        "walk_turn_ms": _best_ms(walk, 10 * repeat),
+        "drawing_turn_ms": _best_ms(drawing.run, 10 * repeat),
         "reference_ms": _best_ms(lambda: LIDAR.scan_numpy(world, track, 0.0, rng), repeat),
         "numpy_gap": _gap(c, exact)[0], "numpy_bitwise": float(c.tobytes() == exact.tobytes()),
         "pymunk_gap": _gap(c, by_pymunk)[0], "pymunk_mismatch": _gap(c, by_pymunk)[1],
@@ -220,7 +242,8 @@ def scan_cost(world: World, offset: tuple[float, float], repeat: int) -> dict[st
 
 def runner_side_by_side(runs: int) -> dict[str, dict[str, float]]:
     """Per bundled lidar scenario: the runner's median real-time factor with the lidar
-    on and off, the simulated seconds and the scans a run."""
+    off, on, and on with each ray walking the grid (no fan), alternating; the
+    simulated seconds and the scans a run."""
     import dataclasses
 
     from wcdrive.sim import runner, scenario
@@ -230,25 +253,49 @@ def runner_side_by_side(runs: int) -> dict[str, dict[str, float]]:
         sc = scenario.load(name)
         off = dataclasses.replace(sc, lidar=None)
         first = runner.run(sc)                                 # a warm-up (the grid built)
-        rtf: dict[str, list[float]] = {"off": [], "on": []}
+        grid = sc.world.ray_grid if sc.world is not None else None
+        assert grid is not None and first.lidar is not None
+        fan = grid.fan_bins
+        rtf: dict[str, list[float]] = {"off": [], "on": [], "walk": []}
         for _ in range(runs):
             rtf["off"].append(runner.run(off).real_time_factor)
             rtf["on"].append(runner.run(sc).real_time_factor)
-        assert first.lidar is not None
+            grid.fan_bins = 0
+            try:
+                rtf["walk"].append(runner.run(sc).real_time_factor)
+            finally:
+                grid.fan_bins = fan
         out[name] = {mode: statistics.median(v) for mode, v in rtf.items()} | {
             "seconds": first.duration, "scans": float(len(first.lidar.scans))}
     return out
 
 
-def print_runner(runs: int) -> None:
-    rows = runner_side_by_side(runs)
-    print(f"\nthe scenario runner (port, host, plant; the turns on a scan thread), median of {runs}:")
-    print("| scenario | simulated | scans | lidar off | on | on / off | the lidar per turn |")
-    print("|---|---|---|---|---|---|---|")
-    for name, r in rows.items():
-        per_turn = (r["seconds"] / r["on"] - r["seconds"] / r["off"]) / r["scans"] * 1e3
-        print(f"| {name} | {r['seconds']:.1f} s | {r['scans']:.0f} | {r['off']:.0f}x | {r['on']:.0f}x "
-              f"| {r['on'] / r['off']:.3f} | {per_turn:.2f} ms |")
+def _hog() -> subprocess.Popen[bytes]:
+    """Another process keeping one core busy (as another developer's test run does)."""
+    return subprocess.Popen([sys.executable, "-c", "while True: pass"])
+
+
+def print_runner(runs: int, busy: bool) -> None:
+    for loaded in (False, True) if busy else (False,):
+        hog = _hog() if loaded else None
+        try:
+            rows = runner_side_by_side(runs)
+        finally:
+            if hog is not None:
+                hog.kill()
+                hog.wait()
+        where = "another process busy on one core" if loaded else "nothing else running"
+        print(f"\nthe scenario runner (port, host, plant; the turns on a scan thread), {where}, "
+              f"median of {runs}:")
+        print("| scenario | simulated | scans | lidar off | on | on / off | the lidar per turn "
+              "| on, no fan | on / off | the lidar per turn |")
+        print("|---|---|---|---|---|---|---|---|---|---|")
+        for name, r in rows.items():
+            def per_turn(mode: str, r: dict[str, float] = r) -> float:
+                return (r["seconds"] / r[mode] - r["seconds"] / r["off"]) / r["scans"] * 1e3
+            print(f"| {name} | {r['seconds']:.1f} s | {r['scans']:.0f} | {r['off']:.0f}x | {r['on']:.0f}x "
+                  f"| {r['on'] / r['off']:.3f} | {per_turn('on'):.3f} ms | {r['walk']:.0f}x "
+                  f"| {r['walk'] / r['off']:.3f} | {per_turn('walk'):.3f} ms |")
 
 
 def main() -> None:
@@ -257,10 +304,12 @@ def main() -> None:
     ap.add_argument("--runs", type=int, default=5, help="drives each way, each world")
     ap.add_argument("--quick", action="store_true", help="10 s, 2 runs")
     ap.add_argument("--runner-only", action="store_true", help="only the scenario runner's side by side")
+    ap.add_argument("--busy", action="store_true",
+                    help="the runner's side by side also with another process busy on one core")
     args = ap.parse_args()
     seconds, runs = (10.0, 2) if args.quick else (args.seconds, args.runs)
     if args.runner_only:
-        print_runner(runs)
+        print_runner(runs, args.busy)
         return
     costs = {name: scan_cost(world, WORLDS[name], 3 if args.quick else 5) for name, world in worlds().items()}
     print("one S3 turn (3,200 rays from a moving chair), best of several:")
@@ -274,13 +323,15 @@ def main() -> None:
               f"| {vs_numpy} | {c['pymunk_gap']:.1e} m, "
               f"{c['pymunk_mismatch']} hit/miss differences ({c['hits']} hits) |")
     print("\nthe whole Lidar.scan of one turn and its parts (ms), best of several:")
-    print("| world | Lidar.scan | noise draws | C turn (poses, casts, bins) | the rest (Python) "
+    print("| world | Lidar.scan | C turn (poses, fan, casts, bins) | the same, each ray walking the grid "
+          "| noise draws in C (numpy's own) | the rest (Python) | noise draws by numpy "
           "| Lidar.scan_numpy (its casts World.cast's) |")
-    print("|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|")
     for name, c in costs.items():
-        rest = c["scan_ms"] - c["noise_ms"] - c["turn_ms"]
-        print(f"| {name} | {c['scan_ms']:.3f} | {c['noise_ms']:.3f} | {c['turn_ms']:.3f} | {rest:.3f} "
-              f"| {c['reference_ms']:.2f} |")
+        draws = c["drawing_turn_ms"] - c["turn_ms"]
+        rest = c["scan_ms"] - c["drawing_turn_ms"]
+        print(f"| {name} | {c['scan_ms']:.3f} | {c['turn_ms']:.3f} | {c['walk_turn_ms']:.3f} | {draws:.3f} "
+              f"| {rest:.3f} | {c['noise_ms']:.3f} | {c['reference_ms']:.2f} |")
     rtf = rtf_side_by_side(seconds, runs)
     print(f"\nreal-time factor, stepped port + plant, {seconds:g} s drives, median of {runs}:")
     print("| world | lidar off | on | on / off | lidar's ms per scan | on, scan thread | on / off "
@@ -297,7 +348,7 @@ def main() -> None:
     drift = max(r["drift"] for r in rtf.values())
     print(f"(the pose integrated from the motion log is within {drift * 1e3:.2f} mm of the plant's at each "
           "turn's end)")
-    print_runner(runs)
+    print_runner(runs, args.busy)
 
 
 if __name__ == "__main__":
