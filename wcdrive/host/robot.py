@@ -5,7 +5,7 @@ and the Parallax Eddie (``wcdrive.eddie.robot.EddieRobot``). Navigation code wri
 against ``Robot`` runs on either unchanged (``wcdrive.connect("sim://")``,
 ``"simavr://"``, ``"eddie+sim://"``, ``"eddie:///dev/ttyUSB0"``). It is a structural
 ``typing.Protocol``, not a base class: the two classes share no code (one speaks
-framed protocol v3 with acknowledgements, the other the Eddie's request/reply ASCII),
+framed protocol v4 with acknowledgements, the other the Eddie's request/reply ASCII),
 so a base class would hold nothing but these signatures, and a Protocol keeps
 ``Wheelchair`` untouched. Each robot's extras stay on its own class (the chair's
 e-stop and parameters; Eddie's PING))), ADC, GPIO, ``travel``/``turn``): code that

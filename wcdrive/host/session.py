@@ -1,7 +1,7 @@
 """The serial session with one board: the port and its reader thread, and the parts that
 make the protocol, composed.
 
-``Session`` speaks protocol v3 (``protocol/PROTOCOL.md``) over any ``Port``: every
+``Session`` speaks protocol v4 (``protocol/PROTOCOL.md``) over any ``Port``: every
 line it writes is a frame ``$<seq>:<command>*<CCCC>\\n`` with its own sequence
 number, from one counter (the hello, motion, requests, the last stop). It turns the
 bytes the board sends into messages, hands each tick's feedback to a callback

@@ -512,7 +512,7 @@ class Wheelchair:
 
     # ---- handshake and telemetry ------------------------------------------------------
     def wait_for_handshake(self, timeout: float = 5.0) -> int:
-        """Waits until the board answered hello; returns the protocol version (3; 1 in
+        """Waits until the board answered hello; returns the protocol version (4; 1 in
         legacy mode). Raises ``WcdriveProtocolError`` when it never answers (unless
         legacy) or names a version this host does not know, ``WcdriveTimeoutError``
         when the handshake is not over after ``timeout`` s."""
