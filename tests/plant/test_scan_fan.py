@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import resource
+import time
 
 import numpy as np
 import pytest
@@ -17,7 +18,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from wcdrive.plant.lidar import Lidar, LidarMount, MotionTrack
-from wcdrive.plant.raycast import MAX_FAN_BINS, RayGrid, ScanJob, Turn, draws_in_c
+from wcdrive.plant.raycast import MAX_FAN_BINS, RayGrid, ScanJob, ScanPipe, Turn, draws_in_c
 from wcdrive.plant.world import World
 
 from .test_lidar_scan import ROOM, SANDBOX, _log, _same_scan
@@ -209,3 +210,18 @@ def test_a_track_that_starts_before_its_turn() -> None:
     _same_scan(got, lidar.scan_numpy(SANDBOX, track(), 0.1, np.random.default_rng(3)), allowed=2)
     # the track keeps the knots the scan integrated: numpy's
     assert np.allclose(np.stack(made.knots), np.stack(track().knots_numpy()), rtol=0, atol=1e-12)
+
+
+def test_an_idle_scan_thread_sleeps() -> None:
+    """After a job the pipe's thread watches for the next one at most 0.1 ms, then
+    sleeps: a pipe left idle burns no core."""
+    grid = ROOM.ray_grid
+    assert grid is not None
+    lidar = Lidar()
+    track = MotionTrack((0.0, 0.0, 0.0), 0.0, _log(0.0, 100, 0.4, 0.0, 0.5))
+    with ScanPipe() as pipe:
+        for _ in range(3):
+            lidar.start_scan(ROOM, track, 0.0, None, pipe).result()
+        cpu = time.process_time()
+        time.sleep(0.3)
+        assert time.process_time() - cpu < 0.03
