@@ -401,10 +401,11 @@ def soak(backend: str, hours: float, speed: float, seed: int, record: Path | Non
                 at_rest = chair.odometry.pose
                 before_reset[0] = (at_rest.x, at_rest.y, at_rest.theta)
                 sent.reset()
+                seen = chair.boots
                 board.dtr()
                 sent.frozen = False
                 with pace.answering():
-                    chair.wait_for_handshake(10.0)
+                    chair.wait_for_boot(seen, 10.0)     # the new board's BOOT read, hello answered
                 pace.silent(0.5)
                 continue
             stop_at = board.time + length

@@ -356,6 +356,26 @@ def test_a_board_that_resets_mid_session_is_handshaken_again(rig) -> None:
         _wait(lambda: state.targetL > 0, "the new board to drive", timeout=2.0)
 
 
+def test_wait_for_boot_returns_once_the_reset_is_seen_and_hello_answered(rig) -> None:
+    """``boots`` counts the ``BOOT:`` lines read; ``wait_for_boot(seen)`` returns once a
+    reset past ``seen`` was read and the new board answered hello (so it sends TLM),
+    and times out when no reset comes."""
+    tamper, path = rig
+    with wcdrive.connect(path) as chair:
+        assert chair.wait_for_handshake(5.0) == 4
+        seen = chair.boots
+        assert seen >= 1
+        with pytest.raises(wcdrive.WcdriveTimeoutError, match="no reset"):
+            chair.wait_for_boot(seen, timeout=0.2)
+        for _ in range(2):
+            seen = chair.boots
+            _reset_board(tamper.board)
+            assert chair.wait_for_boot(seen, timeout=5.0) == 4
+            assert chair.boots == seen + 1 and chair.events.count("BOARD_RESET") == seen
+            assert tamper.board.loop.fw.state.tlmEnabled                  # the new board's hello
+        assert chair.wait_for_boot(seen, timeout=0.0) == 4                 # seen already
+
+
 def test_a_reset_that_cuts_a_line_is_still_seen(rig) -> None:
     """A reset while the board sends a line: its ``BOOT:`` line starts where the cut line
     stopped (``ENC:-7585,7424,VEL:2.68,2.63BOOT:...``). The host still sees the reset and

@@ -138,6 +138,10 @@ class Session:
                                       lambda: self.link.lost, self.errors)
         self.handshake = Handshake(self.name, lambda: self.tracker.send_frame(HELLO_COMMAND),
                                    self._greeted, legacy=legacy)
+        #: ``BOOT:`` lines read from the board (each counted once the host has forgotten
+        #: what it knew of the board before it), and the condition told of each
+        self.boots = 0
+        self._booted = threading.Condition()
         self._dispatch: dict[type, Callable[[float, Any], None]] = {
             ExtendedTelemetry: self._on_telemetry, Feedback: self._on_feedback,
             Boot: self._on_boot, Hello: self._on_hello, Param: self._on_param,
@@ -248,6 +252,20 @@ class Session:
             raise WcdriveProtocolError(str(self.handshake.error))
         return self.protocol_version
 
+    def wait_for_boot(self, seen: int, timeout: float = 5.0) -> int:
+        """Waits until the host has read a ``BOOT:`` line past the first ``seen``
+        (``boots`` before a reset the caller caused: a DTR pulse, a power cycle) and
+        the handshake after it is done; returns the protocol version. Until the host
+        has read that line, ``wait_for_handshake`` may return at once: the handshake
+        before the reset is still done. Raises ``WcdriveTimeoutError`` when no such line
+        came within ``timeout`` s, or as ``wait_for_handshake`` does."""
+        deadline = time.monotonic() + timeout
+        with self._booted:
+            if not self._booted.wait_for(lambda: self.boots > seen, timeout):
+                raise WcdriveTimeoutError(f"no reset of {self.name} seen in {timeout} s "
+                                          f"({self.boots} BOOT lines read, {seen} before)")
+        return self.wait_for_handshake(max(0.0, deadline - time.monotonic()))
+
     # ---- the reader thread -----------------------------------------------------------
     def _read_loop(self) -> None:
         while not self.closed.is_set():
@@ -312,6 +330,9 @@ class Session:
                 self._forget_board()
             self.events.append("BOARD_RESET")       # the cause: reset_cause
             _log.warning("%s: the board reset (%s)", self.name, msg.cause)
+        with self._booted:
+            self.boots += 1
+            self._booted.notify_all()
         self.handshake.step(now, first=True)
 
     def _on_hello(self, now: float, msg: Hello) -> None:

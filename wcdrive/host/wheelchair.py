@@ -518,6 +518,26 @@ class Wheelchair:
         when the handshake is not over after ``timeout`` s."""
         return self._session.wait_for_handshake(timeout)
 
+    @property
+    def boots(self) -> int:
+        """How many ``BOOT:`` lines the host has read from the board (one at start-up,
+        one more for each reset): read it before causing a reset, then
+        ``wait_for_boot``."""
+        return self._session.boots
+
+    def wait_for_boot(self, seen: int, timeout: float = 5.0) -> int:
+        """Waits until the board has reset past ``seen`` boots (``boots`` before the
+        reset) and answered hello again; returns the protocol version. Right after a
+        reset ``wait_for_handshake`` may return at once, the host not having read the
+        ``BOOT:`` line yet. ``WcdriveTimeoutError`` when no reset is seen within
+        ``timeout`` s.
+
+            seen = chair.boots
+            board.dtr()                 # or a power cycle
+            chair.wait_for_boot(seen, timeout=10.0)
+        """
+        return self._session.wait_for_boot(seen, timeout)
+
     def wait_for_telemetry(self, timeout: float = 5.0) -> Telemetry:
         """The next tick's telemetry (``WcdriveTimeoutError`` after ``timeout`` s)."""
         for t in self.telemetry(timeout=timeout):
