@@ -236,7 +236,7 @@ class Session:
         return self.tracker.request(request)
 
     # ---- handshake -------------------------------------------------------------------
-    def wait_for_handshake(self, timeout: float = 5.0) -> int:
+    def wait_for_handshake(self, timeout: float | None = 5.0) -> int:
         """Waits until the board answered hello; returns the protocol version (4, or 1
         in legacy mode after three hellos went unanswered). Raises
         ``WcdriveProtocolError`` when the board never answers hello (unless legacy) or
@@ -252,19 +252,24 @@ class Session:
             raise WcdriveProtocolError(str(self.handshake.error))
         return self.protocol_version
 
-    def wait_for_boot(self, seen: int, timeout: float = 5.0) -> int:
+    def wait_for_boot(self, seen: int, timeout: float | None = 5.0) -> int:
         """Waits until the host has read a ``BOOT:`` line past the first ``seen``
         (``boots`` before a reset the caller caused: a DTR pulse, a power cycle) and
-        the handshake after it is done; returns the protocol version. Until the host
-        has read that line, ``wait_for_handshake`` may return at once: the handshake
-        before the reset is still done. Raises ``WcdriveTimeoutError`` when no such line
-        came within ``timeout`` s, or as ``wait_for_handshake`` does."""
-        deadline = time.monotonic() + timeout
+        the handshake after it is done (None: no limit); returns the protocol version.
+        Until the host has read that line, ``wait_for_handshake`` may return at once:
+        the handshake before the reset is still done. Raises ``WcdriveTimeoutError``
+        when no such line came within ``timeout`` s, or as ``wait_for_handshake`` does.
+
+        It counts ``BOOT:`` lines: any reset read after ``seen`` was taken answers it (take
+        ``seen`` once the handshake is done), and a reset whose ``BOOT:`` line was lost (it
+        carries no CRC) or never sent (a reopened device) is not seen. In legacy mode
+        (protocol 1) the board is not greeted again: it returns once the line is read."""
+        deadline = None if timeout is None else time.monotonic() + timeout
         with self._booted:
             if not self._booted.wait_for(lambda: self.boots > seen, timeout):
                 raise WcdriveTimeoutError(f"no reset of {self.name} seen in {timeout} s "
                                           f"({self.boots} BOOT lines read, {seen} before)")
-        return self.wait_for_handshake(max(0.0, deadline - time.monotonic()))
+        return self.wait_for_handshake(None if deadline is None else max(0.0, deadline - time.monotonic()))
 
     # ---- the reader thread -----------------------------------------------------------
     def _read_loop(self) -> None:

@@ -525,12 +525,13 @@ class Wheelchair:
         ``wait_for_boot``."""
         return self._session.boots
 
-    def wait_for_boot(self, seen: int, timeout: float = 5.0) -> int:
+    def wait_for_boot(self, seen: int, timeout: float | None = 5.0) -> int:
         """Waits until the board has reset past ``seen`` boots (``boots`` before the
         reset) and answered hello again; returns the protocol version. Right after a
         reset ``wait_for_handshake`` may return at once, the host not having read the
         ``BOOT:`` line yet. ``WcdriveTimeoutError`` when no reset is seen within
-        ``timeout`` s.
+        ``timeout`` s (None: no limit). It counts ``BOOT:`` lines (``Session.wait_for_boot``
+        says what that misses): take ``seen`` once the handshake is done.
 
             seen = chair.boots
             board.dtr()                 # or a power cycle

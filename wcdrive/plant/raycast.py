@@ -199,8 +199,9 @@ class RayGrid:
         w, h = float(hi[0] - lo[0]), float(hi[1] - lo[1])
         size = max(w, h, 1e-6)
         cs = cell_factor * math.sqrt(max(w, size / 64) * max(h, size / 64) / n)
-        # at most MAX_CELLS a side, the padding (eps, large for a world far out) included
-        cs = max(cs, (size + 4 * self.eps) / (MAX_CELLS - 2), 1e-6)
+        # at most MAX_CELLS a side, the padding (eps, large for a world far out) included,
+        # and cells no smaller than the padding (else each would hold every item near it)
+        cs = max(cs, (size + 4 * self.eps) / (MAX_CELLS - 2), 4 * self.eps, 1e-6)
         # cell edges off the round figures a map's walls lie on
         pad = 0.309 * cs + self.eps
         nx = math.floor((w + 2 * pad) / cs) + 1
