@@ -407,8 +407,9 @@ static int spans_add(fan_spans *s, int32_t item, int32_t lo, int32_t hi, double 
     return 1;
 }
 
-/* The fan of the rays (their bins set, -1 for a ray with no finite figures); 0 when
- * it cannot be had (every ray then walks the grid). */
+/* The fan of the rays (their bins set, -1 for a ray that walks the grid: one whose
+ * figures are not finite or whose direction is not a unit vector); 0 when it cannot be
+ * had (every ray then walks the grid). */
 static int fan_build(rc_rays *w, const rc_grid *g, int32_t samples) {
     int32_t bins = w->bins, per_group = bins / FAN_GROUPS;
     double box[FAN_GROUPS][4], all[4] = {INFINITY, INFINITY, -INFINITY, -INFINITY};
@@ -920,13 +921,11 @@ typedef struct {
 #define PIPE_AWAKE_NS 100000
 #endif
 
-static int64_t clock_ns(clockid_t clock) {
+static int64_t monotonic_ns(void) {
     struct timespec t;
-    clock_gettime(clock, &t);
+    clock_gettime(CLOCK_MONOTONIC, &t);
     return (int64_t)t.tv_sec * 1000000000 + t.tv_nsec;
 }
-
-static int64_t monotonic_ns(void) { return clock_ns(CLOCK_MONOTONIC); }
 
 /* With the lock held (and held again on return): waits awake up to PIPE_AWAKE_NS for
  * a job to be queued, or the pipe closed. */
