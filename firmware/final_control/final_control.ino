@@ -612,29 +612,26 @@ static void emergencyHalt() {
 #define WHEEL_IMPLAUSIBLE 4
 #define WHEEL_NO_EFFECT 5
 // Effort without progress: toward a steady setpoint the duty has stayed
-// WC_FAULT_EFFORT_PWM above its lowest for WC_FAULT_EFFORT_TICKS ticks in a row while the
-// wheel gained no speed, turns slower than WC_FAULT_EFFORT_SHORTFALL of its setpoint, and
-// leads the other wheel (other: its measured speed) by less than WC_FAULT_EFFORT_LEAD its
-// way (a dead motor, a broken motor wire: the wheel is only dragged along, and trails the
-// wheel that drags it, or stands when that one turns against it). A wheel that leads is
-// pulled by its own motor, at its current limit on a grade. A new setpoint, a duty away
-// from it, any gain in speed, or the wheel turning faster than its setpoint starts over:
-// a wheel being slowed to its setpoint (a sharp change of course) runs on a low duty, and
-// its return to the duty that holds the setpoint is no effort without progress.
-// The other wheel showing effort without progress too (otherRising: effortRising)
-// starts over as well: both wheels held back is the chair's load (a grade, a turn it
-// resists), not one motor; a dead motor's partner keeps its setpoint while it drags it.
-// While the other wheel's own motor drives it on beyond its setpoint (otherOverruns:
-// overruns), the chair is not following the command, and this wheel's effort goes into
-// turning it: the count starts over. (A partner carried beyond its setpoint by a slope
-// is braked, not driven: it stops nothing.)
+// WC_FAULT_EFFORT_PWM above its lowest (or at full duty, which can rise no more, with the
+// other wheel's duty, otherPwm, WC_FAULT_EFFORT_PWM or less below it: the chair at its top
+// speed, not the outer wheel of a turn) for WC_FAULT_EFFORT_TICKS ticks in a row while the
+// wheel gained no speed, turns slower than WC_FAULT_EFFORT_SHORTFALL_MOTOR of its setpoint,
+// and leads the other wheel (other: its measured speed) by less than WC_FAULT_EFFORT_LEAD
+// its way (a dead motor's wheel is only dragged along, and trails the wheel that drags it,
+// or stands when that one turns against it). A new setpoint, a duty away from it, any
+// gain in speed, or the wheel turning faster than its setpoint starts over: a wheel being
+// slowed to its setpoint (a sharp change of course) runs on a low duty, and its return to
+// the duty that holds the setpoint is no effort without progress. While the other wheel's
+// own motor drives it on beyond its setpoint (otherOverruns: overruns), the chair is not
+// following the command, and this wheel's effort goes into turning it: the count starts
+// over. (A partner carried beyond its setpoint by a slope is braked, not driven: it stops
+// nothing.) Whose load it is, one motor's or the chair's, is the caller's: effortLeads.
 static bool noEffect(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, float measured,
-                     float other, bool otherRising, bool otherOverruns, uint8_t& effortPwm,
-                     float& effortSpeed, float& effortSetpoint, uint8_t& effortTicks) {
+                     float other, uint8_t otherPwm, bool otherOverruns, uint8_t& effortPwm, float& effortSpeed,
+                     float& effortSetpoint, uint8_t& effortTicks) {
   float progress = setpoint > 0.0f ? measured : -measured;
   bool toward = setpoint != 0.0f && (appliedDir == HIGH) == (setpoint > 0.0f);
-  if (!toward || setpoint != effortSetpoint || progress > effortSpeed || progress > fabs(setpoint) ||
-      otherRising) {
+  if (!toward || setpoint != effortSetpoint || progress > effortSpeed || progress > fabs(setpoint)) {
     effortSetpoint = setpoint;
     effortSpeed = progress;
     effortPwm = appliedPwm;
@@ -645,19 +642,53 @@ static bool noEffect(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, flo
   bool shortfall = fabs(measured) < WC_FAULT_EFFORT_SHORTFALL_MOTOR * fabs(setpoint);
   float otherProgress = setpoint > 0.0f ? other : -other;
   bool trails = progress < (otherProgress > 0.0f ? otherProgress : 0.0f) + WC_FAULT_EFFORT_LEAD;
-  effortTicks = shortfall && trails && !otherOverruns && appliedPwm >= effortPwm + WC_FAULT_EFFORT_PWM
-                    ? effortTicks + 1
-                    : 0;
+  bool rose = appliedPwm >= effortPwm + WC_FAULT_EFFORT_PWM ||
+              (appliedPwm == 255 && otherPwm + WC_FAULT_EFFORT_PWM >= 255);
+  effortTicks = shortfall && trails && !otherOverruns && rose ? effortTicks + 1 : 0;
   return effortTicks >= WC_FAULT_EFFORT_TICKS;
 }
 
-// Effort without progress too: driven WC_FAULT_EFFORT_PWM or more above the lowest duty
-// since its effort reference (taken toward a setpoint; any gain in speed renews it) and
-// slower than WC_FAULT_EFFORT_SHORTFALL_MOTOR of its setpoint.
-static bool effortRising(uint8_t appliedPwm, uint8_t effortPwm, float effortSetpoint,
-                         float setpoint, float measured) {
-  return effortSetpoint != 0.0f && appliedPwm >= effortPwm + WC_FAULT_EFFORT_PWM &&
-         fabs(measured) < WC_FAULT_EFFORT_SHORTFALL_MOTOR * fabs(setpoint);
+// A wheel's effort: its duty toward its setpoint (against it, negative) less what the
+// back-EMF of its speed that way takes (WC_FAULT_EFFORT_EMF per rad/s), the share of the
+// duty that drives current, so torque (negative: braking); within WC_FAULT_EFFORT_MAX
+// either way, the driver's current limit, past which more gives no more torque. 0
+// without a setpoint.
+static float effortOf(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, float measured) {
+  if (setpoint == 0.0f) return 0.0f;
+  bool forward = setpoint > 0.0f;
+  float duty = (appliedDir == HIGH) == forward ? (float)appliedPwm : -(float)appliedPwm;
+  float progress = forward ? measured : -measured;
+  float effort = duty - WC_FAULT_EFFORT_EMF * progress;
+  if (effort <= -WC_FAULT_EFFORT_MAX) return -WC_FAULT_EFFORT_MAX;
+  return effort < WC_FAULT_EFFORT_MAX ? effort : WC_FAULT_EFFORT_MAX;
+}
+
+// One motor's fault, not the chair's load: the wheel's effort (effortOf) leads the other
+// wheel's by WC_FAULT_EFFORT_LEAD_PWM or more; or it should brake at the current limit
+// (its duty far below its back-EMF) while the other brakes WC_FAULT_EFFORT_LEAD_PWM less,
+// and yet its PID winds its duty up without a gain (a dead wheel carried along by the
+// chair down a grade: a healthy one would brake, and slow, harder than its partner); or,
+// both at the current limit
+// (WC_FAULT_EFFORT_MAX) and the other short of its setpoint, it turns WC_FAULT_EFFORT_LAG
+// slower than the other, each its own way, beyond what the setpoints ask (a setpoint
+// asking this wheel for more than the other is no excuse: at the limit neither gets
+// its setpoint). A dead motor's PID winds its duty up while the partner carries the
+// chair at its own, and where both ask more than the current limit gives, equal torques
+// would keep the wheels together: a wheel left behind is one without torque. A grade, a
+// kerb or a ramp's edge loads both wheels alike, and both duties rise together,
+// whichever wheel's count ran first.
+static bool effortLeads(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, float measured,
+                        uint8_t otherPwm, uint8_t otherDir, float otherSetpoint, float other) {
+  float effort = effortOf(appliedPwm, appliedDir, setpoint, measured);
+  float otherEffort = effortOf(otherPwm, otherDir, otherSetpoint, other);
+  if (effort >= otherEffort + WC_FAULT_EFFORT_LEAD_PWM) return true;
+  if (effort <= -WC_FAULT_EFFORT_MAX && otherEffort >= effort + WC_FAULT_EFFORT_LEAD_PWM) return true;
+  if (effort < WC_FAULT_EFFORT_MAX || otherEffort < WC_FAULT_EFFORT_MAX) return false;
+  float progress = setpoint > 0.0f ? measured : -measured;
+  float otherProgress = otherSetpoint > 0.0f ? other : -other;
+  if (otherProgress >= fabs(otherSetpoint)) return false;
+  float asked = fabs(otherSetpoint) - fabs(setpoint);
+  return (otherProgress - progress) - (asked > 0.0f ? asked : 0.0f) >= WC_FAULT_EFFORT_LAG;
 }
 
 // Driven on beyond its setpoint: a duty toward the setpoint (not braking) while the wheel
@@ -723,7 +754,7 @@ static bool straining(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, fl
 
 static uint8_t checkWheel(int32_t delta, uint32_t illegal, uint8_t storm, uint8_t appliedPwm,
                           uint8_t appliedDir, float setpoint, float measured, float other,
-                          bool otherRising, bool otherOverruns, uint8_t& stallTicks,
+                          uint8_t otherPwm, bool otherOverruns, uint8_t& stallTicks,
                           uint8_t& reverseTicks, uint8_t& runawayTicks, uint8_t& effortPwm,
                           float& effortSpeed, float& effortSetpoint, uint8_t& effortTicks,
                           float prevMeasured) {
@@ -742,21 +773,32 @@ static uint8_t checkWheel(int32_t delta, uint32_t illegal, uint8_t storm, uint8_
   if (reverseTicks >= WC_FAULT_REVERSE_TICKS) return WHEEL_REVERSED;
   runawayTicks = runsAway(appliedPwm, appliedDir, setpoint, measured, prevMeasured) ? runawayTicks + 1 : 0;
   if (runawayTicks >= WC_FAULT_RUNAWAY_TICKS) return WHEEL_REVERSED;
-  if (noEffect(appliedPwm, appliedDir, setpoint, measured, other, otherRising, otherOverruns,
-               effortPwm, effortSpeed, effortSetpoint, effortTicks)) {
+  if (noEffect(appliedPwm, appliedDir, setpoint, measured, other, otherPwm, otherOverruns, effortPwm,
+               effortSpeed, effortSetpoint, effortTicks)) {
     return WHEEL_NO_EFFECT;
   }
   return (stalled || against) ? WHEEL_SUSPECT : WHEEL_OK;
 }
 
-// A wheel at the chair's limit rather than faulty: its check found no effect or a reversal
-// (check) while the other wheel shows the same load: it strains toward its setpoint
-// (straining), or its reversed or effort count runs too. One wheel alone is a fault; both
-// at once are the world (a grade, a command beyond the chair).
-static bool atLimit(uint8_t check, bool otherStrains, uint8_t otherReverse, uint8_t otherRunaway,
-                    uint8_t otherEffort) {
-  return (check == WHEEL_NO_EFFECT || check == WHEEL_REVERSED) &&
+// A wheel at the chair's limit rather than faulty. No effect (check) with an effort that
+// does not lead the other wheel's (leads: effortLeads), slower than WC_GRADE_STALL of its
+// setpoint its way (stalls), while the other wheel strains toward its setpoint
+// (otherStrains: straining) or shows effort without progress too (otherEffort): both
+// wheels held back to a crawl is a grade beyond the chair, not a motor. A reversal
+// (check) while the other wheel strains, or its reversed, runaway or effort count runs:
+// both wheels pushed back. One wheel alone is a fault; both at once are the world (a
+// grade, a command beyond the chair).
+static bool atLimit(uint8_t check, bool leads, bool stalls, bool otherStrains, uint8_t otherReverse,
+                    uint8_t otherRunaway, uint8_t otherEffort) {
+  if (check == WHEEL_NO_EFFECT) return !leads && stalls && (otherStrains || otherEffort != 0);
+  return check == WHEEL_REVERSED &&
          (otherStrains || otherReverse != 0 || otherRunaway != 0 || otherEffort != 0);
+}
+
+// Stalling: slower than WC_GRADE_STALL of its setpoint its way (or against it).
+static bool stalling(float setpoint, float measured) {
+  float progress = setpoint > 0.0f ? measured : -measured;
+  return progress < WC_GRADE_STALL * fabs(setpoint);
 }
 
 // The fault bits of one wheel's check (its stall, reversed, implausible and motor bits).
@@ -902,28 +944,48 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
   if (faultFlags == 0) {
     bool strainL = straining(pwmL, dirL, setpointL, filtVelL);
     bool strainR = straining(pwmR, dirR, setpointR, filtVelR);
-    // The other wheel's effort without progress, short of the chair's limit (straining:
-    // that is atLimit's, a grade): the load is shared, not one motor's.
-    bool risingL = !strainL && effortRising(pwmL, effortPwmL, effortSetpointL, setpointL, filtVelL);
-    bool risingR = !strainR && effortRising(pwmR, effortPwmR, effortSetpointR, setpointR, filtVelR);
     bool overrunL = overruns(pwmL, dirL, setpointL, filtVelL);
     bool overrunR = overruns(pwmR, dirR, setpointR, filtVelR);
     checkL = checkWheel(deltaL, illDeltaL, stormTickL, pwmL, dirL, setpointL, filtVelL, filtVelR,
-                        risingR, overrunR, stallTicksL, reverseTicksL, runawayTicksL, effortPwmL, effortSpeedL,
+                        pwmR, overrunR, stallTicksL, reverseTicksL, runawayTicksL, effortPwmL, effortSpeedL,
                         effortSetpointL, effortTicksL, prevMeasL);
     checkR = checkWheel(deltaR, illDeltaR, stormTickR, pwmR, dirR, setpointR, filtVelR, filtVelL,
-                        risingL, overrunL, stallTicksR, reverseTicksR, runawayTicksR, effortPwmR,
-                        effortSpeedR, effortSetpointR, effortTicksR, prevMeasR);
+                        pwmL, overrunL, stallTicksR, reverseTicksR, runawayTicksR, effortPwmR, effortSpeedR,
+                        effortSetpointR, effortTicksR, prevMeasR);
+    // Effort without progress is one motor's only while its effort leads the other's.
+    bool leadsL = checkL == WHEEL_NO_EFFECT &&
+                  effortLeads(pwmL, dirL, setpointL, filtVelL, pwmR, dirR, setpointR, filtVelR);
+    bool leadsR = checkR == WHEEL_NO_EFFECT &&
+                  effortLeads(pwmR, dirR, setpointR, filtVelR, pwmL, dirL, setpointL, filtVelL);
     // Driving only: a held wheel that runs away is a fault (a reversed encoder turns the
     // hold into positive feedback), whatever the other wheel does.
-    bool limitL = !holding && atLimit(checkL, strainR, reverseTicksR, runawayTicksR, effortTicksR);
-    bool limitR = !holding && atLimit(checkR, strainL, reverseTicksL, runawayTicksL, effortTicksL);
-    if (limitL) checkL = WHEEL_OK;
-    if (limitR) checkR = WHEEL_OK;
+    bool limitL = !holding && atLimit(checkL, leadsL, stalling(setpointL, filtVelL), strainR,
+                                      reverseTicksR, runawayTicksR, effortTicksR);
+    bool limitR = !holding && atLimit(checkR, leadsR, stalling(setpointR, filtVelR), strainL,
+                                      reverseTicksL, runawayTicksL, effortTicksL);
+    // The limit, or a load both wheels share short of it (no lead): not a fault.
+    if (limitL || (checkL == WHEEL_NO_EFFECT && !leadsL)) checkL = WHEEL_OK;
+    if (limitR || (checkR == WHEEL_NO_EFFECT && !leadsR)) checkR = WHEEL_OK;
     bool overL = overspeedRun(!holding && overspeeding(pwmL, dirL, setpointL, targetL, filtVelL),
                               filtVelL, prevMeasL, overspeedTicksL, overspeedFromL);
     bool overR = overspeedRun(!holding && overspeeding(pwmR, dirR, setpointR, targetR, filtVelR),
                               filtVelR, prevMeasR, overspeedTicksR, overspeedFromR);
+    // One wheel gaining speed beyond its setpoint however hard it is braked, for
+    // WC_OVERSPEED_ONE_TICKS ticks, while the other brakes at the current limit too (its
+    // effort WC_FAULT_EFFORT_MAX against its setpoint: the chair is going down a grade)
+    // and holds (not overspeeding at all): its motor does not brake. Gravity beating both
+    // brakes is the chair's (OVERSPEED, below); a wheel pushed on while its partner
+    // drives is the runaway rule's.
+    if (overL && overspeedTicksL >= WC_OVERSPEED_ONE_TICKS && overspeedTicksR == 0 &&
+        effortOf(pwmR, dirR, setpointR, filtVelR) <= -WC_FAULT_EFFORT_MAX &&
+        (checkL == WHEEL_OK || checkL == WHEEL_SUSPECT)) {
+      checkL = WHEEL_NO_EFFECT;
+    }
+    if (overR && overspeedTicksR >= WC_OVERSPEED_ONE_TICKS && overspeedTicksL == 0 &&
+        effortOf(pwmL, dirL, setpointL, filtVelL) <= -WC_FAULT_EFFORT_MAX &&
+        (checkR == WHEEL_OK || checkR == WHEEL_SUSPECT)) {
+      checkR = WHEEL_NO_EFFECT;
+    }
     uint16_t faults;
     if (checkL == WHEEL_STALLED && checkR == WHEEL_STALLED) {
       faults = FAULT_DRIVER;   // both wheels driven, neither turns: the driver or its supply
@@ -940,8 +1002,7 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
       runawayTicksL = runawayTicksR = 0;
       sendFaultEvents(faults);
     } else if (overL && overR) {
-      // both wheels: gravity on the whole chair (one alone is a wheel's fault, left to the
-      // runaway rule)
+      // both wheels: gravity on the whole chair (one alone is its motor's fault, above)
       halt = hardest = true;
       sendEvent(F("OVERSPEED"));
     } else if (limitL || limitR) {

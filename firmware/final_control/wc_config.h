@@ -95,6 +95,10 @@
 #define WC_FAULT_EFFORT_LEAD 0.5f  // rad/s: ...while turning its way no faster than this beyond the other wheel (or beyond standing, when the other turns against it): a dead motor's wheel is only dragged, and trails the wheel that drags it
 #define WC_FAULT_EFFORT_TICKS 4    // consecutive ticks of that effort without progress: the motor fault
 #define WC_FAULT_EFFORT_OVERRUN 0.5f // rad/s: ...nor while the other wheel turns this much beyond its setpoint its way: the chair does not follow the command (momentum, a slope), and the wheel's effort goes into it
+#define WC_FAULT_EFFORT_EMF 14.5f  // duty per rad/s of wheel speed that the motor's back-EMF takes (255 / MAX_WHEEL_SPEED, rounded): a wheel's duty less this times its speed is its effort, the share of the duty that drives current
+#define WC_FAULT_EFFORT_MAX 41.0f  // the largest effort that counts (duty): what drives the driver's 13 A current limit through the 0.3 ohm armature from 24 V; a wheel asking more gets no more torque, so two wheels at their current limit have equal efforts, however far one is behind
+#define WC_FAULT_EFFORT_LEAD_PWM 10.0f // ...and the motor fault only while the wheel's effort leads the other wheel's (toward its own setpoint) by this much duty: one motor doing nothing while its partner carries the chair, not the chair's load on both (a grade, a kerb, a ramp's edge)
+#define WC_FAULT_EFFORT_LAG 1.0f   // rad/s: ...or, both efforts at FAULT_EFFORT_MAX, while the wheel falls this much farther short of its setpoint than the other of its own: equal torques do not turn a chair, a dead motor's partner at its current limit does
 #define WC_FAULT_ILLEGAL_PER_TICK 4 // illegal transitions in one tick: implausible encoder
 #define WC_STORM_EDGES 80          // edges of one encoder in one Timer0 period (1.024 ms) that mask it: 78,000 edges/s, > 2.5x top speed, above the 70,000 every edge is counted at
 #define WC_STORM_COMPARE 128       // OCR0A: the Timer0 count at which each storm window starts
@@ -109,7 +113,9 @@
 #define WC_OVERSPEED_MARGIN 1.0f   // rad/s a wheel braked at OVERSPEED_PWM may run beyond its setpoint before it counts as overspeeding
 #define WC_OVERSPEED_GAIN 0.3f     // rad/s a wheel must gain over a run of overspeeding ticks, from the speed before its first: gravity beats the brakes (within its rated grade a braked chair slows, however slowly)
 #define WC_OVERSPEED_TICKS 2       // ticks in a row overspeeding (0.1 s) at least, with OVERSPEED_GAIN gained over them: EVT:OVERSPEED, the chair parks braking hardest
+#define WC_OVERSPEED_ONE_TICKS 6   // ticks in a row (0.3 s) that one wheel overspeeds, OVERSPEED_GAIN faster than before its first, while the other brakes at the current limit and holds: its motor does not brake (EVT:FAULT,MOTOR_L/R)
 #define WC_GRADE_PWM 128           // duty (50 %) toward its setpoint at or above which a wheel short of it is straining: both straining is the chair's limit (a grade), not a fault
+#define WC_GRADE_STALL 0.25f       // fraction of its setpoint below which a wheel showing effort without progress, no more than its partner, is stalling on the grade: both wheels so is EVT:STALLED_ON_GRADE (within the rated grade a chair slows on the climb, to no less than 84 % of full speed at full duty, and keeps climbing)
 #define WC_ROLLAWAY_COUNTS 209     // encoder counts (2 cm of travel: 0.02 m / (2 pi WHEEL_RADIUS) x CPR) a held wheel may be pushed off its count before EVT:ROLLAWAY
 
 // ---- Modes (printed as MODE:WHEEL / CMDVEL / PPM) --------------------------

@@ -1,9 +1,11 @@
-"""The motor rule (``noEffect``) and the stall rule (``checkWheel``) on the port, tick
-by tick. The motor rule: effort without progress is a
+"""The motor rule (``noEffect``, ``effortLeads``, ``atLimit``) and the stall rule
+(``checkWheel``) on the port, tick by tick. The motor rule: effort without progress is a
 dead motor only while the wheel trails the other one its way (or stands, when the other
-turns against it). A dead motor's wheel is only dragged along, so it never leads the
-wheel that drags it; a wheel that leads is pulled by its own motor, at its current limit
-on a grade (the closed-loop case: tests/sim/test_grade_false_alarms.py).
+turns against it), and only while its effort (duty less back-EMF, up to the current
+limit) leads the other wheel's. A dead motor's wheel is only dragged along, so it never
+leads the wheel that drags it; a wheel that leads is pulled by its own motor, at its
+current limit on a grade; two wheels whose efforts rise together carry the chair's load
+(the closed-loop cases: tests/sim/test_grade_false_alarms.py and the envelope property).
 
 Each case feeds ``no_effect`` the duty rising one step a tick toward a steady setpoint
 with the speed flat and short of it, as the current limit gives, and counts the ticks
@@ -15,20 +17,31 @@ from __future__ import annotations
 import pytest
 
 from wcdrive.firmware import constants as C
-from wcdrive.firmware.control import WHEEL_STALLED, check_wheel, effort_rising, no_effect, overruns
+from wcdrive.firmware.control import (
+    WHEEL_NO_EFFECT,
+    WHEEL_OK,
+    WHEEL_REVERSED,
+    WHEEL_STALLED,
+    at_limit,
+    check_wheel,
+    effort_leads,
+    effort_of,
+    no_effect,
+    overruns,
+    stalling,
+)
 
 SETPOINT = 2.85   # rad/s toward which the duty rises
 
 
 def _ticks_to_trip(measured: float, other: float, setpoint: float = SETPOINT, ticks: int = 40,
-                   other_rising: bool = False, other_overruns: bool = False) -> int | None:
+                   other_overruns: bool = False) -> int | None:
     """The tick at which the rule trips, the duty rising 2 a tick from 80, or None. The
-    other wheel shows effort without progress or not, and is driven on beyond its
-    setpoint or not."""
+    other wheel is driven on beyond its setpoint or not."""
     direction = C.HIGH if setpoint > 0.0 else C.LOW
     effort = (0, 0.0, 0.0, 0)
     for k in range(ticks):
-        tripped, effort = no_effect(80 + 2 * k, direction, setpoint, measured, other, other_rising,
+        tripped, effort = no_effect(80 + 2 * k, direction, setpoint, measured, other, 80,
                                     other_overruns, effort)
         if tripped:
             return k
@@ -65,12 +78,57 @@ def test_the_lead_is_taken_the_way_of_the_setpoint() -> None:
     assert _ticks_to_trip(-1.45, -1.6, setpoint=-SETPOINT) is not None
 
 
-def test_a_wheel_whose_partner_strains_too_is_the_chairs_load() -> None:
-    """Both wheels' duties up without a gain (the other's by FAULT_EFFORT_PWM): a
-    grade or a turn holds the chair back, not one motor. The reference starts over each
-    such tick, so the count never runs."""
-    assert _ticks_to_trip(1.45, 1.6) is not None
-    assert _ticks_to_trip(1.45, 1.6, other_rising=True) is None
+def test_a_duty_pinned_at_full_counts_only_with_the_partner_near_full_too() -> None:
+    """At full duty the duty can rise no more: with the other wheel's duty within
+    FAULT_EFFORT_PWM of it (the chair at its top speed) that is effort enough; with the
+    other far below (the outer wheel of a turn asking more than the motor gives), not."""
+    def trips(other_pwm: int) -> bool:
+        effort = (0, 0.0, 0.0, 0)
+        for _ in range(10):
+            tripped, effort = no_effect(255, C.HIGH, 9.84, 7.0, 8.4, other_pwm, False, effort)
+            if tripped:
+                return True
+        return False
+    assert trips(255 - C.FAULT_EFFORT_PWM)
+    assert not trips(254 - C.FAULT_EFFORT_PWM)
+
+
+def test_effort_is_the_duty_less_the_back_emf_up_to_the_current_limit() -> None:
+    assert effort_of(50, C.HIGH, 3.0, 2.0) == pytest.approx(50 - 2.0 * C.FAULT_EFFORT_EMF, rel=1e-6)
+    assert effort_of(255, C.HIGH, 3.0, 2.0) == C.FAULT_EFFORT_MAX          # past the limit: no more torque
+    assert effort_of(30, C.LOW, 3.0, 2.0) < 0.0                           # braking against the setpoint
+    assert effort_of(50, C.LOW, -3.0, -2.0) == effort_of(50, C.HIGH, 3.0, 2.0)     # backwards the same
+    assert effort_of(200, C.HIGH, 0.0, 2.0) == 0.0                        # no setpoint, no effort
+
+
+@pytest.mark.parametrize(("this", "other", "expected"), [
+    ((72, 2.37, 3.28), (56, 2.85, 3.28), True),       # a dead left motor on the level, 1 s on
+    ((74, 2.32, 3.28), (73, 2.28, 3.28), False),      # both wheels onto a 1:12 ramp at 0.5 m/s
+    ((136, 2.57, 3.28), (128, 2.80, 3.28), False),    # both at the current limit, a 0.23 rad/s yaw
+    ((255, 6.8, 9.84), (250, 8.4, 9.84), True),       # both at the limit, a dead wheel 1.6 behind
+    ((155, 2.9, 3.28), (120, 3.6, 3.28), False),      # both at the limit, the other beyond its setpoint
+    ((255, 6.88, 9.97), (238, 6.85, 8.25), False),    # both at the limit, a turn neither wheel gets
+    ((255, 6.0, 9.97), (238, 7.1, 8.25), True),       # the same, this wheel 1.1 rad/s behind the other
+])
+def test_effort_leads_tells_one_motor_from_the_chairs_load(
+        this: tuple[int, float, float], other: tuple[int, float, float], expected: bool) -> None:
+    """The figures are ticks of the simulated chair (the comment says which)."""
+    pwm, measured, setpoint = this
+    opwm, omeasured, osetpoint = other
+    assert effort_leads(pwm, C.HIGH, setpoint, measured, opwm, C.HIGH, osetpoint, omeasured) is expected
+
+
+def test_no_effect_without_a_lead_is_the_limit_only_once_the_wheel_stalls() -> None:
+    """A load both wheels share is the chair's limit (STALLED_ON_GRADE) only below
+    GRADE_STALL of the setpoint: within the rated grade a chair slows and climbs on."""
+    assert stalling(3.28, 0.8 * C.GRADE_STALL * 3.28) and not stalling(3.28, 1.2 * C.GRADE_STALL * 3.28)
+    assert stalling(-3.28, 0.5) and stalling(3.28, -0.5)                  # against the setpoint
+    assert at_limit(WHEEL_NO_EFFECT, False, True, False, 0, 0, 1)
+    assert not at_limit(WHEEL_NO_EFFECT, False, False, True, 0, 0, 1)     # not stalling: climbs on
+    assert not at_limit(WHEEL_NO_EFFECT, True, True, True, 0, 0, 1)       # it leads: its motor
+    assert not at_limit(WHEEL_NO_EFFECT, False, True, False, 0, 0, 0)     # the other shows nothing
+    assert at_limit(WHEEL_REVERSED, False, False, False, 1, 0, 0)
+    assert not at_limit(WHEEL_OK, False, True, True, 1, 1, 1)
 
 
 def test_a_wheel_whose_partner_is_driven_beyond_its_setpoint_is_not_counted() -> None:
@@ -91,16 +149,6 @@ def test_overruns_is_a_wheel_its_own_motor_drives_beyond_its_setpoint(
     assert overruns(pwm, direction, setpoint, measured) is expected
 
 
-@pytest.mark.parametrize(("pwm", "measured", "expected"), [
-    (75, 3.9, True),       # duty 20 above its lowest (55), at 82 % of its setpoint
-    (74, 3.9, False),      # 19 above
-    (75, 4.6, False),      # at 96 %: it keeps its setpoint, dragging a dead partner
-])
-def test_effort_rising_is_effort_without_progress_short_of_the_setpoint(
-        pwm: int, measured: float, expected: bool) -> None:
-    assert effort_rising(pwm, 55, 4.777, 4.777, measured) is expected
-
-
 def _after_slowing(duties: list[int], held: float = 1.87, setpoint: float = 2.02) -> int | None:
     """A wheel slowed from 3.5 rad/s toward ``setpoint`` on a duty of 17 (a sharp change
     of course: the other wheel ahead at 2.8 rad/s), the duty rising to 34 as it comes
@@ -108,9 +156,9 @@ def _after_slowing(duties: list[int], held: float = 1.87, setpoint: float = 2.02
     which the rule trips, or None."""
     effort = (0, 0.0, 0.0, 0)
     for k, duty in enumerate([17] * 8 + [24, 30, 34]):
-        _, effort = no_effect(duty, C.HIGH, setpoint, 3.5 - 0.14 * k, 2.8, False, False, effort)
+        _, effort = no_effect(duty, C.HIGH, setpoint, 3.5 - 0.14 * k, 2.8, duty, False, effort)
     for k, duty in enumerate(duties):
-        tripped, effort = no_effect(duty, C.HIGH, setpoint, held, 2.8, False, False, effort)
+        tripped, effort = no_effect(duty, C.HIGH, setpoint, held, 2.8, duty, False, effort)
         if tripped:
             return k
     return None
@@ -135,7 +183,7 @@ def _ticks_to_stall(prev_measured: float, setpoint: float = -0.89, ticks: int = 
     direction = C.HIGH if setpoint > 0.0 else C.LOW
     stall = 0
     for k in range(ticks):
-        verdict, stall, _, _, _ = check_wheel(0, 0, 0, 31, direction, setpoint, 0.0, 0.0, False, False,
+        verdict, stall, _, _, _ = check_wheel(0, 0, 0, 31, direction, setpoint, 0.0, 0.0, 0, False,
                                               stall, 0, 0, (0, 0.0, 0.0, 0), prev_measured)
         if verdict == WHEEL_STALLED:
             return k + 1

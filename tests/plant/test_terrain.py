@@ -212,6 +212,28 @@ def test_the_rated_grade_is_the_steepest_the_motors_climb_from_rest(use_kernel: 
         assert (speed > 0.05 if climbs else abs(speed) < 0.01), (grade, speed)
 
 
+@BACKENDS
+def test_the_hold_grade_is_the_steepest_the_motors_brake_the_chair_on(use_kernel: bool) -> None:
+    """``ChairParams.hold_grade``: both duties 0 (the driver shorts the motors: above
+    0.44 m/s their back-EMF drives the current limit), nose downhill, from rest. Half a
+    degree below the hold grade the chair settles at its terminal speed (within 1 cm/s
+    over the fourth second); half a degree above it it keeps gaining, at about
+    g (sin(t) - sin(hold)) = 0.08 m/s^2. Going down, rolling resistance helps the
+    brakes: 7.08 degrees against the 4.87 climbed; one motor alone, 4.09."""
+    hold = P.hold_grade()
+    assert hold == pytest.approx(7.08, abs=0.01)
+    assert P.hold_grade(motors=1) == pytest.approx(4.09, abs=0.01)
+    assert P.hold_grade(motors=1) < math.degrees(math.atan(1 / 12)) < P.rated_grade() < hold
+    for grade, held in ((hold - 0.5, True), (hold + 0.5, False)):
+        plant = Plant(terrain=Terrain(grade, 0.0), heading=0.0, use_kernel=use_kernel)
+        plant.set_drive(0, 1, 0, 1)
+        plant.advance(3000)
+        before = plant.axle_velocity()[0]
+        plant.advance(1000)
+        gain = plant.axle_velocity()[0] - before
+        assert (abs(gain) < 0.01 if held else gain > 0.04), (grade, gain)
+
+
 def test_rated_grade_falls_with_the_occupant() -> None:
     """Heavier occupants, shallower rated grades; the default's is its occupant's."""
     grades = [P.rated_grade(m) for m in (40.0, 80.0, 150.0)]

@@ -65,37 +65,79 @@ Effort = tuple[int, float, float, int]
 
 
 def no_effect(applied_pwm: int, applied_dir: int, setpoint: float, measured: float, other: float,
-              other_rising: bool, other_overruns: bool, effort: Effort) -> tuple[bool, Effort]:
+              other_pwm: int, other_overruns: bool, effort: Effort) -> tuple[bool, Effort]:
     """``noEffect``: effort without progress, by a wheel that trails ``other`` (the other
-    wheel's measured speed), as a dragged one does, judged from where the wheel last
+    wheel's measured speed), as a dragged one does (the duty FAULT_EFFORT_PWM above its
+    lowest, or at full duty, which can rise no more, with ``other_pwm`` no more than
+    FAULT_EFFORT_PWM below it: the chair at its top speed, not the outer wheel of a
+    turn), judged from where the wheel last
     turned faster than its setpoint (being slowed to it). ``effort`` is (lowest duty,
     speed toward the setpoint, setpoint, ticks) of the reference; returns (tripped, the
-    new one). The other wheel straining too (``other_rising``: ``effort_rising``) starts
-    the reference over; the other wheel driven on beyond its setpoint (``other_overruns``:
-    ``overruns``) starts the count over: the chair's load, or a chair not following its
-    command, not one motor."""
+    new one). The other wheel driven on beyond its setpoint (``other_overruns``:
+    ``overruns``) starts the count over: a chair not following its command. Whose load
+    it is, one motor's or the chair's, is the caller's (``effort_leads``)."""
     effort_pwm, effort_speed, effort_setpoint, ticks = effort
     progress = measured if setpoint > 0.0 else -measured
     toward = setpoint != 0.0 and (applied_dir == C.HIGH) == (setpoint > 0.0)
-    if (not toward or setpoint != effort_setpoint or progress > effort_speed or progress > abs(setpoint)
-            or other_rising):
+    if not toward or setpoint != effort_setpoint or progress > effort_speed or progress > abs(setpoint):
         return False, (applied_pwm, progress, setpoint, 0)
     effort_pwm = min(effort_pwm, applied_pwm)
     shortfall = abs(measured) < mul(C.FAULT_EFFORT_SHORTFALL_MOTOR, abs(setpoint))
     other_progress = other if setpoint > 0.0 else -other
     trails = progress < add(max(other_progress, 0.0), C.FAULT_EFFORT_LEAD)
-    ticks = ((ticks + 1) & 0xFF if shortfall and trails and not other_overruns
-             and applied_pwm >= effort_pwm + C.FAULT_EFFORT_PWM else 0)
+    rose = (applied_pwm >= effort_pwm + C.FAULT_EFFORT_PWM
+            or (applied_pwm == 255 and other_pwm + C.FAULT_EFFORT_PWM >= 255))
+    ticks = (ticks + 1) & 0xFF if shortfall and trails and not other_overruns and rose else 0
     return ticks >= C.FAULT_EFFORT_TICKS, (effort_pwm, effort_speed, effort_setpoint, ticks)
 
 
-def effort_rising(applied_pwm: int, effort_pwm: int, effort_setpoint: float, setpoint: float,
-                  measured: float) -> bool:
-    """``effortRising``: effort without progress too, driven FAULT_EFFORT_PWM or more
-    above the lowest duty since its effort reference (taken toward a setpoint) and slower
-    than FAULT_EFFORT_SHORTFALL_MOTOR of its setpoint."""
-    return (effort_setpoint != 0.0 and applied_pwm >= effort_pwm + C.FAULT_EFFORT_PWM
-            and abs(measured) < mul(C.FAULT_EFFORT_SHORTFALL_MOTOR, abs(setpoint)))
+def effort_of(applied_pwm: int, applied_dir: int, setpoint: float, measured: float) -> float:
+    """``effortOf``: the duty toward the setpoint (against it, negative) less what the
+    back-EMF of the wheel's speed that way takes (FAULT_EFFORT_EMF per rad/s): the share
+    of the duty that drives current (negative: braking); within FAULT_EFFORT_MAX either
+    way (the driver's current limit: more gives no more torque). 0 without a setpoint."""
+    if setpoint == 0.0:
+        return 0.0
+    forward = setpoint > 0.0
+    duty = float(applied_pwm) if (applied_dir == C.HIGH) == forward else -float(applied_pwm)
+    progress = measured if forward else -measured
+    effort = sub(duty, mul(C.FAULT_EFFORT_EMF, progress))
+    if effort <= -C.FAULT_EFFORT_MAX:
+        return -C.FAULT_EFFORT_MAX
+    return effort if effort < C.FAULT_EFFORT_MAX else C.FAULT_EFFORT_MAX
+
+
+def effort_leads(applied_pwm: int, applied_dir: int, setpoint: float, measured: float,
+                 other_pwm: int, other_dir: int, other_setpoint: float, other: float) -> bool:
+    """``effortLeads``: the wheel's effort leads the other wheel's by
+    FAULT_EFFORT_LEAD_PWM or more; or it should brake at the current limit while the
+    other brakes FAULT_EFFORT_LEAD_PWM less, yet its duty winds up without a gain (a dead
+    wheel carried down a grade); or, both at FAULT_EFFORT_MAX (the current limit) and
+    the other short of its setpoint, it turns FAULT_EFFORT_LAG slower than the other,
+    each its own way, beyond what the setpoints ask (a setpoint asking this wheel for
+    more is no excuse: at the limit neither gets its setpoint). One motor doing nothing
+    while its partner carries the chair, not a load both wheels share (a grade, a kerb,
+    a ramp's edge)."""
+    effort = effort_of(applied_pwm, applied_dir, setpoint, measured)
+    other_effort = effort_of(other_pwm, other_dir, other_setpoint, other)
+    if effort >= add(other_effort, C.FAULT_EFFORT_LEAD_PWM):
+        return True
+    if other_effort >= add(effort, C.FAULT_EFFORT_LEAD_PWM) and effort <= -C.FAULT_EFFORT_MAX:
+        return True
+    if effort < C.FAULT_EFFORT_MAX or other_effort < C.FAULT_EFFORT_MAX:
+        return False
+    progress = measured if setpoint > 0.0 else -measured
+    other_progress = other if other_setpoint > 0.0 else -other
+    if other_progress >= abs(other_setpoint):
+        return False
+    asked = sub(abs(other_setpoint), abs(setpoint))
+    return sub(sub(other_progress, progress), asked if asked > 0.0 else 0.0) >= C.FAULT_EFFORT_LAG
+
+
+def stalling(setpoint: float, measured: float) -> bool:
+    """``stalling``: slower than GRADE_STALL of its setpoint its way (or against it)."""
+    progress = measured if setpoint > 0.0 else -measured
+    return progress < mul(C.GRADE_STALL, abs(setpoint))
 
 
 def overruns(applied_pwm: int, applied_dir: int, setpoint: float, measured: float) -> bool:
@@ -154,18 +196,22 @@ def straining(applied_pwm: int, applied_dir: int, setpoint: float, measured: flo
             and progress < mul(C.FAULT_EFFORT_SHORTFALL, abs(setpoint)))
 
 
-def at_limit(check: int, other_strains: bool, other_reverse: int, other_runaway: int,
-             other_effort: int) -> bool:
-    """``atLimit``: a wheel whose check found no effect or a reversal while the other
-    wheel shows the same load (it strains, or its reversed or effort count runs): the
-    chair's limit (a grade, a command beyond it), not a fault."""
-    return (check in (WHEEL_NO_EFFECT, WHEEL_REVERSED)
+def at_limit(check: int, leads: bool, stalls: bool, other_strains: bool, other_reverse: int,
+             other_runaway: int, other_effort: int) -> bool:
+    """``atLimit``: the chair's limit rather than a fault. No effect with an effort that
+    does not lead the other wheel's (``leads``), slower than GRADE_STALL of the setpoint
+    (``stalls``), while the other wheel strains or shows effort without progress too:
+    a grade beyond the chair. A reversal while the other wheel strains, or its reversed,
+    runaway or effort count runs: both wheels pushed back."""
+    if check == WHEEL_NO_EFFECT:
+        return not leads and stalls and (other_strains or other_effort != 0)
+    return (check == WHEEL_REVERSED
             and (other_strains or other_reverse != 0 or other_runaway != 0 or other_effort != 0))
 
 
 def check_wheel(delta: int, illegal: int, storm: int, applied_pwm: int, applied_dir: int,
-                setpoint: float, measured: float, other: float, other_rising: bool,
-                other_overruns: bool, stall_ticks: int, reverse_ticks: int, runaway_ticks: int,
+                setpoint: float, measured: float, other: float, other_pwm: int, other_overruns: bool,
+                stall_ticks: int, reverse_ticks: int, runaway_ticks: int,
                 effort: Effort, prev_measured: float) -> tuple[int, int, int, int, Effort]:
     """``checkWheel``: ``(verdict, stall ticks, reverse ticks, runaway ticks, effort
     reference)`` for one wheel over the interval that ended: WHEEL_OK, WHEEL_SUSPECT
@@ -196,7 +242,7 @@ def check_wheel(delta: int, illegal: int, storm: int, applied_pwm: int, applied_
     runaway_ticks = (runaway_ticks + 1) & 0xFF if running else 0
     if runaway_ticks >= C.FAULT_RUNAWAY_TICKS:
         return WHEEL_REVERSED, stall_ticks, reverse_ticks, runaway_ticks, effort
-    tripped, effort = no_effect(applied_pwm, applied_dir, setpoint, measured, other, other_rising,
+    tripped, effort = no_effect(applied_pwm, applied_dir, setpoint, measured, other, other_pwm,
                                 other_overruns, effort)
     if tripped:
         return WHEEL_NO_EFFECT, stall_ticks, reverse_ticks, runaway_ticks, effort
@@ -228,31 +274,33 @@ def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_
         return WHEEL_OK, WHEEL_OK, False, False
     strain_l = straining(s.pwmL, s.dirL, s.setpointL, s.filtVelL)
     strain_r = straining(s.pwmR, s.dirR, s.setpointR, s.filtVelR)
-    rising_l = not strain_l and effort_rising(s.pwmL, s.effortPwmL, s.effortSetpointL, s.setpointL,
-                                              s.filtVelL)
-    rising_r = not strain_r and effort_rising(s.pwmR, s.effortPwmR, s.effortSetpointR, s.setpointR,
-                                              s.filtVelR)
     overrun_l = overruns(s.pwmL, s.dirL, s.setpointL, s.filtVelL)
     overrun_r = overruns(s.pwmR, s.dirR, s.setpointR, s.filtVelR)
     check_l, s.stallTicksL, s.reverseTicksL, s.runawayTicksL, effort_l = check_wheel(
         delta_l, ill_l, s.stormTickL, s.pwmL, s.dirL, s.setpointL, s.filtVelL, s.filtVelR,
-        rising_r, overrun_r, s.stallTicksL, s.reverseTicksL, s.runawayTicksL,
+        s.pwmR, overrun_r, s.stallTicksL, s.reverseTicksL, s.runawayTicksL,
         (s.effortPwmL, s.effortSpeedL, s.effortSetpointL, s.effortTicksL), s.prevMeasL)
     s.effortPwmL, s.effortSpeedL, s.effortSetpointL, s.effortTicksL = effort_l
     check_r, s.stallTicksR, s.reverseTicksR, s.runawayTicksR, effort_r = check_wheel(
         delta_r, ill_r, s.stormTickR, s.pwmR, s.dirR, s.setpointR, s.filtVelR, s.filtVelL,
-        rising_l, overrun_l, s.stallTicksR, s.reverseTicksR, s.runawayTicksR,
+        s.pwmL, overrun_l, s.stallTicksR, s.reverseTicksR, s.runawayTicksR,
         (s.effortPwmR, s.effortSpeedR, s.effortSetpointR, s.effortTicksR), s.prevMeasR)
     s.effortPwmR, s.effortSpeedR, s.effortSetpointR, s.effortTicksR = effort_r
+    # effort without progress is one motor's only while its effort leads the other's
+    leads_l = check_l == WHEEL_NO_EFFECT and effort_leads(s.pwmL, s.dirL, s.setpointL, s.filtVelL,
+                                                          s.pwmR, s.dirR, s.setpointR, s.filtVelR)
+    leads_r = check_r == WHEEL_NO_EFFECT and effort_leads(s.pwmR, s.dirR, s.setpointR, s.filtVelR,
+                                                          s.pwmL, s.dirL, s.setpointL, s.filtVelL)
     # Driving only: a held wheel that runs away is a fault (a reversed encoder turns the
     # hold into positive feedback), whatever the other wheel does.
-    limit_l = not s.holding and at_limit(check_l, strain_r, s.reverseTicksR, s.runawayTicksR,
-                                         s.effortTicksR)
-    limit_r = not s.holding and at_limit(check_r, strain_l, s.reverseTicksL, s.runawayTicksL,
-                                         s.effortTicksL)
-    if limit_l:
+    limit_l = not s.holding and at_limit(check_l, leads_l, stalling(s.setpointL, s.filtVelL), strain_r,
+                                         s.reverseTicksR, s.runawayTicksR, s.effortTicksR)
+    limit_r = not s.holding and at_limit(check_r, leads_r, stalling(s.setpointR, s.filtVelR), strain_l,
+                                         s.reverseTicksL, s.runawayTicksL, s.effortTicksL)
+    # the limit, or a load both wheels share short of it (no lead): not a fault
+    if limit_l or (check_l == WHEEL_NO_EFFECT and not leads_l):
         check_l = WHEEL_OK
-    if limit_r:
+    if limit_r or (check_r == WHEEL_NO_EFFECT and not leads_r):
         check_r = WHEEL_OK
     over_l, s.overspeedTicksL, s.overspeedFromL = overspeed_run(
         not s.holding and overspeeding(s.pwmL, s.dirL, s.setpointL, s.targetL, s.filtVelL),
@@ -260,6 +308,18 @@ def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_
     over_r, s.overspeedTicksR, s.overspeedFromR = overspeed_run(
         not s.holding and overspeeding(s.pwmR, s.dirR, s.setpointR, s.targetR, s.filtVelR),
         s.filtVelR, s.prevMeasR, s.overspeedTicksR, s.overspeedFromR)
+    # one wheel gaining speed however hard it is braked, OVERSPEED_ONE_TICKS ticks, the
+    # other braking at the current limit too (going down a grade) and holding: its motor
+    # does not brake (gravity beating both is OVERSPEED; a wheel pushed on while its
+    # partner drives is the runaway rule's)
+    if (over_l and s.overspeedTicksL >= C.OVERSPEED_ONE_TICKS and s.overspeedTicksR == 0
+            and effort_of(s.pwmR, s.dirR, s.setpointR, s.filtVelR) <= -C.FAULT_EFFORT_MAX
+            and check_l in (WHEEL_OK, WHEEL_SUSPECT)):
+        check_l = WHEEL_NO_EFFECT
+    if (over_r and s.overspeedTicksR >= C.OVERSPEED_ONE_TICKS and s.overspeedTicksL == 0
+            and effort_of(s.pwmL, s.dirL, s.setpointL, s.filtVelL) <= -C.FAULT_EFFORT_MAX
+            and check_r in (WHEEL_OK, WHEEL_SUSPECT)):
+        check_r = WHEEL_NO_EFFECT
     if check_l == WHEEL_STALLED and check_r == WHEEL_STALLED:
         faults = FAULT_DRIVER
     else:
@@ -276,7 +336,7 @@ def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_
         send_fault_events(s, faults, out)
         return check_l, check_r, False, False
     halt = hardest = False
-    # both wheels: gravity on the whole chair (one alone is a wheel's fault: runs_away)
+    # both wheels: gravity on the whole chair (one alone is its motor's fault, above)
     if over_l and over_r:
         halt = hardest = True
         send(s, send_event("OVERSPEED"), out)

@@ -207,6 +207,32 @@ class ChairParams:
             return 90.0
         return max(0.0, math.degrees(math.asin(ratio) - math.atan2(b, a)))
 
+    def hold_grade(self, occupant_mass: float | None = None, *, motors: int = 2) -> float:
+        """degrees: the steepest grade on which ``motors`` motors (2 or 1), braking at the
+        driver's current limit, hold the chair rolling nose downhill (``occupant_mass``
+        kg in the seat, by default this one's); beyond it gravity beats the braking.
+
+        Going down, rolling resistance helps the brakes. With the loads ``grade_loads``
+        gives nose downhill, the rolling resistance is ``m g (B cos(t) - (A - 1) sin(t))``
+        (A, B as in ``rated_grade``), so the balance of the grade's pull against the
+        braking force F (``Ke G eff I / r`` a motor) and the rolling resistance is::
+
+            F = m g (A sin(t) - B cos(t)),   t = asin(F / (m g hypot(A, B))) + atan2(B, A)
+
+        Two motors hold 7.08 degrees with the default 80 kg occupant, where they climb
+        4.87 (``rated_grade``); one motor alone holds 4.09."""
+        if motors not in (1, 2):
+            raise ValueError(f"motors must be 1 or 2, not {motors!r}")
+        p = self if occupant_mass is None else dataclasses.replace(self, occupant_mass=occupant_mass)
+        force = motors * p.gear_ratio * p.gear_efficiency * p.motor_constant * p.current_limit / p.wheel_radius
+        share = p.caster_load_share
+        a = 1.0 + (p.rolling_resistance - p.caster_rolling_resistance) * p.cog_height / p.caster_ahead_of_axle
+        b = p.rolling_resistance * (1.0 - share) + p.caster_rolling_resistance * share
+        ratio = force / (p.mass * G * math.hypot(a, b))
+        if ratio >= 1.0:
+            return 90.0
+        return min(90.0, math.degrees(math.asin(ratio) + math.atan2(b, a)))
+
     def wheel_friction(self, side: str) -> float:
         """The friction coefficient of the ``"left"`` or ``"right"`` drive tyre."""
         override = self.friction_left if side == "left" else self.friction_right

@@ -220,11 +220,10 @@ typedef struct {
 
 /* no_effect: whether it tripped; *e the new reference */
 static int no_effect(int64_t pwm, int64_t dir, double setpoint, double measured, double other,
-                     int other_rising, int other_overruns, Effort *e) {
+                     int64_t other_pwm, int other_overruns, Effort *e) {
     double progress = setpoint > 0.0 ? measured : -measured;
     int toward = setpoint != 0.0 && ((dir == K.high) == (setpoint > 0.0));
-    if (!toward || setpoint != e->setpoint || progress > e->speed || progress > fabs(setpoint)
-        || other_rising) {
+    if (!toward || setpoint != e->setpoint || progress > e->speed || progress > fabs(setpoint)) {
         e->pwm = pwm;
         e->speed = progress;
         e->setpoint = setpoint;
@@ -236,24 +235,10 @@ static int no_effect(int64_t pwm, int64_t dir, double setpoint, double measured,
     int shortfall = fabs(measured) < f_mul(K.effort_shortfall_motor, fabs(setpoint));
     double other_progress = setpoint > 0.0 ? other : -other;
     int trails = progress < f_add(other_progress > 0.0 ? other_progress : 0.0, K.effort_lead);
-    e->ticks = (shortfall && trails && !other_overruns && pwm >= e->pwm + K.effort_pwm)
+    e->ticks = (shortfall && trails && !other_overruns && (pwm >= e->pwm + K.effort_pwm
+                                                        || (pwm == 255 && other_pwm + K.effort_pwm >= 255)))
                    ? ((e->ticks + 1) & 0xFF) : 0;
     return e->ticks >= K.effort_ticks;
-}
-
-/* straining: driven at GRADE_PWM or more toward a setpoint it runs short of */
-static int straining(int64_t pwm, int64_t dir, double setpoint, double measured) {
-    double progress = setpoint > 0.0 ? measured : -measured;
-    return setpoint != 0.0 && ((dir == K.high) == (setpoint > 0.0)) && pwm >= K.grade_pwm
-           && progress < f_mul(K.effort_shortfall, fabs(setpoint));
-}
-
-/* effort_rising: driven EFFORT_PWM above the lowest duty since its reference, short of
- * EFFORT_SHORTFALL_MOTOR of its setpoint */
-static int effort_rising(int64_t pwm, int64_t effort_pwm, double effort_setpoint, double setpoint,
-                         double measured) {
-    return effort_setpoint != 0.0 && pwm >= effort_pwm + K.effort_pwm
-           && fabs(measured) < f_mul(K.effort_shortfall_motor, fabs(setpoint));
 }
 
 /* overruns: driven toward its setpoint while EFFORT_OVERRUN beyond it */
@@ -296,11 +281,13 @@ static int overspeed_run(int over, double measured, double prev_measured, int64_
     return *ticks >= K.overspeed_ticks && f_sub(fabs(measured), *from) >= K.overspeed_gain;
 }
 
-/* check_wheel: WHEEL_OK, WHEEL_SUSPECT or WHEEL_FAULT (any fault: the Python tick
- * latches it) */
+/* check_wheel: WHEEL_OK, WHEEL_SUSPECT or WHEEL_FAULT (any fault, and effort without
+ * progress, which the other wheel may show to be the chair's load: the Python tick
+ * decides and latches it) */
 static int check_wheel(int64_t delta, int64_t illegal, int64_t storm, int64_t pwm, int64_t dir,
-                       double setpoint, double measured, double other, int other_rising,
-                       int other_overruns, int64_t *stall, int64_t *reverse,
+                       double setpoint, double measured, double other, int64_t other_pwm,
+                       int other_overruns,
+                       int64_t *stall, int64_t *reverse,
                        int64_t *runaway, Effort *e, double prev_measured) {
     if (storm || illegal >= K.illegal_per_tick)
         return WHEEL_FAULT;
@@ -319,7 +306,7 @@ static int check_wheel(int64_t delta, int64_t illegal, int64_t storm, int64_t pw
     *runaway = runs_away(pwm, dir, setpoint, measured, prev_measured) ? ((*runaway + 1) & 0xFF) : 0;
     if (*runaway >= K.runaway_ticks)
         return WHEEL_FAULT;
-    if (no_effect(pwm, dir, setpoint, measured, other, other_rising, other_overruns, e))
+    if (no_effect(pwm, dir, setpoint, measured, other, other_pwm, other_overruns, e))
         return WHEEL_FAULT;
     return (stalled || against) ? WHEEL_SUSPECT : WHEEL_OK;
 }
@@ -495,16 +482,12 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
         int64_t stall_r = I(stallTicksR), rev_r = I(reverseTicksR), run_r = I(runawayTicksR);
         Effort el = { I(effortPwmL), I(effortTicksL), D(effortSpeedL), D(effortSetpointL) };
         Effort er = { I(effortPwmR), I(effortTicksR), D(effortSpeedR), D(effortSetpointR) };
-        int rising_l = !straining(I(pwmL), I(dirL), D(setpointL), D(filtVelL))
-                       && effort_rising(I(pwmL), I(effortPwmL), D(effortSetpointL), D(setpointL), D(filtVelL));
-        int rising_r = !straining(I(pwmR), I(dirR), D(setpointR), D(filtVelR))
-                       && effort_rising(I(pwmR), I(effortPwmR), D(effortSetpointR), D(setpointR), D(filtVelR));
         int overrun_l = overruns(I(pwmL), I(dirL), D(setpointL), D(filtVelL));
         int overrun_r = overruns(I(pwmR), I(dirR), D(setpointR), D(filtVelR));
         check_l = check_wheel(delta_l, ill_l, I(stormTickL), I(pwmL), I(dirL), D(setpointL), D(filtVelL),
-                              D(filtVelR), rising_r, overrun_r, &stall_l, &rev_l, &run_l, &el, D(prevMeasL));
+                              D(filtVelR), I(pwmR), overrun_r, &stall_l, &rev_l, &run_l, &el, D(prevMeasL));
         check_r = check_wheel(delta_r, ill_r, I(stormTickR), I(pwmR), I(dirR), D(setpointR), D(filtVelR),
-                              D(filtVelL), rising_l, overrun_l, &stall_r, &rev_r, &run_r, &er, D(prevMeasR));
+                              D(filtVelL), I(pwmL), overrun_l, &stall_r, &rev_r, &run_r, &er, D(prevMeasR));
         if (check_l == WHEEL_FAULT || check_r == WHEEL_FAULT)
             Py_RETURN_NONE;
         SETI(stallTicksL, stall_l); SETI(reverseTicksL, rev_l);
@@ -522,8 +505,8 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
         int fire_r = overspeed_run(!I(holding) && overspeeding(I(pwmR), I(dirR), D(setpointR), D(targetR),
                                                                D(filtVelR)),
                                    D(filtVelR), D(prevMeasR), &os_r, &from_r);
-        if (fire_l && fire_r)
-            Py_RETURN_NONE;       /* an overspeed parks the chair: the Python tick */
+        if (fire_l || fire_r)
+            Py_RETURN_NONE;       /* an overspeed parks the chair, one wheel's is its motor's fault: the Python tick */
         SETI(overspeedTicksL, os_l); SETI(overspeedTicksR, os_r);
         SETF(overspeedFromL, from_l); SETF(overspeedFromR, from_r);
     }

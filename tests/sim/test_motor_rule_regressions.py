@@ -1,0 +1,61 @@
+"""The drives on which the motor rule took a hill for a dead motor, kept as fixed
+cases. Under the rule that read the other wheel by its own effort count
+(``effortRising``, main before the effort lead) a healthy chair latched a fault on the
+first three, and a left motor dying on the 1:20 band was named ``MOTOR_R``, the healthy
+side; the rule now asks whose effort leads (docs/safety.md, "One motor or the chair's
+load"). The cases:
+
+* the 1:20 band (2.86 degrees, inside every occupant's rated grade) at 1.0 m/s with a
+  150 kg occupant: ``MOTOR_R``;
+* a band at the 58 kg occupant's rated grade (5.68 degrees) at 1 m/s, hypothesis'
+  shrunk counterexample of ``tests/sim/test_envelope_property.py``: ``MOTOR_L``;
+* turning 10 s at 0.4 rad/s on a 4 degree slope at 0.5 m/s (``benchmarks/motor_rule.py``):
+  ``MOTOR_L``;
+* a 1:20 band down at 0.6 m/s with 80 kg (no fault under the old rule either: the descent).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from wcdrive.sim import runner, scenario
+
+
+def _band(occupant: float, slope_deg: float, to_x: float, speed: float, seconds: float) -> str:
+    return (f'name = "band"\nsettle_s = 0.5\nhost_rate_hz = 10\n[chair]\noccupant_mass = {occupant}\n'
+            f"[world]\nslope_deg = 0.0\ndownhill_heading_deg = 0\n"
+            f"[[world.ramp]]\nfrom_x = 1.0\nto_x = {to_x}\nslope_deg = {slope_deg}\n"
+            f"[[segment]]\ncmdvel = [{speed}, 0.0]\nduration = {seconds}\n"
+            f"[[segment]]\nstop = true\nduration = 3.0\n")
+
+
+CASES = {
+    "1in20_band_150kg_1mps": _band(150.0, -2.862, 4.6, 1.0, 6.0),
+    "rated_band_58kg_1mps": _band(58.0, -5.68, 3.0, 1.0, 5.2),
+    "1in20_band_down_80kg": _band(80.0, 2.862, 4.6, 0.6, 9.0),
+    "turn_on_4deg_slope": ('name = "turn"\nsettle_s = 0.5\nhost_rate_hz = 10\n'
+                           "[world]\nslope_deg = 4.0\ndownhill_heading_deg = 270.0\n"
+                           "[[segment]]\ncmdvel = [0.5, 0.4]\nduration = 10.0\n"),
+}
+
+
+def _events(tmp_path: Path, text: str) -> list[str]:
+    path = tmp_path / "case.toml"
+    path.write_text(text)
+    return [line for _, line in runner.run(scenario.load(str(path))).link.events]
+
+
+@pytest.mark.parametrize("name", sorted(CASES))
+def test_a_healthy_chair_where_the_old_rule_saw_a_dead_motor_latches_nothing(tmp_path: Path, name: str) -> None:
+    events = _events(tmp_path, CASES[name])
+    assert not [e for e in events if e.startswith("EVT:FAULT")], events
+
+
+@pytest.mark.parametrize("side", ["left", "right"])
+def test_a_dead_motor_on_the_1in20_band_is_named(tmp_path: Path, side: str) -> None:
+    """The same band, the same load: a motor that dies on the ramp is found, on its side."""
+    text = CASES["1in20_band_150kg_1mps"] + f'[[fault]]\nat = 3.5\nkind = "motor_dead"\nside = "{side}"\n'
+    faults = [e for e in _events(tmp_path, text) if e.startswith("EVT:FAULT")]
+    assert faults and faults[0] == f"EVT:FAULT,MOTOR_{side[0].upper()}", faults
