@@ -78,4 +78,4 @@ def test_each_brake_scenario_is_its_twin_with_the_brake(path: Path) -> None:
     assert braked.chair == {**plain.chair, "parking_brake": True}
     assert braked.name == path.stem and braked.description.startswith("With a parking brake")
     assert dataclasses.replace(braked, name=plain.name, description=plain.description, chair=plain.chair,
-                               source=plain.source) == plain
+                               source=plain.source, expect=plain.expect) == plain

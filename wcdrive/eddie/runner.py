@@ -38,6 +38,7 @@ from wcdrive.eddie.plant import eddie_params
 from wcdrive.eddie.robot import PING_M_PER_UNIT, RAD_PER_POSITION, gospd_counts, signed, std_hex
 from wcdrive.host.odometry import OdometryParams, WheelOdometry
 from wcdrive.sim import scenario
+from wcdrive.sim.contract import Miss, evaluate
 from wcdrive.sim.scenario import Scenario, ScenarioError
 
 #: Eddie's own scenarios (walls), found by name after the bundled ones.
@@ -230,6 +231,34 @@ def table(r: EddieResult) -> str:
                      f"(the wall was {r.nearest_ping[1]:.3f} m straight ahead)")
     lines += [f"  note: {n}" for n in r.notes]
     return "\n".join(lines)
+
+
+def figures(r: EddieResult) -> dict[str, object]:
+    """The figures an Eddie scenario's ``[expect]`` bounds name (``wcdrive.sim.expect``):
+    ``path_length_m``, ``final_error_m``, ``final_heading_error_deg``, ``max_error_m``,
+    ``deadman_stops``, and from the nearest PING))) reading, ``nearest_ping_m``, the
+    sensor's true distance then, ``nearest_ping_true_m``, and the reading's error,
+    ``ping_error_m`` (the three None without an echo)."""
+    ping = r.nearest_ping
+    return {"path_length_m": r.path_length_m, "final_error_m": r.final_error_m,
+            "final_heading_error_deg": r.final_heading_error_deg, "max_error_m": r.max_error_m,
+            "deadman_stops": r.deadman_stops,
+            "nearest_ping_m": None if ping is None else ping[0],
+            "nearest_ping_true_m": None if ping is None else ping[1],
+            "ping_error_m": None if ping is None else abs(ping[0] - ping[1])}
+
+
+def check(sc: Scenario, r: EddieResult) -> list[Miss]:
+    """The misses of ``r`` (a run of ``sc`` on Eddie) against ``sc``'s ``[expect]``
+    table (``wcdrive.sim.contract.evaluate`` on ``figures``: Eddie reports no events);
+    one miss when it has none."""
+    if sc.expect is None:
+        return [Miss(sc.name, "eddie", "[expect]", "the scenario has no [expect] table: nothing to check")]
+    misses = evaluate(sc.expect, figures(r), None, name=sc.name, backend="eddie")
+    if sc.expect.stops or sc.expect.safety:
+        misses.append(Miss(sc.name, "eddie", "[expect]", "[[expect.stop]] and safety are the Mega's: "
+                                                         "Eddie's runs have neither"))
+    return misses
 
 
 def to_json(results: list[EddieResult]) -> str:

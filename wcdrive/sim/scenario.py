@@ -65,6 +65,9 @@ beam cast at its own time from where the chair then is (``SimResult.lidar``):
     roll_deg = 0.0           # 180: mounted head down (the seed's chair); 0 or 180
     driver_inverted = false  # the driver's ``inverted`` parameter (told of the roll)
 
+An ``[expect]`` table says what a run must show (``wcdrive.sim.expect``; ``wcdrive sim
+NAME --check`` holds a run to it).
+
 Every table's keys are checked: an unknown key, at the top level too, is a ScenarioError
 that names it.
 
@@ -108,6 +111,8 @@ from wcdrive.plant.rosmap import MapFileError
 from wcdrive.plant.terrain import Ramp, Terrain
 from wcdrive.plant.world import World, WorldError
 from wcdrive.protocol.codec import encode_cmdvel, encode_ppm, encode_set, encode_wheel
+from wcdrive.sim.expect import Expect
+from wcdrive.sim.expect import parse as parse_expect
 from wcdrive.sim.navigation import FollowParams
 
 BUNDLED = Path(__file__).resolve().parent / "scenarios"
@@ -115,7 +120,7 @@ _KINDS = ("cmdvel", "wheel", "ppm", "stop", "silence")
 _FAULT_KEYS = ("at", "kind", "side", "duration", "rate_hz")
 #: The keys a scenario file may have at its top level.
 TOP_KEYS = ("name", "description", "host_rate_hz", "repeat", "settle_s", "chair", "params", "segment",
-            "fault", "path", "follow", "world", "lidar")
+            "fault", "path", "follow", "world", "lidar", "expect")
 _GEOMETRY_KEYS = ("map", "walls", "boxes", "circles")
 _LIDAR_KEYS = ("model", "x", "y", "z", "yaw_deg", "roll_deg", "driver_inverted")
 _WORLD_KEYS = ("slope_deg", "downhill_heading_deg", "ramp", *_GEOMETRY_KEYS, "file", "start")
@@ -172,6 +177,8 @@ class Scenario:
     start: tuple[float, float, float] = (0.0, 0.0, 0.0)
     #: The lidar on the chair (``[lidar]``); None: none.
     lidar: Lidar | None = None
+    #: What a run must show (``[expect]``, ``wcdrive.sim.expect``); None: no table.
+    expect: Expect | None = None
 
     @property
     def closed_loop(self) -> bool:
@@ -276,11 +283,18 @@ def load(name_or_path: str, *, extra: Collection[str] = ()) -> Scenario:
         raise ScenarioError(f"{path}: host_rate_hz must be within 0.5..100")
     terrain, world, start = _world(data.get("world", {}), path)
     lidar = _lidar(data.get("lidar"), path)
+    expect = None
+    if "expect" in data:
+        try:
+            expect = parse_expect(data["expect"])
+        except ValueError as exc:
+            raise ScenarioError(f"{path}: [expect] {exc}") from exc
     scenario = Scenario(
         name=str(data.get("name", path.stem)), description=str(data.get("description", "")),
         segments=tuple(segments) * repeat, host_rate_hz=rate,
         settle_s=float(data.get("settle_s", 1.5)), chair=chair, source=path,
         path=waypoints, follow=follow, terrain=terrain, world=world, start=start, lidar=lidar,
+        expect=expect,
     )
     if world is not None:
         try:

@@ -1,7 +1,8 @@
 """``wcdrive``: the one command line.
 
     wcdrive --version                                    package and protocol versions, native paths
-    wcdrive sim [SCENARIO ...] [--backend port|simavr] [--json] [--out DIR] [--no-plots] [--ekf]
+    wcdrive sim [SCENARIO ...] [--backend port|simavr] [--json] [--out DIR] [--no-plots] [--ekf] [--check]
+    wcdrive sim --all --check                            every bundled scenario held to its [expect]
     wcdrive sim --list
     wcdrive verify --traces N --seed S [--elf PATH]      the port against the firmware in simavr
     wcdrive verify --fp N [--seed S]                     binary32 on the AVR against the port, N pairs/op
@@ -45,7 +46,7 @@ from wcdrive import __version__
 from wcdrive.boards.sim_board import SimulatedBoard
 from wcdrive.hil import verify
 from wcdrive.protocol.spec import integer
-from wcdrive.sim import report, runner, scenario
+from wcdrive.sim import contract, report, runner, scenario
 from wcdrive.tools import bench, console, ros2_node, sweep
 from wcdrive.tools.options import add_ros_output
 from wcdrive.transports.can_link import CanGateway, open_bus
@@ -96,7 +97,29 @@ def _sim(args: argparse.Namespace) -> int:
         return 0
     names = [p.stem for p in scenario.bundled()] if args.all else (args.scenario or ["square"])
     if args.robot == "eddie":
+        if args.all and args.check:          # the Mega's contracts are the Mega's: Eddie's own
+            names = _eddie_own()
         return _sim_eddie(args, names)
+    status = _sim_mega(args, names)
+    if args.all and args.check:              # every bundled scenario: Eddie's own on Eddie too
+        eddie = _sim_eddie(args, _eddie_own())
+        status = max(status, eddie)
+    return status
+
+
+def _eddie_own() -> list[str]:
+    from wcdrive.eddie import runner as eddie_runner
+
+    return [p.stem for p in sorted(eddie_runner.SCENARIOS.glob("*.toml"))]
+
+
+def _report_misses(misses: list[contract.Miss]) -> None:
+    """``--check``: each miss on a line of its own, on stderr."""
+    for miss in misses:
+        print(f"wcdrive sim: check failed: {miss}", file=sys.stderr)
+
+
+def _sim_mega(args: argparse.Namespace, names: list[str]) -> int:
     from wcdrive.plant.params import ChairFileError, load_chair_overrides
 
     try:                                   # a chair file; a scenario's own [chair] keys win
@@ -105,6 +128,7 @@ def _sim(args: argparse.Namespace) -> int:
         print(f"wcdrive sim: {exc}", file=sys.stderr)
         return 2
     results = []
+    misses: list[contract.Miss] = []
     for name in names:
         try:
             sc = scenario.load(name)
@@ -117,6 +141,10 @@ def _sim(args: argparse.Namespace) -> int:
             result = runner.run(sc, backend=args.backend, seed=args.seed, dt=args.dt, progress=progress,
                                 ekf=args.ekf or bool(args.mcap or args.live))
         results.append(result)
+        if args.check:
+            found = contract.check(sc, result)
+            misses += found
+            _report_misses(found)
         if args.mcap or args.live:
             _ros_out(args, sc, result, several=len(names) > 1)
         if not args.json:
@@ -130,7 +158,15 @@ def _sim(args: argparse.Namespace) -> int:
     if args.json:
         print(report.to_json(results))
     failed = [r for r in results if r.firmware_differences]
-    return 1 if failed else 0
+    if args.check:
+        _check_summary(len(results), misses)
+    return console.CHECK_FAILED if failed or misses else console.OK
+
+
+def _check_summary(runs: int, misses: list[contract.Miss]) -> None:
+    missed = len({m.scenario for m in misses})
+    print(f"wcdrive sim: check: {runs - missed} of {runs} runs kept their [expect]"
+          + (f", {missed} missed ({len(misses)} misses)" if misses else ""), file=sys.stderr)
 
 
 def _ros_out(args: argparse.Namespace, sc: scenario.Scenario, result: runner.SimResult,
@@ -160,6 +196,7 @@ def _sim_eddie(args: argparse.Namespace, names: list[str]) -> int:
     from wcdrive.eddie import runner as eddie_runner
 
     results = []
+    misses: list[contract.Miss] = []
     for name in names:
         try:
             sc = eddie_runner.load(name)
@@ -167,11 +204,17 @@ def _sim_eddie(args: argparse.Namespace, names: list[str]) -> int:
             print(f"wcdrive sim: {exc}", file=sys.stderr)
             return 2
         results.append(eddie_runner.run(sc, seed=args.seed))
+        if args.check:
+            found = eddie_runner.check(sc, results[-1])
+            misses += found
+            _report_misses(found)
         if not args.json:
             print(eddie_runner.table(results[-1]) + "\n")
     if args.json:
         print(eddie_runner.to_json(results))
-    return 0
+    if args.check:
+        _check_summary(len(results), misses)
+    return console.CHECK_FAILED if misses else console.OK
 
 
 def _serve(bridge: PtyBridge) -> int:
@@ -293,6 +336,9 @@ def parser() -> argparse.ArgumentParser:
     sim.add_argument("--backend", choices=("port", "simavr"), default="port",
                      help="the Python port (default) or the compiled firmware in simavr")
     sim.add_argument("--json", action="store_true", help="print the metrics as JSON")
+    sim.add_argument("--check", action="store_true",
+                     help="hold each run to its scenario's [expect] table (wcdrive.sim.expect): each miss "
+                          "on stderr, exit 1 if any; with --all, Eddie's own scenarios run on Eddie too")
     sim.add_argument("--out", default="wcdrive-out", help="where the plots go (default: wcdrive-out/)")
     sim.add_argument("--no-plots", action="store_true", help="write no PNG plots")
     sim.add_argument("--seed", type=int, default=0, help="gyro noise seed")
