@@ -17,6 +17,10 @@ hypothesis can shrink a failing example):
   serial writes and both encoders.
 - ``faults(duration)``: one ``Fault`` of any kind (a scenario's ``[[fault]]``).
 - ``scenarios()``: a short ``Scenario`` of random segments, with faults or not.
+- ``envelope_drives(cases)``: one drive of the chair's operating envelope
+  (``wcdrive.testing.envelope.Drive``: grades, ramp bands and their transitions,
+  kerb cuts beyond it, loads, speeds, turns, gains, host rates); ``Drive.toml()`` is
+  its scenario file.
 """
 
 from __future__ import annotations
@@ -40,11 +44,12 @@ from wcdrive.hil.traces import (
 from wcdrive.plant.encoders import EdgeTrain
 from wcdrive.plant.faults import FAULT_KINDS, SIDED_KINDS, Fault
 from wcdrive.sim.scenario import Scenario, Segment
+from wcdrive.testing.envelope import BEYOND, INSIDE, Drive, drive
 
 T = TypeVar("T")
 
-__all__ = ["byte_streams", "commands", "encoder_traces", "fault", "faults", "scenario", "scenarios",
-           "traces"]
+__all__ = ["byte_streams", "commands", "encoder_traces", "envelope_drives", "fault", "faults", "scenario",
+           "scenarios", "traces"]
 
 
 def _strategy(generator: Callable[..., T], *args: Any) -> st.SearchStrategy[T]:
@@ -132,3 +137,10 @@ def faults(duration: float = 10.0) -> st.SearchStrategy[Fault]:
 def scenarios(max_segments: int = 4, with_faults: bool | None = None) -> st.SearchStrategy[Scenario]:
     """A short ``Scenario`` to run with ``wcdrive.sim.runner.run``."""
     return _strategy(scenario, max_segments, with_faults)
+
+
+def envelope_drives(cases: tuple[str, ...] = INSIDE + BEYOND) -> st.SearchStrategy[Drive]:
+    """One healthy drive of the operating envelope, of a class in ``cases``
+    (``wcdrive.testing.envelope``: ``INSIDE``, ``BEYOND``); it shrinks toward the
+    first class, the level, the slowest speed, no turn, 10 Hz and the default gains."""
+    return _strategy(drive, cases)

@@ -27,6 +27,11 @@ and the metrics of ``wcdrive sim --json`` (those that are lists, the board's eve
 among them, as JSON strings), or ``error`` for a run that raised. Rows are written as
 CSV or Parquet (``--out``, by its suffix), sorted by run index. Ctrl-C cancels the runs
 not done and writes the finished ones.
+
+A program may build the runs itself and give each its scenario as TOML text: a point
+of ``expand``'s form whose ``toml`` is the scenario file's text (``scenario`` then only
+names it in the row); ``run_one``, ``run_serial`` and ``run_dask`` take such points as
+they are (``benchmarks/envelope.py`` generates its drives so).
 """
 
 from __future__ import annotations
@@ -38,6 +43,7 @@ import json
 import logging
 import math
 import random
+import tempfile
 import time
 import tomllib
 from collections.abc import Callable, Iterable, Iterator
@@ -173,14 +179,15 @@ def expand(spec: Spec) -> list[dict[str, Any]]:
 
 def run_one(point: dict[str, Any]) -> dict[str, Any]:
     """One run of ``expand``'s list, as its table row (a run that raises gives a row
-    with ``error``). Runs in a Dask worker, or here with ``--serial``."""
+    with ``error``). Runs in a Dask worker, or here with ``--serial``. A point with a
+    ``toml`` (the module docstring) runs that text, not the file ``scenario`` names."""
     row: dict[str, Any] = {"run": point["run"], "scenario": point["scenario"], "backend": point["backend"],
                            "seed": point["seed"]}
     row.update({f"param.{k}": v for k, v in point["params"].items()})
     row.update({f"chair.{k}": v for k, v in point["chair"].items()})
     wall0 = time.perf_counter()
     try:
-        sc = scenario.load(point["scenario"])
+        sc = _load(point)
         sc = dataclasses.replace(sc, board_params={**sc.board_params, **point["params"]},
                                  chair={**sc.chair, **point["chair"]})
         result = runner.run(sc, backend=point["backend"], seed=point["seed"], dt=point["dt"])
@@ -198,6 +205,17 @@ def run_one(point: dict[str, Any]) -> dict[str, Any]:
     row["error"] = ""
     row["wall_s"] = round(time.perf_counter() - wall0, 3)
     return row
+
+
+def _load(point: dict[str, Any]) -> scenario.Scenario:
+    """The point's scenario: its ``toml`` text, or the file ``scenario`` names."""
+    text = point.get("toml")
+    if text is None:
+        return scenario.load(point["scenario"])
+    with tempfile.TemporaryDirectory(prefix="wcdrive-sweep-") as tmp:
+        path = Path(tmp) / "scenario.toml"
+        path.write_text(text)
+        return scenario.load(str(path))
 
 
 def run_serial(points: Iterable[dict[str, Any]]) -> Iterator[dict[str, Any]]:

@@ -1,0 +1,84 @@
+"""No false alarm anywhere in the chair's operating envelope: a hypothesis property over
+the drives of ``wcdrive.testing.envelope`` (through ``strategies.envelope_drives``), on
+the port with the pymunk chair.
+
+The drives: uniform grades and cross-slopes, ramp bands up and down with their
+level-to-ramp and ramp-to-level transitions (the chair stopping beyond the band or on
+it), every grade up to the rated grade of the drawn occupant (40 to 150 kg), speeds up
+to the full-speed command, turns up to 1 rad/s, host rates 4 to 100 Hz, the default
+gains or a set drawn over the accepted ranges for both wheels; and beyond the envelope,
+1:8 kerb cuts up and down.
+
+The property: a healthy chair never latches an ``EVT:FAULT`` (beyond the envelope
+neither: there the board's limit events are the right answer), and within 90 % of the
+rated grade sends no limit event (``EVT:STALLED_ON_GRADE``, ``EVT:OVERSPEED``,
+``EVT:ROLLAWAY``) either. At the rated grade itself the motors are at their current
+limit with nothing to spare (``ChairParams.rated_grade``: a static balance), and a
+climb at speed there may truly be beyond them (40 kg up 6.52 degrees at 1 m/s stalls);
+the 10 % margin is the one ``tests/sim/test_grade_false_alarms.py`` keeps.
+
+A failure prints the drive's scenario TOML: ``wcdrive sim FILE.toml`` replays it.
+``benchmarks/envelope.py`` sweeps the same space with the figures.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from hypothesis import given, settings
+
+from tests.conftest import thorough
+from wcdrive.sim import runner, scenario
+from wcdrive.testing import envelope as ev
+from wcdrive.testing.strategies import envelope_drives
+
+
+def _run(tmp_path_factory, drive: ev.Drive) -> ev.Verdict:
+    path = Path(tmp_path_factory.mktemp("envelope")) / "drive.toml"
+    path.write_text(drive.toml())
+    return ev.judge(runner.run(scenario.load(str(path))).link.events)
+
+
+#: The classes inside the envelope, the ramp bands at the ends (hypothesis draws the
+#: ends of a choice often).
+INSIDE = ("band_up", "uniform", "cross", "band_down")
+#: The share of the rated grade within which a limit event is a false alarm too.
+LIMIT_FREE = 0.9
+
+
+@settings(max_examples=300 if thorough() else 60, deadline=None)
+@given(drive=envelope_drives(INSIDE))
+def test_a_healthy_chair_inside_its_envelope_sends_no_alarm(tmp_path_factory, drive: ev.Drive) -> None:
+    verdict = _run(tmp_path_factory, drive)
+    assert not verdict.faults, f"{drive.describe()}: {verdict.faults}\n{drive.toml()}"
+    if drive.grade_fraction <= LIMIT_FREE:
+        assert not verdict.limits, f"{drive.describe()}: {verdict.limits}\n{drive.toml()}"
+
+
+@settings(max_examples=100 if thorough() else 20, deadline=None)
+@given(drive=envelope_drives(ev.BEYOND))
+def test_a_healthy_chair_on_a_kerb_cut_latches_no_fault(tmp_path_factory, drive: ev.Drive) -> None:
+    """Beyond the rated grade the board's limit events are the right answer, a fault
+    never."""
+    verdict = _run(tmp_path_factory, drive)
+    assert not verdict.faults, f"{drive.describe()}: {verdict.faults}\n{drive.toml()}"
+
+
+def test_the_drives_cover_the_envelope_and_beyond(tmp_path: Path) -> None:
+    """The generator's classes and bounds, checked over seeded draws: every class comes,
+    each grade is within the occupant's rated grade inside the envelope and a 1:8 cut
+    beyond it, and the scenario file it writes loads."""
+    from wcdrive.hil.traces import RandomDraw
+
+    drives = [ev.drive(RandomDraw(i), ev.INSIDE + ev.BEYOND) for i in range(200)]
+    assert {d.case for d in drives} == set(ev.INSIDE + ev.BEYOND)
+    assert all(d.grade_deg <= d.rated_deg + 1e-9 for d in drives if d.inside)
+    assert all(d.grade_deg > d.rated_deg for d in drives if not d.inside)
+    assert max(d.speed for d in drives) == ev.MAX_LINEAR
+    assert {d.host_rate_hz for d in drives} == set(ev.HOST_RATES)
+    assert any(d.gains is None for d in drives) and any(d.gains is not None for d in drives)
+    for i, d in enumerate(drives[:8]):
+        path = tmp_path / f"drive{i}.toml"
+        path.write_text(d.with_fault("motor_dead", 1.0, "left").toml())
+        sc = scenario.load(str(path))
+        assert sc.params().occupant_mass == d.occupant and len(sc.faults) == 1

@@ -1,0 +1,29 @@
+"""``benchmarks/envelope.py --quick`` as a user runs it: the figures come out, the sweep
+runs every drive, a healthy chair latches no fault inside the envelope nor on a kerb
+cut, and every encoder, wheel and link fault injected is found (the dead motor, the
+slow one, is held only to being found at all)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_the_quick_envelope_has_no_false_fault_and_finds_the_faults() -> None:
+    out = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "envelope.py"), "--quick", "--serial",
+                          "--json"], capture_output=True, text=True, check=True, cwd=ROOT, timeout=600)
+    figures = json.loads(out.stdout)
+    assert figures["errors"] == 0 and figures["runs"] > 100
+    healthy, beyond = figures["healthy"]["all"], figures["beyond"]["all"]
+    assert healthy["drives"] >= 60 and healthy["fault"] == 0, healthy
+    assert healthy["limit_90"] == 0, healthy                  # no limit event within 90 % of rated
+    assert beyond["fault"] == 0, beyond                       # kerb cuts: limit events only
+    faulty = figures["faulty"]
+    for kind in ("encoder_cut", "encoder_reversed", "wheel_locked", "link_cut"):
+        assert faulty[kind]["detected"] == faulty[kind]["drives"], (kind, faulty[kind])
+        assert faulty[kind]["right_side"] == faulty[kind]["detected"], (kind, faulty[kind])
+    assert faulty["motor_dead"]["detected"] > 0
