@@ -48,7 +48,8 @@ def _events(tmp_path: Path, text: str) -> list[str]:
 
 
 @pytest.mark.parametrize("name", sorted(CASES))
-def test_a_healthy_chair_where_the_old_rule_saw_a_dead_motor_latches_nothing(tmp_path: Path, name: str) -> None:
+def test_a_healthy_chair_where_the_old_rule_saw_a_dead_motor_latches_nothing(tmp_path: Path,
+                                                                            name: str) -> None:
     events = _events(tmp_path, CASES[name])
     assert not [e for e in events if e.startswith("EVT:FAULT")], events
 

@@ -224,7 +224,8 @@ class ChairParams:
         if motors not in (1, 2):
             raise ValueError(f"motors must be 1 or 2, not {motors!r}")
         p = self if occupant_mass is None else dataclasses.replace(self, occupant_mass=occupant_mass)
-        force = motors * p.gear_ratio * p.gear_efficiency * p.motor_constant * p.current_limit / p.wheel_radius
+        force = (motors * p.gear_ratio * p.gear_efficiency * p.motor_constant * p.current_limit
+                 / p.wheel_radius)
         share = p.caster_load_share
         a = 1.0 + (p.rolling_resistance - p.caster_rolling_resistance) * p.cog_height / p.caster_ahead_of_axle
         b = p.rolling_resistance * (1.0 - share) + p.caster_rolling_resistance * share
