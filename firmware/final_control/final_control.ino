@@ -759,7 +759,11 @@ static uint8_t checkWheel(int32_t delta, uint32_t illegal, uint8_t storm, uint8_
                           float& effortSpeed, float& effortSetpoint, uint8_t& effortTicks,
                           float prevMeasured) {
   if (storm || illegal >= WC_FAULT_ILLEGAL_PER_TICK) return WHEEL_IMPLAUSIBLE;
-  bool driven = appliedPwm >= WC_FAULT_STALL_PWM && setpoint != 0.0f &&
+  // A wheel that stands beside a standing partner may stand on a grade below the
+  // motor's full torque.
+  bool standing = fabs(prevMeasured) < WC_FAULT_STANDING_SPEED && fabs(other) < WC_FAULT_STANDING_SPEED;
+  uint8_t stallPwm = standing ? WC_FAULT_STALL_PWM_STANDING : WC_FAULT_STALL_PWM;
+  bool driven = appliedPwm >= stallPwm && setpoint != 0.0f &&
                 (appliedDir == HIGH) == (setpoint > 0.0f);
   bool stalled = driven && delta == 0;
   stallTicks = stalled ? stallTicks + 1 : 0;

@@ -80,7 +80,9 @@
 #define WC_PIN_BRAKE 22            // PA0, the parking brake: HIGH releases it; LOW, or an input (at reset: the driver's pull-down), engages it
 
 // ---- Fault detection (EVT:FAULT; docs/safety.md) ---------------------------
-#define WC_FAULT_STALL_PWM 26      // duty (10 %) at or above which a wheel must show encoder counts
+#define WC_FAULT_STALL_PWM 26      // duty (10 %) at or above which a turning wheel must show encoder counts (one that stood: FAULT_STALL_PWM_STANDING)
+#define WC_FAULT_STALL_PWM_STANDING 42 // duty (16 %) at or above which a wheel that stood beside a standing partner (both slower than FAULT_STANDING_SPEED when the PID last ran) must show encoder counts: the driver's 13 A current limit at a standstill, the motor's full torque, at which a healthy chair starts its wheels within its rated grade (the grade's definition); on a grade a standing wheel at a lower duty may not turn
+#define WC_FAULT_STANDING_SPEED 0.3f // rad/s: a wheel and its partner both slower than this when the PID last ran stand (FAULT_STALL_PWM_STANDING); a chair that still moves, however slowly, has a wheel turning
 #define WC_FAULT_STALL_TICKS 2     // ticks driven at FAULT_STALL_PWM without a count: stalled or cut encoder
 #define WC_FAULT_STALL_TICKS_TURNING 4 // ...by a wheel whose last motion ran against its setpoint: one turning round stands while its duty builds to break it away
 #define WC_FAULT_REVERSE_SPEED 1.0f // rad/s: setpoint and measured speed both beyond it, opposite signs

@@ -225,7 +225,11 @@ def check_wheel(delta: int, illegal: int, storm: int, applied_pwm: int, applied_
     reversed encoder too: the one whose reading flipped sign with its setpoint."""
     if storm or illegal >= C.FAULT_ILLEGAL_PER_TICK:
         return WHEEL_IMPLAUSIBLE, stall_ticks, reverse_ticks, runaway_ticks, effort
-    driven = (applied_pwm >= C.FAULT_STALL_PWM and setpoint != 0.0
+    # a wheel that stands beside a standing partner may stand on a grade below the
+    # motor's full torque
+    standing = abs(prev_measured) < C.FAULT_STANDING_SPEED and abs(other) < C.FAULT_STANDING_SPEED
+    stall_pwm = C.FAULT_STALL_PWM_STANDING if standing else C.FAULT_STALL_PWM
+    driven = (applied_pwm >= stall_pwm and setpoint != 0.0
               and (applied_dir == C.HIGH) == (setpoint > 0.0))
     stalled = driven and delta == 0
     stall_ticks = (stall_ticks + 1) & 0xFF if stalled else 0

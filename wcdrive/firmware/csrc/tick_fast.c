@@ -144,11 +144,12 @@ static int arg_int(PyObject *o, int64_t *out) {
 
 static struct {
     double alpha, one_minus_alpha, cpr, two_pi, pid_out_max, pwm_scale, still_speed,
-        brake_done_speed, reverse_speed, reverse_approach, runaway_gain, effort_shortfall, effort_shortfall_motor, effort_lead, effort_overrun,
+        brake_done_speed, standing_speed, reverse_speed, reverse_approach, runaway_gain, effort_shortfall, effort_shortfall_motor, effort_lead, effort_overrun,
         overspeed_margin, overspeed_gain,
         pivot_start_speed,
         pivot_speed, rounding2;
-    int64_t control_period_ms, tx_credit_max, tx_credit_per_ms, stall_pwm, stall_ticks, stall_ticks_turning,
+    int64_t control_period_ms, tx_credit_max, tx_credit_per_ms, stall_pwm, stall_pwm_standing, stall_ticks,
+        stall_ticks_turning,
         reverse_ticks, runaway_pwm, runaway_ticks, effort_pwm, effort_ticks, grade_pwm, illegal_per_tick, still_ticks, pivot_ticks,
         hold_deadband, overspeed_pwm, overspeed_ticks,
         high, low, pivot_none, pivot_stopping, pivot_rotating, untrusted_l, untrusted_r;
@@ -291,7 +292,9 @@ static int check_wheel(int64_t delta, int64_t illegal, int64_t storm, int64_t pw
                        int64_t *runaway, Effort *e, double prev_measured) {
     if (storm || illegal >= K.illegal_per_tick)
         return WHEEL_FAULT;
-    int driven = pwm >= K.stall_pwm && setpoint != 0.0 && ((dir == K.high) == (setpoint > 0.0));
+    int standing = fabs(prev_measured) < K.standing_speed && fabs(other) < K.standing_speed;
+    int64_t stall_pwm = standing ? K.stall_pwm_standing : K.stall_pwm;
+    int driven = pwm >= stall_pwm && setpoint != 0.0 && ((dir == K.high) == (setpoint > 0.0));
     int stalled = driven && delta == 0;
     *stall = stalled ? ((*stall + 1) & 0xFF) : 0;
     int turning = prev_measured != 0.0 && ((prev_measured > 0.0) != (setpoint > 0.0));
@@ -733,6 +736,7 @@ static PyObject *bind(PyObject *self, PyObject *args) {
           && const_double(consts, "STILL_SPEED", &k.still_speed)
           && const_double(consts, "BRAKE_DONE_SPEED", &k.brake_done_speed)
           && const_double(consts, "FAULT_REVERSE_SPEED", &k.reverse_speed)
+          && const_double(consts, "FAULT_STANDING_SPEED", &k.standing_speed)
           && const_double(consts, "FAULT_REVERSE_APPROACH", &k.reverse_approach)
           && const_double(consts, "FAULT_RUNAWAY_GAIN", &k.runaway_gain)
           && const_double(consts, "FAULT_EFFORT_SHORTFALL", &k.effort_shortfall)
@@ -746,6 +750,7 @@ static PyObject *bind(PyObject *self, PyObject *args) {
           && const_int(consts, "TX_CREDIT_MAX", &k.tx_credit_max)
           && const_int(consts, "TX_CREDIT_PER_MS", &k.tx_credit_per_ms)
           && const_int(consts, "FAULT_STALL_PWM", &k.stall_pwm)
+          && const_int(consts, "FAULT_STALL_PWM_STANDING", &k.stall_pwm_standing)
           && const_int(consts, "FAULT_STALL_TICKS", &k.stall_ticks)
           && const_int(consts, "FAULT_STALL_TICKS_TURNING", &k.stall_ticks_turning)
           && const_int(consts, "FAULT_REVERSE_TICKS", &k.reverse_ticks)
