@@ -52,7 +52,7 @@ def test_port_matches_firmware(elf, half: str, trace: Trace) -> None:
 @pytest.mark.parametrize("chunk", range(SEEDED_CHUNKS))
 def test_port_matches_firmware_on_seeded_traces(elf, chunk: int) -> None:
     """Longer traces than hypothesis draws (its buffer caps a trace's choices): the
-    motion profiles (``hil.traces.motion_profile``) start in mid-trace too, after the
+    motion profiles (``hil.profiles.motion_profile``) start in mid-trace too, after the
     preamble that brings the chair back to rest. A failure names the seed, which
     ``generate_trace(RandomDraw(seed), SEEDED_DURATION)`` replays."""
     for k in range(SEEDED_PER_CHUNK):

@@ -1,4 +1,4 @@
-"""The trace generator's motion profiles (``hil.traces.motion_profile``). The random
+"""The trace generator's motion profiles (``hil.profiles.motion_profile``). The random
 traces' encoders are scripted, not driven by the duty, so the firmware's rules that
 weigh the duty against the wheels' speeds (the grade limit, the motor rule, the
 overspeed, the hill hold) fire only where a profile shapes the speeds as the chair would
@@ -13,13 +13,8 @@ import numpy as np
 import pytest
 
 from wcdrive.hil.lockstep import compare, record
-from wcdrive.hil.traces import (
-    FIRST_COMMAND_S,
-    MAX_TRACE_EDGE_RATE,
-    PROFILES,
-    RandomDraw,
-    generate_trace,
-)
+from wcdrive.hil.profiles import PROFILES
+from wcdrive.hil.traces import FIRST_COMMAND_S, MAX_TRACE_EDGE_RATE, RandomDraw, generate_trace
 
 
 def _most_edges_in(train_times: np.ndarray, window: float) -> int:

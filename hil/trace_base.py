@@ -1,0 +1,133 @@
+"""The two things every trace generator shares: a source of choices (``Draw``:
+``RandomDraw`` seeded, ``HypothesisDraw`` for property tests, which then shrink) and
+the trace itself (``Trace``: serial writes and encoder edges on a timeline, resets,
+storms). ``wcdrive.hil.traces`` builds random traces from them, ``wcdrive.hil.profiles``
+the motion profiles a trace may end in.
+"""
+
+from __future__ import annotations
+
+import random
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any, Protocol, TypeVar
+
+from wcdrive.plant.encoders import EdgeTrain
+
+T = TypeVar("T")
+
+#: When the first byte may arrive: setup() is done after about 2 ms.
+FIRST_COMMAND_S = 0.010
+#: Edges/s per wheel in generated traces. The firmware counts every edge up to
+#: 70,000 edges/s on both wheels at once, coincident edges included (the timing budget:
+#: tests/boards/test_harness.py); traces keep a margin for the UART interrupts.
+MAX_TRACE_EDGE_RATE = 60000.0
+
+
+class Draw(Protocol):
+    """A source of choices: ``RandomDraw`` or ``HypothesisDraw``."""
+
+    def integer(self, lo: int, hi: int) -> int:
+        """An integer in [lo, hi]."""
+
+    def real(self, lo: float, hi: float) -> float:
+        """A float in [lo, hi]."""
+
+    def choice(self, options: Sequence[T]) -> T:
+        """One of ``options``."""
+
+    def boolean(self, p: float = 0.5) -> bool:
+        """True with probability ``p``."""
+
+
+class RandomDraw:
+    """Choices from ``random.Random(seed)``: one seed, one trace."""
+
+    def __init__(self, seed: int, *, eeprom_commands: bool = True, floods: bool = True,
+                 profiles: bool = True) -> None:
+        """``eeprom_commands=False``: the generator as it was before ``save`` and
+        ``defaults``; ``floods=False``: as it was before ``flood``; ``profiles=False``:
+        as it was before ``motion_profile``; so that a seed found then gives the same
+        trace."""
+        self.rng = random.Random(seed)
+        self.eeprom_commands = eeprom_commands
+        self.floods = floods
+        self.profiles = profiles
+
+    def integer(self, lo: int, hi: int) -> int:
+        """An integer in [lo, hi]."""
+        return self.rng.randint(lo, hi)
+
+    def real(self, lo: float, hi: float) -> float:
+        """A float in [lo, hi]."""
+        return self.rng.uniform(lo, hi)
+
+    def choice(self, options: Sequence[T]) -> T:
+        """One of ``options``."""
+        return options[self.rng.randrange(len(options))]
+
+    def boolean(self, p: float = 0.5) -> bool:
+        """True with probability ``p``."""
+        return self.rng.random() < p
+
+
+class HypothesisDraw:
+    """Choices drawn from ``st.data()``, so hypothesis can shrink a failing trace."""
+
+    def __init__(self, data: Any) -> None:
+        from hypothesis import strategies as st
+
+        self._st = st
+        self._data = data
+
+    def integer(self, lo: int, hi: int) -> int:
+        """An integer in [lo, hi]."""
+        return self._data.draw(self._st.integers(lo, hi))
+
+    def real(self, lo: float, hi: float) -> float:
+        """A float in [lo, hi] (never NaN)."""
+        return self._data.draw(self._st.floats(lo, hi, allow_nan=False))
+
+    def choice(self, options: Sequence[T]) -> T:
+        """One of ``options``."""
+        return options[self._data.draw(self._st.integers(0, len(options) - 1))]
+
+    def boolean(self, p: float = 0.5) -> bool:
+        """True with probability ``p`` (in steps of 0.001)."""
+        return self._data.draw(self._st.integers(0, 999)) < int(p * 1000)
+
+
+@dataclass
+class Trace:
+    """The firmware's inputs: serial writes as (s, bytes), an encoder edge train per
+    side, and ``millis_start``, the ``millis()`` set at ``main()`` (None: boot at 0)."""
+
+    duration: float
+    serial: list[tuple[float, bytes]] = field(default_factory=list)
+    encoders: dict[str, EdgeTrain] = field(default_factory=dict)
+    millis_start: int | None = None
+    #: Encoder storms in the trains (``storm``): (side, start s, end s).
+    storms: list[tuple[str, float, float]] = field(default_factory=list)
+    #: The EEPROM's contents at power-on (``EEPROM_SIZE`` bytes; None: erased).
+    eeprom: bytes | None = None
+    #: Resets of the board during the trace (``VirtualMega.reset``): (s, cause).
+    resets: list[tuple[float, str]] = field(default_factory=list)
+    #: The motion profile the trace ends in (one of ``PROFILES``; None: none), and from when.
+    profile: str | None = None
+    profile_start: float = 0.0
+
+    def describe(self) -> str:
+        """The trace as text for a failure report, one serial write a line."""
+        lines = [f"duration={self.duration}s millis_start={self.millis_start}"]
+        if self.profile is not None:
+            lines.append(f"  ends in the motion profile {self.profile!r} from t={self.profile_start:.4f}s")
+        if self.eeprom is not None:
+            lines.append(f"  EEPROM at power-on: {self.eeprom[:48].hex()}...")
+        lines += [f"  t={t:.4f}s {data!r}" for t, data in self.serial]
+        for side, train in self.encoders.items():
+            lines.append(f"  {side}: {train.times.size} edges, count {train.start_count}"
+                         f" -> {train.end_count}")
+        lines += [f"  reset ({cause}) at t={t:.4f}s" for t, cause in self.resets]
+        lines += [f"  storm on {side} from {a:.4f}s to {b:.4f}s" for side, a, b in self.storms]
+        return "\n".join(lines)
+
