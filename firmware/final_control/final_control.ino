@@ -681,11 +681,15 @@ static bool effortLeads(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, 
                         uint8_t otherPwm, uint8_t otherDir, float otherSetpoint, float other) {
   float effort = effortOf(appliedPwm, appliedDir, setpoint, measured);
   float otherEffort = effortOf(otherPwm, otherDir, otherSetpoint, other);
-  if (effort >= otherEffort + WC_FAULT_EFFORT_LEAD_PWM) return true;
+  float otherProgress = otherSetpoint > 0.0f ? other : -other;
+  // A partner braking down to its setpoint works as hard as one driving: its braking
+  // slows the chair that this wheel drives.
+  bool brakingDown = otherEffort < 0.0f && otherProgress > fabs(otherSetpoint);
+  float otherWork = brakingDown ? -otherEffort : otherEffort;
+  if (effort >= otherWork + WC_FAULT_EFFORT_LEAD_PWM) return true;
   if (effort <= -WC_FAULT_EFFORT_MAX && otherEffort >= effort + WC_FAULT_EFFORT_LEAD_PWM) return true;
   if (effort < WC_FAULT_EFFORT_MAX || otherEffort < WC_FAULT_EFFORT_MAX) return false;
   float progress = setpoint > 0.0f ? measured : -measured;
-  float otherProgress = otherSetpoint > 0.0f ? other : -other;
   if (otherProgress >= fabs(otherSetpoint)) return false;
   float asked = fabs(otherSetpoint) - fabs(setpoint);
   return (otherProgress - progress) - (asked > 0.0f ? asked : 0.0f) >= WC_FAULT_EFFORT_LAG;

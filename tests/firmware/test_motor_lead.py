@@ -177,13 +177,15 @@ def test_a_dead_motor_after_slowing_is_still_found() -> None:
     assert _after_slowing(list(range(34, 100, 2))) is not None
 
 
-def _ticks_to_stall(prev_measured: float, setpoint: float = -0.89, ticks: int = 10) -> int | None:
-    """The tick count at which a wheel driven at duty 31 toward ``setpoint``, without a
-    count, is a stall, the PID having last run on ``prev_measured``."""
+def _ticks_to_stall(prev_measured: float, setpoint: float = -0.89, ticks: int = 10, duty: int = 31,
+                    other: float = 2.0) -> int | None:
+    """The tick count at which a wheel driven at ``duty`` toward ``setpoint``, without a
+    count, is a stall, the PID having last run on ``prev_measured``, the other wheel
+    turning at ``other``."""
     direction = C.HIGH if setpoint > 0.0 else C.LOW
     stall = 0
     for k in range(ticks):
-        verdict, stall, _, _, _ = check_wheel(0, 0, 0, 31, direction, setpoint, 0.0, 0.0, 0, False,
+        verdict, stall, _, _, _ = check_wheel(0, 0, 0, duty, direction, setpoint, 0.0, other, 0, False,
                                               stall, 0, 0, (0, 0.0, 0.0, 0), prev_measured)
         if verdict == WHEEL_STALLED:
             return k + 1
@@ -201,3 +203,14 @@ def test_a_wheel_turning_round_without_counts_stalls_later(prev_measured: float)
     sign): FAULT_STALL_TICKS_TURNING ticks, and no more."""
     assert C.FAULT_STALL_TICKS < C.FAULT_STALL_TICKS_TURNING
     assert _ticks_to_stall(prev_measured) == C.FAULT_STALL_TICKS_TURNING
+
+
+def test_a_wheel_standing_beside_a_standing_partner_stalls_only_at_full_torque() -> None:
+    """Both wheels slower than FAULT_STANDING_SPEED: on a grade a healthy wheel may stand
+    below the motor's full torque, so only FAULT_STALL_PWM_STANDING without a count is a
+    stall; a partner that turns, or this wheel having turned, brings back FAULT_STALL_PWM."""
+    assert C.FAULT_STALL_PWM < C.FAULT_STALL_PWM_STANDING
+    assert _ticks_to_stall(0.0, duty=C.FAULT_STALL_PWM_STANDING - 1, other=0.1) is None
+    assert _ticks_to_stall(0.0, duty=C.FAULT_STALL_PWM_STANDING, other=0.1) == C.FAULT_STALL_TICKS
+    assert _ticks_to_stall(0.0, duty=C.FAULT_STALL_PWM, other=2.0) == C.FAULT_STALL_TICKS
+    assert _ticks_to_stall(-1.5, duty=C.FAULT_STALL_PWM, other=0.1) == C.FAULT_STALL_TICKS

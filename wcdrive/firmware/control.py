@@ -120,14 +120,17 @@ def effort_leads(applied_pwm: int, applied_dir: int, setpoint: float, measured: 
     a ramp's edge)."""
     effort = effort_of(applied_pwm, applied_dir, setpoint, measured)
     other_effort = effort_of(other_pwm, other_dir, other_setpoint, other)
-    if effort >= add(other_effort, C.FAULT_EFFORT_LEAD_PWM):
+    other_progress = other if other_setpoint > 0.0 else -other
+    # a partner braking down to its setpoint works as hard as one driving
+    braking_down = other_effort < 0.0 and other_progress > abs(other_setpoint)
+    other_work = -other_effort if braking_down else other_effort
+    if effort >= add(other_work, C.FAULT_EFFORT_LEAD_PWM):
         return True
-    if other_effort >= add(effort, C.FAULT_EFFORT_LEAD_PWM) and effort <= -C.FAULT_EFFORT_MAX:
+    if effort <= -C.FAULT_EFFORT_MAX and other_effort >= add(effort, C.FAULT_EFFORT_LEAD_PWM):
         return True
     if effort < C.FAULT_EFFORT_MAX or other_effort < C.FAULT_EFFORT_MAX:
         return False
     progress = measured if setpoint > 0.0 else -measured
-    other_progress = other if other_setpoint > 0.0 else -other
     if other_progress >= abs(other_setpoint):
         return False
     asked = sub(abs(other_setpoint), abs(setpoint))
