@@ -668,11 +668,10 @@ static float effortOf(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, fl
 // (its duty far below its back-EMF) while the other brakes WC_FAULT_EFFORT_LEAD_PWM less,
 // and yet its PID winds its duty up without a gain (a dead wheel carried along by the
 // chair down a grade: a healthy one would brake, and slow, harder than its partner); or,
-// both at the current limit
-// (WC_FAULT_EFFORT_MAX) and the other short of its setpoint, it turns WC_FAULT_EFFORT_LAG
-// slower than the other, each its own way, beyond what the setpoints ask (a setpoint
-// asking this wheel for more than the other is no excuse: at the limit neither gets
-// its setpoint). A dead motor's PID winds its duty up while the partner carries the
+// both at the current limit (WC_FAULT_EFFORT_MAX) and the other short of its setpoint,
+// it turns WC_FAULT_EFFORT_LAG slower than the other, each its own way, beyond what the
+// setpoints ask (a setpoint asking this wheel for more than the other is no excuse: at
+// the limit neither gets its setpoint). A dead motor's PID winds its duty up while the partner carries the
 // chair at its own, and where both ask more than the current limit gives, equal torques
 // would keep the wheels together: a wheel left behind is one without torque. A grade, a
 // kerb or a ramp's edge loads both wheels alike, and both duties rise together,

@@ -196,16 +196,10 @@ class ChairParams:
         so ``t = asin(F / (m g hypot(A, B))) - atan2(B, A)``. Traction (``friction`` times
         the drive wheels' load) and tipping are not limits here; 0 when the motors
         cannot overcome rolling resistance."""
-        p = self if occupant_mass is None else dataclasses.replace(self, occupant_mass=occupant_mass)
-        ke = p.motor_constant
-        force = 2.0 * p.gear_ratio * p.gear_efficiency * ke * p.current_limit / p.wheel_radius
-        share = p.caster_load_share
-        a = 1.0 + (p.rolling_resistance - p.caster_rolling_resistance) * p.cog_height / p.caster_ahead_of_axle
-        b = p.rolling_resistance * (1.0 - share) + p.caster_rolling_resistance * share
-        ratio = force / (p.mass * G * math.hypot(a, b))
+        ratio, rolling = self._grade_balance(occupant_mass, motors=2)
         if ratio >= 1.0:
             return 90.0
-        return max(0.0, math.degrees(math.asin(ratio) - math.atan2(b, a)))
+        return max(0.0, math.degrees(math.asin(ratio) - rolling))
 
     def hold_grade(self, occupant_mass: float | None = None, *, motors: int = 2) -> float:
         """degrees: the steepest grade on which ``motors`` motors (2 or 1), braking at the
@@ -223,16 +217,23 @@ class ChairParams:
         4.87 (``rated_grade``); one motor alone holds 4.09."""
         if motors not in (1, 2):
             raise ValueError(f"motors must be 1 or 2, not {motors!r}")
+        ratio, rolling = self._grade_balance(occupant_mass, motors=motors)
+        if ratio >= 1.0:
+            return 90.0
+        return min(90.0, math.degrees(math.asin(ratio) + rolling))
+
+    def _grade_balance(self, occupant_mass: float | None, *, motors: int) -> tuple[float, float]:
+        """``(F / (m g hypot(A, B)), atan2(B, A))`` of ``rated_grade``'s force balance:
+        ``motors`` motors' force at the driver's current limit, ``Ke G eff I / r`` each,
+        against the chair's weight (``occupant_mass`` kg in the seat, by default this
+        one's), and the rolling resistance's angle."""
         p = self if occupant_mass is None else dataclasses.replace(self, occupant_mass=occupant_mass)
         force = (motors * p.gear_ratio * p.gear_efficiency * p.motor_constant * p.current_limit
                  / p.wheel_radius)
         share = p.caster_load_share
         a = 1.0 + (p.rolling_resistance - p.caster_rolling_resistance) * p.cog_height / p.caster_ahead_of_axle
         b = p.rolling_resistance * (1.0 - share) + p.caster_rolling_resistance * share
-        ratio = force / (p.mass * G * math.hypot(a, b))
-        if ratio >= 1.0:
-            return 90.0
-        return min(90.0, math.degrees(math.asin(ratio) + math.atan2(b, a)))
+        return force / (p.mass * G * math.hypot(a, b)), math.atan2(b, a)
 
     def wheel_friction(self, side: str) -> float:
         """The friction coefficient of the ``"left"`` or ``"right"`` drive tyre."""

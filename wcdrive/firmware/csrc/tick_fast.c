@@ -144,13 +144,13 @@ static int arg_int(PyObject *o, int64_t *out) {
 
 static struct {
     double alpha, one_minus_alpha, cpr, two_pi, pid_out_max, pwm_scale, still_speed,
-        brake_done_speed, standing_speed, reverse_speed, reverse_approach, runaway_gain, effort_shortfall, effort_shortfall_motor, effort_lead, effort_overrun,
+        brake_done_speed, standing_speed, reverse_speed, reverse_approach, runaway_gain, effort_shortfall_motor, effort_lead, effort_overrun,
         overspeed_margin, overspeed_gain,
         pivot_start_speed,
         pivot_speed, rounding2;
     int64_t control_period_ms, tx_credit_max, tx_credit_per_ms, stall_pwm, stall_pwm_standing, stall_ticks,
         stall_ticks_turning,
-        reverse_ticks, runaway_pwm, runaway_ticks, effort_pwm, effort_ticks, grade_pwm, illegal_per_tick, still_ticks, pivot_ticks,
+        reverse_ticks, runaway_pwm, runaway_ticks, effort_pwm, effort_ticks, illegal_per_tick, still_ticks, pivot_ticks,
         hold_deadband, overspeed_pwm, overspeed_ticks,
         high, low, pivot_none, pivot_stopping, pivot_rotating, untrusted_l, untrusted_r;
 } K;
@@ -739,7 +739,6 @@ static PyObject *bind(PyObject *self, PyObject *args) {
           && const_double(consts, "FAULT_STANDING_SPEED", &k.standing_speed)
           && const_double(consts, "FAULT_REVERSE_APPROACH", &k.reverse_approach)
           && const_double(consts, "FAULT_RUNAWAY_GAIN", &k.runaway_gain)
-          && const_double(consts, "FAULT_EFFORT_SHORTFALL", &k.effort_shortfall)
           && const_double(consts, "FAULT_EFFORT_SHORTFALL_MOTOR", &k.effort_shortfall_motor)
           && const_double(consts, "FAULT_EFFORT_LEAD", &k.effort_lead)
           && const_double(consts, "FAULT_EFFORT_OVERRUN", &k.effort_overrun)
@@ -757,7 +756,6 @@ static PyObject *bind(PyObject *self, PyObject *args) {
           && const_int(consts, "FAULT_RUNAWAY_PWM", &k.runaway_pwm)
           && const_int(consts, "FAULT_RUNAWAY_TICKS", &k.runaway_ticks)
           && const_int(consts, "FAULT_EFFORT_PWM", &k.effort_pwm)
-          && const_int(consts, "GRADE_PWM", &k.grade_pwm)
           && const_int(consts, "FAULT_EFFORT_TICKS", &k.effort_ticks)
           && const_int(consts, "FAULT_ILLEGAL_PER_TICK", &k.illegal_per_tick)
           && const_int(consts, "STILL_TICKS", &k.still_ticks)
