@@ -21,6 +21,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.conftest import thorough
+from tests.support.depth import cases
 from tests.support.grade import checked_run
 from wcdrive.firmware import constants as C
 from wcdrive.plant import ChairParams, Plant
@@ -95,9 +97,11 @@ def _locked_slide(slope: float) -> float:
     return math.hypot(x - x0, y - y0)
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
-@pytest.mark.parametrize("stop", ["zero", "silence"])
-@pytest.mark.parametrize("slope", [ONE_IN_12, ONE_IN_20], ids=["1:12", "1:20"])
+#: Each park runs 70 simulated s; the fast depth runs one on simavr (the watchdog's stop
+#: on 1:12, the steeper grade), the thorough depth all four.
+@pytest.mark.parametrize(("slope", "stop", "backend"), cases(
+    [(ONE_IN_12, "zero"), (ONE_IN_12, "silence"), (ONE_IN_20, "zero"), (ONE_IN_20, "silence")],
+    ["1:12-zero", "1:12-silence", "1:20-zero", "1:20-silence"], fast_simavr=["1:12-silence"]))
 def test_a_chair_parked_on_a_ramp_stays(slope: float, stop: str, backend: str) -> None:
     r = _run(slope, stop, backend)
     if stop == "silence":
@@ -110,7 +114,7 @@ def test_a_chair_parked_on_a_ramp_stays(slope: float, stop: str, backend: str) -
     assert np.all(r.board.pwm[-20:] > 0) and np.all(r.board.pwm[-20:] <= C.HOLD_PWM_MAX)
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("backend", BACKENDS if thorough() else ["port"])
 def test_a_chair_parked_on_the_level_stands_at_duty_zero(backend: str) -> None:
     r = _run(0.0, "zero", backend)
     i = _park_tick(r, "zero")
