@@ -664,8 +664,8 @@ static float effortOf(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, fl
 }
 
 // One motor's fault, not the chair's load: the wheel's effort (effortOf) leads the other
-// wheel's by WC_FAULT_EFFORT_LEAD_PWM or more; or it should brake at the current limit
-// (its duty far below its back-EMF) while the other brakes WC_FAULT_EFFORT_LEAD_PWM less,
+// wheel's by WC_FAULT_EFFORT_LEAD_PWM or more, the other not held back by its own
+// setpoint; or it should brake at the current limit (its duty far below its back-EMF) while the other brakes WC_FAULT_EFFORT_LEAD_PWM less,
 // and yet its PID winds its duty up without a gain (a dead wheel carried along by the
 // chair down a grade: a healthy one would brake, and slow, harder than its partner); or,
 // both at the current limit (WC_FAULT_EFFORT_MAX) and the other short of its setpoint,
@@ -685,7 +685,11 @@ static bool effortLeads(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, 
   // slows the chair that this wheel drives.
   bool brakingDown = otherEffort < 0.0f && otherProgress > fabs(otherSetpoint);
   float otherWork = brakingDown ? -otherEffort : otherEffort;
-  if (effort >= otherWork + WC_FAULT_EFFORT_LEAD_PWM) return true;
+  // A partner held back by its own setpoint, WC_FAULT_EFFORT_OVERRUN or more behind it
+  // this wheel's way (a spin, a sharp turn, a stop), holds the chair back: the chair
+  // does not follow this wheel's command, and its effort goes into that.
+  float heldBack = setpoint > 0.0f ? other - otherSetpoint : otherSetpoint - other;
+  if (heldBack < WC_FAULT_EFFORT_OVERRUN && effort >= otherWork + WC_FAULT_EFFORT_LEAD_PWM) return true;
   if (effort <= -WC_FAULT_EFFORT_MAX && otherEffort >= effort + WC_FAULT_EFFORT_LEAD_PWM) return true;
   if (effort < WC_FAULT_EFFORT_MAX || otherEffort < WC_FAULT_EFFORT_MAX) return false;
   float progress = setpoint > 0.0f ? measured : -measured;

@@ -11,7 +11,12 @@ load"). The cases:
   shrunk counterexample of ``tests/sim/test_envelope_property.py``: ``MOTOR_L``;
 * turning 10 s at 0.4 rad/s on a 4 degree slope at 0.5 m/s (``benchmarks/motor_rule.py``):
   ``MOTOR_L``;
-* a 1:20 band down at 0.6 m/s with 80 kg (no fault under the old rule either: the descent).
+* a 1:20 band down at 0.6 m/s with 80 kg (no fault under the old rule either: the descent);
+* near the rated grade, on the band, a sharp turn that asks one wheel to stop or
+  reverse (``benchmarks/envelope.py``'s drives 2337 and 2442): the other wheel, at the
+  current limit, carries the chair alone while its partner brakes to its setpoint.
+  Under the effort lead alone it latched ``MOTOR_R``/``MOTOR_L``; a partner held back
+  by its own setpoint now excuses the lead.
 """
 
 from __future__ import annotations
@@ -31,10 +36,27 @@ def _band(occupant: float, slope_deg: float, to_x: float, speed: float, seconds:
             f"[[segment]]\nstop = true\nduration = 3.0\n")
 
 
+def _band_turn(occupant: float, slope_deg: float, to_x: float, speed: float, seconds: float,
+               turn: tuple[float, float], host_hz: int, gains: tuple[float, float, float] | None) -> str:
+    """Up a band at ``speed``, then ``turn`` (m/s, rad/s) for 2 s, then the stop."""
+    params = "" if gains is None else "[params]\n" + "".join(
+        f"{k}_{side} = {v}\n" for side in "lr" for k, v in zip(("kp", "ki", "kd"), gains, strict=True))
+    return (f'name = "band_turn"\nsettle_s = 0.5\nhost_rate_hz = {host_hz}\n'
+            f"[chair]\noccupant_mass = {occupant}\n{params}"
+            f"[world]\nslope_deg = 0.0\ndownhill_heading_deg = 0\n"
+            f"[[world.ramp]]\nfrom_x = 1.0\nto_x = {to_x}\nslope_deg = {slope_deg}\n"
+            f"[[segment]]\ncmdvel = [{speed}, 0.0]\nduration = {seconds}\n"
+            f"[[segment]]\ncmdvel = [{turn[0]}, {turn[1]}]\nduration = 2.0\n"
+            f"[[segment]]\nstop = true\nduration = 3.0\n")
+
+
 CASES = {
     "1in20_band_150kg_1mps": _band(150.0, -2.862, 4.6, 1.0, 6.0),
     "rated_band_58kg_1mps": _band(58.0, -5.68, 3.0, 1.0, 5.2),
     "1in20_band_down_80kg": _band(80.0, 2.862, 4.6, 0.6, 9.0),
+    "rated_band_122kg_sharp_turn": _band_turn(122.0, -3.749, 4.9, 0.5, 6.7, (0.25, 0.89), 5, None),
+    "rated_band_125kg_spin": _band_turn(125.0, -3.684, 2.8, 0.3, 7.0, (0.15, -0.97), 4,
+                                        (2.64, 2.764, 0.162)),
     "turn_on_4deg_slope": ('name = "turn"\nsettle_s = 0.5\nhost_rate_hz = 10\n'
                            "[world]\nslope_deg = 4.0\ndownhill_heading_deg = 270.0\n"
                            "[[segment]]\ncmdvel = [0.5, 0.4]\nduration = 10.0\n"),

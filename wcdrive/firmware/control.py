@@ -110,21 +110,25 @@ def effort_of(applied_pwm: int, applied_dir: int, setpoint: float, measured: flo
 def effort_leads(applied_pwm: int, applied_dir: int, setpoint: float, measured: float,
                  other_pwm: int, other_dir: int, other_setpoint: float, other: float) -> bool:
     """``effortLeads``: the wheel's effort leads the other wheel's by
-    FAULT_EFFORT_LEAD_PWM or more; or it should brake at the current limit while the
-    other brakes FAULT_EFFORT_LEAD_PWM less, yet its duty winds up without a gain (a dead
-    wheel carried down a grade); or, both at FAULT_EFFORT_MAX (the current limit) and
-    the other short of its setpoint, it turns FAULT_EFFORT_LAG slower than the other,
-    each its own way, beyond what the setpoints ask (a setpoint asking this wheel for
-    more is no excuse: at the limit neither gets its setpoint). One motor doing nothing
-    while its partner carries the chair, not a load both wheels share (a grade, a kerb,
-    a ramp's edge)."""
+    FAULT_EFFORT_LEAD_PWM or more, the other not held back by its own setpoint
+    (FAULT_EFFORT_OVERRUN or more beyond it this wheel's way); or it should brake at the
+    current limit while the other brakes FAULT_EFFORT_LEAD_PWM less, yet its duty winds
+    up without a gain (a dead wheel carried down a grade); or, both at FAULT_EFFORT_MAX
+    (the current limit) and the other short of its setpoint, it turns FAULT_EFFORT_LAG
+    slower than the other, each its own way, beyond what the setpoints ask (a setpoint
+    asking this wheel for more is no excuse: at the limit neither gets its setpoint).
+    One motor doing nothing while its partner carries the chair, not a load both wheels
+    share (a grade, a kerb, a ramp's edge)."""
     effort = effort_of(applied_pwm, applied_dir, setpoint, measured)
     other_effort = effort_of(other_pwm, other_dir, other_setpoint, other)
     other_progress = other if other_setpoint > 0.0 else -other
     # a partner braking down to its setpoint works as hard as one driving
     braking_down = other_effort < 0.0 and other_progress > abs(other_setpoint)
     other_work = -other_effort if braking_down else other_effort
-    if effort >= add(other_work, C.FAULT_EFFORT_LEAD_PWM):
+    # a partner held back by its own setpoint (a spin, a sharp turn, a stop) holds the
+    # chair back: this wheel's effort goes into that
+    held_back = sub(other, other_setpoint) if setpoint > 0.0 else sub(other_setpoint, other)
+    if held_back < C.FAULT_EFFORT_OVERRUN and effort >= add(other_work, C.FAULT_EFFORT_LEAD_PWM):
         return True
     if effort <= -C.FAULT_EFFORT_MAX and other_effort >= add(effort, C.FAULT_EFFORT_LEAD_PWM):
         return True
