@@ -50,10 +50,22 @@ def test_every_page_in_the_nav_is_checked() -> None:
     nav = re.findall(r":\s+(\S+\.md)$", (REPO / "mkdocs.yml").read_text(), re.M)
     unchecked = set(nav) - set(PAGES) - {"index.md", "docs/architecture.md", "docs/safety.md",
                                          "docs/benchmarks.md", "docs/api.md", "protocol/PROTOCOL.md",
-                                         "firmware/final_control/README.md"}
+                                         "firmware/final_control/README.md", "docs/changelog.md"}
     assert not unchecked, unchecked
-    for page in ("docs/architecture.md", "docs/safety.md", "docs/benchmarks.md", "docs/api.md"):
+    for page in ("docs/architecture.md", "docs/safety.md", "docs/benchmarks.md", "docs/api.md",
+                 "docs/changelog.md"):
         assert not blocks(page), page
+
+
+def test_every_changelog_entry_names_a_test_that_exists() -> None:
+    """Each entry of docs/changelog.md ends naming the test that holds it."""
+    entries = re.split(r"^- ", (REPO / "docs/changelog.md").read_text(), flags=re.M)[1:]
+    assert entries
+    for entry in entries:
+        named = re.findall(r"`(tests/[\w/]+\.py)`", entry)
+        assert named, entry
+        for path in named:
+            assert (REPO / path).is_file(), path
 
 
 @pytest.mark.parametrize("page", PAGES)

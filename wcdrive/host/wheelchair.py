@@ -32,8 +32,6 @@ from typing import TYPE_CHECKING, Literal, overload
 
 import numpy as np
 
-from wcdrive.avr.avrlibc import strtod
-from wcdrive.avr.f32 import f32
 from wcdrive.errors import (
     WcdriveCommandError,
     WcdriveConnectionError,
@@ -50,15 +48,12 @@ from wcdrive.host.scan_feed import ScanFeed, ScanSource
 from wcdrive.host.session import Session
 from wcdrive.host.telemetry import LinkEvent, LinkLost, LinkRestored, Reset, Telemetry, TelemetryHub
 from wcdrive.protocol.codec import (
-    MAX_ANGULAR,
-    MAX_LINEAR,
-    MAX_WHEEL,
     ExtendedTelemetry,
     LineStats,
     Param,
     encode_cmdvel,
-    encode_wheel,
 )
+from wcdrive.protocol.motion import velocity_command, wheel_command
 from wcdrive.protocol.spec import integer
 from wcdrive.transports.port import Port
 from wcdrive.transports.recording import Recording
@@ -73,17 +68,6 @@ __all__ = ["LINK_TIMEOUT", "LinkEvent", "LinkLost", "LinkRestored", "Reset", "Te
 LINK_TIMEOUT = 3 * integer("CONTROL_PERIOD_MS") / 1000.0
 #: The signals whose default action (terminate, no cleanup) the chairs' handler replaces.
 STOP_SIGNALS = ("SIGTERM", "SIGHUP")
-
-
-def _as_board_reads(value: float, limit: float) -> float:
-    """``value`` (already checked against ``limit``) at the 3 decimals the codec writes,
-    stepped 0.001 toward zero when the board would read that text just past its
-    binary32 limit: avr-libc's ``strtod`` is not correctly rounded, and reads "9.400"
-    as 9.4000006, above the firmware's 9.3999996, so ``x:0.000,t:9.400,`` is refused."""
-    text = f"{abs(value):.3f}"
-    while strtod(text.encode())[0] > f32(limit):
-        text = f"{float(text) - 0.001:.3f}"
-    return math.copysign(float(text), value)
 
 
 #: The chairs of this process: their shutdown, by session (the closed ones are pruned
@@ -332,16 +316,13 @@ class Wheelchair:
         """Drive at ``linear`` m/s and ``angular`` rad/s (ValueError when out of range;
         the board takes them to 3 decimals, and the limits themselves 0.001 short).
         Raises ``WcdriveConnectionError`` while the link is lost."""
-        encode_cmdvel(linear, angular)          # ValueError when out of range
-        self._move(encode_cmdvel(_as_board_reads(linear, MAX_LINEAR),
-                                 _as_board_reads(angular, MAX_ANGULAR)))
+        self._move(velocity_command(linear, angular))
 
     def set_wheels(self, left: float, right: float) -> None:
         """Wheel speeds in rad/s, forward positive (ValueError outside the WHEEL range;
         the board refuses speeds beyond its ``max_wheel`` parameter: "range" in
         ``errors``, and the command before stays in force)."""
-        encode_wheel(right, left)               # ValueError when out of range
-        self._move(encode_wheel(_as_board_reads(right, MAX_WHEEL), _as_board_reads(left, MAX_WHEEL)))
+        self._move(wheel_command(left, right))
 
     def stop(self) -> None:
         """Targets to zero at the normal ramp. Always sent: also while the e-stop is

@@ -36,6 +36,7 @@ from wcdrive.protocol.codec import (
     crc16,
     frame,
 )
+from wcdrive.protocol.motion import VelocityCommand, WheelCommand, parse_motion
 
 # Host -> chair
 CMD_VEL = 0x300
@@ -70,8 +71,6 @@ KIND_ACK, KIND_NAK, KIND_ERR, KIND_EVT, KIND_PAR, KIND_HELLO, KIND_BOOT = range(
 FIRMWARE = "final_control"
 
 _FRAMED = re.compile(rb"\$(\d{1,5}):(.*)\*([0-9A-F]{4})")
-_CMDVEL = re.compile(rb"x:([-+]?[\d.]+),t:([-+]?[\d.]+),?")
-_WHEEL = re.compile(rb"r([pn])([\d.]+),l([pn])([\d.]+),?")
 
 
 class CanCodecError(ValueError):
@@ -82,10 +81,10 @@ def _seq_bytes(seq: int | None) -> tuple[int, int]:
     return (0, 0) if seq is None else (1, seq)
 
 
-def _milli(text: bytes) -> int:
-    value = round(float(text) * 1000)
+def _milli(number: float) -> int:
+    value = round(number * 1000)
     if not -32768 <= value <= 32767:
-        raise CanCodecError(f"{text!r} does not fit the frame's int16 (x 0.001)")
+        raise CanCodecError(f"{number!r} does not fit the frame's int16 (x 0.001)")
     return value
 
 
@@ -102,12 +101,11 @@ def command_to_frames(line: bytes) -> list[tuple[int, bytes]]:
         body = m[2]
     has_seq, seq_value = _seq_bytes(seq)
     tail = struct.pack("<BBH", 0, has_seq, seq_value)
-    if m2 := _CMDVEL.fullmatch(body):
-        return [(CMD_VEL, struct.pack("<hh", _milli(m2[1]), _milli(m2[2])) + tail)]
-    if m2 := _WHEEL.fullmatch(body):
-        right = _milli(m2[2]) * (-1 if m2[1] == b"n" else 1)
-        left = _milli(m2[4]) * (-1 if m2[3] == b"n" else 1)
-        return [(CMD_WHEELS, struct.pack("<hh", right, left) + tail)]
+    command = parse_motion(body)
+    if isinstance(command, VelocityCommand):
+        return [(CMD_VEL, struct.pack("<hh", _milli(command.linear), _milli(command.angular)) + tail)]
+    if isinstance(command, WheelCommand):
+        return [(CMD_WHEELS, struct.pack("<hh", _milli(command.right), _milli(command.left)) + tail)]
     for op, word in CONTROL_OPS.items():
         if body == word:
             return [(CONTROL, struct.pack("<BBBBHH", op, 0, 0, has_seq, 0, seq_value))]

@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import functools
 import math
-import re
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -34,6 +33,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from wcdrive.protocol.motion import VelocityCommand, WheelCommand, find_motion
 from wcdrive.transports.wrapper import PortWrapper
 
 #: Topic -> message type.
@@ -437,8 +437,6 @@ class LiveSink:
 
 
 # ---- a connected chair ------------------------------------------------------------------
-_CMDVEL = re.compile(rb"x:(-?[\d.]+),t:(-?[\d.]+),")
-_WHEEL = re.compile(rb"r([pn])([\d.]+),l([pn])([\d.]+),")
 
 
 class ChairPublisher:
@@ -473,11 +471,11 @@ class ChairPublisher:
     def wrote(self, data: bytes) -> None:
         """Bytes the host wrote: a velocity or wheel command is a ``/cmd_vel``."""
         t = self._monotonic() + self._wall
-        if m := _CMDVEL.search(data):
-            self.sink.publish("/cmd_vel", twist_stamped(t, float(m[1]), float(m[2])), t)
-        elif m := _WHEEL.search(data):
-            r = float(m[2]) * (-1 if m[1] == b"n" else 1)
-            left = float(m[4]) * (-1 if m[3] == b"n" else 1)
+        command = find_motion(data)
+        if isinstance(command, VelocityCommand):
+            self.sink.publish("/cmd_vel", twist_stamped(t, command.linear, command.angular), t)
+        elif isinstance(command, WheelCommand):
+            r, left = command.right, command.left
             self.sink.publish("/cmd_vel", twist_stamped(t, 0.5 * self._radius * (r + left),
                                                         self._radius * (r - left) / self._base), t)
 

@@ -23,7 +23,8 @@ from wcdrive.boards.port_loop import F_CPU
 from wcdrive.host.odometry import GyroIntegrator, OdometryParams, WheelOdometry
 from wcdrive.plant import Gyro
 from wcdrive.plant.params import ChairParams
-from wcdrive.protocol.codec import Feedback, LineDecoder, encode_cmdvel
+from wcdrive.protocol.codec import Feedback, LineDecoder
+from wcdrive.protocol.motion import velocity_command
 from wcdrive.sim.localization import Ekf2D, EkfConfig
 from wcdrive.sim.navigation import PurePursuit
 from wcdrive.sim.scenario import Scenario
@@ -122,7 +123,7 @@ class Pilot:
         v, w, done = self.ctl.command(*self.pose())
         if done and self.done_at is None:
             self.done_at = cycle
-        data = encode_cmdvel(v, w)
+        data = velocity_command(v, w)
         self.sent.append((cycle, data))
         self.next += self.period
         return cycle, data

@@ -110,7 +110,8 @@ from wcdrive.plant.params import ChairParams
 from wcdrive.plant.rosmap import MapFileError
 from wcdrive.plant.terrain import Ramp, Terrain
 from wcdrive.plant.world import World, WorldError
-from wcdrive.protocol.codec import encode_cmdvel, encode_ppm, encode_set, encode_wheel
+from wcdrive.protocol.codec import encode_cmdvel, encode_ppm, encode_set
+from wcdrive.protocol.motion import velocity_command, wheel_command
 from wcdrive.sim.expect import Expect
 from wcdrive.sim.expect import parse as parse_expect
 from wcdrive.sim.navigation import FollowParams
@@ -143,9 +144,10 @@ class Segment:
     def command(self) -> bytes | None:
         """The command the host repeats during the segment (None: it sends nothing)."""
         if self.kind == "cmdvel":
-            return encode_cmdvel(*self.values)
-        if self.kind == "wheel":
-            return encode_wheel(*self.values)
+            return velocity_command(*self.values)
+        if self.kind == "wheel":               # the file's order is the wire's: [right, left]
+            right, left = self.values
+            return wheel_command(left=left, right=right)
         if self.kind == "ppm":
             return encode_ppm([int(v) for v in self.values])
         if self.kind == "stop":

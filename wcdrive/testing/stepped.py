@@ -11,6 +11,7 @@ deterministic and as fast as the port runs (a few hundred times real time)::
 
 from __future__ import annotations
 
+import warnings
 from collections import deque
 from collections.abc import Sequence
 
@@ -24,10 +25,9 @@ from wcdrive.protocol.codec import (
     Feedback,
     LineDecoder,
     Message,
-    encode_cmdvel,
-    encode_wheel,
     frame,
 )
+from wcdrive.protocol.motion import velocity_command, wheel_command
 
 #: How many of the board's messages ``SteppedChair.messages`` keeps (the newest).
 MESSAGE_HISTORY = 10_000
@@ -80,12 +80,28 @@ class SteppedChair:
         self.send(frame(body, self._seq))
 
     def set_velocity(self, linear: float, angular: float) -> None:
-        """A CMDVEL frame (m/s, rad/s); resend it at least every 500 ms (watchdog)."""
-        self.command(encode_cmdvel(linear, angular))
+        """A CMDVEL frame (m/s, rad/s), validated and encoded as ``Wheelchair`` sends it
+        (``wcdrive.protocol.motion``); resend it at least every 500 ms (watchdog)."""
+        self.command(velocity_command(linear, angular))
 
-    def set_wheels(self, right: float, left: float) -> None:
-        """A WHEEL frame (rad/s per wheel)."""
-        self.command(encode_wheel(right, left))
+    def set_wheels(self, *args: float, left: float | None = None, right: float | None = None) -> None:
+        """A WHEEL frame: ``set_wheels(left=..., right=...)`` in rad/s, validated and
+        encoded as ``Wheelchair.set_wheels(left, right)`` sends it.
+
+        Deprecated: positional arguments, which this class took as ``(right, left)``
+        (the wire's order), the opposite of ``Wheelchair``. They keep that meaning for
+        this release, with a ``DeprecationWarning``; pass the wheels by name. From the
+        next release the positional order is ``(left, right)``, as ``Wheelchair``'s."""
+        if args:
+            if len(args) != 2 or left is not None or right is not None:
+                raise TypeError("set_wheels takes left= and right= (by name)")
+            warnings.warn("SteppedChair.set_wheels(right, left) by position is deprecated: its order "
+                          "becomes (left, right), as Wheelchair.set_wheels', in the next release; "
+                          "pass set_wheels(left=..., right=...)", DeprecationWarning, stacklevel=2)
+            right, left = args
+        if left is None or right is None:
+            raise TypeError("set_wheels needs both left= and right=")
+        self.command(wheel_command(left, right))
 
     def run(self, seconds: float) -> list[Message]:
         """Advances simulated time by ``seconds``; returns the board's messages."""
