@@ -80,6 +80,7 @@ from wcdrive.errors import (
     WcdriveConnectionError,
     WcdrivePermissionError,
 )
+from wcdrive.host.scan_feed import ScanSource
 from wcdrive.host.wheelchair import (
     LINK_TIMEOUT,
     LinkEvent,
@@ -89,7 +90,7 @@ from wcdrive.host.wheelchair import (
     Telemetry,
     Wheelchair,
 )
-from wcdrive.transports.port import Port
+from wcdrive.transports.port import Port, simulation_of
 from wcdrive.transports.recording import RecordingPort
 
 __all__ = ["SCHEMES", "LinkEvent", "LinkLost", "LinkRestored", "Reset", "Telemetry", "Wheelchair", "connect"]
@@ -143,31 +144,19 @@ def _open_url(url: str) -> Port:
 
 
 def _board_clock(port: Port) -> Callable[[], float | None] | None:
-    """A simulated board's own clock (``ThreadedBoard.reported_time``: how far its
-    output has come), for the link monitor; None for a device, a pty or a CAN link."""
-    board = getattr(port, "board", None)
-    if board is None or not hasattr(board, "reported_time"):
+    """A simulated board's own clock (``Simulated.reported_time``: how far its output
+    has come), for the link monitor; None for a device, a pty or a CAN link."""
+    sim = simulation_of(port)
+    if sim is None:
         return None
-    return lambda: board.reported_time
+    return lambda: sim.reported_time
 
 
-def _scan_source(port: Port) -> Any:
+def _scan_source(port: Port) -> ScanSource | None:
     """A simulated board's lidar (``BoardLidar``), for ``Wheelchair.scan``; None for a
     board without one, a device, a pty or a CAN link."""
-    return getattr(getattr(port, "board", None), "lidar", None)
-
-
-def _default_link_timeout(port: Port) -> float:
-    """``LINK_TIMEOUT``: on a simulated board's own clock when it has one (the session
-    counts the silence there, ``_board_clock``), so at any ``speed`` and however far
-    behind the wall clock a loaded machine leaves it; else on the host's, stretched
-    for a board slower than the wall clock."""
-    if _board_clock(port) is not None:
-        return LINK_TIMEOUT
-    speed = getattr(getattr(port, "board", None), "speed", None)
-    if isinstance(speed, int | float) and 0 < speed < 1:
-        return LINK_TIMEOUT / speed
-    return LINK_TIMEOUT
+    sim = simulation_of(port)
+    return sim.lidar if sim is not None else None
 
 
 def connect(url: str = "sim://", *, boot_timeout: float = 10.0, record: bool | str = False,
@@ -182,8 +171,8 @@ def connect(url: str = "sim://", *, boot_timeout: float = 10.0, record: bool | s
     instead (a ``wcdrive.ros2.bridge.McapSink`` or ``LiveSink``; closed with the chair), with
     ``record=True`` too if wanted. ``legacy``: drive a board that never answers hello with
     protocol v1 instead of raising ``WcdriveProtocolError``. ``link_timeout``: seconds
-    without a line before the link counts as lost (default 0.15 s, longer for a
-    simulated board slower than real time). ``options`` go to ``Wheelchair``
+    without a line before the link counts as lost (default 0.15 s, counted on a
+    simulated board's own clock). ``options`` go to ``Wheelchair``
     (``odometry_method``, ``reconnect_timeout``, ``stop_on_signals``)."""
     publisher = None
     if isinstance(record, str) or ros is not None:
@@ -237,10 +226,10 @@ def connect(url: str = "sim://", *, boot_timeout: float = 10.0, record: bool | s
 
         options.setdefault("reopen", reopen)
     chair = Wheelchair(first, legacy=legacy,
-                       link_timeout=_default_link_timeout(port) if link_timeout is None else link_timeout,
+                       link_timeout=LINK_TIMEOUT if link_timeout is None else link_timeout,
                        board_clock=_board_clock(port), scan_source=_scan_source(port), **options)
     if publisher is not None:
-        publisher.attach(chair, getattr(port, "board", None))
+        publisher.attach(chair, simulation_of(port))
     try:
         chair.wait_for_telemetry(boot_timeout)   # the Mega resets on open: wait for it
         chair.wait_for_handshake(boot_timeout)

@@ -48,7 +48,9 @@ def test_a_wrapper_is_a_port_that_delegates_everything() -> None:
     port.flush()
     assert inner.flushed == 1
     port.reset_input_buffer()                       # FakePort has none: a no-op
-    assert port.is_open and port.board is None
+    assert port.is_open and port.simulation is None
+    with pytest.warns(DeprecationWarning, match=r"\.simulation"):
+        assert port.board is None
     port.close()
     assert not inner.is_open and not port.is_open
     with pytest.raises(serial.SerialException):

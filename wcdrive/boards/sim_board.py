@@ -80,6 +80,12 @@ class SimulatedBoard(ThreadedBoard):
     def _dtr_reset(self) -> None:
         self.loop.reset()
 
+    def _simulated_plant(self) -> Plant:
+        return self.plant
+
+    def _simulated_gyro(self) -> Gyro | None:
+        return self.loop.gyro
+
     def _clock(self) -> float:
         return self.time
 

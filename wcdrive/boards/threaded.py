@@ -15,8 +15,11 @@ from typing import TYPE_CHECKING
 
 from wcdrive.boards.receive_buffer import DEFAULT_CAPACITY, ReceiveBuffer
 
+from wcdrive.boards.simulation import GroundTruth, GyroSamples
+
 if TYPE_CHECKING:
     from wcdrive.boards.board_lidar import BoardLidar
+    from wcdrive.plant import Gyro, Plant
 
 #: A board's thread that ends no step for this long (wall time) is taken as hung:
 #: ``reported_time`` is None, and a host falls back to its own clock for the link.
@@ -58,6 +61,45 @@ class ThreadedBoard:
         """The board's own clock: simulated seconds since it booted (None: it keeps
         none)."""
         return None
+
+    def _simulated_plant(self) -> Plant | None:
+        """The plant behind the board (None: it has none); read under the lock."""
+        return None
+
+    def _simulated_gyro(self) -> Gyro | None:
+        """The gyro on the board's chair (None: it has none); read under the lock."""
+        return None
+
+    # ---- the simulation (wcdrive.boards.simulation.Simulated) ---------------------
+    def ground_truth(self) -> GroundTruth | None:
+        """The plant now, between two steps of the board's thread; None without one."""
+        with self._lock:
+            plant = self._simulated_plant()
+            if plant is None:
+                return None
+            x, y, heading = plant.pose
+            linear, _ = plant.axle_velocity()
+            return GroundTruth(plant.time, x, y, heading, linear, plant.yaw_rate)
+
+    def gyro_samples(self, seen: int) -> GyroSamples:
+        """The gyro's samples after the first ``seen`` it took (those it still keeps),
+        between two steps of the board's thread."""
+        with self._lock:
+            gyro = self._simulated_gyro()
+            if gyro is None:
+                return GyroSamples((), seen)
+            times, rates = gyro.times, gyro.rates
+            total = gyro.samples_taken
+            new = min(total - seen, len(times))
+            if new <= 0:
+                return GyroSamples((), total)
+            return GyroSamples(tuple(zip(times[-new:], rates[-new:], strict=True)), total)
+
+    @property
+    def gyro_noise_dps(self) -> float:
+        """The gyro's rate noise (deg/s rms); 0 without a gyro."""
+        gyro = self._simulated_gyro()
+        return gyro.noise_dps if gyro is not None else 0.0
 
     # ---- lifecycle ---------------------------------------------------------------
     def start(self):

@@ -133,6 +133,9 @@ class EddieSimBoard(ThreadedBoard):
         with self._lock:
             add_wall(self.plant.space, a, b)
 
+    def _simulated_plant(self) -> Plant:
+        return self.plant
+
     def _send(self, data: bytes) -> None:
         self.loop.send(data)
 

@@ -35,6 +35,8 @@ class Gyro:
         self.period = 1.0 / params.gyro_rate_hz
         self._rng = np.random.default_rng(seed)
         dps = math.pi / 180.0
+        #: the rate noise, deg/s rms (``noise`` in rad/s)
+        self.noise_dps = params.gyro_noise_dps
         self.noise = params.gyro_noise_dps * dps
         self.bias = float(self._rng.normal(0.0, params.gyro_bias_dps * dps))
         self.walk = params.gyro_bias_walk_dps_per_sqrt_s * dps
@@ -50,6 +52,13 @@ class Gyro:
         self._out_times = self._out_rates = np.empty(0)
         self._out_at = (0, 0)
         self._draws_at = 0
+
+    @property
+    def samples_taken(self) -> int:
+        """How many samples the gyro has taken (those ``times`` keeps and those it
+        dropped to keep its ``history``)."""
+        times = self.times
+        return (times.dropped if isinstance(times, History) else 0) + len(times)
 
     def _reserve(self, count: int) -> None:
         """At least ``count`` unused draws in the buffer."""

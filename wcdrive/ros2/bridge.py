@@ -29,12 +29,15 @@ import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
 from wcdrive.protocol.motion import VelocityCommand, WheelCommand, find_motion
 from wcdrive.transports.wrapper import PortWrapper
+
+if TYPE_CHECKING:
+    from wcdrive.boards.simulation import Simulated
 
 #: Topic -> message type.
 TOPICS: dict[str, str] = {
@@ -460,11 +463,12 @@ class ChairPublisher:
         self._partial = bytearray()
         self._lock = threading.Lock()
         self._chair: Any = None
-        self._board: Any = None
+        self._board: Simulated | None = None
         self._gyro_seen = 0
 
-    def attach(self, chair: Any, board: Any = None) -> None:
-        """Subscribes to ``chair``'s ticks; ``board``: the simulated board, if any."""
+    def attach(self, chair: Any, board: Simulated | None = None) -> None:
+        """Subscribes to ``chair``'s ticks; ``board``: the simulated board, if any
+        (``wcdrive.transports.port.simulation_of``)."""
         self._chair, self._board = chair, board
         chair.on_telemetry(self._tick)
 
@@ -505,33 +509,21 @@ class ChairPublisher:
             t, (-tel.count_left * self._per_count, tel.count_right * self._per_count),
             (tel.vel_left, tel.vel_right)), t)
         if self._board is not None:
-            self._simulated(chair)
+            self._simulated(chair, self._board)
 
-    def _simulated(self, chair: Any) -> None:
-        board = self._board
-        pins = getattr(board, "_pins", None)
-        gyro = getattr(getattr(board, "loop", None), "gyro", None) or getattr(pins, "gyro", None)
-        with board._lock:
-            plant = board.plant
-            if plant is None:
-                return
-            x, y, th = plant.pose
-            v, _ = plant.axle_velocity()
-            w, now = plant.yaw_rate, plant.time
-            samples: list[tuple[float, float]] = []
-            if gyro is not None:
-                # the gyro keeps its newest samples only (a History): count every one it took
-                times, rates = gyro.times, gyro.rates
-                total = getattr(times, "dropped", 0) + len(times)
-                new = min(total - self._gyro_seen, len(times))
-                if new > 0:
-                    samples = list(zip(times[-new:], rates[-new:], strict=True))
-                self._gyro_seen = total
+    def _simulated(self, chair: Any, sim: Simulated) -> None:
+        truth = sim.ground_truth()
+        if truth is None:
+            return
+        # the gyro keeps its newest samples only: count every one it took
+        new = sim.gyro_samples(self._gyro_seen)
+        self._gyro_seen = new.total
         clock = chair.board_clock
-        t = clock.to_host(now) + self._wall
-        self.sink.publish("/ground_truth", odometry(t, x, y, th, v, w), t)
-        variance = math.radians(getattr(getattr(plant, "p", None), "gyro_noise_dps", 0.0)) ** 2
-        for ts, rate in samples:
+        t = clock.to_host(truth.time) + self._wall
+        self.sink.publish("/ground_truth", odometry(t, truth.x, truth.y, truth.heading, truth.linear,
+                                                    truth.angular), t)
+        variance = math.radians(sim.gyro_noise_dps) ** 2
+        for ts, rate in new.samples:
             stamp_s = clock.to_host(ts) + self._wall
             self.sink.publish("/imu", imu(stamp_s, rate, variance), stamp_s)
 

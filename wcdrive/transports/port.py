@@ -8,9 +8,13 @@ backend.
 
 from __future__ import annotations
 
-from typing import Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
-__all__ = ["Port"]
+if TYPE_CHECKING:
+    from wcdrive.boards.simulation import Simulated
+
+
+__all__ = ["Port", "SimulatedPort", "simulation_of"]
 
 
 @runtime_checkable
@@ -45,3 +49,20 @@ class Port(Protocol):
 
     def close(self) -> None:
         """Releases the port; wakes a ``read`` blocked in another thread."""
+
+
+@runtime_checkable
+class SimulatedPort(Protocol):
+    """A ``Port`` that may have a simulated board behind it: the ``wc*://`` handlers'
+    ports and every ``PortWrapper`` (which asks the port it wraps)."""
+
+    @property
+    def simulation(self) -> Simulated | None:
+        """The simulated board behind the port (``wcdrive.boards.simulation``), or None
+        (a device, a pty, a CAN link, a closed port)."""
+
+
+def simulation_of(port: Port) -> Simulated | None:
+    """The simulated board behind ``port``, through any wrappers; None for a port with
+    none."""
+    return port.simulation if isinstance(port, SimulatedPort) else None

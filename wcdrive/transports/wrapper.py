@@ -21,9 +21,13 @@ around any ``Port`` (``wcsim://``, a device, another wrapper), and wrappers stac
 
 from __future__ import annotations
 
-from typing import Any
+import warnings
+from typing import TYPE_CHECKING
 
-from wcdrive.transports.port import Port
+from wcdrive.transports.port import Port, simulation_of
+
+if TYPE_CHECKING:
+    from wcdrive.boards.simulation import Simulated
 
 __all__ = ["PortWrapper"]
 
@@ -38,8 +42,8 @@ class PortWrapper:
       ``b""`` too) gives what the caller gets.
     - ``close()``: the wrapped port closes, then ``on_close()``.
     - ``timeout`` (read and set), ``in_waiting``, ``is_open`` and ``flush`` are the
-      wrapped port's; ``board`` too (a simulated port's board, None for a device), and
-      ``reset_input_buffer`` where it has one.
+      wrapped port's; ``simulation`` too (the simulated board behind it, None for a
+      device), and ``reset_input_buffer`` where it has one.
 
     A hook that raises makes its call raise. The hooks run in the caller's thread (the
     session's reader thread for ``read``), so a hook that keeps state shared with
@@ -86,9 +90,17 @@ class PortWrapper:
         return bool(getattr(self.port, "is_open", True))
 
     @property
-    def board(self) -> Any:
-        """The wrapped port's simulated board (None for a port without one)."""
-        return getattr(self.port, "board", None)
+    def simulation(self) -> Simulated | None:
+        """The simulated board behind the wrapped port (``simulation_of``), or None."""
+        return simulation_of(self.port)
+
+    @property
+    def board(self) -> Simulated | None:
+        """Deprecated: ``simulation``, the typed handle on the simulated board (this
+        returns the same object, with a ``DeprecationWarning``)."""
+        warnings.warn("PortWrapper.board is deprecated: use .simulation (or "
+                      "wcdrive.transports.port.simulation_of(port))", DeprecationWarning, stacklevel=2)
+        return self.simulation
 
     def write(self, data: bytes) -> int | None:
         """``on_write``, the wrapped port's ``write``, ``on_sent``; returns ``len(data)``."""

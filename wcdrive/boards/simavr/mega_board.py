@@ -104,6 +104,12 @@ class MegaBoard(ThreadedBoard):
     def _dtr_reset(self) -> None:
         self.mega.reset("external")
 
+    def _simulated_plant(self) -> Plant | None:
+        return self.plant
+
+    def _simulated_gyro(self) -> Gyro | None:
+        return self._pins.gyro if self._pins is not None else None
+
     def _clock(self) -> float:
         return self.mega.time
 

@@ -17,6 +17,8 @@ from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 
 from serial.serialutil import PortNotOpenError, SerialBase, SerialException, to_bytes
 
+from wcdrive.boards.simulation import Simulated
+
 if TYPE_CHECKING:                     # a real chair's link (can://) loads no simulator
     from wcdrive.plant.lidar import Lidar
     from wcdrive.plant.world import World
@@ -203,6 +205,13 @@ class BoardSerial(SerialBase):
 
     def _reconfigure_port(self) -> None:
         pass
+
+    @property
+    def simulation(self) -> Simulated | None:
+        """The simulated board behind the port (``wcdrive.boards.simulation``); None
+        when closed or for a link that is not one (``wccan://``)."""
+        board = self.board
+        return board if isinstance(board, Simulated) else None
 
     def _board(self) -> BoardLike:
         """The open board, or ``PortNotOpenError``. Callers keep the object they got:
