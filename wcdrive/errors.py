@@ -1,10 +1,47 @@
-"""wcdrive's exceptions: one root, messages that say what to do."""
+"""wcdrive's exceptions: one root, messages that say what to do.
+
+Everything wcdrive raises derives from ``WcdriveError``, so ``except WcdriveError``
+catches it all; each error also keeps the built-in base it had before, so an older
+``except ValueError`` or ``except RuntimeError`` still catches it.
+
+- The board and the link (this module): ``WcdriveConnectionError`` (with
+  ``WcdrivePermissionError``, also a ``PermissionError``, and ``WcdriveBusyError``),
+  ``WcdriveTimeoutError`` (also a ``TimeoutError``), ``WcdriveProtocolError`` and
+  ``WcdriveCommandError`` (with ``WcdriveEstopError`` and its ``WcdriveFaultError``).
+- A file or a configuration wcdrive cannot use: ``WcdriveFileError``, also a
+  ``ValueError``. Its subclasses live beside what they read: ``ChairFileError``
+  (``wcdrive.plant.params``), ``WorldError`` (``wcdrive.plant.world``), ``MapFileError``
+  (``wcdrive.plant.rosmap``), ``ScenarioError`` (``wcdrive.sim.scenario``), ``SpecError``
+  (``wcdrive.tools.sweep``), ``RecordingError`` (``wcdrive.tools.identify``),
+  ``ReplayError`` (``wcdrive.tools.replay``) and ``HexError``
+  (``wcdrive.boards.simavr.bootloader_mega``).
+- The others, also beside their modules: ``CanCodecError`` (also a ``ValueError``: a
+  line or CAN frame with no counterpart, ``wcdrive.protocol.can_frames``), ``BuildError``
+  (also a ``RuntimeError``: a C helper, the simavr harness or the firmware could not be
+  built, ``wcdrive._util.native``), ``HarnessError`` (also a ``RuntimeError``: the
+  virtual board could not be made or stopped, ``wcdrive.boards.simavr.virtual_mega``),
+  ``FlashError`` (``wcdrive.tools.bench``) and the firmware ports' ``ParseError``
+  (``wcdrive.firmware.commands``, ``wcdrive.eddie.firmware``), which the ports catch
+  themselves to answer a malformed command.
+
+One exception stays outside on purpose: ``wcdrive.tools.bench.Interrupted`` (Ctrl-C
+during ``bench run``, carrying the recording so far) is a ``KeyboardInterrupt``, so that
+no ``except Exception`` swallows Ctrl-C. ``wcdrive.protocol.codec.Error`` is no exception
+at all: it is the parsed ``ERR:`` line of the protocol. tests/meta/test_errors.py holds
+all this.
+"""
 
 from __future__ import annotations
 
 
 class WcdriveError(Exception):
     """Root of every wcdrive error."""
+
+
+class WcdriveFileError(WcdriveError, ValueError):
+    """A file or a configuration that wcdrive cannot use (a chair file, a world, a map, a
+    scenario, a sweep spec, a recording, an Intel HEX file, ...); the message names the
+    file and the entry. Also a ``ValueError``, as these errors always were."""
 
 
 class WcdriveConnectionError(WcdriveError):

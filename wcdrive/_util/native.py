@@ -24,9 +24,10 @@ from pathlib import Path
 from types import ModuleType
 
 from wcdrive._util.resources import cache_dir
+from wcdrive.errors import WcdriveError
 
 
-class BuildError(RuntimeError):
+class BuildError(WcdriveError, RuntimeError):
     """A C helper could not be compiled; the message says what to install."""
 
 

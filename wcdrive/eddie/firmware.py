@@ -45,6 +45,8 @@ import math
 from collections import deque
 from dataclasses import dataclass, field
 
+from wcdrive.errors import WcdriveError
+
 CLKFREQ = 80_000_000
 BUFFER_LENGTH = 255
 VERSION = 12
@@ -133,7 +135,7 @@ def hexw(value: int, digits: int) -> bytes:
     return f"{value & ((1 << (4 * digits)) - 1):0{digits}X}".encode()
 
 
-class ParseError(Exception):
+class ParseError(WcdriveError):
     """A Spin ``abort`` with one of the source's reason strings."""
 
     def __init__(self, reason: str) -> None:

@@ -18,6 +18,7 @@ import re
 
 from wcdrive.avr.avrlibc import strtod
 from wcdrive.avr.f32 import add, constrain, div, from_int, mul, sub
+from wcdrive.errors import WcdriveError
 from wcdrive.firmware import constants as C
 from wcdrive.firmware.eeprom import restore_defaults, save_params
 from wcdrive.firmware.motion import accept_command, emergency_halt
@@ -30,7 +31,7 @@ DISCARD_NONE, DISCARD_TO_COMMA, DISCARD_TO_EOL, DISCARD_OVERRUN = 0, 1, 2, 3
 _PPM_PER_US = div(C.PPM_MAX_WHEEL, float(C.PPM_SPAN))
 
 
-class ParseError(Exception):
+class ParseError(WcdriveError):
     """A malformed command; ``reason`` is the word after ``ERR:``."""
 
     def __init__(self, reason: str) -> None:

@@ -14,6 +14,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
+from wcdrive.errors import WcdriveFileError
 from wcdrive.protocol.spec import real
 
 G = 9.81
@@ -241,7 +242,7 @@ class ChairParams:
         return self.friction if override is None else override
 
 
-class ChairFileError(ValueError):
+class ChairFileError(WcdriveFileError):
     """A chair file (``load_chair``) is missing or malformed; the message names it."""
 
 

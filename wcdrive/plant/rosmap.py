@@ -38,6 +38,8 @@ import numpy as np
 import yaml
 from PIL import Image
 
+from wcdrive.errors import WcdriveFileError
+
 MODES = ("trinary", "scale", "raw")
 UNKNOWN, FREE, OCCUPIED = -1, 0, 100
 #: What map_saver writes for a trinary map (grey levels) and in its YAML.
@@ -45,7 +47,7 @@ SAVED_OCCUPIED, SAVED_FREE, SAVED_UNKNOWN = 0, 254, 205
 SAVED_OCCUPIED_THRESH, SAVED_FREE_THRESH = 0.65, 0.196
 
 
-class MapFileError(ValueError):
+class MapFileError(WcdriveFileError):
     """A map YAML or image that map_server would refuse (the message says why)."""
 
 

@@ -40,6 +40,7 @@ from typing import Any
 
 import numpy as np
 
+from wcdrive.errors import WcdriveFileError
 from wcdrive.plant.raycast import RayGrid
 from wcdrive.plant.rosmap import OCCUPIED, MapFileError, OccupancyGrid, load_map
 
@@ -48,7 +49,7 @@ from wcdrive.plant.rosmap import OCCUPIED, MapFileError, OccupancyGrid, load_map
 BUNDLED_WORLDS = Path(__file__).resolve().parents[1] / "sim" / "scenarios" / "worlds"
 
 
-class WorldError(ValueError):
+class WorldError(WcdriveFileError):
     """A world table that cannot be built (the message says which entry and why)."""
 
 

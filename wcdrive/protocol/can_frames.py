@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 from wcdrive.avr.avrlibc import strtod
 from wcdrive.avr.f32 import bits
+from wcdrive.errors import WcdriveError
 from wcdrive.protocol.codec import (
     PARAM_RANGES,
     Ack,
@@ -73,7 +74,7 @@ FIRMWARE = "final_control"
 _FRAMED = re.compile(rb"\$(\d{1,5}):(.*)\*([0-9A-F]{4})")
 
 
-class CanCodecError(ValueError):
+class CanCodecError(WcdriveError, ValueError):
     """A line or frame that has no counterpart on the other side."""
 
 

@@ -165,7 +165,9 @@ class Feedback:
 
 @dataclass(frozen=True, slots=True)
 class Error:
-    """``ERR:<reason>``: a command the board rejected (protocol/PROTOCOL.md)."""
+    """``ERR:<reason>``: a command the board rejected (protocol/PROTOCOL.md). A message
+    the board sent, not an exception: the host logs it and keeps ``reason`` in
+    ``chair.errors``; what wcdrive raises derives from ``wcdrive.errors.WcdriveError``."""
 
     reason: str
 

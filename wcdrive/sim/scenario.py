@@ -103,6 +103,7 @@ from collections.abc import Collection
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from wcdrive.errors import WcdriveFileError
 from wcdrive.plant.chair import Plant
 from wcdrive.plant.faults import FAULT_KINDS, SIDED_KINDS, Fault
 from wcdrive.plant.lidar import MODELS, SEED_MOUNT, Lidar, LidarMount
@@ -128,7 +129,7 @@ _WORLD_KEYS = ("slope_deg", "downhill_heading_deg", "ramp", *_GEOMETRY_KEYS, "fi
 _RAMP_KEYS = ("from_x", "to_x", "slope_deg")
 
 
-class ScenarioError(ValueError):
+class ScenarioError(WcdriveFileError):
     """A scenario file is missing or malformed; the message names the field."""
 
 

@@ -57,6 +57,8 @@ def exit_code(exc: BaseException) -> int:
         return BUILD
     if isinstance(exc, serial.SerialException | ConnectionError | TimeoutError):
         return CONNECTION
+    if isinstance(exc, RuntimeError):       # HarnessError too (the virtual board broke): a bug
+        return INTERNAL
     if isinstance(exc, WcdriveError | ValueError | FileNotFoundError):
         return USAGE
     return INTERNAL

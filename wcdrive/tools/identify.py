@@ -24,13 +24,14 @@ from pathlib import Path
 
 import numpy as np
 
+from wcdrive.errors import WcdriveFileError
 from wcdrive.plant.identify import GAP, Fit, Run, identify, simulate
 from wcdrive.plant.params import ChairFileError, ChairParams, chair_toml, load_chair
 from wcdrive.protocol.codec import Boot, ExtendedTelemetry, Feedback, LineDecoder
 from wcdrive.transports.recording import Recording
 
 
-class RecordingError(ValueError):
+class RecordingError(WcdriveFileError):
     """A recording cannot be fitted (no TLM lines, a board reset, too short)."""
 
 

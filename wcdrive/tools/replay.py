@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from wcdrive.avr.timer0 import millis_after
+from wcdrive.errors import WcdriveFileError
 from wcdrive.firmware.constants import CONTROL_PERIOD_MS
 from wcdrive.firmware.eeprom import image_for
 from wcdrive.firmware.final_control import Firmware
@@ -28,7 +29,7 @@ from wcdrive.protocol.codec import ExtendedTelemetry, Feedback, parse_line
 from wcdrive.transports.recording import Recording
 
 
-class ReplayError(ValueError):
+class ReplayError(WcdriveFileError):
     """The recording cannot be replayed (no boot line, commands before hello, ...)."""
 
 

@@ -50,7 +50,7 @@ from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
-from wcdrive.errors import WcdriveConnectionError
+from wcdrive.errors import WcdriveConnectionError, WcdriveFileError
 from wcdrive.firmware.params import PARAMS
 from wcdrive.plant.params import ChairParams
 from wcdrive.sim import report, runner, scenario
@@ -62,7 +62,7 @@ WALL_CLOCK_COLUMNS = ("real_time_factor", "wall_s")
 _SPEC_KEYS = {"scenarios", "backends", "seeds", "dt", "mode", "samples", "sample_seed", "params", "chair"}
 
 
-class SpecError(ValueError):
+class SpecError(WcdriveFileError):
     """A sweep spec is missing, malformed or names an unknown scenario, parameter or
     chair field; the message says which."""
 

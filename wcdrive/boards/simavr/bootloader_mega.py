@@ -31,6 +31,7 @@ from pathlib import Path
 from wcdrive.avr.timer0 import F_CPU
 from wcdrive.boards.simavr.mega_board import MegaBoard
 from wcdrive.boards.simavr.virtual_mega import ENCODER_PINS, HarnessError, Reset, VirtualMega, _lib
+from wcdrive.errors import WcdriveFileError
 from wcdrive.plant import ChairParams
 
 __all__ = ["BOOTLOADER_HEX", "BOOT_START", "BootloaderBoard", "BootloaderMega", "HexError",
@@ -45,7 +46,7 @@ BOOT_START = 0x3E000
 FLASH_SIZE = 0x40000
 
 
-class HexError(ValueError):
+class HexError(WcdriveFileError):
     """An Intel HEX file that cannot be read."""
 
 

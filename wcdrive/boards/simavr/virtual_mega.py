@@ -30,6 +30,7 @@ from elftools.elf.sections import SymbolTableSection
 from wcdrive.avr.timer0 import F_CPU
 from wcdrive.avr.uart import UART_BYTE_CYCLES
 from wcdrive.boards.simavr.build import firmware_elf, harness_library
+from wcdrive.errors import WcdriveError
 from wcdrive.plant.encoders import EdgeTrain
 from wcdrive.protocol.spec import integer
 
@@ -111,7 +112,7 @@ class RxLoss:
     cause: str
 
 
-class HarnessError(RuntimeError):
+class HarnessError(WcdriveError, RuntimeError):
     """The virtual board could not be made or stopped unexpectedly."""
 
 
