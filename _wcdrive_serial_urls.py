@@ -1,12 +1,13 @@
-"""Makes wcdrive's pyserial URL handlers (``wcsim://``, ``wcavr://``, ``wccan://``)
-visible to any program that uses pyserial, without importing wcdrive first:
-``python -m serial.tools.miniterm wcsim://``.
+"""Makes wcdrive's pyserial URL handlers (``wcsim://``, ``wcavr://``, ``wccan://``, and
+those of robot plugins, such as ``wceddie://``) visible to any program that uses
+pyserial, without importing wcdrive first: ``python -m serial.tools.miniterm wcsim://``.
 
 pyserial imports ``serial.urlhandler.protocol_<scheme>`` for a URL. The
 ``wcdrive-serial-urls.pth`` file installed beside this module puts a finder on
-``sys.meta_path`` at interpreter start that answers that import, for wcdrive's
-schemes only, with ``wcdrive.transports.urlhandler.protocol_<scheme>``. Nothing is imported
-until a program opens such a URL.
+``sys.meta_path`` at interpreter start that answers that import, for the schemes
+registered in the ``wcdrive.serial_urls`` entry-point group only (the one registration
+path: name = the scheme, value = the handler module), with that module. Nothing is
+imported until a program opens such a URL.
 
 PYTEST_DONT_REWRITE: the .pth imports this module before pytest can (pytest would
 otherwise warn, when it loads wcdrive's plugin, that it cannot rewrite it).
@@ -18,8 +19,15 @@ import importlib
 import sys
 from importlib.machinery import ModuleSpec
 
-SCHEMES = ("wcsim", "wcavr", "wccan", "wceddie")
+_GROUP = "wcdrive.serial_urls"
 _PREFIX = "serial.urlhandler.protocol_"
+
+
+def handlers() -> dict[str, str]:
+    """The registered schemes and their handler modules (the entry-point group)."""
+    from importlib.metadata import entry_points
+
+    return {ep.name: ep.value for ep in entry_points(group=_GROUP)}
 
 
 class _Alias:
@@ -38,9 +46,10 @@ class _Alias:
 class SerialUrlFinder:
     @staticmethod
     def find_spec(name: str, path=None, target=None) -> ModuleSpec | None:
-        if not name.startswith(_PREFIX) or name[len(_PREFIX):] not in SCHEMES:
+        if not name.startswith(_PREFIX):
             return None
-        return ModuleSpec(name, _Alias("wcdrive.transports.urlhandler.protocol_" + name[len(_PREFIX):]))
+        target = handlers().get(name[len(_PREFIX):])
+        return None if target is None else ModuleSpec(name, _Alias(target))
 
 
 def install() -> None:

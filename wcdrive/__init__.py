@@ -10,7 +10,6 @@ if "wcdrive.transports.urlhandler" not in _serial.protocol_handler_packages:
 __version__ = "0.1.0"
 
 from wcdrive.api import LinkEvent, LinkLost, LinkRestored, Reset, Telemetry, Wheelchair, connect
-from wcdrive.eddie.robot import EddieRobot
 from wcdrive.errors import (
     WcdriveBusyError,
     WcdriveCommandError,
@@ -51,3 +50,14 @@ __all__ = [
 # faults, NAKs, dropped lines; wcdrive.telemetry; wcdrive.sweep) and leaves output to
 # the application: nothing is printed unless it configures logging.
 _logging.getLogger("wcdrive").addHandler(_logging.NullHandler())
+
+
+def __getattr__(name: str) -> object:
+    """``wcdrive.EddieRobot``: the Eddie plugin's robot class, found through the robot
+    registry (``wcdrive.host.robots``) when first asked for."""
+    if name == "EddieRobot":
+        from wcdrive.host.robots import registered
+
+        robot_class: object = registered()["eddie"].extras["robot_class"]
+        return robot_class
+    raise AttributeError(f"module 'wcdrive' has no attribute {name!r}")

@@ -26,9 +26,10 @@ URLs map onto pyserial (the query goes to the handler, which alone parses it):
 - any ``scheme://`` pyserial opens (``wcsim://``, ``socket://``, ``rfc2217://``);
 - a device path such as ``/dev/ttyACM0``: opened exclusively (a second program gets
   ``WcdriveBusyError``), reopened after an unplug;
-- ``eddie+sim://[?speed=S&seed=N]`` -> ``wceddie://``: a simulated Parallax Eddie, and
-  ``eddie:///dev/ttyUSB0``: a real one. These return an ``EddieRobot``
-  (docs/eddie.md), which has the navigation surface of ``wcdrive.host.robot.Robot``.
+- a robot plugin's URL (``wcdrive.host.robots``): ``eddie+sim://[?speed=S&seed=N]`` ->
+  ``wceddie://``, a simulated Parallax Eddie, and ``eddie:///dev/ttyUSB0``, a real one,
+  both an ``EddieRobot`` (docs/eddie.md) with the navigation surface of
+  ``wcdrive.host.robot.Robot``.
 
 On connect the board resets (a real Mega does when its port opens); the API waits
 for it to boot, then says ``hello:4`` (a v3 frame, tried 3 times with growing waits).
@@ -74,12 +75,13 @@ from typing import Any
 
 import serial
 
-from wcdrive.eddie.robot import EddieRobot
 from wcdrive.errors import (
     WcdriveBusyError,
     WcdriveConnectionError,
     WcdrivePermissionError,
 )
+from wcdrive.host.robot import Robot
+from wcdrive.host.robots import Link, entry_for
 from wcdrive.host.scan_feed import ScanSource
 from wcdrive.host.wheelchair import (
     LINK_TIMEOUT,
@@ -161,7 +163,7 @@ def _scan_source(port: Port) -> ScanSource | None:
 
 def connect(url: str = "sim://", *, boot_timeout: float = 10.0, record: bool | str = False,
             legacy: bool = False, link_timeout: float | None = None, ros: Any = None,
-            **options: Any) -> Wheelchair | EddieRobot:
+            **options: Any) -> Wheelchair | Robot:
     """Opens ``url``, waits for the board's boot and feedback, says hello (module
     docstring). ``record``: keep every byte both ways (``chair.recording``) for
     ``wcdrive.tools.replay``; ``record="run.mcap"``: write ROS 2 messages (odometry, tf, the
@@ -200,8 +202,10 @@ def connect(url: str = "sim://", *, boot_timeout: float = 10.0, record: bool | s
             return TapPort(RecordingPort(port) if record else port, publisher)
         return RecordingPort(port) if record else port
 
-    if url.startswith(("eddie+sim://", "eddie://")):
-        return _connect_eddie(url, wrap, boot_timeout=boot_timeout, **options)
+    plugin = entry_for(url)
+    if plugin is not None:
+        return plugin.connect(url, Link(_open_url, _open_device, wrap), boot_timeout=boot_timeout,
+                              **options)
 
     if "://" in url:
         port = _open_url(url)
@@ -237,21 +241,3 @@ def connect(url: str = "sim://", *, boot_timeout: float = 10.0, record: bool | s
         chair.close()
         raise
     return chair
-
-
-def _connect_eddie(url: str, wrap: Any, **options: Any) -> EddieRobot:
-    """``eddie+sim://...`` (``wceddie://...``) or ``eddie://<device path>``; ``options``
-    go to ``EddieRobot`` (``boot_timeout``: how long to ask ``VER`` before giving up)."""
-    if url.startswith("eddie+sim://"):
-        port = _open_url("wceddie://" + url[len("eddie+sim://"):])
-    else:
-        path = url[len("eddie://"):]
-        if not path.startswith("/"):
-            raise WcdriveConnectionError(f"unsupported URL {url!r}: use eddie:///dev/ttyUSB0")
-        port = _open_device(path)
-    options.setdefault("name", url)
-    try:
-        return EddieRobot(wrap(port), **options)
-    except BaseException:
-        port.close()
-        raise

@@ -45,7 +45,7 @@ PACKAGE_FLOORS: tuple[tuple[str, tuple[str, ...]], ...] = (
 ROOT_MODULES = {"__init__", "__main__", "api", "errors"}
 #: The Eddie's modules, each on the floor of the package it parallels.
 EDDIE = {"geometry": "protocol", "firmware": "firmware", "plant": "plant", "board": "boards",
-         "robot": "host", "runner": "sim"}
+         "serial_url": "transports", "robot": "host", "plugin": "api", "runner": "sim"}
 
 
 def _floors() -> tuple[tuple[int, str, tuple[str, ...]], ...]:

@@ -32,6 +32,10 @@ def test_the_flags_choose_the_topics() -> None:
 
     class Idle:                        # a Robot that never moves (start() is not called)
         link_ok = True
+        command_limits = (1.0, 1.0)
+
+        def wheel_angles(self, sample: object) -> tuple[float, float]:
+            return 0.0, 0.0
 
     ros = RosNode("wcdrive", domain=fresh_domain())
     try:

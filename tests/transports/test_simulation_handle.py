@@ -24,8 +24,8 @@ def _open(url: str) -> serial.SerialBase:
     return serial.serial_for_url(url, timeout=0.2)
 
 
-@pytest.mark.parametrize("url", ["wcsim://?speed=5", pytest.param("wcavr://?speed=1", marks=pytest.mark.simavr),
-                                 "wceddie://?speed=5"])
+@pytest.mark.parametrize("url", ["wcsim://?speed=5", "wceddie://?speed=5",
+                                 pytest.param("wcavr://?speed=1", marks=pytest.mark.simavr)])
 def test_every_simulated_port_offers_the_handle_through_wrappers(url: str) -> None:
     port = _open(url)
     try:
@@ -60,6 +60,7 @@ def test_nothing_above_the_boards_reaches_into_a_board() -> None:
     files = subprocess.run(["git", "ls-files", "wcdrive"], cwd=REPO, capture_output=True, text=True,
                            check=True).stdout.split()
     pattern = re.compile(r"\b_pins\b|board\._lock|getattr\((?:port|self\.port), \"board\"")
-    found = [f"{path}:{n}" for path in files if path.endswith(".py") and not path.startswith("wcdrive/boards/")
+    above = [p for p in files if p.endswith(".py") and not p.startswith("wcdrive/boards/")]
+    found = [f"{path}:{n}" for path in above
              for n, line in enumerate((REPO / path).read_text().splitlines(), 1) if pattern.search(line)]
     assert not found, found

@@ -7,7 +7,8 @@ from __future__ import annotations
 import pytest
 import serial
 
-from wcdrive.transports.urlhandler import protocol_wcavr, protocol_wceddie, protocol_wcsim
+from wcdrive.eddie import serial_url as protocol_wceddie
+from wcdrive.transports.urlhandler import protocol_wcavr, protocol_wcsim
 from wcdrive.transports.urlhandler.board_serial import url_options
 
 

@@ -14,7 +14,6 @@ import time
 from typing import TYPE_CHECKING
 
 from wcdrive.boards.receive_buffer import DEFAULT_CAPACITY, ReceiveBuffer
-
 from wcdrive.boards.simulation import GroundTruth, GyroSamples
 
 if TYPE_CHECKING:

@@ -42,6 +42,7 @@ from wcdrive.eddie.geometry import POSITIONS_PER_REV, WHEEL_RADIUS, WHEEL_SEPARA
 from wcdrive.errors import WcdriveCommandError, WcdriveConnectionError, WcdriveTimeoutError
 from wcdrive.host.odometry import OdometryEstimate, OdometryParams, WheelOdometry
 from wcdrive.host.telemetry import Telemetry
+from wcdrive.protocol.codec import MAX_ANGULAR, MAX_LINEAR
 from wcdrive.transports.port import Port
 from wcdrive.transports.recording import Recording, RecordingPort
 
@@ -175,6 +176,16 @@ class EddieRobot:
         """The pose from ``DIST``, its speeds and covariances, at the last poll."""
         with self._state:
             return self._odo.estimate(self._odo_time)
+
+    def wheel_angles(self, sample: Telemetry) -> tuple[float, float]:
+        """The wheels' angles (rad, forward positive): the Eddie's position counts."""
+        return sample.count_left * RAD_PER_POSITION, sample.count_right * RAD_PER_POSITION
+
+    @property
+    def command_limits(self) -> tuple[float, float]:
+        """The protocol's limits, as the chair's (the Eddie's own, 32767 positions/s, is
+        far beyond what it can do)."""
+        return MAX_LINEAR, MAX_ANGULAR
 
     @property
     def link_ok(self) -> bool:

@@ -1,4 +1,5 @@
-"""``wceddie://[?speed=1.0&seed=0&eol=firmware]``: a simulated Eddie board as a pyserial port.
+"""``wceddie://[?speed=1.0&seed=0&eol=firmware]``: a simulated Eddie board as a pyserial port
+(pyserial finds it through the ``wcdrive.serial_urls`` entry point ``wceddie``).
 
 Behind it runs ``wcdrive.eddie.board.EddieSimBoard``: the model of the Eddie control
 board's firmware driving the Eddie configuration of the pymunk plant, paced to the

@@ -48,13 +48,15 @@ from wcdrive.host.scan_feed import ScanFeed, ScanSource
 from wcdrive.host.session import Session
 from wcdrive.host.telemetry import LinkEvent, LinkLost, LinkRestored, Reset, Telemetry, TelemetryHub
 from wcdrive.protocol.codec import (
+    MAX_ANGULAR,
+    MAX_LINEAR,
     ExtendedTelemetry,
     LineStats,
     Param,
     encode_cmdvel,
 )
 from wcdrive.protocol.motion import velocity_command, wheel_command
-from wcdrive.protocol.spec import integer
+from wcdrive.protocol.spec import integer, real
 from wcdrive.transports.port import Port
 from wcdrive.transports.recording import Recording
 
@@ -66,6 +68,8 @@ __all__ = ["LINK_TIMEOUT", "LinkEvent", "LinkLost", "LinkRestored", "Reset", "Te
 
 #: Default ``link_timeout``: three feedback periods (150 ms) without a line from the board.
 LINK_TIMEOUT = 3 * integer("CONTROL_PERIOD_MS") / 1000.0
+#: One encoder count as a wheel angle (rad).
+_RAD_PER_COUNT = 2.0 * math.pi / real("CPR")
 #: The signals whose default action (terminate, no cleanup) the chairs' handler replaces.
 STOP_SIGNALS = ("SIGTERM", "SIGHUP")
 
@@ -244,6 +248,15 @@ class Wheelchair:
         self._session.reconnect_timeout = value
 
     # ---- the link ----------------------------------------------------------------------
+    def wheel_angles(self, sample: Telemetry) -> tuple[float, float]:
+        """The wheels' angles (rad, forward positive): the left encoder counts mirrored."""
+        return -sample.count_left * _RAD_PER_COUNT, sample.count_right * _RAD_PER_COUNT
+
+    @property
+    def command_limits(self) -> tuple[float, float]:
+        """The protocol's limits (m/s, rad/s)."""
+        return MAX_LINEAR, MAX_ANGULAR
+
     @property
     def link_ok(self) -> bool:
         """True while the board's lines arrive: the last less than ``link_timeout`` s

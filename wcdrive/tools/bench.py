@@ -39,12 +39,13 @@ import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol, cast
 
 import wcdrive
 from wcdrive._util.resources import firmware_dir
 from wcdrive.boards.simavr.build import build_dir, firmware_elf
 from wcdrive.errors import WcdriveError
+from wcdrive.host.robot import Robot
 from wcdrive.protocol.codec import ExtendedTelemetry, Feedback, LineDecoder
 from wcdrive.sim import scenario
 from wcdrive.tools.options import add_ros_output
@@ -69,6 +70,23 @@ class FlashError(WcdriveError):
 MEGA2560_VECTORS = 57
 _VECTOR_CHIPS = {26: "an ATmega328P/168 (Uno, Nano)", 43: "an ATmega32U4 (Leonardo)",
                  35: "an ATmega644/1284", 57: "an ATmega2560"}
+
+
+class _BenchRobot(Robot, Protocol):
+    """What ``bench run`` uses of the robot it drives, beyond ``Robot``: its recording,
+    its firmware's identity and raw commands (the chair's and the Eddie's)."""
+
+    @property
+    def recording(self) -> Recording: ...
+    @property
+    def protocol_version(self) -> int: ...
+    @property
+    def firmware(self) -> str: ...
+    @property
+    def firmware_version(self) -> str: ...
+    @property
+    def build_id(self) -> str: ...
+    def send_command(self, command: bytes) -> None: ...
 
 
 def check_hex(hex_path: Path) -> dict[int, bytes]:
@@ -284,7 +302,8 @@ def run_scenario(name: str, url: str, *, speed: float = 1.0,
     period = 1.0 / (sc.host_rate_hz * speed)
     recording: Recording | None = None
     try:
-        with wcdrive.connect(url, record=True, ros=ros) as chair:   # ros: --mcap/--live sink
+        with wcdrive.connect(url, record=True, ros=ros) as robot:   # ros: --mcap/--live sink
+            chair = cast(_BenchRobot, robot)
             recording = chair.recording
             recording.meta.update({"scenario": sc.name, "url": url, "protocol": chair.protocol_version,
                                    "firmware": chair.firmware, "firmware_version": chair.firmware_version,

@@ -45,6 +45,7 @@ import serial
 from wcdrive import __version__
 from wcdrive.boards.sim_board import SimulatedBoard
 from wcdrive.hil import verify
+from wcdrive.host import robots
 from wcdrive.protocol.spec import integer
 from wcdrive.sim import contract, report, runner, scenario
 from wcdrive.tools import bench, console, ros2_node, sweep
@@ -86,8 +87,7 @@ def _sim(args: argparse.Namespace) -> int:
         paths = list(scenario.bundled())
         load: Callable[[str], scenario.Scenario] = scenario.load
         if args.robot == "eddie":                      # and Eddie's own (walls)
-            from wcdrive.eddie import runner as eddie_runner
-
+            eddie_runner = robots.extra("eddie", "runner")
             paths += sorted(eddie_runner.SCENARIOS.glob("*.toml"))
             load = eddie_runner.load
         for path in paths:
@@ -108,8 +108,7 @@ def _sim(args: argparse.Namespace) -> int:
 
 
 def _eddie_own() -> list[str]:
-    from wcdrive.eddie import runner as eddie_runner
-
+    eddie_runner = robots.extra("eddie", "runner")
     return [p.stem for p in sorted(eddie_runner.SCENARIOS.glob("*.toml"))]
 
 
@@ -193,8 +192,7 @@ def _ros_out(args: argparse.Namespace, sc: scenario.Scenario, result: runner.Sim
 
 
 def _sim_eddie(args: argparse.Namespace, names: list[str]) -> int:
-    from wcdrive.eddie import runner as eddie_runner
-
+    eddie_runner = robots.extra("eddie", "runner")
     results = []
     misses: list[contract.Miss] = []
     for name in names:
@@ -232,9 +230,8 @@ def _serve(bridge: PtyBridge) -> int:
 def eddie_pty(speed: float = 1.0, seed: int = 0, eol: str = "firmware",
               link: str | None = None) -> PtyBridge:
     """``wcdrive pty --eddie``'s bridge: a simulated Eddie board (``EddieSimBoard``) on a pty."""
-    from wcdrive.eddie.board import EddieSimBoard
-
-    return PtyBridge(EddieSimBoard(speed=speed, seed=seed, eol=eol).start(), link=link).start()
+    board = robots.extra("eddie", "sim_board")
+    return PtyBridge(board(speed=speed, seed=seed, eol=eol).start(), link=link).start()
 
 
 def _pty(args: argparse.Namespace) -> int:

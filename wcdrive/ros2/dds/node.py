@@ -132,27 +132,6 @@ class Options:
     scan: ScanSource | None = None
 
 
-def wheel_radians(robot: Robot) -> Callable[[Telemetry], tuple[float, float]]:
-    """Telemetry counts -> wheel angles (rad, forward positive) for this robot."""
-    from wcdrive.eddie.robot import RAD_PER_POSITION, EddieRobot
-
-    if isinstance(robot, EddieRobot):
-        return lambda t: (t.count_left * RAD_PER_POSITION, t.count_right * RAD_PER_POSITION)
-    from wcdrive.protocol.spec import real
-
-    per_count = 2.0 * math.pi / real("CPR")     # the left encoder counts mirrored
-    return lambda t: (-t.count_left * per_count, t.count_right * per_count)
-
-
-def limits(robot: Robot) -> tuple[float, float]:
-    """The largest ``|linear|`` (m/s) and ``|angular|`` (rad/s) a command may ask: the
-    protocol's, for either robot (the Eddie's own limit, 32767 positions/s, is far
-    beyond what it can do)."""
-    from wcdrive.protocol.codec import MAX_ANGULAR, MAX_LINEAR
-
-    return MAX_LINEAR, MAX_ANGULAR
-
-
 def _as_dict(message: Any) -> Any:
     """A message as a dict: dicts stay, dataclass messages (rosbags') are converted."""
     if isinstance(message, dict):
@@ -193,9 +172,9 @@ class ChairNode:
                  imu: ImuTap | None = None) -> None:
         self.robot, self.ros = robot, ros
         self.options = o = options or Options()
-        max_linear, max_angular = limits(robot)
+        max_linear, max_angular = robot.command_limits
         self.gate = CmdVelGate(o.max_linear or max_linear, o.max_angular or max_angular, o.max_age)
-        self._wheels = wheel_radians(robot)
+        self._wheels = robot.wheel_angles
         self._wall = time.time() - time.monotonic()
         self._last_board_time = 0.0
         self._stop = threading.Event()
