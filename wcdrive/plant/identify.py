@@ -7,18 +7,9 @@ angles at each tick (``Run``), the wheels on blocks or on the floor.
 
 The fit is a simulation-error fit (``scipy.optimize.least_squares``): each run is
 re-simulated from rest, driven by its recorded duty tick by tick, and the residuals are
-the wheels' mean speeds over each tick interval, simulated less measured (rad/s). So the
-encoder's quantisation is one count over a whole interval, a dropped tick only widens an
-interval, and the equation of motion is the plant's own:
-
-* On the floor ``simulate`` runs ``wcdrive.plant.chair.Plant`` itself (body, tyres,
-  casters), 1 ms steps, the duty of tick k from ``millis[k]`` to ``millis[k+1]``.
-* On blocks the drive tyres touch nothing; the wheel is the plant's wheel with no tyre
-  force (``block_wheel_step``: the kernel's implicit step, ``j dw/dt = tau - b w`` with
-  ``tau = Kt (V - Ke G w) / R`` held to the driver's current limit). The plant cannot be
-  used for this: with no grip (``friction = 0``) its wheel step takes the current limit
-  it decided with the tyre gripping, and a wheel in the air then runs away beyond its
-  no-load speed (docs/bench.md, "Known limits").
+the wheels' mean speeds over each tick interval, simulated less measured (rad/s), with
+the plant's own equation of motion (``wcdrive.plant.identify_model``; the runs
+themselves: ``wcdrive.plant.identify_run``).
 
 What the counts can tell apart (docs/bench.md has the reasoning). The motor's torque is
 ``Kt (V - Ke G w) / R`` with ``Kt = eta G Ke`` at the wheel, against ``J dw/dt + b w``
@@ -40,7 +31,8 @@ the occupant is held. Then, with ``FITTED``:
 Each fitted figure has a standard uncertainty from the fit's Jacobian (residuals taken
 as independent: an underestimate where they are correlated), widened to half the spread
 of the fits from other starts that end within ``RIVAL`` of the best cost; one beyond
-``PIN_LIMIT`` is reported as not pinned down.
+``PIN_LIMIT`` is reported as not pinned down (``wcdrive.plant.identify_uncertainty``).
+The model's and the runs' names are importable from here too.
 """
 
 from __future__ import annotations
@@ -54,8 +46,25 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares
 
-from wcdrive.plant.chair import Plant
+from wcdrive.plant.identify_model import (
+    DT,
+    ROBUST_SCALE,
+    apply,
+    block_wheel_step,
+    residuals,
+    rms,
+    simulate,
+    value,
+    with_motor_constant,
+)
+from wcdrive.plant.identify_run import GAP, GAP_SETTLE, Run, degraded
+from wcdrive.plant.identify_uncertainty import _standard_errors, _uncertainty_scale
 from wcdrive.plant.params import ChairParams
+
+__all__ = ["BLOCKS_FITS", "BODY_KEEP", "BODY_LOSS", "BODY_SCAN", "CONSIDER", "DT", "FITTED", "FLOOR_FITS",
+           "GAP", "GAP_SETTLE", "HELD", "MOTOR_STARTS", "PIN_LIMIT", "RIVAL", "ROBUST_SCALE", "STAGES",
+           "Fit", "Run", "apply", "block_wheel_step", "degraded", "identify", "residuals", "rms",
+           "simulate", "value", "wheel_factors", "with_motor_constant"]
 
 #: The figures a fit may move, in the order the fit keeps them; ``motor_constant`` is
 #: written as the ``top_wheel_speed`` that gives it.
@@ -97,179 +106,6 @@ HELD = {
 CONSIDER = {"wheel_inertia": 0.3}
 #: A fitted figure whose relative standard uncertainty passes this is not pinned down.
 PIN_LIMIT = 0.02
-#: s of a plant step.
-DT = 0.001
-#: An interval longer than this many ticks is a gap: a tick's lines were lost.
-GAP = 1.5
-#: s after a gap that the fit leaves out, on blocks and on the floor: the wheel in the air
-#: settles within a few of its 30 ms time constants; on the floor a guessed duty's error
-#: lingered in the body's motion (0.5 and 1 s left rolling resistance 8 and 5 % off
-#: with 5 % of the lines lost, benchmarks/identify.py).
-GAP_SETTLE = {True: 0.2, False: 2.0}
-#: rad/s: residuals beyond this weigh less and less (``least_squares``' soft L1 loss): a
-#: tick stamped late, a lost line's guessed duty, do not steer the fit.
-ROBUST_SCALE = 0.1
-
-
-@dataclass(frozen=True)
-class Run:
-    """One recorded experiment: ``millis`` (n) the ticks' board times in ms; ``duty``
-    (n x 2, left and right) the signed duty (-255..255, + forward) each tick wrote,
-    driving until the next; ``angle`` (n x 2) the wheels' angles at each tick (rad,
-    forward +, from the encoder counts); ``blocks`` whether the wheels were off the
-    ground. The first tick is at rest."""
-
-    millis: np.ndarray
-    duty: np.ndarray
-    angle: np.ndarray
-    blocks: bool
-    name: str = ""
-    #: (n-1) bools: the intervals over which a tick's lines were lost (its duty unknown);
-    #: None: every interval longer than ``GAP`` ticks (a tick that ran late is one too).
-    lost: np.ndarray | None = None
-
-    def __post_init__(self) -> None:
-        n = len(self.millis)
-        if n < 3 or self.duty.shape != (n, 2) or self.angle.shape != (n, 2):
-            raise ValueError("a run needs 3 or more ticks, with a duty and an angle pair for each")
-        if np.any(np.diff(self.millis) <= 0):
-            raise ValueError("the ticks' millis must increase")
-
-    @property
-    def duration(self) -> float:
-        """s from the first tick to the last."""
-        return float(self.millis[-1] - self.millis[0]) / 1000.0
-
-    @property
-    def tick_ms(self) -> float:
-        """ms of a control tick: the median interval."""
-        return float(np.median(np.diff(self.millis)))
-
-    def gaps(self) -> np.ndarray:
-        """(n-1) bools: the intervals where a tick's lines were lost (its duty is not
-        known): ``lost``, else those longer than ``GAP`` ticks."""
-        if self.lost is not None:
-            return self.lost
-        return np.diff(self.millis) > GAP * self.tick_ms
-
-    def weights(self) -> np.ndarray:
-        """(n-1): 1 for an interval the fit compares, 0 for a gap and the ``GAP_SETTLE``
-        s after it (the simulation guessed the lost duty: its state settles again). A
-        run with many gaps keeps little: its figures come out not pinned down."""
-        out = np.ones(len(self.millis) - 1)
-        settle = math.ceil(GAP_SETTLE[self.blocks] * 1000.0 / self.tick_ms)
-        for i in np.flatnonzero(self.gaps()):
-            out[i:i + 1 + settle] = 0.0
-        return out
-
-    def schedule(self) -> list[tuple[int, float, float, int]]:
-        """What drives the simulation: (steps, duty left, duty right, interval) runs of
-        ``DT`` steps, each ending where the interval ``interval`` ends (-1: it does not).
-        Over a gap the tick's own duty holds for a tick, then the mean of it and the
-        next known one (the lost tick's, guessed)."""
-        out: list[tuple[int, float, float, int]] = []
-        gaps = self.gaps()
-        tick = round(self.tick_ms)
-        for i, n in enumerate(np.diff(self.millis).astype(int)):
-            dl, dr = float(self.duty[i, 0]), float(self.duty[i, 1])
-            if gaps[i]:
-                out.append((tick, dl, dr, -1))
-                out.append((int(n) - tick, round(0.5 * (dl + self.duty[i + 1, 0])),
-                            round(0.5 * (dr + self.duty[i + 1, 1])), i))
-            else:
-                out.append((int(n), dl, dr, i))
-        return out
-
-    def speeds(self) -> np.ndarray:
-        """(n-1) x 2: each wheel's mean speed over each interval between ticks (rad/s)."""
-        return np.diff(self.angle, axis=0) / (np.diff(self.millis)[:, None] / 1000.0)
-
-
-def block_wheel_step(p: ChairParams, volts: float, speed: float, dt: float = DT) -> float:
-    """A wheel on blocks one step of ``dt`` on from ``speed`` (rad/s) at ``volts``: the
-    plant's implicit wheel step with no tyre force. The unlimited solution of
-    ``j (w - speed) / dt = k1 V - (k2 + b) w``; where its current would pass the limit,
-    the limit's torque instead: ``j (w - speed) / dt = +-tau_max - b w``."""
-    k = p.motor_constant
-    ke_g = k * p.gear_ratio
-    k1 = p.gear_ratio * p.gear_efficiency * k / p.armature_resistance
-    j_dt = p.wheel_total_inertia / dt
-    b = p.viscous_friction
-    w = (j_dt * speed + k1 * volts) / (j_dt + k1 * ke_g + b)
-    if abs(volts - ke_g * w) > p.current_limit * p.armature_resistance:
-        tau = math.copysign(p.gear_ratio * p.gear_efficiency * k * p.current_limit, volts - ke_g * w)
-        w = (j_dt * speed + tau) / (j_dt + b)
-    return w
-
-
-def simulate(p: ChairParams, run: Run) -> np.ndarray:
-    """The wheels' angles (n x 2) at ``run``'s ticks, from rest at its first, driven by
-    its duty: on the floor the plant itself, on blocks ``block_wheel_step``."""
-    schedule = run.schedule()
-    volts_per_duty = (p.battery_voltage or p.supply_voltage) / 255.0
-    out = np.zeros((len(run.millis), 2))
-    if not run.blocks:
-        plant = Plant(p)
-        for n, dl, dr, i in schedule:
-            plant.set_drive(abs(int(dl)), int(dl >= 0), abs(int(dr)), int(dr >= 0))
-            plant.advance(n, DT)
-            if i >= 0:
-                out[i + 1] = plant.left.angle, plant.right.angle
-        return out
-    # the kernel's wheel step, inlined (a call per step costs more than the step)
-    k = p.motor_constant
-    ke_g = k * p.gear_ratio
-    k1 = p.gear_ratio * p.gear_efficiency * k / p.armature_resistance
-    j_dt = p.wheel_total_inertia / DT
-    b = p.viscous_friction
-    limit_v = p.current_limit * p.armature_resistance
-    tau_max = p.gear_ratio * p.gear_efficiency * k * p.current_limit
-    free = j_dt + k1 * ke_g + b
-    held = j_dt + b
-    for side in (0, 1):
-        w = theta = 0.0
-        for n, dl, dr, i in schedule:
-            volts = volts_per_duty * (dl if side == 0 else dr)
-            drive = k1 * volts
-            for _ in range(n):
-                nxt = (j_dt * w + drive) / free
-                if abs(volts - ke_g * nxt) > limit_v:
-                    nxt = (j_dt * w + math.copysign(tau_max, volts - ke_g * nxt)) / held
-                w = nxt
-                theta += w * DT
-            if i >= 0:
-                out[i + 1, side] = theta
-    return out
-
-
-def with_motor_constant(p: ChairParams, k: float) -> ChairParams:
-    """``p`` with the ``top_wheel_speed`` that makes its ``motor_constant`` ``k``.
-    ``ChairParams.motor_constant`` solves ``V = k G w + R load / (k G eta)`` for ``k`` at
-    the top speed ``w``, the load ``L0 + b w`` per wheel (rolling resistance, the
-    casters' share, viscous friction); for a given ``k`` that is linear in ``w``:
-    ``w = (V k - R L0 / (G eta)) / (G k^2 + R b / (G eta))``."""
-    g, eta, res = p.gear_ratio, p.gear_efficiency, p.armature_resistance
-    static = (p.rolling_resistance * p.drive_wheel_load
-              + p.caster_rolling_resistance * p.caster_load) * p.wheel_radius
-    top = ((p.supply_voltage * k - res * static / (g * eta))
-           / (g * k * k + res * p.viscous_friction / (g * eta)))
-    if not top > 0:
-        raise ValueError(f"no top speed gives the motor constant {k}: too small for the loads")
-    return dataclasses.replace(p, top_wheel_speed=float(top))
-
-
-def apply(base: ChairParams, values: dict[str, float]) -> ChairParams:
-    """``base`` with the ``FITTED`` figures of ``values``."""
-    fields = {n: v for n, v in values.items() if n != "motor_constant"}
-    p = dataclasses.replace(base, **fields)                     # type: ignore[arg-type]
-    if "motor_constant" in values:
-        p = with_motor_constant(p, values["motor_constant"])
-    return p
-
-
-def value(p: ChairParams, name: str) -> float:
-    """A ``FITTED`` figure of ``p``."""
-    return float(getattr(p, name))
 
 
 @dataclass
@@ -335,23 +171,6 @@ class Fit:
             lines.append(f"  {name}: {self.rms_before[name]:.4f} -> {self.rms_after[name]:.4f}")
         lines += [f"note: {note}" for note in self.notes]
         return "\n".join(lines)
-
-
-def residuals(p: ChairParams, runs: Sequence[Run]) -> np.ndarray:
-    """Simulated less measured mean wheel speeds over every tick interval of every run
-    (rad/s), flattened; 0 where ``Run.weights`` leaves an interval out."""
-    out = []
-    for run in runs:
-        sim = simulate(p, run)
-        dt = np.diff(run.millis)[:, None] / 1000.0
-        err = (np.diff(sim, axis=0) - np.diff(run.angle, axis=0)) / dt * run.weights()[:, None]
-        out.append(err.ravel())
-    return np.concatenate(out)
-
-
-def rms(p: ChairParams, run: Run) -> float:
-    """The RMS of ``residuals`` for one run (rad/s)."""
-    return float(np.sqrt(np.mean(residuals(p, [run]) ** 2)))
 
 
 def identify(runs: Sequence[Run], start: ChairParams | None = None) -> Fit:
@@ -508,61 +327,6 @@ def _staged(fun: Callable[[np.ndarray], np.ndarray], x: np.ndarray, names: Seque
     return cost, x
 
 
-def _uncertainty_scale(runs: Sequence[Run], fun: np.ndarray, counts_per_rev: int) -> float:
-    """The variance that scales ``(J^T J)^-1`` into the figures' covariance: the
-    residuals' own (robustly, from their median absolute deviation), no less than the
-    counts' quantisation gives (one count at each end of a tick interval:
-    ``2 q^2 / 12`` over the interval squared), and times ``(1 + r) / (1 - r)`` for the
-    residuals' correlation ``r`` from one tick to the next: residuals that run in
-    streaks (a model the data does not quite fit) carry fewer independent errors than
-    their number."""
-    used = fun[fun != 0.0]
-    if used.size < 3:
-        return math.inf
-    mad = float(np.median(np.abs(used - np.median(used))))
-    tick = float(np.median([r.tick_ms for r in runs])) / 1000.0
-    var = max((1.4826 * mad) ** 2, (2.0 * math.pi / counts_per_rev / tick) ** 2 / 6.0)
-    clipped = np.clip(fun, -3 * ROBUST_SCALE, 3 * ROBUST_SCALE)
-    pairs, lagged, total = 0.0, 0.0, 0.0
-    at = 0
-    for run in runs:
-        n = len(run.millis) - 1
-        block = clipped[at:at + 2 * n].reshape(n, 2)
-        at += 2 * n
-        lagged += float(np.sum(block[1:] * block[:-1]))
-        total += float(np.sum(block * block))
-        pairs += n
-    r = min(max(lagged / total, 0.0), 0.98) if total > 0 else 0.0
-    return var * (1.0 + r) / (1.0 - r)
-
-
-def _standard_errors(jac: np.ndarray, s2: float) -> list[float]:
-    """Standard errors of the fitted (log) figures: ``sqrt(diag(s2 (J^T J)^-1))``; inf for
-    a figure the residuals do not depend on (a zero column, or one the others span)."""
-    norms = np.linalg.norm(jac, axis=0)
-    if not norms.max() > 0:
-        return [math.inf] * jac.shape[1]
-    if not np.all(norms > 1e-9 * float(norms.max())):
-        return _with_dead_columns(jac, s2, norms)
-    scaled = jac / norms
-    try:
-        cov = np.linalg.inv(scaled.T @ scaled)
-    except np.linalg.LinAlgError:
-        return [math.inf] * jac.shape[1]
-    return [math.sqrt(max(cov[i, i], 0.0) * s2) / norms[i] if cov[i, i] < 1e12 else math.inf
-            for i in range(jac.shape[1])]
-
-
-def _with_dead_columns(jac: np.ndarray, s2: float, norms: np.ndarray) -> list[float]:
-    """``_standard_errors`` when some columns are zero: those inf, the rest on their own."""
-    live = norms > 1e-9 * float(norms.max())
-    out = [math.inf] * jac.shape[1]
-    if live.any():
-        for i, s in zip(np.flatnonzero(live), _standard_errors(jac[:, live], s2), strict=True):
-            out[int(i)] = s
-    return out
-
-
 def wheel_factors(p: ChairParams, runs: Sequence[Run]) -> dict[str, tuple[float, float]]:
     """Each wheel's back-EMF constant over the mean of both, from runs on blocks (where
     the wheels are independent): a one-figure fit of ``motor_constant`` per wheel, the
@@ -584,25 +348,3 @@ def wheel_factors(p: ChairParams, runs: Sequence[Run]) -> dict[str, tuple[float,
     for name, (k, rel) in zip(("left", "right"), ks, strict=True):
         out[name] = (k / mean, rel * k / mean)
     return out
-
-
-def degraded(run: Run, rng: np.random.Generator, *, quantum: int = 1, counts_per_rev: int | None = None,
-             late: float = 0.0, late_ms: int = 2, drop: float = 0.0) -> Run:
-    """``run`` as a poorer recording would give it: the counts floored to multiples of
-    ``quantum`` (a coarser encoder); a share ``late`` of the ticks stamped up to
-    ``late_ms`` ms after their counts were latched (a stamp that disagrees with its
-    counts: the board's own lines cannot, as ``millis`` and the counts are taken in
-    the same tick, but a logger that stamps lines as they arrive would); a share
-    ``drop`` of the ticks lost (not the first)."""
-    cpr = counts_per_rev or ChairParams().counts_per_rev
-    step = 2.0 * math.pi * quantum / cpr
-    angle = np.floor(np.round(run.angle / (2.0 * math.pi / cpr)) / quantum) * step
-    millis = run.millis.copy()
-    shifted = rng.random(len(millis)) < late
-    shifted[0] = False
-    millis[shifted] += rng.integers(1, late_ms + 1, size=int(shifted.sum()))
-    keep = rng.random(len(millis)) >= drop
-    keep[0] = True
-    keep &= np.concatenate([[True], np.diff(millis) > 0])     # a late stamp may pass the next
-    millis, duty, angle = millis[keep], run.duty[keep], angle[keep]
-    return Run(millis=millis, duty=duty, angle=angle, blocks=run.blocks, name=run.name)
