@@ -14,6 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import wcdrive
+from tests.support.board_of import board_of
 from wcdrive.host.boardclock import BoardClock, ClockFilter
 
 
@@ -58,7 +59,7 @@ def _twist_ratios(url: str, linear: float = 0.5, angular: float = 0.2) -> tuple[
     """Drives ``url`` at a constant command; returns the mean ratios odometry/plant of
     the linear and angular twist over the settled part, and the clock's rate."""
     with wcdrive.connect(url) as chair:
-        board = chair._session.port.board            # type: ignore[attr-defined]
+        board = board_of(chair._session.port)
         lin: list[float] = []
         ang: list[float] = []
         start = board.plant.time
@@ -104,7 +105,7 @@ def test_a_reset_mid_drive_keeps_the_pose_and_tells_the_subscribers() -> None:
         chair.on_link(links.append)
         stream = chair.telemetry(timeout=5.0, link_events=True)
         next(stream)                                 # subscribed from here on
-        board = chair._session.port.board            # type: ignore[attr-defined]
+        board = board_of(chair._session.port)
 
         def drive(seconds: float) -> None:
             start = board.plant.time

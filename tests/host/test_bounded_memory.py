@@ -15,6 +15,7 @@ import tracemalloc
 import pytest
 
 import wcdrive
+from tests.support.board_of import board_of
 from wcdrive._util.history import History
 
 SPEED = 50.0
@@ -69,7 +70,7 @@ def test_ten_minute_sim_session_holds_flat_memory() -> None:
             chair.history_limit = LIMIT
             for _ in range(1100):         # fills the port's cache of unframed lines (1,024)
                 chair.set_velocity(0.0, 0.0)
-            board = chair._session.port.board
+            board = board_of(chair._session.port)
             marks: dict[int, int] = {}
             k = 0
             while board.time < 600.0:

@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 
 import wcdrive
+from tests.support.board_of import board_of
 from wcdrive.errors import WcdriveConnectionError, WcdriveError, WcdriveFaultError
 from wcdrive.plant import ChairParams
 from wcdrive.plant.lidar import RPLIDAR_S3, SEED_MOUNT
@@ -42,7 +43,7 @@ def _angles(scan: wcdrive.plant.lidar.LaserScan) -> np.ndarray:
 
 
 def _board(chair: object) -> object:
-    return chair._session.port.board  # type: ignore[attr-defined]
+    return board_of(chair._session.port)
 
 
 @pytest.mark.parametrize("base", BACKENDS)

@@ -18,6 +18,7 @@ import time
 import pytest
 
 import wcdrive
+from tests.support.board_of import board_of
 from wcdrive.boards.sim_board import SimulatedBoard
 
 #: Simulated seconds per wall-clock second the "loaded" board manages.
@@ -68,7 +69,7 @@ def _drive(chair: wcdrive.Wheelchair, seconds: float) -> int:
 
 def test_a_fast_board_behind_the_wall_clock_keeps_its_link(loaded) -> None:
     with wcdrive.connect("sim://?speed=20") as chair:
-        board = chair._session.port.board
+        board = board_of(chair._session.port)
         start = board.time
         refused = _drive(chair, 2.0)
         assert board.time - start > 4.0                   # it ran, behind (40 s would be on time)
@@ -124,7 +125,7 @@ def test_a_hung_board_thread_is_a_silent_link(monkeypatch) -> None:
     with wcdrive.connect("sim://") as chair:
         try:
             _drive(chair, 0.3)
-            board = chair._session.port.board
+            board = board_of(chair._session.port)
             hang[0] = True
             hung_at = time.monotonic()
             while chair.link_ok and time.monotonic() - hung_at < STEP_STALL_S + 3.0:

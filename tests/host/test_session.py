@@ -29,6 +29,7 @@ import pytest
 import serial
 
 import wcdrive
+from tests.support.board_of import board_of
 from wcdrive.boards.sim_board import SimulatedBoard
 from wcdrive.host.handshake import Handshake
 from wcdrive.host.requests import Request
@@ -113,7 +114,7 @@ def test_every_line_the_host_writes_is_a_v3_frame(rig) -> None:
         assert expected in commands, (expected, commands)
     seqs = [s for s, _ in frames]
     assert seqs == sorted(set(seqs)) and seqs[0] >= 1               # one counter, never reused here
-    assert tamper.board.loop.fw.state.crcRejected == 0
+    assert board_of(tamper).loop.fw.state.crcRejected == 0
     assert "unframed" not in chair.errors
 
 
@@ -189,7 +190,7 @@ def test_a_garbled_first_hello_is_retried(rig) -> None:
         assert "checksum" in chair.errors
     hellos = re.findall(rb"\$\d+:hello:4\*[0-9A-F]{4}", b"".join(tamper.written))
     assert len(hellos) == 2 and hellos[0] != hellos[1]
-    assert tamper.board.loop.fw.state.crcRejected == 1
+    assert board_of(tamper).loop.fw.state.crcRejected == 1
     assert took < Handshake.HELLO_WAITS[0], took       # retried on its ERR, not after its wait
 
 
@@ -216,21 +217,21 @@ def test_no_hello_answer_raises_unless_legacy(rig) -> None:
         wcdrive.connect(path)
     assert "legacy=True" in str(e.value)
     assert b"".join(tamper.written).count(b":hello:4*") == 3          # three tries, then no more
-    assert tamper.board.loop.fw.state.targetR == 0.0
+    assert board_of(tamper).loop.fw.state.targetR == 0.0
 
     with wcdrive.connect(path, legacy=True) as chair:
         assert chair.protocol_version == 1 and chair.status is None
         for _ in range(5):
             chair.set_velocity(0.4, 0.0)
             time.sleep(0.02)
-        _wait(lambda: tamper.board.loop.fw.state.targetR > 0, "the board to take the v1 line")
+        _wait(lambda: board_of(tamper).loop.fw.state.targetR > 0, "the board to take the v1 line")
         sent = b"".join(tamper.written)
         assert sent.endswith(b"x:0.400,t:0.000,") and b"$" not in sent.rpartition(b"hello")[2]
         with pytest.raises(wcdrive.WcdriveProtocolError, match="v1"):
             chair.get_param("kp_l")
         with pytest.raises(wcdrive.WcdriveProtocolError, match="stop was sent"):
             chair.estop()
-    _wait(lambda: tamper.board.loop.fw.state.targetR == 0.0, "the v1 stop")
+    _wait(lambda: board_of(tamper).loop.fw.state.targetR == 0.0, "the v1 stop")
 
 
 @pytest.mark.parametrize("legacy", [False, True])
@@ -294,7 +295,7 @@ def test_an_estop_during_a_dead_link_is_latched_once_the_link_is_back(rig) -> No
     """The link is dead both ways: ``estop()`` cannot be confirmed and says so; the
     host holds it (motion raises) and latches it on the board once lines flow again."""
     tamper, path = rig
-    state = tamper.board.loop.fw.state
+    state = board_of(tamper).loop.fw.state
     dropped: list[bytes] = []
 
     def drop(data: bytes) -> bytes:
@@ -339,16 +340,16 @@ def test_a_board_that_resets_mid_session_is_handshaken_again(rig) -> None:
     tamper, path = rig
     with wcdrive.connect(path) as chair:
         chair.estop()
-        _reset_board(tamper.board)
-        state = tamper.board.loop.fw.state
+        _reset_board(board_of(tamper))
+        state = board_of(tamper).loop.fw.state
         assert not state.estopLatched and not state.tlmEnabled      # the fresh board
         _wait(lambda: "BOARD_RESET" in chair.events, "the host to notice the reset", timeout=2.0)
         _wait(lambda: state.tlmEnabled and state.estopLatched, "hello and the e-stop again",
               timeout=3.0)
         assert chair.protocol_version == 4 and chair.estop_latched
         chair.reset_estop(timeout=10)
-        _reset_board(tamper.board)
-        state = tamper.board.loop.fw.state
+        _reset_board(board_of(tamper))
+        state = board_of(tamper).loop.fw.state
         _wait(lambda: chair.events.count("BOARD_RESET") == 2 and state.tlmEnabled,
               "the second handshake", timeout=3.0)
         assert not state.estopLatched and not chair.estop_latched
@@ -369,10 +370,10 @@ def test_wait_for_boot_returns_once_the_reset_is_seen_and_hello_answered(rig) ->
             chair.wait_for_boot(seen, timeout=0.2)
         for _ in range(2):
             seen = chair.boots
-            _reset_board(tamper.board)
+            _reset_board(board_of(tamper))
             assert chair.wait_for_boot(seen, timeout=5.0) == 4
             assert chair.boots == seen + 1 and chair.events.count("BOARD_RESET") == seen
-            assert tamper.board.loop.fw.state.tlmEnabled                  # the new board's hello
+            assert board_of(tamper).loop.fw.state.tlmEnabled                  # the new board's hello
         assert chair.wait_for_boot(seen, timeout=0.0) == 4                 # seen already
 
 
@@ -384,7 +385,7 @@ def test_a_reset_that_cuts_a_line_is_still_seen(rig) -> None:
 
     tamper, path = rig
     with wcdrive.connect(path) as chair:
-        board = tamper.board
+        board = board_of(tamper)
         with board._lock:
             loop = board.loop
             loop.fw = Firmware(boot_millis=loop.timer.millis)
@@ -507,7 +508,7 @@ def test_a_latch_decided_while_the_estop_is_released_does_not_follow_the_reset()
     with wcdrive.connect("sim://") as chair:
         chair.estop()
         session = chair._session
-        board = session.port.board
+        board = board_of(session.port)
         tracker = session.tracker
         write = tracker._write
         late: list[threading.Thread] = []

@@ -69,6 +69,7 @@ from hypothesis.errors import InvalidArgument
 from hypothesis.stateful import RuleBasedStateMachine, initialize, invariant, precondition, rule
 
 import wcdrive
+from tests.support.board_of import board_of
 from wcdrive.avr.avrlibc import strtod
 from wcdrive.boards.sim_board import SimulatedBoard
 from wcdrive.errors import WcdriveCommandError, WcdriveConnectionError, WcdriveEstopError
@@ -172,7 +173,7 @@ class Link(FaultyPort):
 
     def __init__(self, speed: float, seed: int) -> None:
         super().__init__(serial.serial_for_url(f"wcsim://?speed={speed}&seed={seed}", timeout=0.1), seed=seed)
-        self.probe = BoardProbe(self.board)
+        self.probe = BoardProbe(board_of(self))
         self._answers = self.rx.drop(match=self.ANSWER, count=0)
         self._data = self.rx.drop(match=rb"^PAR:", count=0)
         self._requests = self.tx.flip(match=self.REQUEST, count=0)
@@ -333,10 +334,11 @@ class WheelchairMachine(RuleBasedStateMachine):
         board did meanwhile to the model, and returns the board's state then and the
         lines it finished."""
         link = self.link
-        state = link.board.loop.fw.state
+        board = board_of(link)
+        state = board.loop.fw.state
         deadline = time.monotonic() + WALL_TIMEOUT
         while True:
-            with link.board._lock:
+            with board._lock:
                 if state.rxCount == link.written:
                     snapshot = state.copy()
                     new = link.probe.log[self.consumed:]

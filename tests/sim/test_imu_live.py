@@ -8,6 +8,7 @@ import time
 from typing import Any
 
 import wcdrive
+from tests.support.board_of import board_of
 from wcdrive.boards.sim_board import GYRO_HISTORY
 
 
@@ -28,7 +29,7 @@ class Imu:
 def test_the_gyro_goes_on_past_its_history() -> None:
     sink = Imu()
     with wcdrive.connect("sim://?speed=10", ros=sink) as chair:
-        board = chair._session.port.port.board        # type: ignore[attr-defined]
+        board = board_of(chair._session.port)
         deadline = time.monotonic() + 30.0
         while board.time < 25.0 and time.monotonic() < deadline:
             chair.set_velocity(0.3, 0.5)

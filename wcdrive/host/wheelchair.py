@@ -16,18 +16,15 @@ lets the signal kill the process as it would have (exit status -15 / 143). A han
 the program installed itself is left alone (it then owns the exit: raising
 ``SystemExit`` there is enough, or ``wcdrive.stop_all()``). SIGKILL cannot be caught:
 the board's watchdog stops the chair ``watchdog_ms`` (500 ms) after the last command.
+The machinery is ``wcdrive.host.exit_safety``'s.
 """
 
 from __future__ import annotations
 
 import math
-import os
-import signal
 import threading
 import time
-import weakref
 from collections.abc import Callable, Iterator
-from types import FrameType
 from typing import TYPE_CHECKING, Literal, overload
 
 import numpy as np
@@ -42,6 +39,7 @@ from wcdrive.errors import (
     WcdriveTimeoutError,
 )
 from wcdrive.host.boardclock import BoardClock
+from wcdrive.host.exit_safety import install_signal_handlers, register, stop_all
 from wcdrive.host.odometry import OdometryEstimate
 from wcdrive.host.requests import Request
 from wcdrive.host.scan_feed import ScanFeed, ScanSource
@@ -70,67 +68,6 @@ __all__ = ["LINK_TIMEOUT", "LinkEvent", "LinkLost", "LinkRestored", "Reset", "Te
 LINK_TIMEOUT = 3 * integer("CONTROL_PERIOD_MS") / 1000.0
 #: One encoder count as a wheel angle (rad).
 _RAD_PER_COUNT = 2.0 * math.pi / real("CPR")
-#: The signals whose default action (terminate, no cleanup) the chairs' handler replaces.
-STOP_SIGNALS = ("SIGTERM", "SIGHUP")
-
-
-#: The chairs of this process: their shutdown, by session (the closed ones are pruned
-#: as new ones come). No lock: a finalizer may run on any thread, in the middle of
-#: anything (garbage collection), so every use is one atomic dict operation.
-_OPEN: dict[int, weakref.finalize] = {}
-_HANDLED: set[int] = set()
-
-
-def _shutdown(session: Session, on_close: Callable[[], None] | None) -> None:
-    """The way out of every chair (``close``, garbage collection, interpreter exit, a
-    signal): a stop, then the port closes. Refers to the session only, never to the
-    ``Wheelchair``, so that it can run when that is collected."""
-    try:
-        session.close(session.stop_line())
-    finally:
-        if on_close is not None:
-            on_close()
-
-
-def stop_all() -> int:
-    """Stops and closes every chair this process has open (best effort); returns how
-    many. What the signal handler does; also for a program's own handlers."""
-    finalizers = [f for f in tuple(_OPEN.values()) if f.alive]
-    for finalizer in finalizers:
-        try:
-            finalizer()
-        except Exception:
-            pass
-    return len(finalizers)
-
-
-def _on_signal(signum: int, frame: FrameType | None) -> None:
-    stop_all()
-    signal.signal(signum, signal.SIG_DFL)
-    os.kill(os.getpid(), signum)            # dies as the signal would have killed it
-
-
-def install_signal_handlers() -> list[str]:
-    """Installs the stop-then-die handler for ``SIGTERM`` and ``SIGHUP`` where their
-    action is still the default (never over a handler the program installed); only
-    from the main thread. Returns the signals it installed now. ``Wheelchair`` calls it
-    unless ``stop_on_signals=False``."""
-    if threading.current_thread() is not threading.main_thread():
-        return []
-    installed = []
-    for name in STOP_SIGNALS:
-        signum = getattr(signal, name, None)
-        if signum is None or signum in _HANDLED:
-            continue
-        try:
-            if signal.getsignal(signum) is signal.SIG_DFL:
-                signal.signal(signum, _on_signal)
-                _HANDLED.add(signum)
-                installed.append(name)
-        except (OSError, ValueError):
-            pass
-    return installed
-
 
 class Wheelchair:
     """A chair behind a serial-like ``port`` (a ``wcdrive.transports.port.Port``);
@@ -172,11 +109,7 @@ class Wheelchair:
             port, self._hub.deliver, name=name, reopen=reopen, reconnect_timeout=reconnect_timeout,
             legacy=legacy, link_timeout=link_timeout, on_link=self._hub.deliver_link,
             on_board_reset=self._hub.board_reset, board_clock=board_clock)
-        self._finalizer = weakref.finalize(self, _shutdown, session, on_close)
-        for key, finalizer in tuple(_OPEN.items()):
-            if not finalizer.alive:
-                _OPEN.pop(key, None)
-        _OPEN[id(session)] = self._finalizer
+        self._finalizer = register(self, session, on_close)
         if stop_on_signals:
             install_signal_handlers()
 
