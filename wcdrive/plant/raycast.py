@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from wcdrive._util.native import BuildError, library, record
+from wcdrive.plant.struct_layout import check_layout
 
 Knots = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
@@ -113,7 +114,9 @@ class Turn:
 
 def load_raycast() -> ctypes.CDLL | None:
     """The C ray cast: the one the install built, else compiled on first use; None when
-    neither can be had (``World.cast`` then runs the numpy cast)."""
+    neither can be had (``World.cast`` then runs the numpy cast). Raises
+    ``wcdrive.plant.struct_layout.StructLayoutError`` when ``GridStruct``, ``TurnStruct``
+    or ``JobStruct`` does not lay its C struct out as the compiler did."""
     global _lib
     if _lib is None:
         try:
@@ -123,6 +126,9 @@ def load_raycast() -> ctypes.CDLL | None:
             if npyrandom is not None:
                 libs, flags = (str(npyrandom[1]), *libs), (*flags, "-DWC_NPYRANDOM", f"-I{npyrandom[0]}")
             lib, how = library("wcdrive.plant._raycast", _SOURCE, "raycast", libs, flags)
+            check_layout(GridStruct, lib, "rc_grid_layout")
+            check_layout(TurnStruct, lib, "rc_lidar_layout")
+            check_layout(JobStruct, lib, "rc_job_layout")
             grid = ctypes.POINTER(GridStruct)
             lib.rc_count.argtypes = [grid, _P]
             lib.rc_count.restype = None

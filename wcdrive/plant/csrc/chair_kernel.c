@@ -2,7 +2,7 @@
  * chair_kernel: the inner loop of wcdrive.plant.Plant in C, for speed.
  *
  * chair_advance() runs n physics steps: the same force model as Plant._python_step
- * (wcdrive/plant/chair.py, the reference; tests/test_plant.py checks the two agree),
+ * (wcdrive/plant/force_model.py, the reference; tests/plant/test_plant.py checks the two agree),
  * then Chipmunk's cpSpaceStep through function pointers that pymunk's own library
  * provides, so pymunk still integrates the chassis (and any walls in its space).
  *
@@ -15,7 +15,7 @@
  * cpSpaceStep also does are skipped, as nothing of the plant reads them: the space's
  * time stamp and its current step (pymunk's Space.current_time_step stays as it was).
  * tests/test_plant.py holds the two paths to the same motion bit for bit.
- * The floor's grade (Plant._grade) runs only when the plant has a terrain that is not
+ * The floor's grade (force_model.grade) runs only when the plant has a terrain that is not
  * flat, so the flat floor's steps are the same operations as without one.
  * Built on first use by wcdrive.native (gcc -O2 -ffp-contract=off).
  */
@@ -23,10 +23,10 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#define SWIVEL_RATE_SCALE 0.2   /* rad/s, as in chair.py */
-#define SCRUB_SLIP 1e-4         /* m/s, as in chair.py */
+#define SWIVEL_RATE_SCALE 0.2   /* rad/s, as in force_model.py */
+#define SCRUB_SLIP 1e-4         /* m/s, as in force_model.py */
 #define MAX_RAMPS 8             /* wcdrive.plant.terrain.MAX_RAMPS */
-#define BRAKE_SLACK 1e-9        /* s, as in chair.py */
+#define BRAKE_SLACK 1e-9        /* s, as in force_model.py */
 
 typedef struct { double x, y; } vec_t;
 typedef vec_t (*get_vec_fn)(const void *);
@@ -57,13 +57,13 @@ typedef struct {
     int32_t locked[2], dead[2];
     /* the body has update functions of its own (pymunk's velocity_func/position_func) */
     int32_t custom_funcs;
-    /* the floor (Plant._set_terrain): off on the flat; a uniform grade (sin, cos) and
+    /* the floor (force_model.set_terrain): off on the flat; a uniform grade (sin, cos) and
      * bands along the downhill heading (down_c, down_s) with their own */
     int32_t terrain, n_ramps;
     double mass_g, cog_h, n_drive0, n_caster0, down_c, down_s, slope_sin, slope_cos;
     double ramp_from[MAX_RAMPS], ramp_to[MAX_RAMPS], ramp_sin[MAX_RAMPS], ramp_cos[MAX_RAMPS];
     void *get_position;
-    /* the drive tyres' patches as springs (Plant._wheel, _deflect): stiffness along and
+    /* the drive tyres' patches as springs (force_model.wheel, deflect): stiffness along and
      * sideways, their inverses (0 for no spring), each wheel's deflections */
     double k_long, k_lat, inv_k_long, inv_k_lat;
     double defl[2], defl_lat[2];
@@ -114,10 +114,10 @@ static void space_step(chair_t *c, int lone, double dt) {
 
 static double clampd(double v, double lo, double hi) { return v > hi ? hi : (v < lo ? lo : v); }
 
-/* chair.py's _deflect: the patch's deflection after a step at this slip, within most */
+/* force_model.deflect: the patch's deflection after a step at this slip, within most */
 static double deflect(double z, double slip, double most, double dt) { return clampd(z + slip * dt, -most, most); }
 
-/* Plant._stand_still: the wheel stands still over the step (locked, or held by the
+/* force_model.stand_still: the wheel stands still over the step (locked, or held by the
  * brake), its patch holding or sliding with force; a stalled motor (no current when dead) */
 static double stand_still(chair_t *c, int i, double force, double ground, double fmax, double dt) {
     double imax = c->i_max_r / c->res;
@@ -140,7 +140,7 @@ static double wheel(chair_t *c, int i, double ground, double dt) {
         return stand_still(c, i, clampd(f0 + ce * -ground, -fmax, fmax), ground, fmax, dt);
     double tb = 0.0;
     if (c->brake_engaged) {
-        /* what holding the wheel still takes (Plant._wheel) */
+        /* what holding the wheel still takes (force_model.wheel) */
         double hold = clampd(f0 + ce * -ground, -fmax, fmax);
         double stall = c->dead[i] ? 0.0 : clampd(c->k1 * volts, -c->tau_max, c->tau_max);
         tb = r * hold - j_dt * speed - stall;
@@ -174,7 +174,7 @@ static double wheel(chair_t *c, int i, double ground, double dt) {
     }
     double force = f0 + ce * (r * w - ground);
     if (fabs(force) > fmax) {
-        /* the patch slides: speed and current limit solved again (Plant._wheel) */
+        /* the patch slides: speed and current limit solved again (force_model.wheel) */
         force = copysign(fmax, force);
         w = (j_dt * speed + k1v - r * force + tb) / (j_dt + c->k2 + b);
         limited = fabs(volts - c->ke_g * w) > c->i_max_r;
@@ -194,7 +194,7 @@ static double wheel(chair_t *c, int i, double ground, double dt) {
     return force - rr;
 }
 
-/* Plant._grade: the normal loads on the floor under (x, y), the chassis heading
+/* force_model.grade: the normal loads on the floor under (x, y), the chassis heading
  * (cs, sn); the grade's pull on the chassis (world frame) into *gx, *gy. */
 static void grade(chair_t *c, double x, double y, double cs, double sn, double *gx, double *gy) {
     double along = x * c->down_c + y * c->down_s;
@@ -265,7 +265,7 @@ static void step(chair_t *c, int lone, double dt) {
         double f_side = clampd(f_swivel - c->c_caster * side_slip, -limit, limit);
         c->swivel_work += fabs(c->swivel_friction * tanh(rate / SWIVEL_RATE_SCALE) * rate) * dt;
         c->side_impulse += fabs(f_side) * dt;
-        /* the patch carries its side force by sliding (chair.py) */
+        /* the patch carries its side force by sliding (force_model.py) */
         double slip = fabs(f_side) / c->c_caster;
         if (fabs(f_side) >= limit) slip = fmax(slip, fabs(side_slip));
         c->scrub_energy += fabs(f_side) * slip * dt;
@@ -373,3 +373,55 @@ int32_t chair_advance_sampled(chair_t *c, int32_t n, double dt, double *angles, 
     if (n <= 0 || g[0] > g[2]) return 0;
     return gyro_samples(n, g, yaw_rates, draws, max_samples, times, values);
 }
+
+/* The layout of chair_t as compiled, for the check that the ctypes mirror
+ * (wcdrive.plant.chair_kernel.ChairStruct) lays it out alike (wcdrive.plant.struct_layout,
+ * whose docstring describes these records): each field's name, offset, size and kind,
+ * from offsetof, sizeof and _Generic. A field added to chair_t is added here too: the
+ * check refuses a mirror with a field this table lacks, and a table with a gap wider
+ * than alignment explains. */
+typedef struct { const char *name; size_t offset, size; char kind; } wc_field;
+typedef struct {
+    size_t layout_size, field_size;
+    const char *name;
+    size_t size, count;
+    const wc_field *fields;
+} wc_layout;
+#define WC_KIND(x) _Generic((x), double: 'd', float: 'f', int32_t: 'i', uint32_t: 'I', int64_t: 'q', \
+                            uint64_t: 'Q', default: 'p')
+#define WC_FIELD(T, f) { #f, offsetof(T, f), sizeof(((T *)0)->f), WC_KIND(((T *)0)->f) }
+#define WC_ARRAY(T, f) { #f, offsetof(T, f), sizeof(((T *)0)->f), WC_KIND(((T *)0)->f[0]) }
+#define WC_LAYOUT(T, fields) { sizeof(wc_layout), sizeof(wc_field), #T, sizeof(T), \
+                               sizeof fields / sizeof fields[0], fields }
+#define F(f) WC_FIELD(chair_t, f)
+#define A(f) WC_ARRAY(chair_t, f)
+
+static const wc_field chair_fields[] = {
+    F(half_base), F(r), F(cog_x), F(caster_x), F(caster_y), F(trail), F(swivel_max), F(swivel_friction),
+    A(mu), F(mu_c), F(n_drive), F(n_caster), F(crr), F(crr_c), F(c_long), F(c_lat), F(c_caster),
+    F(j), F(b), F(k1), F(k2), F(ke_g), F(tau_max), F(i_max_r), F(res),
+    F(space), F(body),
+    F(get_velocity), F(get_angle), F(get_angular_velocity), F(set_force), F(set_torque), F(space_step),
+    F(update_position), F(update_velocity), F(get_damping), F(get_gravity), F(get_sleep_threshold),
+    F(each_body), F(each_constraint), F(body_each_shape), F(get_body_type),
+    A(volts),
+    A(angle), A(speed), A(current), A(slip), A(force),
+    A(caster_heading),
+    F(scrub_energy), F(scrub_time), F(swivel_work), F(side_impulse), F(time),
+    A(locked), A(dead),
+    F(custom_funcs),
+    F(terrain), F(n_ramps),
+    F(mass_g), F(cog_h), F(n_drive0), F(n_caster0), F(down_c), F(down_s), F(slope_sin), F(slope_cos),
+    A(ramp_from), A(ramp_to), A(ramp_sin), A(ramp_cos),
+    F(get_position),
+    F(k_long), F(k_lat), F(inv_k_long), F(inv_k_lat),
+    A(defl), A(defl_lat),
+    F(brake_torque), F(brake_wait),
+    F(has_brake), F(brake_pin), F(brake_engaged),
+};
+#undef F
+#undef A
+
+static const wc_layout layout = WC_LAYOUT(chair_t, chair_fields);
+
+const wc_layout *chair_layout(void) { return &layout; }

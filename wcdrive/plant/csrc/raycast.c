@@ -1091,3 +1091,51 @@ void rc_pipe_close(rc_pipe *p) {
     pthread_mutex_destroy(&p->lock);
     free(p);
 }
+
+/* The layouts of rc_grid, rc_lidar and rc_job as compiled, for the check that their
+ * ctypes mirrors (wcdrive.plant.raycast's GridStruct, TurnStruct and JobStruct) lay
+ * them out alike (wcdrive.plant.struct_layout, whose docstring describes these
+ * records): each field's name, offset, size and kind, from offsetof, sizeof and
+ * _Generic. A field added to one of the structs is added here too: the check refuses
+ * a mirror with a field a table lacks, and a table with a gap wider than alignment
+ * explains. */
+typedef struct { const char *name; size_t offset, size; char kind; } wc_field;
+typedef struct {
+    size_t layout_size, field_size;
+    const char *name;
+    size_t size, count;
+    const wc_field *fields;
+} wc_layout;
+#define WC_KIND(x) _Generic((x), double: 'd', float: 'f', int32_t: 'i', uint32_t: 'I', int64_t: 'q', \
+                            uint64_t: 'Q', default: 'p')
+#define WC_FIELD(T, f) { #f, offsetof(T, f), sizeof(((T *)0)->f), WC_KIND(((T *)0)->f) }
+#define WC_LAYOUT(T, fields) { sizeof(wc_layout), sizeof(wc_field), #T, sizeof(T), \
+                               sizeof fields / sizeof fields[0], fields }
+
+#define F(f) WC_FIELD(rc_grid, f)
+static const wc_field grid_fields[] = {
+    F(seg), F(n_seg), F(circ), F(n_circ), F(minx), F(miny), F(cs), F(inv_cs), F(nx), F(ny), F(eps),
+    F(start), F(items), F(rec), F(seg_end), F(item_rec), F(fan_bins), F(scale),
+};
+#undef F
+#define F(f) WC_FIELD(rc_lidar, f)
+static const wc_field lidar_fields[] = {
+    F(samples), F(offset), F(device), F(first_bin), F(beams), F(multiple), F(mount_x), F(mount_y),
+    F(sigma), F(device_min), F(range_max), F(intensity), F(reverse),
+};
+#undef F
+#define F(f) WC_FIELD(rc_job, f)
+static const wc_field job_fields[] = {
+    F(grid), F(lidar), F(t0), F(n), F(kt), F(kx), F(ky), F(kh), F(log), F(log_rows), F(log_stride),
+    F(start_x), F(start_y), F(start_h), F(noise), F(q2), F(ranges), F(intensities), F(beam_time),
+    F(state), F(next_chunk), F(chunks_left), F(next), F(rays), F(bitgen), F(draws), F(log_t0),
+};
+#undef F
+
+static const wc_layout grid_layout = WC_LAYOUT(rc_grid, grid_fields);
+static const wc_layout lidar_layout = WC_LAYOUT(rc_lidar, lidar_fields);
+static const wc_layout job_layout = WC_LAYOUT(rc_job, job_fields);
+
+const wc_layout *rc_grid_layout(void) { return &grid_layout; }
+const wc_layout *rc_lidar_layout(void) { return &lidar_layout; }
+const wc_layout *rc_job_layout(void) { return &job_layout; }
