@@ -13,9 +13,11 @@ base_link), ``/tf_static`` (base_link -> laser, the lidar's mount), ``/scan``
 (``nav_msgs/msg/Odometry``: the plant, in simulation), ``/diagnostics/serial``
 (``diagnostic_msgs/msg/DiagnosticArray``: each raw line from the board) and
 ``/odometry/filtered`` (the EKF, when there is one). ``QOS`` is the QoS each is
-offered with: ``/tf_static`` and ``/map`` are latched (reliable, transient local, keep
-last 1, as tf2's static broadcaster and map_server offer them), so ``ros2 bag play``
-offers them latched too.
+offered with, the topic table's (``wcdrive.ros2.topics``, which the DDS node reads
+too): ``/tf_static`` and ``/map`` are latched (reliable, transient local, keep last 1,
+as tf2's static broadcaster and map_server offer them), ``/imu`` and ``/scan`` are
+sensor data (best effort, keep last 5), so ``ros2 bag play`` offers each as the live
+node does.
 
 ``ChairPublisher`` turns a ``Wheelchair``'s ticks into these messages (``connect(url,
 record="run.mcap")``); ``wcdrive.sim.rosout`` does the same for a simulated run.
@@ -27,68 +29,36 @@ import functools
 import math
 import threading
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
 from wcdrive.protocol.motion import VelocityCommand, WheelCommand, find_motion
+from wcdrive.ros2.topics import TABLE, Profile, by_name
 from wcdrive.transports.wrapper import PortWrapper
 
 if TYPE_CHECKING:
     from wcdrive.boards.simulation import Simulated
 
-#: Topic -> message type.
-TOPICS: dict[str, str] = {
-    "/odom": "nav_msgs/msg/Odometry",
-    "/imu": "sensor_msgs/msg/Imu",
-    "/cmd_vel": "geometry_msgs/msg/TwistStamped",
-    "/tf": "tf2_msgs/msg/TFMessage",
-    "/tf_static": "tf2_msgs/msg/TFMessage",
-    "/scan": "sensor_msgs/msg/LaserScan",
-    "/map": "nav_msgs/msg/OccupancyGrid",
-    "/joint_states": "sensor_msgs/msg/JointState",
-    "/ground_truth": "nav_msgs/msg/Odometry",
-    "/diagnostics/serial": "diagnostic_msgs/msg/DiagnosticArray",
-    "/odometry/filtered": "nav_msgs/msg/Odometry",
-}
+#: Topic -> message type: the recorded rows of the topic table (``wcdrive.ros2.topics``).
+TOPICS: dict[str, str] = {t.name: t.msgtype for t in TABLE if t.recorded}
 ODOM_FRAME, BASE_FRAME, MAP_FRAME = "odom", "base_link", "map"
+#: The gyro's frame (base_link -> imu_link is the identity: the gyro reads the chassis's yaw).
+IMU_FRAME = by_name("/imu").frame or BASE_FRAME
 WHEEL_JOINTS = ("left_wheel_joint", "right_wheel_joint")
 #: The ROS distribution whose definitions, hashes and bag format are written.
 ROS_DISTRO = "jazzy"
 
 
-@dataclass(frozen=True)
-class Qos:
-    """The QoS a topic's publisher offers (rclcpp's names): reliable or best effort,
-    transient local or volatile, keep last ``depth``; deadline, lifespan and liveliness
-    as rclcpp leaves them (infinite, automatic)."""
-
-    depth: int = 10
-    reliable: bool = True
-    transient_local: bool = False
-
-    def profile(self) -> dict[str, Any]:
-        """The profile as rosbag2 (Jazzy, bag version 9) writes it in
-        ``offered_qos_profiles``."""
-        infinite = {"sec": 9223372036, "nsec": 854775807}
-        return {"history": "keep_last", "depth": self.depth,
-                "reliability": "reliable" if self.reliable else "best_effort",
-                "durability": "transient_local" if self.transient_local else "volatile",
-                "deadline": dict(infinite), "lifespan": dict(infinite), "liveliness": "automatic",
-                "liveliness_lease_duration": dict(infinite), "avoid_ros_namespace_conventions": False}
+#: Topic -> the QoS its publisher offers, from the topic table (the live DDS node offers
+#: the same: ``ros2 bag play`` replays a recording as the node publishes it).
+QOS: dict[str, Profile] = {t.name: t.profile for t in TABLE if t.recorded}
 
 
-LATCHED = Qos(depth=1, transient_local=True)
-#: Topic -> the QoS its publisher offers (rclcpp's default for the rest: reliable,
-#: volatile, keep last 10).
-QOS: dict[str, Qos] = {"/tf_static": LATCHED, "/map": LATCHED, "/tf": Qos(depth=100)}
-
-
-def qos(topic: str) -> Qos:
+def qos(topic: str) -> Profile:
     """The QoS ``topic`` is offered with."""
-    return QOS.get(topic, Qos())
+    return QOS[topic]
 
 
 @functools.cache
@@ -204,7 +174,7 @@ def odometry(t: float, x: float, y: float, yaw: float, linear: float, angular: f
                       "covariance": _cov(twist_covariance, 36)}}
 
 
-def imu(t: float, rate: float, rate_variance: float, frame: str = BASE_FRAME) -> dict[str, Any]:
+def imu(t: float, rate: float, rate_variance: float, frame: str = IMU_FRAME) -> dict[str, Any]:
     """``sensor_msgs/msg/Imu`` of a z-gyro: no orientation, no acceleration (their
     covariances' first element -1, REP 145)."""
     unknown = [-1.0] + [0.0] * 8
@@ -328,7 +298,7 @@ class McapSink:
             schema = self._schemas[typename] = self._writer.register_schema(
                 typename, "ros2msg", msgdef(typename).encode())
         channel = self._writer.register_channel(topic, "cdr", schema, {
-            "offered_qos_profiles": _yaml([qos(topic).profile()]),
+            "offered_qos_profiles": _yaml([qos(topic).rosbag2()]),
             "topic_type_hash": type_hash(typename)})
         encode = encoder(typename)
         self._channels[topic] = (channel, encode)
@@ -358,7 +328,7 @@ class McapSink:
             "message_count": count,
             "topics_with_message_count": [
                 {"topic_metadata": {"name": topic, "type": TOPICS[topic], "serialization_format": "cdr",
-                                    "offered_qos_profiles": [qos(topic).profile()],
+                                    "offered_qos_profiles": [qos(topic).rosbag2()],
                                     "type_description_hash": type_hash(TOPICS[topic])},
                  "message_count": n} for topic, n in self._counts.items()],
             "compression_format": "", "compression_mode": "",

@@ -18,7 +18,7 @@ from wcdrive.ros2.bridge import header, quaternion
 from wcdrive.ros2.bridge import joint_state as joint_state
 from wcdrive.ros2.bridge import stamp as stamp
 
-IMU_FRAME = "imu_link"
+IMU_FRAME = bridge.IMU_FRAME
 #: diagnostic_msgs/DiagnosticStatus levels.
 OK, WARN, ERROR = 0, 1, 2
 

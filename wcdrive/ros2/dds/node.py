@@ -39,6 +39,7 @@ from wcdrive.ros2.bridge import laser_scan, tf_static
 from wcdrive.ros2.dds import messages, qos
 from wcdrive.ros2.dds.cmdvel import CmdVelGate
 from wcdrive.ros2.dds.graph import RosNode
+from wcdrive.ros2.topics import TABLE, Topic
 
 ODOMETRY = "nav_msgs/msg/Odometry"
 TF = "tf2_msgs/msg/TFMessage"
@@ -53,32 +54,9 @@ BOOL = "std_msgs/msg/Bool"
 EMPTY = "std_msgs/msg/Empty"
 
 
-@dataclass(frozen=True)
-class Topic:
-    """One row of the topic table: ROS name, type, QoS, direction, rate."""
-
-    name: str
-    msgtype: str
-    profile: qos.Profile
-    direction: str          # "pub" or "sub"
-    rate: str
-
-
-#: Every topic the node may have (docs/ros2.md's table).
-TOPICS: tuple[Topic, ...] = (
-    Topic("/odom", ODOMETRY, qos.DEFAULT, "pub", "every telemetry tick (20 Hz chair, 25 Hz Eddie)"),
-    Topic("/tf", TF, qos.TF, "pub", "with /odom (unless --no-tf)"),
-    Topic("/tf_static", TF, qos.TF_STATIC, "pub", "once"),
-    Topic("/joint_states", JOINTS, qos.DEFAULT, "pub", "with /odom"),
-    Topic("/imu", IMU, qos.SENSOR_DATA, "pub", "each gyro sample (400 Hz, sim:// and simavr://)"),
-    Topic("/scan", SCAN, qos.SENSOR_DATA, "pub",
-          "each turn of the lidar (10 Hz, sim:// and simavr:// with lidar=)"),
-    Topic("/diagnostics", DIAGNOSTICS, qos.DEFAULT, "pub", "1 Hz"),
-    Topic("/clock", CLOCK, qos.CLOCK, "pub", "with /odom, only with --sim-time"),
-    Topic("/cmd_vel", TWIST_STAMPED, qos.DEFAULT, "sub", "the publisher's (>= 2 Hz to keep moving)"),
-    Topic("/estop", BOOL, qos.DEFAULT, "sub", "on demand"),
-    Topic("/estop_reset", EMPTY, qos.DEFAULT, "sub", "on demand"),
-)
+#: Every topic the node may have (docs/ros2.md's table): the topic table's rows with a
+#: DDS direction (``wcdrive.ros2.topics``).
+TOPICS: tuple[Topic, ...] = tuple(t for t in TABLE if t.direction is not None)
 #: How often the last good ``/cmd_vel`` is sent again (s).
 RESEND = 0.1
 #: The control loop's period (s): how often ``/cmd_vel`` is read.

@@ -1,7 +1,8 @@
 """ROS 2's QoS profiles as DDS QoS, and the USER_DATA a ROS 2 Jazzy endpoint carries.
 
-A ``Profile`` is what ``rclcpp`` names a QoS: reliability, durability, history depth.
-The profiles are rclcpp's: ``DEFAULT`` (reliable, volatile, keep last 10: ``/odom``,
+A ``Profile`` is what ``rclcpp`` names a QoS: reliability, durability, history depth
+(``wcdrive.ros2.topics``, the one topic table, defines them). The profiles are
+rclcpp's: ``DEFAULT`` (reliable, volatile, keep last 10: ``/odom``,
 ``/joint_states``, ``/diagnostics``, ``/cmd_vel``), ``SENSOR_DATA`` (best effort,
 volatile, keep last 5: ``/imu``, ``/scan``), ``CLOCK`` (best effort, keep last 1),
 ``TF`` (tf2_ros' dynamic broadcaster: reliable, volatile, keep last 100), ``TF_STATIC``
@@ -16,33 +17,12 @@ the type hash in USER_DATA (``typehash=RIHS01_<64 hex>;``) and the plain CDR
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 from cyclonedds.core import Policy, Qos
 
+from wcdrive.ros2.topics import CLOCK, DEFAULT, DISCOVERY, SENSOR_DATA, TF, TF_STATIC, Profile
 
-@dataclass(frozen=True)
-class Profile:
-    """A ROS 2 QoS profile: ``reliable`` or best effort, ``transient_local`` or
-    volatile, keep last ``depth``."""
+__all__ = ["CLOCK", "DEFAULT", "DISCOVERY", "SENSOR_DATA", "TF", "TF_STATIC", "Profile", "qos", "user_data"]
 
-    name: str
-    reliable: bool
-    transient_local: bool
-    depth: int
-
-    def describe(self) -> str:
-        """As docs/ros2.md's topic table shows it."""
-        return (f"{'reliable' if self.reliable else 'best effort'}, "
-                f"{'transient local' if self.transient_local else 'volatile'}, keep last {self.depth}")
-
-
-DEFAULT = Profile("default", reliable=True, transient_local=False, depth=10)
-SENSOR_DATA = Profile("sensor data", reliable=False, transient_local=False, depth=5)
-CLOCK = Profile("clock", reliable=False, transient_local=False, depth=1)
-TF = Profile("tf", reliable=True, transient_local=False, depth=100)
-TF_STATIC = Profile("tf_static", reliable=True, transient_local=True, depth=1)
-DISCOVERY = Profile("ros_discovery_info", reliable=True, transient_local=True, depth=1)
 
 
 def user_data(type_hash: str) -> bytes:
