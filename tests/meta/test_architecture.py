@@ -45,7 +45,9 @@ PACKAGE_FLOORS: tuple[tuple[str, tuple[str, ...]], ...] = (
 ROOT_MODULES = {"__init__", "__main__", "api", "errors"}
 #: The Eddie's modules, each on the floor of the package it parallels.
 EDDIE = {"geometry": "protocol", "firmware": "firmware", "plant": "plant", "board": "boards",
-         "serial_url": "transports", "robot": "host", "plugin": "api", "runner": "sim"}
+         "serial_url": "transports", "robot": "host", "plugin": "api", "runner": "sim",
+         "spin_arithmetic": "firmware", "position_controller": "firmware",
+         "command_interpreter": "firmware"}
 
 
 def _floors() -> tuple[tuple[int, str, tuple[str, ...]], ...]:

@@ -14,206 +14,61 @@ A reset (``reset``: external, brown-out, power-on; or the AVR's own watchdog) re
 the core but not the clock: ``cycle`` keeps counting from the first power-on, queued
 bytes and pin edges stay queued at their cycles, the pins driven from outside keep
 their levels, and ``resets`` logs each one with MCUSR as the chip shows it.
+
+This module holds ``VirtualMega``: its life, its clock and resets, the stimulus it
+queues and the records it gathers. The rest is where its concerns part, and
+importable from here too: the ctypes binding to the harness (``_lib``,
+``HarnessError``) in ``harness_binding``; the records (``Reset``, ``Hit``,
+``RxLoss``, the reset causes and MCUSR flags) in ``harness_records``; the memory by
+the firmware's names (``read_symbols``, ``VARIABLE_FORMATS``, ``MegaMemory``) in
+``mega_memory``; the pin map and the outputs (``ENCODER_PINS``, ``MegaPins``) in
+``mega_pins``.
 """
 
 from __future__ import annotations
 
 import ctypes
-import struct
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from elftools.elf.elffile import ELFFile
-from elftools.elf.sections import SymbolTableSection
 
 from wcdrive.avr.timer0 import F_CPU
 from wcdrive.avr.uart import UART_BYTE_CYCLES
-from wcdrive.boards.simavr.build import firmware_elf, harness_library
-from wcdrive.errors import WcdriveError
+from wcdrive.boards.simavr.build import firmware_elf
+from wcdrive.boards.simavr.harness_binding import HarnessError, _lib
+from wcdrive.boards.simavr.harness_records import (
+    BORF,
+    EXTRF,
+    JTRF,
+    PORF,
+    RESET_CAUSES,
+    RX_LOSS_CAUSES,
+    WDRF,
+    Hit,
+    Reset,
+    RxLoss,
+)
+from wcdrive.boards.simavr.mega_memory import SRAM_OFFSET, VARIABLE_FORMATS, read_symbols
+from wcdrive.boards.simavr.mega_pins import (
+    BRAKE_PIN,
+    DIR_PINS,
+    ENCODER_PINS,
+    MEGA_PORT_BIT,
+    RELAY_PIN,
+    MegaPins,
+)
 from wcdrive.plant.encoders import EdgeTrain
-from wcdrive.protocol.spec import integer
 
-SRAM_OFFSET = 0x800000
-
-#: The Mega 2560's Arduino pin numbers (variants/mega/pins_arduino.h) as (port letter,
-#: bit), for the pins the spec assigns.
-MEGA_PORT_BIT = {2: ("E", 4), 3: ("E", 5), 7: ("H", 4), 8: ("H", 5), 9: ("H", 6), 10: ("B", 4),
-                 11: ("B", 5), 18: ("D", 3), 19: ("D", 2), 22: ("A", 0)}
-
-
-def _pin(name: str) -> tuple[str, int]:
-    return MEGA_PORT_BIT[integer(name)]
-
-
-# Pins of final_control (protocol/spec.toml, [pins]) as (port letter, bit).
-ENCODER_PINS = {"left": (_pin("PIN_ENC_L_A"), _pin("PIN_ENC_L_B")),
-                "right": (_pin("PIN_ENC_R_A"), _pin("PIN_ENC_R_B"))}
-DIR_PINS = {"left": _pin("PIN_DIR_L"), "right": _pin("PIN_DIR_R")}
-RELAY_PIN = _pin("PIN_RELAY")
-BRAKE_PIN = _pin("PIN_BRAKE")
-# PWM: pin 9 = OC2B on PH6, pin 10 = OC2A on PB4 (Timer2, phase-correct).
-_TCCR2A, _OCR2A, _OCR2B = 0xB0, 0xB3, 0xB4
-_PWM = {"left": (_OCR2B, 1 << 5, _pin("PIN_PWM_L")), "right": (_OCR2A, 1 << 7, _pin("PIN_PWM_R"))}
-_PORT_REG = {"A": 0x22, "B": 0x25, "D": 0x2B, "E": 0x2E, "H": 0x102}
-_DDR_REG = {port: address - 1 for port, address in _PORT_REG.items()}
-
-#: C types of the controller globals, for ``read(name)``.
-VARIABLE_FORMATS = {
-    "f": ("targetL", "targetR", "setpointL", "setpointR", "rawVelL", "rawVelR", "filtVelL",
-          "filtVelR", "integralL", "integralR", "prevMeasL", "prevMeasR", "outputL", "outputR",
-          "lastTravel", "pendingL", "pendingR", "kpL", "kiL", "kdL", "kpR", "kiR", "kdR",
-          "maxWheel", "maxAccel", "estopDecel", "effortSpeedL", "effortSpeedR", "effortSetpointL",
-          "effortSetpointR", "overspeedFromL", "overspeedFromR", "haltIntegralL", "haltIntegralR",
-          "haltSetpointL", "haltSetpointR"),
-    "i": ("encoderValueL", "encoderValueR", "encTickL", "encTickR", "prevEncL", "prevEncR", "holdRefL",
-          "holdRefR", "holdStepL", "holdStepR"),
-    "I": ("illegalL", "illegalR", "lastControlTime", "tickCount", "lastCmdTime", "rejectedCount",
-          "errSuppressed", "txDropped", "timer0_millis", "timer0_overflow_count", "illTickL",
-          "illTickR", "rxCount", "crcRejected", "txRingFull", "rxGaps", "rxLost", "rxLostTick",
-          "lastTickTime", "lateTicks"),
-    "H": ("freeRam", "watchdogMs", "lastSeq", "faultFlags", "txCredit"),
-    "B": ("mode", "pwmL", "pwmR", "dirL", "dirR", "pivotPhase", "pivotTicksLeft", "cmdSinceTick",
-          "watchdogArmed", "emergencyStop", "ppmLost", "stillTicks", "parked", "cmdLen",
-          "cmdCommas", "cmdDiscarding", "errLinesThisTick", "lastEncodedL", "lastEncodedR",
-          "timer0_fract", "estopLatched", "tlmEnabled", "linesFramed", "lineCounter", "unframedLine",
-          "stormTickL", "stormTickR",
-          "stallTicksL", "stallTicksR", "reverseTicksL", "reverseTicksR", "runawayTicksL",
-          "runawayTicksR", "stormL", "stormR",
-          "resetCause", "effortPwmL", "effortPwmR", "effortTicksL", "effortTicksR", "eeNext", "eeBusy",
-          "holding", "holdRollaway", "brakeReleased", "overspeedTicksL", "overspeedTicksR",
-          "limitLatched"),
-}
-_FORMAT_OF = {name: fmt for fmt, names in VARIABLE_FORMATS.items() for name in names}
+__all__ = ["BORF", "BRAKE_PIN", "DIR_PINS", "ENCODER_PINS", "EXTRF", "F_CPU", "HOOKS", "JTRF",
+           "MEGA_PORT_BIT", "PORF", "RELAY_PIN", "RESET_CAUSES", "RX_LOSS_CAUSES", "SRAM_OFFSET",
+           "VARIABLE_FORMATS", "WDRF", "HarnessError", "Hit", "Reset", "RxLoss", "VirtualMega",
+           "read_symbols"]
 
 #: Functions whose entries are logged: (name, what the harness records).
 HOOKS = ("processByte", "controlTick", "rxGap", "main", "doneOp", "eepromReady")
 
 
-#: Reset causes by the harness's code (wcsim.c, ``WCSIM_RESET_*``).
-RESET_CAUSES = ("power_on", "external", "brownout", "watchdog")
-#: MCUSR's flags (ATmega2560 datasheet, 11.5.1).
-PORF, EXTRF, BORF, WDRF, JTRF = 0x01, 0x02, 0x04, 0x08, 0x10
-
-
-#: Why the USART0 receiver lost a byte (wcsim.c, ``wcsim_rx_lost_t``).
-RX_LOSS_CAUSES = ("overrun", "receiver_off")
-
-
-@dataclass(frozen=True)
-class RxLoss:
-    """A byte the USART0 receiver lost (the harness models its two-frame FIFO and shift
-    register, and data overrun): the cycle, its index among the bytes sent to the board
-    (0 the first since power-on), the byte, and why (``RX_LOSS_CAUSES``)."""
-
-    cycle: int
-    index: int
-    byte: int
-    cause: str
-
-
-class HarnessError(WcdriveError, RuntimeError):
-    """The virtual board could not be made or stopped unexpectedly."""
-
-
-@dataclass(frozen=True)
-class Reset:
-    """One reset of the AVR: the cycle it happened at, its cause (one of
-    ``RESET_CAUSES``) and MCUSR right after it (what the firmware finds at boot)."""
-
-    cycle: int
-    cause: str
-    mcusr: int
-
-
-@dataclass(frozen=True)
-class Hit:
-    """One logged function entry: the cycle, the function, its first 32-bit argument."""
-
-    cycle: int
-    function: str
-    arg: int
-
-
-def read_symbols(elf_path: Path) -> tuple[dict[str, tuple[int, int]], dict[str, int]]:
-    """``(variables, functions)``: data-space address and size by name, flash byte address by name."""
-    variables: dict[str, tuple[int, int]] = {}
-    functions: dict[str, int] = {}
-    with open(elf_path, "rb") as handle:
-        elf = ELFFile(handle)
-        for section in elf.iter_sections():
-            if not isinstance(section, SymbolTableSection):
-                continue
-            for sym in section.iter_symbols():
-                kind = sym["st_info"]["type"]
-                value = sym["st_value"]
-                if kind in ("STT_OBJECT", "STT_NOTYPE") and value >= SRAM_OFFSET:
-                    variables[sym.name] = (value - SRAM_OFFSET, sym["st_size"])
-                elif kind == "STT_FUNC":
-                    functions[sym.name] = value
-    return variables, functions
-
-
-def _load_library() -> ctypes.CDLL:
-    lib = ctypes.CDLL(str(harness_library()))
-    p, u64, u32, i32, sz = ctypes.c_void_p, ctypes.c_uint64, ctypes.c_uint32, ctypes.c_int, ctypes.c_size_t
-    u8p = ctypes.POINTER(ctypes.c_uint8)
-    sig = {
-        "wcsim_new": (p, [ctypes.c_char_p, ctypes.c_char_p, i32]),
-        "wcsim_free": (None, [p]),
-        "wcsim_cycle": (u64, [p]),
-        "wcsim_crashed": (i32, [p]),
-        "wcsim_schedule": (i32, [p, u64, i32, i32, i32, i32]),
-        "wcsim_schedule_many": (i32, [p, sz, ctypes.POINTER(u64), u8p, u8p, u8p, u8p]),
-        "wcsim_add_hook": (i32, [p, u32]),
-        "wcsim_set_break_mask": (None, [p, u32]),
-        "wcsim_run_until": (i32, [p, u64]),
-        "wcsim_tx_count": (sz, [p]),
-        "wcsim_tx_take": (sz, [p, ctypes.POINTER(u64), u8p, sz]),
-        "wcsim_hits_count": (sz, [p]),
-        "wcsim_hits_take": (sz, [p, ctypes.POINTER(u64), ctypes.POINTER(u32), ctypes.POINTER(u32), sz]),
-        "wcsim_read": (i32, [p, u32, u8p, u32]),
-        "wcsim_write": (i32, [p, u32, u8p, u32]),
-        "wcsim_sp": (u32, [p]),
-        "wcsim_ramend": (u32, [p]),
-        "wcsim_vcd_pwm": (None, [p, i32, i32]),
-        "wcsim_vcd_open": (i32, [p, ctypes.c_char_p, ctypes.c_char_p]),
-        "wcsim_vcd_close": (None, [p]),
-        "wcsim_reset": (i32, [p, i32]),
-        "wcsim_mcusr": (ctypes.c_uint8, [p]),
-        "wcsim_resets_count": (sz, [p]),
-        "wcsim_resets_take": (sz, [p, ctypes.POINTER(u64), u8p, u8p, sz]),
-        "wcsim_charge_irq_entry": (None, [p, i32]),
-        "wcsim_irq_entries": (u64, [p, i32]),
-        "wcsim_prof_set": (i32, [p, i32, ctypes.POINTER(u32), ctypes.POINTER(u32)]),
-        "wcsim_prof_get": (u64, [p, i32]),
-        "wcsim_pc": (u32, [p]),
-        "wcsim_rx_index": (u64, [p]),
-        "wcsim_rx_held": (i32, [p]),
-        "wcsim_rx_lost_count": (sz, [p]),
-        "wcsim_rx_lost_take": (sz, [p, ctypes.POINTER(u64), ctypes.POINTER(u64), u8p, u8p, sz]),
-        "wcsim_eeprom_size": (u32, [p]),
-        "wcsim_eeprom_read": (i32, [p, u32, u8p, u32]),
-        "wcsim_eeprom_write": (i32, [p, u32, u8p, u32]),
-    }
-    for name, (restype, argtypes) in sig.items():
-        fn = getattr(lib, name)
-        fn.restype = restype
-        fn.argtypes = argtypes
-    return lib
-
-
-_LIB: ctypes.CDLL | None = None
-
-
-def _lib() -> ctypes.CDLL:
-    global _LIB
-    if _LIB is None:
-        _LIB = _load_library()
-    return _LIB
-
-
-class VirtualMega:
+class VirtualMega(MegaPins):
     """The firmware ELF running in simavr, advanced only by this object's calls."""
 
     def __init__(self, elf: str | Path | None = None, *, millis_start: int | None = None,
@@ -534,132 +389,3 @@ class VirtualMega:
         """The hooked function entries since the last take."""
         out, self.hit_log = self.hit_log, []
         return out
-
-    def read_bytes(self, address: int, size: int) -> bytes:
-        """``size`` bytes of data space (SRAM and I/O registers) from ``address``."""
-        buf = (ctypes.c_uint8 * size)()
-        if self._c.wcsim_read(self._s, address, buf, size) != 0:
-            raise ValueError(f"address {address:#x}+{size} is outside the data space")
-        return bytes(buf)
-
-    def write_bytes(self, address: int, data: bytes) -> None:
-        """Writes ``data`` into data space (SRAM and I/O registers) at ``address``: for
-        tests that corrupt what a fault would (a stack, a register)."""
-        buf = (ctypes.c_uint8 * len(data))(*data)
-        if self._c.wcsim_write(self._s, address, buf, len(data)) != 0:
-            raise ValueError(f"address {address:#x}+{len(data)} is outside the data space")
-
-    # ---- EEPROM --------------------------------------------------------------------
-    @property
-    def eeprom_size(self) -> int:
-        """Bytes of EEPROM (4096 on the Mega 2560)."""
-        return int(self._c.wcsim_eeprom_size(self._s))
-
-    def read_eeprom(self, address: int = 0, size: int | None = None) -> bytes:
-        """The EEPROM's contents from ``address`` (all of it by default). simavr makes it
-        erased (0xFF) and keeps it across ``reset`` of any cause, as the chip does."""
-        size = self.eeprom_size - address if size is None else size
-        buf = (ctypes.c_uint8 * size)()
-        if self._c.wcsim_eeprom_read(self._s, address, buf, size) != 0:
-            raise ValueError(f"EEPROM address {address:#x}+{size} is outside the EEPROM")
-        return bytes(buf)
-
-    def write_eeprom(self, data: bytes, address: int = 0) -> None:
-        """Writes ``data`` into the EEPROM at ``address`` at once (as a programmer would,
-        no write cycle): to preload an image before the firmware boots, or corrupt one."""
-        buf = (ctypes.c_uint8 * len(data))(*data)
-        if self._c.wcsim_eeprom_write(self._s, address, buf, len(data)) != 0:
-            raise ValueError(f"EEPROM address {address:#x}+{len(data)} is outside the EEPROM")
-
-    def address_of(self, name: str) -> tuple[int, int]:
-        """Data-space address and size of a firmware global, from the ELF's symbols."""
-        try:
-            return self.variables[name]
-        except KeyError:
-            raise KeyError(f"the ELF has no variable {name!r}") from None
-
-    def snapshot(self, names: tuple[str, ...]) -> dict[str, float | int]:
-        """Several globals at once (one read of the SRAM span that holds them)."""
-        spans = [self.address_of(n) for n in names]
-        lo = min(a for a, _ in spans)
-        hi = max(a + size for a, size in spans)
-        block = self.read_bytes(lo, hi - lo)
-        out: dict[str, float | int] = {}
-        for name, (address, size) in zip(names, spans, strict=True):
-            raw = block[address - lo:address - lo + size]
-            out[name] = struct.unpack("<" + _FORMAT_OF[name], raw)[0]
-        return out
-
-    def read_raw(self, name: str) -> bytes:
-        """The bytes of a firmware global by name."""
-        address, size = self.address_of(name)
-        return self.read_bytes(address, size)
-
-    def read(self, name: str, fmt: str | None = None) -> float | int:
-        """A firmware global by name, decoded by its C type (floats as Python floats
-        holding the exact binary32 value); ``fmt`` is a struct code for other globals."""
-        fmt = fmt or _FORMAT_OF.get(name)
-        if fmt is None:
-            raise KeyError(f"no known C type for {name!r}; pass fmt or use read_raw()")
-        return struct.unpack("<" + fmt, self.read_raw(name)[:struct.calcsize(fmt)])[0]
-
-    def write(self, name: str, value: float | int, fmt: str | None = None) -> None:
-        """Writes a firmware global by name, encoded by its C type (or ``fmt``)."""
-        data = struct.pack("<" + (fmt or _FORMAT_OF[name]), value)
-        self.write_raw(name, data)
-
-    def write_raw(self, name: str, data: bytes) -> None:
-        """Writes bytes into a firmware global by name (at most its size)."""
-        address, size = self.address_of(name)
-        if len(data) > size:
-            raise ValueError(f"{len(data)} bytes do not fit in {name} ({size} bytes)")
-        buf = (ctypes.c_uint8 * len(data))(*data)
-        self._c.wcsim_write(self._s, address, buf, len(data))
-
-    def pin_output(self, pin: tuple[str, int]) -> int:
-        """The level the firmware drives on an output pin (its PORTx bit)."""
-        port, bit = pin
-        return (self.read_bytes(_PORT_REG[port], 1)[0] >> bit) & 1
-
-    def pwm(self, side: str) -> int:
-        """Duty 0..255 on the motor's PWM pin: OCR when the compare output is on,
-        else the pin's level (analogWrite 0 and 255 fall back to digitalWrite)."""
-        ocr, com_bit, pin = _PWM[side]
-        tccr2a = self.read_bytes(_TCCR2A, 1)[0]
-        if tccr2a & com_bit:
-            return self.read_bytes(ocr, 1)[0]
-        return 255 if self.pin_output(pin) else 0
-
-    def direction(self, side: str) -> int:
-        """The DIR pin of a motor (1 forward)."""
-        return self.pin_output(DIR_PINS[side])
-
-    def relay(self) -> int:
-        """The relay pin that powers the motor driver."""
-        return self.pin_output(RELAY_PIN)
-
-    def brake_released(self) -> int:
-        """1 while the firmware drives the parking brake's pin HIGH as an output (the
-        brake released); 0 when it drives it LOW or leaves it an input (at reset: the
-        driver's pull-down engages the brake)."""
-        port, bit = BRAKE_PIN
-        ddr = (self.read_bytes(_DDR_REG[port], 1)[0] >> bit) & 1
-        return ddr & self.pin_output(BRAKE_PIN)
-
-    def stack_pointer(self) -> int:
-        """The AVR's stack pointer now."""
-        return int(self._c.wcsim_sp(self._s))
-
-    def free_ram(self) -> int:
-        """Bytes between the end of .bss (no heap is used) and the stack pointer."""
-        if "__bss_end" not in self.variables:
-            raise HarnessError("the ELF has no __bss_end symbol")
-        return self.stack_pointer() - self.variables["__bss_end"][0]
-
-    def _named_pins(self) -> dict[str, tuple[str, int]]:
-        return {
-            "enc_l_a": ENCODER_PINS["left"][0], "enc_l_b": ENCODER_PINS["left"][1],
-            "enc_r_a": ENCODER_PINS["right"][0], "enc_r_b": ENCODER_PINS["right"][1],
-            "dir_l": DIR_PINS["left"], "dir_r": DIR_PINS["right"], "relay": RELAY_PIN, "brake": BRAKE_PIN,
-            "pwm_l_pin": _PWM["left"][2], "pwm_r_pin": _PWM["right"][2],
-        }
