@@ -5,7 +5,8 @@
   wheel installed anywhere can build the firmware and load the spec.
 - ``wcdrive-serial-urls.pth`` goes to site-packages beside ``_wcdrive_serial_urls.py``,
   for wheels and editable installs alike: pyserial then finds ``wcsim://``,
-  ``wcavr://`` and ``wccan://`` without importing wcdrive first.
+  ``wcavr://``, ``wccan://`` and ``wceddie://`` (every scheme of the
+  ``wcdrive.serial_urls`` entry points) without importing wcdrive first.
 - The C helpers (``NATIVE``) are built at install. Without a C compiler (or Python's
   headers) the install still succeeds and says so; wcdrive then compiles them on first
   use where it can, and runs the Python paths where it cannot (``wcdrive --version``

@@ -1,7 +1,7 @@
 // fpcheck: runs single floating-point and formatting operations on the AVR for the
-// differential tests of wcdrive.firmware.f32, .avrlibc and .arduino_print.
+// differential tests of wcdrive.avr.f32, .avrlibc and .arduino_print.
 //
-// The test (tests/test_avr_arithmetic.py) writes the operands and an op code into
+// The test (tests/avr/test_avr_arithmetic.py) writes the operands and an op code into
 // the globals below through the simavr harness, lets loop() run the op, and reads
 // the result when doneOp() is entered. Not for a real board.
 #include <Arduino.h>

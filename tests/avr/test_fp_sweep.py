@@ -74,7 +74,7 @@ def test_the_sweep_reaches_avr_libc_s_rounding_quirks(avr: AvrMath, op: str) -> 
 
 @pytest.mark.parametrize("op", ["add", "sub", "mul", "div", "floatsisf"])
 def test_the_python_reference_against_the_avr(avr: AvrMath, op: str, monkeypatch: pytest.MonkeyPatch) -> None:
-    """With the C fast path loaded (``wcdrive.avr.csrc.f32_fast``) the sweep runs it;
+    """With the C fast path loaded (``wcdrive/avr/csrc/f32_fast.c``) the sweep runs it;
     the pure Python functions it hands the uncommon cases to, and that run alone with
     ``WCDRIVE_PURE_F32=1`` or without a compiler, are swept here on the same slice."""
     for name in ("add", "sub", "mul", "div"):

@@ -54,7 +54,7 @@ INFORMATIONAL = ("PARAMS_LOADED", "PARAMS_DEFAULT")
 #: What an event's window may count from: the start of the run, the first fault
 #: (``fault_at_s``), the last stop (``stop_at_s``), the first stall of the chair while the
 #: host still commands motion, the first runaway of both wheels under braking
-#: (``wcdrive.sim.contract.anchors``).
+#: (``wcdrive.sim.contract.anchor``).
 ANCHORS = ("start", "fault", "stop", "stall", "runaway")
 #: Bounds by name (``wcdrive.sim.contract.named_bound``).
 NAMED_BOUNDS = ("standstill_bound", "stopping_bound", "terminal_speed")

@@ -1,7 +1,7 @@
 """``Port``: the byte-level interface every backend offers the session.
 
 It is pyserial's, so a ``serial.Serial`` on a device path, anything
-``serial.serial_for_url`` opens (``wcsim://``, ``wcavr://``, ``wccan://``) and the
+``serial.serial_for_url`` opens (``wcsim://``, ``wcavr://``, ``wccan://``, ``wceddie://``) and the
 ``RecordingPort`` wrapper all are Ports. ``tests/transports/contract/`` runs one suite over every
 backend.
 """

@@ -9,12 +9,12 @@
  * OverflowError). Everything else (an operand that is not exactly a float, a NaN
  * result, a product below 2**-126, a quotient below 2**-125, a division by zero, a NaN
  * to round) is handed back to the Python function, which stays the reference: see
- * _bind(). tests/test_f32_fast.py checks the two agree, and the float sweep
+ * _bind(). tests/avr/test_f32_fast.py checks the two agree, and the float sweep
  * (wcdrive verify --fp) checks the result against the AVR.
  *
- * Built on first use by wcdrive.native (gcc -O2 -ffp-contract=off, the Python
- * headers from sysconfig) and imported by f32.py; without a compiler or headers the
- * port keeps the Python functions.
+ * Built at install (setup.py's NATIVE) or else on first use by wcdrive._util.native
+ * (gcc -O2 -ffp-contract=off, the Python headers from sysconfig) and imported by
+ * f32.py; without a compiler or headers the port keeps the Python functions.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>

@@ -23,9 +23,11 @@
  *
  * The constants, the mode names and FirmwareState's slot offsets come from Python at
  * _bind() (wcdrive.firmware.tick_fast), so nothing here restates the spec.
- * tests/test_tick_fast.py holds this to the Python tick on random states and on whole
- * runs; the differential suite holds the port (this path by default) to the firmware.
- * Built by wcdrive.native (gcc -O2 -ffp-contract=off).
+ * tests/firmware/test_tick_fast.py holds this to the Python tick on random states and
+ * on whole runs; the differential suite holds the port (this path by default) to the
+ * firmware.
+ * Built at install (setup.py's NATIVE) or else on first use by wcdrive._util.native
+ * (gcc -O2 -ffp-contract=off).
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>

@@ -14,10 +14,11 @@
  * numbers, without the collision and solver passes (about 30% of a step). Two things
  * cpSpaceStep also does are skipped, as nothing of the plant reads them: the space's
  * time stamp and its current step (pymunk's Space.current_time_step stays as it was).
- * tests/test_plant.py holds the two paths to the same motion bit for bit.
+ * tests/plant/test_plant.py holds the two paths to the same motion bit for bit.
  * The floor's grade (force_model.grade) runs only when the plant has a terrain that is not
  * flat, so the flat floor's steps are the same operations as without one.
- * Built on first use by wcdrive.native (gcc -O2 -ffp-contract=off).
+ * Built at install (setup.py's NATIVE) or else on first use by wcdrive._util.native
+ * (gcc -O2 -ffp-contract=off).
  */
 #include <math.h>
 #include <stddef.h>
