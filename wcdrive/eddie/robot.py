@@ -153,7 +153,12 @@ class EddieRobot:
 
     # ---- navigation surface ---------------------------------------------------------
     def set_velocity(self, linear: float, angular: float) -> None:
-        """Drive at ``linear`` m/s, ``angular`` rad/s; call again at >= 2 Hz (deadman)."""
+        """Drive at ``linear`` m/s, ``angular`` rad/s; call again at >= 2 Hz (deadman).
+        A speed that is not finite or beyond ``command_limits`` is a ``ValueError``, and
+        nothing is sent."""
+        for what, value, limit in (("linear", linear, MAX_LINEAR), ("angular", angular, MAX_ANGULAR)):
+            if not math.isfinite(value) or abs(value) > limit:
+                raise ValueError(f"{what} {value!r} is not a finite speed within +-{limit}")
         if not self._link_ok:
             raise WcdriveConnectionError(f"{self.name}: the board does not answer")
         pair = gospd_counts(linear, angular, self.wheel_separation)

@@ -7,19 +7,31 @@ deterministic and as fast as the port runs (a few hundred times real time)::
     chair.set_velocity(0.3, 0.0)      # a CMDVEL line onto the simulated wire
     chair.run(1.0)                    # one simulated second
     x, y, heading = chair.pose        # the plant's ground truth
+
+It is a ``wcdrive.host.robot.Robot`` too, on simulated time: ``odometry`` is the
+host's wheel odometry of the board's feedback (as ``Wheelchair``'s), ``telemetry(t)``
+runs the simulation and yields each sample for ``t`` simulated seconds, and
+``on_telemetry`` callbacks run as ``run`` delivers the samples. Navigation code
+written against ``Robot`` runs on it unchanged, faster than real time and repeatably.
 """
 
 from __future__ import annotations
 
+import math
 import warnings
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Callable, Iterator, Sequence
 
 from wcdrive.boards.port_loop import F_CPU, PortLoop
+from wcdrive.firmware import constants as C
+from wcdrive.host.odometry import OdometryEstimate, WheelOdometry
+from wcdrive.host.telemetry import Telemetry
 from wcdrive.plant import Gyro, Plant
 from wcdrive.plant.faults import Fault
 from wcdrive.plant.params import ChairParams
 from wcdrive.protocol.codec import (
+    MAX_ANGULAR,
+    MAX_LINEAR,
     SEQ_MAX,
     Event,
     Feedback,
@@ -51,6 +63,10 @@ class SteppedChair:
         #: The last ``ENC:...`` feedback line (None before the first control tick).
         self.feedback: Feedback | None = None
         self._seq = 0
+        self._odometry = WheelOdometry()
+        self._callbacks: list[Callable[[Telemetry], None]] = []
+        self._samples: deque[Telemetry] = deque(maxlen=history)
+        self._closed = False
 
     @property
     def time(self) -> float:
@@ -109,12 +125,83 @@ class SteppedChair:
             raise ValueError("seconds must be >= 0")
         self.loop.run_until(self.loop.cycle + round(seconds * F_CPU))
         out: list[Message] = []
-        for _, data in self.loop.take_output():
-            out += self._decoder.feed(data)
-        for msg in out:
-            if isinstance(msg, Feedback):
-                self.feedback = msg
-            elif isinstance(msg, Event):
-                self.events.append(msg.name)
+        for cycle, data in self.loop.take_output():
+            messages = self._decoder.feed(data)
+            for msg in messages:
+                if isinstance(msg, Feedback):
+                    self.feedback = msg
+                    self._deliver(cycle / F_CPU, msg)
+                elif isinstance(msg, Event):
+                    self.events.append(msg.name)
+            out += messages
         self.messages.extend(out)
         return out
+
+    def _deliver(self, t: float, msg: Feedback) -> None:
+        sample = Telemetry(t, msg.count_left, msg.count_right, msg.vel_left, msg.vel_right, msg.mode,
+                           board_time=t, stamp=t)
+        self._odometry.integrate(t, msg.count_left, msg.count_right)
+        self._samples.append(sample)
+        for callback in tuple(self._callbacks):
+            callback(sample)
+
+    # ---- the Robot surface (wcdrive.host.robot.Robot), on simulated time ----------
+    def stop(self) -> None:
+        """Targets to zero at the normal ramp (a zero CMDVEL frame)."""
+        self.set_velocity(0.0, 0.0)
+
+    @property
+    def odometry(self) -> OdometryEstimate:
+        """The host's wheel odometry of the board's feedback, stamped in simulated s."""
+        return self._odometry.estimate(self.time)
+
+    def telemetry(self, timeout: float | None = None) -> Iterator[Telemetry]:
+        """Each sample, the simulation run on a control period at a time as the caller
+        iterates; ends after ``timeout`` simulated seconds without one (as
+        ``Wheelchair.telemetry`` ends after ``timeout`` s of silence), or on close."""
+        step = C.CONTROL_PERIOD_MS / 1000.0
+        self._samples.clear()
+        quiet = 0.0
+        while not self._closed:
+            self.run(step)
+            if not self._samples:
+                quiet += step
+                if timeout is not None and quiet >= timeout:
+                    return
+                continue
+            quiet = 0.0
+            while self._samples:
+                yield self._samples.popleft()
+
+    def on_telemetry(self, callback: Callable[[Telemetry], None]) -> None:
+        """Calls ``callback`` with each sample as ``run`` delivers it."""
+        self._callbacks.append(callback)
+
+    @property
+    def link_ok(self) -> bool:
+        """True until ``close``: the stepped wire never drops."""
+        return not self._closed
+
+    def wheel_angles(self, sample: Telemetry) -> tuple[float, float]:
+        """The wheels' angles (rad, forward positive): the left encoder counts mirrored."""
+        per_count = 2.0 * math.pi / C.CPR
+        return -sample.count_left * per_count, sample.count_right * per_count
+
+    @property
+    def command_limits(self) -> tuple[float, float]:
+        """The protocol's limits (m/s, rad/s)."""
+        return MAX_LINEAR, MAX_ANGULAR
+
+    def close(self) -> None:
+        """Sends a stop and lets the chair come to rest (one simulated second)."""
+        if self._closed:
+            return
+        self.stop()
+        self.run(1.0)
+        self._closed = True
+
+    def __enter__(self) -> SteppedChair:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
