@@ -115,7 +115,7 @@ class MegaCable(FaultyPort):
             raise serial.SerialException("[Errno 2] could not open port: No such file or directory")
         self._drain()
         self._host_open = True
-        self.board.reset("external")
+        self.port.board.reset("external")       # the wcavr:// port's MegaBoard
         return self
 
     def shutdown(self) -> None:

@@ -55,9 +55,9 @@ from wcdrive.protocol.codec import (
     Nak,
     Param,
     Unknown,
-    encode_cmdvel,
     frame,
 )
+from wcdrive.protocol.motion import velocity_command
 from wcdrive.transports.port import Port
 
 __all__ = ["PROTOCOL_VERSION", "FeedbackHandler", "Session"]
@@ -68,7 +68,7 @@ FeedbackHandler = Callable[[float, Feedback, ExtendedTelemetry | None], None]
 _log = logging.getLogger("wcdrive.session")
 
 #: The stop every way out of a session sends.
-_STOP = encode_cmdvel(0.0, 0.0)
+_STOP = velocity_command(0.0, 0.0)
 
 
 def _port_name(port: object) -> str:

@@ -51,7 +51,6 @@ from wcdrive.protocol.codec import (
     ExtendedTelemetry,
     LineStats,
     Param,
-    encode_cmdvel,
 )
 from wcdrive.protocol.motion import velocity_command, wheel_command
 from wcdrive.protocol.spec import integer, real
@@ -274,7 +273,7 @@ class Wheelchair:
         """Targets to zero at the normal ramp. Always sent: also while the e-stop is
         latched and while the link is lost (raises only when the port is closed or
         gone)."""
-        self._session.send_motion(encode_cmdvel(0.0, 0.0))
+        self._session.send_motion(velocity_command(0.0, 0.0))
 
     def estop(self) -> None:
         """Latch the e-stop: the board stops at its emergency rate and refuses motion

@@ -111,7 +111,7 @@ from wcdrive.plant.params import ChairParams
 from wcdrive.plant.rosmap import MapFileError
 from wcdrive.plant.terrain import Ramp, Terrain
 from wcdrive.plant.world import World, WorldError
-from wcdrive.protocol.codec import encode_cmdvel, encode_ppm, encode_set
+from wcdrive.protocol.codec import encode_ppm, encode_set
 from wcdrive.protocol.motion import velocity_command, wheel_command
 from wcdrive.sim.expect import Expect
 from wcdrive.sim.expect import parse as parse_expect
@@ -152,7 +152,7 @@ class Segment:
         if self.kind == "ppm":
             return encode_ppm([int(v) for v in self.values])
         if self.kind == "stop":
-            return encode_cmdvel(0.0, 0.0)
+            return velocity_command(0.0, 0.0)
         return None
 
 
@@ -213,7 +213,7 @@ class Scenario:
             if data is not None:
                 out += [(t0 + k * period, data) for k in range(n)]
             t0 += seg.duration
-        out.append((t0, encode_cmdvel(0.0, 0.0)))
+        out.append((t0, velocity_command(0.0, 0.0)))
         return out
 
 

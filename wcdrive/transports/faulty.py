@@ -77,7 +77,7 @@ class Direction:
         self.passed = 0
 
     def _add(self, rule: Rule) -> Rule:
-        with self._owner._lock:
+        with self._owner.lock:
             self.rules.append(rule)
         return rule
 
@@ -104,7 +104,7 @@ class Direction:
 
     def clear(self) -> None:
         """Removes every rule (a cut stays)."""
-        with self._owner._lock:
+        with self._owner.lock:
             self.rules.clear()
 
     def _apply(self, unit: bytes) -> tuple[bytes | None, float]:
@@ -194,6 +194,12 @@ class FaultyPort(PortWrapper):
         self._tx_held: deque[tuple[float, bytes]] = deque()  # tx: writes delayed
 
     # ---- faults of the link -----------------------------------------------------------
+    @property
+    def lock(self) -> threading.RLock:
+        """Held around the rules, the random draws and the buffers (the directions'
+        ``tx``/``rx`` take it too)."""
+        return self._lock
+
     def cut(self, tx: bool = True, rx: bool = True, partial: bool = False) -> None:
         """The link goes dead: what the host writes (``tx``) and what the board sends
         (``rx``) are lost; ``partial``: the next write goes out in part."""
