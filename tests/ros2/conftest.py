@@ -15,6 +15,18 @@ PEER = Path(__file__).with_name("dds_peer.py")
 _DOMAINS = itertools.count(100 + (os.getpid() % 40) * 3)
 
 
+class IdleRobot:
+    """A stand-in ``Robot`` that never moves, for building a ``ChairNode`` whose
+    ``start()`` is not called (its topics and QoS only); also a scan source that has no
+    scan."""
+
+    link_ok = True
+    command_limits = (1.0, 1.0)
+
+    def wheel_angles(self, sample: object) -> tuple[float, float]:
+        return 0.0, 0.0
+
+
 def fresh_domain() -> int:
     """A ROS domain id for one bridge, unlikely to be another test run's (100 to 222)."""
     return next(_DOMAINS)

@@ -26,16 +26,10 @@ def test_faster_than_real_time() -> None:
 def test_the_flags_choose_the_topics() -> None:
     """``--no-tf`` drops ``/tf``; ``/imu`` needs a gyro tap, ``/scan`` a scan source,
     ``/clock`` sim time; ``--twist`` makes ``/cmd_vel`` a plain Twist reader."""
+    from tests.ros2.conftest import IdleRobot as Idle
     from tests.ros2.conftest import fresh_domain
     from wcdrive.ros2.dds.graph import RosNode
     from wcdrive.ros2.dds.node import ChairNode, ImuTap, Options
-
-    class Idle:                        # a Robot that never moves (start() is not called)
-        link_ok = True
-        command_limits = (1.0, 1.0)
-
-        def wheel_angles(self, sample: object) -> tuple[float, float]:
-            return 0.0, 0.0
 
     ros = RosNode("wcdrive", domain=fresh_domain())
     try:

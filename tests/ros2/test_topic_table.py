@@ -80,15 +80,9 @@ def test_the_dds_node_offers_the_tables_qos() -> None:
     """The DDS writers the node makes carry the table's QoS (read back from Cyclone)."""
     from cyclonedds.core import Policy
 
+    from tests.ros2.conftest import IdleRobot as Idle
     from tests.ros2.conftest import fresh_domain
     from wcdrive.ros2.dds.graph import RosNode
-
-    class Idle:                        # a Robot that never moves (start() is not called)
-        link_ok = True
-        command_limits = (1.0, 1.0)
-
-        def wheel_angles(self, sample: object) -> tuple[float, float]:
-            return 0.0, 0.0
 
     ros = RosNode("wcdrive", domain=fresh_domain())
     try:
