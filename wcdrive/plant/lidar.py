@@ -381,3 +381,12 @@ class Lidar:
         return LaserScan(t0, self.frame_id, angle_min, angle_max, increment,
                          float(f32(scan_time / (beams - 1))), float(f32(scan_time)), float(f32(m.range_min)),
                          float(f32(m.range_max)), ranges, intensities, beam_time)
+
+
+def lidar_named(name: str) -> Lidar:
+    """The lidar model ``name`` (``MODELS``: rplidar_s3) on the seed's mount
+    (``SEED_MOUNT``: 0.20 m ahead of the axle, 0.30 m up); a ``ValueError`` names the
+    models for any other."""
+    if name not in MODELS:
+        raise ValueError(f"must be one of {', '.join(MODELS)}")
+    return Lidar(MODELS[name], SEED_MOUNT)

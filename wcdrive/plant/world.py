@@ -266,3 +266,23 @@ class World:
             t = np.where(near >= 0, near, far)
             best = np.minimum(best, np.where((disc >= 0) & (t >= 0), t, np.inf).min(axis=1))
         return np.where(best <= max_range, best + 0.0, np.inf)          # + 0.0: no -0
+
+
+def world_named(text: str) -> World:
+    """A world's file (``World.from_file``: a map_server YAML or a hand-written world's
+    TOML), or the name of a bundled one (``BUNDLED_WORLDS``: hospital_corridor,
+    furnished_room). A ``ValueError`` names what is wrong (the bundled names among it)."""
+    path = Path(text)
+    if not path.suffix and len(path.parts) == 1:
+        if any(c in text for c in "*?["):
+            raise ValueError("a world's name has no wildcards")
+        found = sorted(BUNDLED_WORLDS.glob(f"{text}.*"))
+        found = [p for p in found if p.suffix in (".yaml", ".toml")]
+        if not found:
+            names = sorted({p.stem for p in BUNDLED_WORLDS.glob("*") if p.suffix in (".yaml", ".toml")})
+            raise ValueError(f"no bundled world of that name ({', '.join(names)}), nor a file")
+        path = found[0]
+    try:
+        return World.from_file(path)
+    except OSError as exc:
+        raise ValueError(f"cannot read {path}: {exc.strerror or exc}") from exc

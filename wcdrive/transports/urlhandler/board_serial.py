@@ -12,7 +12,6 @@ import time
 import urllib.parse
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 
 from serial.serialutil import PortNotOpenError, SerialBase, SerialException, to_bytes
@@ -81,25 +80,10 @@ def flag_option(text: str) -> bool:
 
 
 def world_option(text: str) -> World:
-    """A world's file (``World.from_file``: a map_server YAML or a hand-written world's
-    TOML), or the name of a bundled one (``BUNDLED_WORLDS``: hospital_corridor,
-    furnished_room)."""
-    from wcdrive.plant.world import BUNDLED_WORLDS, World
+    """A world's file or a bundled world's name (``wcdrive.plant.world.world_named``)."""
+    from wcdrive.plant.world import world_named
 
-    path = Path(text)
-    if not path.suffix and len(path.parts) == 1:
-        if any(c in text for c in "*?["):
-            raise ValueError("a world's name has no wildcards")
-        found = sorted(BUNDLED_WORLDS.glob(f"{text}.*"))
-        found = [p for p in found if p.suffix in (".yaml", ".toml")]
-        if not found:
-            names = sorted({p.stem for p in BUNDLED_WORLDS.glob("*") if p.suffix in (".yaml", ".toml")})
-            raise ValueError(f"no bundled world of that name ({', '.join(names)}), nor a file")
-        path = found[0]
-    try:
-        return World.from_file(path)
-    except OSError as exc:
-        raise ValueError(f"cannot read {path}: {exc.strerror or exc}") from exc
+    return world_named(text)
 
 
 def start_option(text: str) -> tuple[float, float, float]:
@@ -116,13 +100,10 @@ def start_option(text: str) -> tuple[float, float, float]:
 
 
 def lidar_option(text: str) -> Lidar:
-    """A lidar model's name (``wcdrive.plant.lidar.MODELS``: rplidar_s3), on the seed's
-    mount (``SEED_MOUNT``: 0.20 m ahead of the axle, 0.30 m up)."""
-    from wcdrive.plant.lidar import MODELS, SEED_MOUNT, Lidar
+    """A lidar model's name on the seed's mount (``wcdrive.plant.lidar.lidar_named``)."""
+    from wcdrive.plant.lidar import lidar_named
 
-    if text not in MODELS:
-        raise ValueError(f"must be one of {', '.join(MODELS)}")
-    return Lidar(MODELS[text], SEED_MOUNT)
+    return lidar_named(text)
 
 
 #: The options that put a simulated board's chair in a world (``wcsim://``, ``wcavr://``).
