@@ -16,6 +16,7 @@ otherwise warn, when it loads wcdrive's plugin, that it cannot rewrite it).
 from __future__ import annotations
 
 import importlib
+import importlib.abc
 import sys
 from importlib.machinery import ModuleSpec
 
@@ -30,7 +31,7 @@ def handlers() -> dict[str, str]:
     return {ep.name: ep.value for ep in entry_points(group=_GROUP)}
 
 
-class _Alias:
+class _Alias(importlib.abc.Loader):
     """Loader: the handler module of wcdrive, under pyserial's name for it."""
 
     def __init__(self, target: str) -> None:

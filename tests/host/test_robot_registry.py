@@ -89,3 +89,12 @@ def test_nothing_outside_the_eddie_package_imports_it() -> None:
     found = [f"{p}:{n}" for p in files if p.endswith(".py") and not p.startswith("wcdrive/eddie/")
              for n, line in enumerate((REPO / p).read_text().splitlines(), 1) if pattern.search(line)]
     assert not found, found
+
+
+def test_the_old_handler_name_warns_and_is_the_plugins() -> None:
+    import importlib
+
+    sys.modules.pop("wcdrive.transports.urlhandler.protocol_wceddie", None)
+    with pytest.warns(DeprecationWarning, match="wcdrive.eddie.serial_url"):
+        old = importlib.import_module("wcdrive.transports.urlhandler.protocol_wceddie")
+    assert old.Serial.__module__ == "wcdrive.eddie.serial_url"

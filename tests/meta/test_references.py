@@ -18,6 +18,7 @@ import inspect
 import io
 import re
 import tokenize
+import warnings
 from collections.abc import Iterator
 from dataclasses import dataclass
 from functools import cache
@@ -40,8 +41,6 @@ PATH_EXEMPT: dict[tuple[str, str], str] = {}
 #: file "*": in any file.
 NAME_EXEMPT: dict[tuple[str, str], str] = {
     ("*", "wcdrive.dbc"): "the CAN database's file name (protocol/wcdrive.dbc), not a Python name",
-    ("docs/changelog.md", "wcdrive.transports.urlhandler.protocol_wceddie"):
-        "the Eddie's pyserial handler's old place, which the entry says it moved from",
 }
 
 #: Pages of docs/ that are deliberately not in mkdocs.yml's nav, with why.
@@ -224,6 +223,13 @@ def _instance_attribute(cls: type, attr: str) -> bool:
 
 
 @cache
+def _quietly_import(module: str) -> object:
+    """The module; the old names kept for a release warn when imported, by design."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        return importlib.import_module(module)
+
+
 def name_problem(token: str) -> str | None:
     """Why ``token`` (a dotted ``wcdrive.`` name, perhaps ``module:attribute``) does not
     resolve, or None: the longest importable module prefix is imported, the rest is
@@ -231,12 +237,12 @@ def name_problem(token: str) -> str | None:
     if token in _declared_names():
         return None
     parts = token.replace(":", ".").split(".")
-    obj: object = importlib.import_module(parts[0])
+    obj: object = _quietly_import(parts[0])
     for i, part in enumerate(parts[1:], 1):
         if inspect.ismodule(obj):
             module = ".".join(parts[:i + 1])
             try:
-                obj = importlib.import_module(module)
+                obj = _quietly_import(module)
                 continue
             except ImportError as exc:
                 if not (isinstance(exc, ModuleNotFoundError) and exc.name == module):
