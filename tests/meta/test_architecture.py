@@ -39,7 +39,7 @@ PACKAGE_FLOORS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("ros2", ("ros2",)),
     ("api", ("api", "__init__")),
     ("hil (harness)", ("hil",)),
-    ("tools", ("sim", "testing", "tools", "__main__")),
+    ("tools", ("sim", "navigation", "testing", "tools", "__main__")),
 )
 #: The package root: the public surface only.
 ROOT_MODULES = {"__init__", "__main__", "api", "errors"}

@@ -11,8 +11,8 @@ from pathlib import Path
 
 import pytest
 
+from wcdrive.navigation.pure_pursuit import FollowParams, PurePursuit
 from wcdrive.sim import runner, scenario
-from wcdrive.sim.navigation import FollowParams, PurePursuit
 from wcdrive.tools.cli import main as wcdrive_main
 
 CLOSED = ("square_closed", "l_shape_closed", "corridor_closed")

@@ -14,9 +14,7 @@ import math
 import numpy as np
 import pytest
 
-from wcdrive.plant.lidar import Lidar, LidarMount
-from wcdrive.plant.world import World
-from wcdrive.sim.icp import (
+from wcdrive.navigation.icp import (
     IcpOdometry,
     Method,
     Pose2D,
@@ -27,6 +25,8 @@ from wcdrive.sim.icp import (
     transform,
     voxel_downsample,
 )
+from wcdrive.plant.lidar import Lidar, LidarMount
+from wcdrive.plant.world import World
 
 #: walls at x = 5 and -5, y = 3 and -2 (tests/plant/test_lidar.py's room)
 BARE = World.from_table({"walls": [[5, -2, 5, 3, -5, 3, -5, -2, 5, -2]]})

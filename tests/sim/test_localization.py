@@ -1,4 +1,4 @@
-"""The seeds' EKF (``wcdrive.sim.localization``): robot_localization's 2D mode on filterpy,
+"""The seeds' EKF (``wcdrive.navigation.ekf``): robot_localization's 2D mode on filterpy,
 fusing the states seed 000's ekf.yaml names, and what it does on a slipping wheel."""
 
 from __future__ import annotations
@@ -8,8 +8,8 @@ import math
 
 import pytest
 
+from wcdrive.navigation.ekf import VX, VYAW, YAW, Ekf2D, EkfConfig, X, Y, _selected
 from wcdrive.sim import report, runner, scenario
-from wcdrive.sim.localization import VX, VYAW, YAW, Ekf2D, EkfConfig, X, Y, _selected
 
 
 def test_the_seed_000_configuration_fuses_what_ekf_yaml_says() -> None:

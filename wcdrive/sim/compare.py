@@ -10,7 +10,7 @@ The estimates:
 - ``wheel``: the host's position-based wheel odometry (``Odometry.wheel``);
 - ``ekf``: the EKF on wheel velocities and the gyro (``Odometry.ekf_vel``, seed 002's
   scheme; ``docs/odometry.md``);
-- ``icp``: ``wcdrive.sim.icp.IcpOdometry`` on the run's scans, each aligned to the one
+- ``icp``: ``wcdrive.navigation.icp.IcpOdometry`` on the run's scans, each aligned to the one
   before from the wheel odometry's pose change between their stamps (the guess, and
   the fallback when ICP fails or jumps);
 - ``icp_ekf``: the same, the EKF's pose change as the guess and the fallback (seed
@@ -37,9 +37,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from wcdrive.host.odometry import GyroIntegrator
+from wcdrive.navigation.ekf import Ekf2D, EkfConfig
+from wcdrive.navigation.icp import IcpOdometry, Pose2D, compose, relative
 from wcdrive.plant.params import ChairParams
-from wcdrive.sim.icp import IcpOdometry, Pose2D, compose, relative
-from wcdrive.sim.localization import Ekf2D, EkfConfig
 from wcdrive.sim.result import SimResult, placed
 
 #: The estimates compared, in the table's order, with their labels.

@@ -6,7 +6,7 @@ as ``wcdrive.host.session.Session`` does for ``connect()``) and integrates each
 ``Feedback``'s counts with ``WheelOdometry`` (``wcdrive.host.odometry``, the integrator
 ``wcdrive.host.telemetry.TelemetryHub`` keeps), three times: by position (the library's
 default), by velocity, and by position with the heading from the gyro
-(``GyroIntegrator``); on request also the seeds' EKFs (``wcdrive.sim.localization``).
+(``GyroIntegrator``); on request also the seeds' EKFs (``wcdrive.navigation.ekf``).
 
 What it leaves out of ``TelemetryHub``, on purpose: the board clock (a line's time is the
 simulated cycle of its last byte, exact), the re-baselining after a board reset (the
@@ -21,12 +21,12 @@ import bisect
 
 from wcdrive.boards.port_loop import F_CPU
 from wcdrive.host.odometry import GyroIntegrator, OdometryParams, WheelOdometry
+from wcdrive.navigation.ekf import Ekf2D, EkfConfig
+from wcdrive.navigation.pure_pursuit import PurePursuit
 from wcdrive.plant import Gyro
 from wcdrive.plant.params import ChairParams
 from wcdrive.protocol.codec import Feedback, LineDecoder
 from wcdrive.protocol.motion import velocity_command
-from wcdrive.sim.localization import Ekf2D, EkfConfig
-from wcdrive.sim.navigation import PurePursuit
 from wcdrive.sim.scenario import Scenario
 
 Pose = tuple[float, float, float]
@@ -96,7 +96,7 @@ class SimHost:
 
 class Pilot:
     """The closed-loop host: every host period, a ``cmdvel`` from pure pursuit
-    (``wcdrive.sim.navigation``) on the host's own estimate (wheel odometry or the EKF);
+    (``wcdrive.navigation.pure_pursuit``) on the host's own estimate (wheel odometry or the EKF);
     after the goal, stops for ``settle_s``. Times are in 16 MHz cycles."""
 
     def __init__(self, scenario: Scenario, host: SimHost) -> None:

@@ -93,7 +93,7 @@ class Odometry:
     wheel: np.ndarray           # position-based wheel odometry
     velocity: np.ndarray        # velocity-based
     gyro: np.ndarray            # wheel distance + gyro heading
-    #: The seeds' EKF (``wcdrive.sim.localization``) on velocity odometry and the
+    #: The seeds' EKF (``wcdrive.navigation.ekf``) on velocity odometry and the
     #: gyro: seed 000's ekf.yaml (wheels: x, y, vx), and seed 002's scheme (wheels: vx, vy).
     #: None unless the run asked for them (``run(..., ekf=True)``).
     ekf: np.ndarray | None = None

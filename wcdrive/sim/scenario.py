@@ -72,7 +72,7 @@ Every table's keys are checked: an unknown key, at the top level too, is a Scena
 that names it.
 
 A closed-loop scenario gives a path instead of segments; the host follows it with a
-pure-pursuit controller (``wcdrive.sim.navigation``) against its own odometry, sending a
+pure-pursuit controller (``wcdrive.navigation.pure_pursuit``) against its own odometry, sending a
 ``cmdvel`` at ``host_rate_hz``:
 
     path = [[1.0, 0.0], [1.0, 1.0]]   # waypoints (m) in the odometry frame, from (0, 0)
@@ -104,6 +104,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from wcdrive.errors import WcdriveFileError
+from wcdrive.navigation.pure_pursuit import FollowParams
 from wcdrive.plant.chair import Plant
 from wcdrive.plant.faults import FAULT_KINDS, SIDED_KINDS, Fault
 from wcdrive.plant.lidar import MODELS, SEED_MOUNT, Lidar, LidarMount
@@ -115,7 +116,6 @@ from wcdrive.protocol.codec import encode_ppm, encode_set
 from wcdrive.protocol.motion import velocity_command, wheel_command
 from wcdrive.sim.expect import Expect
 from wcdrive.sim.expect import parse as parse_expect
-from wcdrive.sim.navigation import FollowParams
 
 BUNDLED = Path(__file__).resolve().parent / "scenarios"
 _KINDS = ("cmdvel", "wheel", "ppm", "stop", "silence")
