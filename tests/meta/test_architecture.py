@@ -23,10 +23,10 @@ import pytest
 REPO = Path(__file__).resolve().parents[2]
 
 #: The floors, lowest first: (floor, name, the packages on it). Every floor is a
-#: package of ``wcdrive/`` (the tools' floor has three: the CLI's ``tools``, the
-#: scenario runner ``sim`` and the pytest plugin ``testing``); the package root holds
-#: only ``ROOT_MODULES``. ``eddie`` is the second robot, one module per floor, placed
-#: by ``EDDIE``.
+#: package of ``wcdrive/`` (the tools' floor has four: the CLI's ``tools``, the
+#: scenario runner ``sim``, the navigation helpers ``navigation`` and the pytest plugin
+#: ``testing``); the package root holds only ``ROOT_MODULES``. ``eddie`` is the second
+#: robot, its modules each on the floor of the package they parallel (``EDDIE``).
 PACKAGE_FLOORS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("utilities", ("_util", "errors")),
     ("avr", ("avr",)),
