@@ -26,10 +26,12 @@ from wcdrive._util.history import DEFAULT_HISTORY
 from wcdrive.host.boardclock import BoardClock
 from wcdrive.host.odometry import OdometryEstimate, WheelOdometry
 from wcdrive.protocol.codec import ExtendedTelemetry, Feedback
+from wcdrive.protocol.spec import real
 
 _log = logging.getLogger("wcdrive.telemetry")
 
-__all__ = ["LinkEvent", "LinkLost", "LinkRestored", "Reset", "Telemetry", "TelemetryHub"]
+__all__ = ["LinkEvent", "LinkLost", "LinkRestored", "Reset", "Telemetry", "TelemetryHub",
+           "chair_wheel_angles"]
 
 
 @dataclass(frozen=True)
@@ -47,6 +49,16 @@ class Telemetry:
     #: maps to (``wcdrive.host.boardclock``): stamp navigation data with these.
     board_time: float | None = None
     stamp: float | None = None
+
+
+#: One encoder count of the chair as a wheel angle (rad).
+_RAD_PER_COUNT = 2.0 * math.pi / real("CPR")
+
+
+def chair_wheel_angles(sample: Telemetry) -> tuple[float, float]:
+    """The chair's wheel angles at ``sample`` (rad, forward positive; left, right): the
+    left encoder counts mirrored. ``Robot.wheel_angles`` of every chair host."""
+    return -sample.count_left * _RAD_PER_COUNT, sample.count_right * _RAD_PER_COUNT
 
 
 @dataclass(frozen=True)

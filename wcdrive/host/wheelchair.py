@@ -44,7 +44,15 @@ from wcdrive.host.odometry import OdometryEstimate
 from wcdrive.host.requests import Request
 from wcdrive.host.scan_feed import ScanFeed, ScanSource
 from wcdrive.host.session import Session
-from wcdrive.host.telemetry import LinkEvent, LinkLost, LinkRestored, Reset, Telemetry, TelemetryHub
+from wcdrive.host.telemetry import (
+    LinkEvent,
+    LinkLost,
+    LinkRestored,
+    Reset,
+    Telemetry,
+    TelemetryHub,
+    chair_wheel_angles,
+)
 from wcdrive.protocol.codec import (
     MAX_ANGULAR,
     MAX_LINEAR,
@@ -53,7 +61,7 @@ from wcdrive.protocol.codec import (
     Param,
 )
 from wcdrive.protocol.motion import velocity_command, wheel_command
-from wcdrive.protocol.spec import integer, real
+from wcdrive.protocol.spec import integer
 from wcdrive.transports.port import Port
 from wcdrive.transports.recording import Recording
 
@@ -65,8 +73,7 @@ __all__ = ["LINK_TIMEOUT", "LinkEvent", "LinkLost", "LinkRestored", "Reset", "Te
 
 #: Default ``link_timeout``: three feedback periods (150 ms) without a line from the board.
 LINK_TIMEOUT = 3 * integer("CONTROL_PERIOD_MS") / 1000.0
-#: One encoder count as a wheel angle (rad).
-_RAD_PER_COUNT = 2.0 * math.pi / real("CPR")
+
 
 class Wheelchair:
     """A chair behind a serial-like ``port`` (a ``wcdrive.transports.port.Port``);
@@ -182,7 +189,7 @@ class Wheelchair:
     # ---- the link ----------------------------------------------------------------------
     def wheel_angles(self, sample: Telemetry) -> tuple[float, float]:
         """The wheels' angles (rad, forward positive): the left encoder counts mirrored."""
-        return -sample.count_left * _RAD_PER_COUNT, sample.count_right * _RAD_PER_COUNT
+        return chair_wheel_angles(sample)
 
     @property
     def command_limits(self) -> tuple[float, float]:

@@ -17,7 +17,6 @@ written against ``Robot`` runs on it unchanged, faster than real time and repeat
 
 from __future__ import annotations
 
-import math
 import warnings
 from collections import deque
 from collections.abc import Callable, Iterator, Sequence
@@ -25,7 +24,7 @@ from collections.abc import Callable, Iterator, Sequence
 from wcdrive.boards.port_loop import F_CPU, PortLoop
 from wcdrive.firmware import constants as C
 from wcdrive.host.odometry import OdometryEstimate, WheelOdometry
-from wcdrive.host.telemetry import Telemetry
+from wcdrive.host.telemetry import Telemetry, chair_wheel_angles
 from wcdrive.plant import Gyro, Plant
 from wcdrive.plant.faults import Fault
 from wcdrive.plant.params import ChairParams
@@ -184,8 +183,7 @@ class SteppedChair:
 
     def wheel_angles(self, sample: Telemetry) -> tuple[float, float]:
         """The wheels' angles (rad, forward positive): the left encoder counts mirrored."""
-        per_count = 2.0 * math.pi / C.CPR
-        return -sample.count_left * per_count, sample.count_right * per_count
+        return chair_wheel_angles(sample)
 
     @property
     def command_limits(self) -> tuple[float, float]:
