@@ -9,19 +9,20 @@ import serial
 
 from wcdrive.eddie import serial_url as protocol_wceddie
 from wcdrive.transports.urlhandler import protocol_wcavr, protocol_wcsim
-from wcdrive.transports.urlhandler.board_serial import url_options
+from wcdrive.transports.urlhandler.board_serial import LIDAR_DETAILS, url_options
 
 
 def test_defaults_and_given_values() -> None:
     parts, values, given = url_options("wcsim://?seed=7", "wcsim", protocol_wcsim.USAGE,
                                        protocol_wcsim.OPTIONS)
     assert values == {"speed": 1.0, "seed": 7, "chair": None, "world": None, "start": (0.0, 0.0, 0.0),
-                      "lidar": None} and given == {"seed"}
+                      "lidar": None, **dict.fromkeys(LIDAR_DETAILS)} and given == {"seed"}
     parts, values, given = url_options("wcavr:///tmp/a.elf?plant=0&realtime=false", "wcavr",
                                        protocol_wcavr.USAGE, protocol_wcavr.OPTIONS)
     assert parts.path == "/tmp/a.elf" and values == {"realtime": False, "speed": 1.0, "plant": False,
                                                      "chair": None, "world": None,
-                                                     "start": (0.0, 0.0, 0.0), "lidar": None}
+                                                     "start": (0.0, 0.0, 0.0), "lidar": None,
+                                                     **dict.fromkeys(LIDAR_DETAILS)}
     _, values, _ = url_options("wceddie://?eol=tolerant&speed=2.5", "wceddie", protocol_wceddie.USAGE,
                                protocol_wceddie.OPTIONS)
     assert values == {"speed": 2.5, "seed": 0, "eol": "tolerant"}

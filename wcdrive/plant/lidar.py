@@ -1,7 +1,10 @@
 """A 2D lidar on the chair, the Slamtec RPLidar S3 by default, and the
-``sensor_msgs/LaserScan`` its ROS 2 driver (``sllidar_ros2``) publishes.
+``sensor_msgs/LaserScan`` its ROS 2 driver publishes (``sllidar_ros2`` by default, or
+the older ``rplidar_ros``: ``wcdrive.plant.lidar_driver``).
 
     lidar = Lidar(RPLIDAR_S3, LidarMount(x=0.30, z=0.45))
+    lidar = configured_lidar("rplidar_s3", "-0.30,0,0.25,180,0,180", "rplidar_ros",
+                             inverted=True)      # head down, facing back: m and degrees
     scan = lidar.scan(world, pose_at, t0=12.3, rng=np.random.default_rng(0))
     scan.ranges          # float32, len(scan.ranges) == lidar.beams, inf for no return
 
@@ -35,7 +38,7 @@ How a scan is made, as the device and the driver make it:
 - A sample's range is the distance to the world (``World.cast``) plus Gaussian noise
   (``range_sigma``), in the device's quarter millimetres (``dist_mm_q2``); a range
   below ``device_min`` or above ``range_max`` is no return (0).
-- The driver (``angle_compensate``, the S3 launch file's default) bins the samples into
+- The driver (``angle_compensate``, the S3 launch files' default) bins the samples into
   ``360 * multiple`` beams, ``multiple = int(points_per_revolution / 360 + 1)`` (3,240
   for the S3 at 32 kHz and 10 Hz): each sample with a return fills the ``multiple``
   bins from ``int(angle * multiple)`` on (the last bin for any past the end), later
@@ -45,12 +48,16 @@ How a scan is made, as the device and the driver make it:
   the mode's, 0 as ``+inf``, and the bins in reverse order unless its ``inverted``
   parameter is set (``sllidar_node.cpp``, ``publish_scan``). The bin-to-angle rule is
   the driver's own and is off by up to one bin (0.11 deg) at the end of the turn; the
-  simulated scan keeps that, as the real one has it.
-- Mounting: the device's front points along the mount's ``yaw`` (its 0 deg is the
-  laser frame's -x, as ``pi - angle`` says); ``inverted`` (a 180 deg roll, the head
-  down) turns it the other way. The laser frame of ``/tf_static`` then has a roll of pi
-  when the mount is inverted and the driver is not told (``driver_inverted``), and
-  none otherwise (``tf_roll``).
+  simulated scan keeps that, as the real one has it. ``rplidar_ros`` publishes the
+  same bins with its own angles, ``range_min`` and intensities, and either driver
+  without ``angle_compensate`` publishes the samples themselves (``LidarDriver``, whose
+  docstring cites the lines of both drivers).
+- Mounting (``wcdrive.plant.lidar_mount``): the device's front points along the mount's
+  ``yaw`` (its 0 deg is the laser frame's -x, as ``pi - angle`` says); ``inverted`` (a
+  180 deg roll, the head down) turns it the other way. The laser frame of
+  ``/tf_static`` then has a roll of pi when the mount is inverted and the driver is not
+  told (``driver_inverted``), and none otherwise (``tf_roll``; the quaternion:
+  ``LidarMount.laser_rotation``).
 
 Figures (``RPLIDAR_S3``): 10 Hz, DenseBoost's 32 kHz, 40 m (white target), 0.05 m
 (``sllidar_ros2``'s ``range_min``; Slamtec's ``rplidar_ros`` says 0.15), accuracy +-30
@@ -61,13 +68,18 @@ not modelled).
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, fields
 
 import numpy as np
 
+from wcdrive.plant.lidar_driver import SLLIDAR_ROS2, LidarDriver
+from wcdrive.plant.lidar_mount import SEED_MOUNT as SEED_MOUNT
+from wcdrive.plant.lidar_mount import LidarMount as LidarMount
+from wcdrive.plant.lidar_mount import parse_mount
 from wcdrive.plant.raycast import ScanJob, ScanPipe, Turn, draws_in_c, integrate_motion
 from wcdrive.plant.world import World
 
@@ -129,7 +141,7 @@ class LidarModel:
     scan_hz: float
     sample_hz: float
     range_max: float
-    range_min: float            # what the driver publishes as range_min
+    range_min: float            # sllidar_ros2's range_min (a scan carries its driver's)
     device_min: float           # below this the device reports no return
     range_sigma: float
     intensity: float = 47.0
@@ -153,29 +165,6 @@ class LidarModel:
 RPLIDAR_S3 = LidarModel("rplidar_s3", scan_hz=10.0, sample_hz=32_000.0, range_max=40.0,
                         range_min=0.05, device_min=0.05, range_sigma=0.010)
 MODELS = {RPLIDAR_S3.name: RPLIDAR_S3}
-
-
-@dataclass(frozen=True)
-class LidarMount:
-    """Where the lidar sits on the chair (base frame, metres and degrees), whether it is
-    mounted head down, and whether its driver is told so (``inverted`` parameter)."""
-
-    x: float = 0.0
-    y: float = 0.0
-    z: float = 0.4
-    yaw_deg: float = 0.0
-    inverted: bool = False
-    driver_inverted: bool = False
-
-    @property
-    def tf_roll(self) -> float:
-        """The roll of the laser frame in ``/tf_static`` (0 or pi)."""
-        return math.pi if self.inverted != self.driver_inverted else 0.0
-
-
-#: The seed's mount: its static transform base_link -> laser, 0.20 m ahead of the axle
-#: midpoint and 0.30 m up, no rotation (seed 000, "Static TF Publishers").
-SEED_MOUNT = LidarMount(x=0.20, y=0.0, z=0.30)
 
 
 @dataclass(eq=False)
@@ -232,11 +221,14 @@ class Lidar:
     model: LidarModel = RPLIDAR_S3
     mount: LidarMount = field(default_factory=LidarMount)
     frame_id: str = "laser"
+    driver: LidarDriver = SLLIDAR_ROS2
 
     @property
     def beams(self) -> int:
-        """Beams a scan holds."""
-        return self.model.beams
+        """Beams a scan holds: the driver's slots with ``angle_compensate`` (constant);
+        without, the samples of a turn, the most a scan holds (it holds those from the
+        first return to the last)."""
+        return self.model.beams if self.driver.angle_compensate else self.model.samples
 
     def times(self, t0: float) -> np.ndarray:
         """Each sample's time in the turn from ``t0``."""
@@ -248,13 +240,21 @@ class Lidar:
         angle_deg = np.arange(m.samples) * 360.0 / m.samples
         device = np.radians(angle_deg)
         turn = device - math.pi if mount.inverted else math.pi - device
-        return angle_deg, math.radians(mount.yaw_deg) + turn
+        return angle_deg, mount.yaw + turn
 
     def _first_bins(self, angle_deg: np.ndarray) -> np.ndarray:
-        """The driver's first bin of each sample."""
+        """The driver's first bin of each sample (without ``angle_compensate``, one bin
+        a sample: the samples themselves)."""
         m = self.model
+        if not self.driver.angle_compensate:
+            return np.arange(len(angle_deg))
         first = (angle_deg.astype(np.float32) * m.compensate_multiple).astype(np.int64)
         return np.minimum(first, m.beams - 1)
+
+    @property
+    def _multiple(self) -> int:
+        """The bins each sample fills."""
+        return self.model.compensate_multiple if self.driver.angle_compensate else 1
 
     def __getstate__(self) -> dict[str, object]:
         # the C scan's description of the turn holds pointers: a copy makes its own
@@ -265,8 +265,15 @@ class Lidar:
         m, mount = self.model, self.mount
         angle_deg, direction = self._device_angles()
         return Turn(m.sample_hz, np.column_stack((np.cos(direction), np.sin(direction))),
-                    self._first_bins(angle_deg), m.beams, m.compensate_multiple, (mount.x, mount.y),
-                    m.range_sigma, m.device_min, m.range_max, m.intensity, not mount.driver_inverted)
+                    self._first_bins(angle_deg), self.beams, self._multiple, (mount.x, mount.y),
+                    m.range_sigma, m.device_min, m.range_max, m.intensity, self._c_reverses)
+
+    @property
+    def _c_reverses(self) -> bool:
+        """Whether the C scan publishes its bins last first: with ``angle_compensate`` as
+        the driver does (``LidarDriver.publish``: unless told ``inverted``); without,
+        never (the driver's scan is cut to the returns first)."""
+        return self.driver.angle_compensate and not self.mount.driver_inverted
 
     def _noise(self, rng: np.random.Generator | None) -> np.ndarray | None:
         """The turn's standard normal draws (one a sample), or None for no noise."""
@@ -340,7 +347,7 @@ class Lidar:
         """``scan`` in numpy (its casts ``world.cast``'s): the reference."""
         m = self.model
         times, q2 = self.samples(world, pose_at, t0, rng)
-        beams, multiple = m.beams, m.compensate_multiple
+        beams, multiple = self.beams, self._multiple
         start_bin = self._first_bins(np.arange(m.samples) * 360.0 / m.samples)
         valid = np.flatnonzero(q2 != 0)
         # bin b holds the last sample with a return whose bins (start .. start + multiple - 1,
@@ -354,8 +361,6 @@ class Lidar:
         reaches = (node >= 0) & (start_bin[np.maximum(node, 0)] + multiple - 1 >= b)
         bins_q2 = np.where(reaches, q2[np.maximum(node, 0)], 0)
         bins_t = np.where(reaches, times[np.maximum(node, 0)], np.nan)
-        if not self.mount.driver_inverted:
-            bins_q2, bins_t = bins_q2[::-1], bins_t[::-1]
         ranges = (bins_q2.astype(np.float32) / np.float32(4.0)) / np.float32(1000.0)
         ranges = np.where(bins_q2 == 0, np.float32(np.inf), ranges).astype(np.float32)
         intensities = np.where(bins_q2 == 0, 0.0, m.intensity).astype(np.float32)
@@ -365,22 +370,26 @@ class Lidar:
         """The scan of a job made (a ``MotionTrack`` keeping the knots it integrated)."""
         if isinstance(pose_at, MotionTrack) and job.integrated:
             pose_at._integrated(job)
+        if self._c_reverses:                # back to the device's order
+            return self._message(t0, job.ranges[::-1], job.intensities[::-1], job.beam_time[::-1])
         return self._message(t0, job.ranges, job.intensities, job.beam_time)
 
     def _message(self, t0: float, ranges: np.ndarray, intensities: np.ndarray, beam_time: np.ndarray
                  ) -> LaserScan:
-        m = self.model
-        beams = m.beams
+        """The scan the driver publishes of the turn's bins (in the device's order)."""
+        m, driver = self.model, self.driver
         scan_time = 1.0 / m.scan_hz
-        # the driver: DEG2RAD(360.0f) and DEG2RAD(0.0f) as floats, M_PI a double, each
-        # field a float32
+        told = self.mount.driver_inverted
+        if driver.angle_compensate:
+            f = driver.publish(ranges, intensities, beam_time, (0.0, driver.compensated_span_deg),
+                               scan_time, told)
+        else:                               # every sample its own beam, at its own time
+            f = driver.publish_raw(ranges, intensities, self.times(t0), self._device_angles()[0],
+                                   scan_time, told)
         f32 = np.float32
-        angle_min = float(f32(math.pi - float(f32(2 * math.pi))))
-        angle_max = float(f32(math.pi))
-        increment = float(f32((angle_max - angle_min) / (beams - 1)))
-        return LaserScan(t0, self.frame_id, angle_min, angle_max, increment,
-                         float(f32(scan_time / (beams - 1))), float(f32(scan_time)), float(f32(m.range_min)),
-                         float(f32(m.range_max)), ranges, intensities, beam_time)
+        return LaserScan(t0, self.frame_id, f.angle_min, f.angle_max, f.angle_increment, f.time_increment,
+                         float(f32(scan_time)), f.range_min, float(f32(m.range_max)), f.ranges,
+                         f.intensities, f.beam_time)
 
 
 def lidar_named(name: str) -> Lidar:
@@ -390,3 +399,57 @@ def lidar_named(name: str) -> Lidar:
     if name not in MODELS:
         raise ValueError(f"must be one of {', '.join(MODELS)}")
     return Lidar(MODELS[name], SEED_MOUNT)
+
+
+#: The keys of a lidar's configuration: a URL's ``lidar_*`` options, a chair file's
+#: ``[lidar]`` table.
+LIDAR_KEYS = ("model", "mount", "driver", "inverted", "angle_compensate")
+
+
+def flag(text: str) -> bool:
+    """``true``/``false`` (or ``1``/``0``); a ``ValueError`` for anything else."""
+    value = {"true": True, "1": True, "false": False, "0": False}.get(text.strip().lower())
+    if value is None:
+        raise ValueError(f"{text!r} is not true or false")
+    return value
+
+
+def configured_lidar(model: str = "rplidar_s3", mount: str | LidarMount | None = None,
+                     driver: str = "sllidar_ros2", inverted: bool = False,
+                     angle_compensate: bool = True) -> Lidar:
+    """The lidar ``model`` (``MODELS``) on ``mount`` (a ``LidarMount``, its
+    ``x,y,z,roll,pitch,yaw`` text for ``parse_mount``, or None: the seed's,
+    ``SEED_MOUNT``), published by ``driver`` (``DRIVERS``) with its ``inverted`` and
+    ``angle_compensate`` parameters. A ``ValueError`` names the bad value."""
+    if model not in MODELS:
+        raise ValueError(f"lidar model {model!r}: must be one of {', '.join(MODELS)}")
+    if isinstance(mount, str):
+        place = parse_mount(mount, inverted)
+    else:
+        place = dataclasses.replace(mount or SEED_MOUNT, driver_inverted=inverted)
+    return Lidar(MODELS[model], place, driver=LidarDriver(driver, angle_compensate))
+
+
+def lidar_from_table(table: Mapping[str, object]) -> Lidar:
+    """``configured_lidar`` of a chair file's ``[lidar]`` table (``LIDAR_KEYS``: ``model``
+    and ``driver`` strings, ``mount`` its text or an array of six numbers, ``inverted``
+    and ``angle_compensate`` true or false; each may be left out). A ``ValueError``
+    names an unknown key or a value of the wrong kind."""
+    for key in table:
+        if key not in LIDAR_KEYS:
+            raise ValueError(f"unknown key {key!r} (known: {', '.join(LIDAR_KEYS)})")
+    kinds = {"model": str, "driver": str, "inverted": bool, "angle_compensate": bool}
+    for key, kind in kinds.items():
+        if key in table and not isinstance(table[key], kind):
+            what = "true or false" if kind is bool else "a string"
+            raise ValueError(f"{key} = {table[key]!r} is not {what}")
+    mount = table.get("mount")
+    if isinstance(mount, list):
+        if len(mount) != 6 or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in mount):
+            raise ValueError(f"mount = {mount!r} is not six numbers x, y, z, roll, pitch, yaw (m and deg)")
+        mount = ",".join(repr(float(v)) for v in mount)
+    if mount is not None and not isinstance(mount, str):
+        raise ValueError(f"mount = {mount!r} is not \"x,y,z,roll,pitch,yaw\" or an array of six numbers")
+    return configured_lidar(str(table.get("model", "rplidar_s3")), mount,
+                            str(table.get("driver", "sllidar_ros2")), bool(table.get("inverted", False)),
+                            bool(table.get("angle_compensate", True)))

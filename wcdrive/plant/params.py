@@ -13,9 +13,13 @@ import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from wcdrive.errors import WcdriveFileError
 from wcdrive.protocol.spec import real
+
+if TYPE_CHECKING:
+    from wcdrive.plant.lidar import Lidar
 
 G = 9.81
 
@@ -275,15 +279,20 @@ def chair_overrides(table: dict[str, object], where: str = "[chair]") -> dict[st
     return out
 
 
-def load_chair_overrides(path: str | Path) -> dict[str, object]:
-    """The checked ``[chair]`` table of a chair file (``load_chair``), as overrides."""
-    path = Path(path)
+def _chair_file(path: Path) -> dict[str, object]:
+    """A chair file's tables; ``ChairFileError`` when it cannot be read or is not TOML."""
     try:
-        data = tomllib.loads(path.read_text())
+        return tomllib.loads(path.read_text())
     except OSError as exc:
         raise ChairFileError(f"cannot read chair file {path}: {exc.strerror or exc}") from None
     except tomllib.TOMLDecodeError as exc:
         raise ChairFileError(f"{path}: not valid TOML: {exc}") from None
+
+
+def load_chair_overrides(path: str | Path) -> dict[str, object]:
+    """The checked ``[chair]`` table of a chair file (``load_chair``), as overrides."""
+    path = Path(path)
+    data = _chair_file(path)
     table = data.get("chair")
     if not isinstance(table, dict):
         raise ChairFileError(f"{path}: no [chair] table")
@@ -297,6 +306,26 @@ def load_chair(path: str | Path) -> ChairParams:
     alone. ``ChairFileError`` when the file is missing, not TOML, has no ``[chair]``
     table or a key that ``chair_overrides`` refuses."""
     return dataclasses.replace(ChairParams(), **load_chair_overrides(path))  # type: ignore[arg-type]
+
+
+def load_chair_lidar(path: str | Path) -> Lidar | None:
+    """The lidar of a chair file's ``[lidar]`` table, or None without one: its keys
+    ``model``, ``mount`` (``"x,y,z,roll,pitch,yaw"`` or six numbers, m and degrees),
+    ``driver``, ``inverted`` and ``angle_compensate``, the URL's ``lidar=`` and
+    ``lidar_*`` options (``wcdrive.plant.lidar.lidar_from_table``). ``ChairFileError``
+    names the file and the bad key or value."""
+    from wcdrive.plant.lidar import lidar_from_table
+
+    path = Path(path)
+    table = _chair_file(path).get("lidar")
+    if table is None:
+        return None
+    if not isinstance(table, dict):
+        raise ChairFileError(f"{path}: lidar is not a table")
+    try:
+        return lidar_from_table(table)
+    except ValueError as exc:
+        raise ChairFileError(f"{path}: [lidar] {exc}") from None
 
 
 def chair_toml(overrides: Mapping[str, object], comments: dict[str, str] | None = None,

@@ -20,6 +20,7 @@ from wcdrive.boards.simulation import Simulated
 
 if TYPE_CHECKING:                     # a real chair's link (can://) loads no simulator
     from wcdrive.plant.lidar import Lidar
+    from wcdrive.plant.lidar_mount import LidarMount
     from wcdrive.plant.world import World
 
 
@@ -106,18 +107,86 @@ def lidar_option(text: str) -> Lidar:
     return lidar_named(text)
 
 
+def lidar_mount_option(text: str) -> LidarMount:
+    """``x,y,z,roll,pitch,yaw`` (m and degrees): the lidar's mount
+    (``wcdrive.plant.lidar_mount.parse_mount``)."""
+    from wcdrive.plant.lidar_mount import parse_mount
+
+    return parse_mount(text)
+
+
+def lidar_driver_option(text: str) -> str:
+    """The lidar's ROS 2 driver (``wcdrive.plant.lidar_driver.DRIVERS``)."""
+    from wcdrive.plant.lidar_driver import DRIVERS
+
+    if text not in DRIVERS:
+        raise ValueError(f"must be one of {', '.join(DRIVERS)}")
+    return text
+
+
+def lidar_flag_option(text: str) -> bool:
+    """``true`` or ``false`` (``wcdrive.plant.lidar.flag``)."""
+    from wcdrive.plant.lidar import flag
+
+    return flag(text)
+
+
+#: The lidar's details (None: not given): its mount, its driver and the driver's two
+#: parameters; each needs ``lidar=`` or a chair file's ``[lidar]`` table (``placed_lidar``).
+LIDAR_DETAILS = {"lidar_mount": Option(None, lidar_mount_option),
+                 "lidar_driver": Option(None, lidar_driver_option),
+                 "lidar_inverted": Option(None, lidar_flag_option),
+                 "lidar_angle_compensate": Option(None, lidar_flag_option)}
 #: The options that put a simulated board's chair in a world (``wcsim://``, ``wcavr://``).
-PLACE_USAGE = "world=W&start=x,y,deg&lidar=rplidar_s3"
+PLACE_USAGE = ("world=W&start=x,y,deg&lidar=rplidar_s3&lidar_mount=x,y,z,roll,pitch,yaw"
+               "&lidar_driver=sllidar_ros2|rplidar_ros&lidar_inverted=B&lidar_angle_compensate=B")
 PLACE_OPTIONS = {"world": Option(None, world_option), "start": Option((0.0, 0.0, 0.0), start_option),
-                 "lidar": Option(None, lidar_option)}
+                 "lidar": Option(None, lidar_option), **LIDAR_DETAILS}
 
 
-def placed(scheme: str, options: Mapping[str, Any], make: Callable[..., _B]) -> _B:
-    """The board ``make`` builds with the ``PLACE_OPTIONS`` of ``options`` as keywords; a
+def chair_file_lidar(url: str) -> Lidar | None:
+    """The lidar of the ``[lidar]`` table of the chair file a URL's ``chair=`` names
+    (``wcdrive.plant.params.load_chair_lidar``), or None."""
+    texts = urllib.parse.parse_qs(urllib.parse.urlsplit(url).query, True).get("chair")
+    if not texts:
+        return None
+    from wcdrive.plant.params import load_chair_lidar
+
+    return load_chair_lidar(texts[-1])
+
+
+def placed_lidar(scheme: str, options: Mapping[str, Any], url: str = "") -> Lidar | None:
+    """The lidar of ``options``: ``lidar=``'s model on the seed's mount, else the chair
+    file's (``chair_file_lidar``), with the ``LIDAR_DETAILS`` given in place of that
+    lidar's own (``wcdrive.plant.lidar.configured_lidar``). A detail with no lidar to
+    apply to is a ``SerialException`` that names it, as is a bad ``[lidar]`` table."""
+    try:
+        lidar: Lidar | None = options["lidar"] or chair_file_lidar(url)
+    except ValueError as exc:
+        raise SerialException(f"{scheme}://: chair=: {exc}") from exc
+    given = {name: options[name] for name in LIDAR_DETAILS if options.get(name) is not None}
+    if lidar is None:
+        if given:
+            names = ", ".join(given)
+            raise SerialException(f"{scheme}://: {names} needs lidar=rplidar_s3 (a lidar to mount)")
+        return None
+    from wcdrive.plant.lidar import configured_lidar
+
+    return configured_lidar(lidar.model.name, given.get("lidar_mount", lidar.mount),
+                            given.get("lidar_driver", lidar.driver.name),
+                            given.get("lidar_inverted", lidar.mount.driver_inverted),
+                            given.get("lidar_angle_compensate", lidar.driver.angle_compensate))
+
+
+def placed(scheme: str, options: Mapping[str, Any], make: Callable[..., _B], url: str = "") -> _B:
+    """The board ``make`` builds with the chair's place as keywords (``world``, ``start``,
+    and ``lidar``: ``placed_lidar`` of ``options`` and the ``url`` they came from); a
     chair that cannot stand where ``start`` puts it in its ``world`` is a
     ``SerialException`` that says to give another start."""
+    place = {"world": options["world"], "start": options["start"],
+             "lidar": placed_lidar(scheme, options, url)}
     try:
-        return make(**{name: options[name] for name in PLACE_OPTIONS})
+        return make(**place)
     except ValueError as exc:
         if options["world"] is None:
             raise

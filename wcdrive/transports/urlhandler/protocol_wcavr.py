@@ -48,4 +48,4 @@ class Serial(BoardSerial):
         elf = (parts.netloc + parts.path) or None
         plant = o["chair"] if o["plant"] and o["chair"] is not None else o["plant"]
         return placed("wcavr", o, lambda **place: MegaBoard(elf, realtime=o["realtime"], speed=o["speed"],
-                                                            plant=plant, **place))
+                                                            plant=plant, **place), url)

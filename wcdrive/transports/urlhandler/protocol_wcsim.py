@@ -37,4 +37,4 @@ class Serial(BoardSerial):
     def _open_board(self, url: str) -> SimulatedBoard:
         _, o, _ = url_options(url, "wcsim", USAGE, OPTIONS)
         return placed("wcsim", o, lambda **place: SimulatedBoard(o["chair"], speed=o["speed"], seed=o["seed"],
-                                                                 **place))
+                                                                 **place), url)
