@@ -499,6 +499,9 @@ static float computePID(float setpoint, float measurement, float& integral, floa
   float clamped = constrain(output, -WC_PID_OUT_MAX, WC_PID_OUT_MAX);
   if (output != clamped) {
     integral = (clamped - kp * error - kd * derivative) / ki;   // back-calculation
+    // Never past zero: a P term beyond the clamp on its own would wind the integral
+    // against the saturation, and the wheel would be driven backward once the error fell.
+    if ((integral > 0.0f) != (clamped > 0.0f)) integral = 0.0f;
   }
   prevMeas = measurement;
   return clamped;
@@ -689,7 +692,17 @@ static bool effortLeads(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, 
   // this wheel's way (a spin, a sharp turn, a stop), holds the chair back: the chair
   // does not follow this wheel's command, and its effort goes into that.
   float heldBack = setpoint > 0.0f ? other - otherSetpoint : otherSetpoint - other;
-  if (heldBack < WC_FAULT_EFFORT_OVERRUN && effort >= otherWork + WC_FAULT_EFFORT_LEAD_PWM) return true;
+  // A partner braking below the current limit while short of its setpoint by
+  // WC_FAULT_EFFORT_SHORTFALL of it and WC_FAULT_EFFORT_OVERRUN (its PID unwinding after
+  // a descent or a cut of its setpoint) slows the chair of its own accord; one braking at
+  // the limit may be holding a dead wheel's chair.
+  bool brakingShort = -WC_FAULT_EFFORT_MAX < otherEffort && otherEffort < 0.0f &&
+                      otherProgress < WC_FAULT_EFFORT_SHORTFALL * fabs(otherSetpoint) &&
+                      otherProgress < fabs(otherSetpoint) - WC_FAULT_EFFORT_OVERRUN;
+  if (heldBack < WC_FAULT_EFFORT_OVERRUN && !brakingShort &&
+      effort >= otherWork + WC_FAULT_EFFORT_LEAD_PWM) {
+    return true;
+  }
   if (effort <= -WC_FAULT_EFFORT_MAX && otherEffort >= effort + WC_FAULT_EFFORT_LEAD_PWM) return true;
   if (effort < WC_FAULT_EFFORT_MAX || otherEffort < WC_FAULT_EFFORT_MAX) return false;
   float progress = setpoint > 0.0f ? measured : -measured;
@@ -766,9 +779,10 @@ static uint8_t checkWheel(int32_t delta, uint32_t illegal, uint8_t storm, uint8_
                           float& effortSpeed, float& effortSetpoint, uint8_t& effortTicks,
                           float prevMeasured) {
   if (storm || illegal >= WC_FAULT_ILLEGAL_PER_TICK) return WHEEL_IMPLAUSIBLE;
-  // A wheel that stands beside a standing partner may stand on a grade below the
-  // motor's full torque.
-  bool standing = fabs(prevMeasured) < WC_FAULT_STANDING_SPEED && fabs(other) < WC_FAULT_STANDING_SPEED;
+  // A wheel that stands while its partner does not carry the chair its way (stands, or
+  // rolls back) may stand on a grade below the motor's full torque.
+  float otherAlong = setpoint > 0.0f ? other : -other;
+  bool standing = fabs(prevMeasured) < WC_FAULT_STANDING_SPEED && otherAlong < WC_FAULT_STANDING_SPEED;
   uint8_t stallPwm = standing ? WC_FAULT_STALL_PWM_STANDING : WC_FAULT_STALL_PWM;
   bool driven = appliedPwm >= stallPwm && setpoint != 0.0f &&
                 (appliedDir == HIGH) == (setpoint > 0.0f);
@@ -789,6 +803,16 @@ static uint8_t checkWheel(int32_t delta, uint32_t illegal, uint8_t storm, uint8_
     return WHEEL_NO_EFFECT;
   }
   return (stalled || against) ? WHEEL_SUSPECT : WHEEL_OK;
+}
+
+// A stalled wheel that stood (slower than WC_FAULT_STANDING_SPEED when the PID last ran)
+// while the other wheel rolls WC_FAULT_STANDING_SPEED or more against this wheel's
+// setpoint: the chair pivots back about the standing wheel, which its full torque
+// (WC_FAULT_STALL_PWM_STANDING) cannot move, the chair's limit (a turn on a grade). A cut
+// encoder's wheel turns its way and carries the chair with it.
+static bool stallsLoaded(float setpoint, float prevMeasured, float other) {
+  float along = setpoint > 0.0f ? other : -other;
+  return fabs(prevMeasured) < WC_FAULT_STANDING_SPEED && along <= -WC_FAULT_STANDING_SPEED;
 }
 
 // A wheel at the chair's limit rather than faulty. No effect (check) with an effort that
@@ -974,6 +998,12 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
                                       reverseTicksR, runawayTicksR, effortTicksR);
     bool limitR = !holding && atLimit(checkR, leadsR, stalling(setpointR, filtVelR), strainL,
                                       reverseTicksL, runawayTicksL, effortTicksL);
+    // A wheel that stood at full torque while its partner rolled back against its way:
+    // the chair pivots back about it, beyond what the motors hold (a turn on a grade).
+    if (!holding && checkL == WHEEL_STALLED && checkR != WHEEL_STALLED)
+      limitL = limitL || stallsLoaded(setpointL, prevMeasL, filtVelR);
+    if (!holding && checkR == WHEEL_STALLED && checkL != WHEEL_STALLED)
+      limitR = limitR || stallsLoaded(setpointR, prevMeasR, filtVelL);
     // The limit, or a load both wheels share short of it (no lead): not a fault.
     if (limitL || (checkL == WHEEL_NO_EFFECT && !leadsL)) checkL = WHEEL_OK;
     if (limitR || (checkR == WHEEL_NO_EFFECT && !leadsR)) checkR = WHEEL_OK;

@@ -94,7 +94,7 @@
 #define WC_FAULT_EFFORT_PWM 20     // duty rise (8 %) toward a steady setpoint without any gain in speed: the motor does not respond
 #define WC_FAULT_EFFORT_SHORTFALL 0.8f // ...while the wheel turns slower than this fraction of its setpoint
 #define WC_FAULT_EFFORT_SHORTFALL_MOTOR 0.95f // ...while the wheel turns slower than this fraction of its setpoint (the motor rule; a dead motor's wheel dragged at speed keeps most of its setpoint, a healthy one at steady speed keeps more: 92 % at 1 m/s on the level)
-#define WC_FAULT_EFFORT_LEAD 0.5f  // rad/s: ...while turning its way no faster than this beyond the other wheel (or beyond standing, when the other turns against it): a dead motor's wheel is only dragged, and trails the wheel that drags it
+#define WC_FAULT_EFFORT_LEAD 0.45f // rad/s: ...while turning its way no faster than this beyond the other wheel (or beyond standing, when the other turns against it): a dead motor's wheel is only dragged, and trails the wheel that drags it
 #define WC_FAULT_EFFORT_TICKS 4    // consecutive ticks of that effort without progress: the motor fault
 #define WC_FAULT_EFFORT_OVERRUN 0.5f // rad/s: ...nor while the other wheel turns this much beyond its setpoint its way: the chair does not follow the command (momentum, a slope), and the wheel's effort goes into it
 #define WC_FAULT_EFFORT_EMF 14.5f  // duty per rad/s of wheel speed that the motor's back-EMF takes (255 / MAX_WHEEL_SPEED, rounded): a wheel's duty less this times its speed is its effort, the share of the duty that drives current

@@ -24,11 +24,13 @@ from wcdrive.firmware.control import (
     WHEEL_STALLED,
     at_limit,
     check_wheel,
+    compute_pid,
     effort_leads,
     effort_of,
     no_effect,
     overruns,
     stalling,
+    stalls_loaded,
 )
 
 SETPOINT = 2.85   # rad/s toward which the duty rises
@@ -48,7 +50,7 @@ def _ticks_to_trip(measured: float, other: float, setpoint: float = SETPOINT, ti
     return None
 
 
-@pytest.mark.parametrize(("measured", "other"), [(1.45, 1.6), (1.45, 1.45), (1.45, 1.0), (0.4, 0.0),
+@pytest.mark.parametrize(("measured", "other"), [(1.45, 1.6), (1.45, 1.45), (1.4, 1.0), (0.4, 0.0),
                                                  (0.4, -0.5)])
 def test_a_wheel_that_trails_the_other_is_a_dead_motor(measured: float, other: float) -> None:
     """Short of its setpoint, behind (or no further ahead than FAULT_EFFORT_LEAD of) the
@@ -118,6 +120,37 @@ def test_effort_leads_tells_one_motor_from_the_chairs_load(
     assert effort_leads(pwm, C.HIGH, setpoint, measured, opwm, C.HIGH, osetpoint, omeasured) is expected
 
 
+def test_a_partner_braking_short_of_its_setpoint_below_the_limit_excuses_the_lead() -> None:
+    """Ticks of the simulated chair. Off a 1:12 band at 2.68 m/s and turning, 149 kg:
+    the left wheel brakes (effort -9) while 33 % short of its setpoint, its PID unwinding
+    after the descent, and the right one's effort leads it by 16: the chair slowing of its
+    own accord. A dead left motor 4.6 s into a 4 degree descent brakes at the current
+    limit (-41) while short of its setpoint too: that lead is the right wheel's partner
+    carrying a dead wheel, and it counts."""
+    assert effort_of(70, C.HIGH, 8.12, 5.45) > -C.FAULT_EFFORT_MAX
+    assert not effort_leads(90, C.HIGH, 9.47, 5.74, 70, C.HIGH, 8.12, 5.45)
+    assert effort_leads(84, C.HIGH, 6.56, 6.04, 10, C.LOW, 6.56, 5.94)
+    # short by less than FAULT_EFFORT_SHORTFALL of its setpoint, or by less than
+    # FAULT_EFFORT_OVERRUN (a slow inner wheel): no excuse
+    assert effort_leads(90, C.HIGH, 9.47, 5.74, 70, C.HIGH, 6.5, 5.45)
+    assert effort_leads(40, C.HIGH, 2.0, 1.2, 12, C.HIGH, 1.2, 0.9)
+    assert not effort_leads(40, C.HIGH, 2.0, 1.2, 12, C.HIGH, 1.5, 0.9)
+
+
+def test_the_pid_anti_windup_never_turns_the_integral_against_the_saturation() -> None:
+    """A P term beyond the clamp on its own (a low ki, a big error) back-calculates
+    the integral to 0, not past it: the wheel is not driven backward once the error
+    falls (a climb at 2.44 m/s with ki 0.07 rolled back down a 4 degree grade)."""
+    out, integral = compute_pid(20.0, 0.0, 0.0, 0.0, 9.63, 0.07, 0.044, 0.05)
+    assert out == C.PID_OUT_MAX and integral == 0.0
+    out, integral = compute_pid(-20.0, 0.0, 0.0, 0.0, 9.63, 0.07, 0.044, 0.05)
+    assert out == -C.PID_OUT_MAX and integral == 0.0
+    # the back-calculation still trims an integral wound up the saturation's way
+    out, integral = compute_pid(3.0, 0.0, 5000.0, 0.0, 9.63, 0.07, 0.044, 0.05)
+    assert out == C.PID_OUT_MAX and 0.0 < integral < 5000.0
+    assert 9.63 * 3.0 + 0.07 * integral == pytest.approx(C.PID_OUT_MAX, rel=1e-4)
+
+
 def test_no_effect_without_a_lead_is_the_limit_only_once_the_wheel_stalls() -> None:
     """A load both wheels share is the chair's limit (STALLED_ON_GRADE) only below
     GRADE_STALL of the setpoint: within the rated grade a chair slows and climbs on."""
@@ -178,7 +211,7 @@ def test_a_dead_motor_after_slowing_is_still_found() -> None:
 
 
 def _ticks_to_stall(prev_measured: float, setpoint: float = -0.89, ticks: int = 10, duty: int = 31,
-                    other: float = 2.0) -> int | None:
+                    other: float = -2.0) -> int | None:
     """The tick count at which a wheel driven at ``duty`` toward ``setpoint``, without a
     count, is a stall, the PID having last run on ``prev_measured``, the other wheel
     turning at ``other``."""
@@ -212,5 +245,25 @@ def test_a_wheel_standing_beside_a_standing_partner_stalls_only_at_full_torque()
     assert C.FAULT_STALL_PWM < C.FAULT_STALL_PWM_STANDING
     assert _ticks_to_stall(0.0, duty=C.FAULT_STALL_PWM_STANDING - 1, other=0.1) is None
     assert _ticks_to_stall(0.0, duty=C.FAULT_STALL_PWM_STANDING, other=0.1) == C.FAULT_STALL_TICKS
-    assert _ticks_to_stall(0.0, duty=C.FAULT_STALL_PWM, other=2.0) == C.FAULT_STALL_TICKS
+    assert _ticks_to_stall(0.0, duty=C.FAULT_STALL_PWM, other=-2.0) == C.FAULT_STALL_TICKS
     assert _ticks_to_stall(-1.5, duty=C.FAULT_STALL_PWM, other=0.1) == C.FAULT_STALL_TICKS
+
+
+def test_a_wheel_standing_while_its_partner_rolls_back_stalls_only_at_full_torque() -> None:
+    """A partner turning against this wheel's setpoint does not carry the chair its way
+    (a turn on a grade pivots back about the standing wheel): as beside a standing
+    partner, only FAULT_STALL_PWM_STANDING without a count is a stall."""
+    assert _ticks_to_stall(0.0, duty=C.FAULT_STALL_PWM_STANDING - 1, other=2.0) is None
+    assert _ticks_to_stall(0.0, duty=C.FAULT_STALL_PWM_STANDING, other=2.0) == C.FAULT_STALL_TICKS
+    assert _ticks_to_stall(0.0, setpoint=2.9, duty=C.FAULT_STALL_PWM_STANDING - 1, other=-0.4) is None
+    assert _ticks_to_stall(0.0, setpoint=2.9, duty=C.FAULT_STALL_PWM, other=0.4) == C.FAULT_STALL_TICKS
+
+
+@pytest.mark.parametrize(("setpoint", "prev_measured", "other", "loaded"), [
+    (2.9, 0.0, -0.35, True), (2.9, 0.0, -0.25, False), (2.9, 0.0, 0.5, False),
+    (2.9, 0.5, -0.5, False), (-1.0, 0.1, 0.4, True), (-1.0, 0.1, -0.4, False)])
+def test_a_stall_at_full_torque_with_the_partner_rolling_back_is_the_chairs_limit(
+        setpoint: float, prev_measured: float, other: float, loaded: bool) -> None:
+    """``stalls_loaded``: the wheel stood and its partner rolls FAULT_STANDING_SPEED or
+    more against this wheel's setpoint: the chair pivots back about it."""
+    assert stalls_loaded(setpoint, prev_measured, other) is loaded

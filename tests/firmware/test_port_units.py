@@ -72,11 +72,17 @@ def test_ramp_reaches_10_rad_s_in_2_s() -> None:
 def test_pid_back_calculation_holds_output_at_the_limit() -> None:
     integral = 0.0
     for _ in range(200):
-        out, integral = compute_pid(f32(17.0), 0.0, integral, 0.0, C.KP_R, C.KI_R, C.KD_R,
+        out, integral = compute_pid(f32(12.0), 0.0, integral, 0.0, C.KP_R, C.KI_R, C.KD_R,
                                     f32(0.05))
     assert out == 100.0
     # Back-calculated: Kp*e + Ki*I == 100 (to rounding), so no windup beyond saturation.
-    assert abs(C.KP_R * 17.0 + C.KI_R * integral - 100.0) < 1e-3
+    assert abs(C.KP_R * 12.0 + C.KI_R * integral - 100.0) < 1e-3
+    # A P term beyond the limit on its own: the integral is held at 0, never wound
+    # against the saturation.
+    for _ in range(3):
+        out, integral = compute_pid(f32(17.0), 0.0, integral, 0.0, C.KP_R, C.KI_R, C.KD_R,
+                                    f32(0.05))
+        assert out == 100.0 and integral == 0.0
 
 
 def test_tick_due_every_50_ms_across_the_wrap() -> None:

@@ -47,28 +47,11 @@ INSIDE = ("band_up", "uniform", "cross", "band_down")
 LIMIT_FREE = 0.9
 
 
-#: Up to this share of the rated grade a turn is held to no fault too.
-TURN_FREE = 0.5
-
-
-def _judged(drive: ev.Drive, verdict: ev.Verdict) -> list[tuple[float, str]]:
-    """The faults the property holds the drive to: all of them, or, for a drive that
-    turns at more than ``TURN_FREE`` of its rated grade, those before the turn (the
-    ``drive_s`` of straight driving). Near the rated grade a turn asks one wheel for more
-    than the current limit gives while its partner idles, which the board cannot yet
-    tell from a dead motor (docs/safety.md, "The envelope": 11 of 3,000 drives, all
-    turning at 70 % of the rated grade or more)."""
-    if drive.turn == 0.0 or drive.grade_fraction <= TURN_FREE:
-        return list(verdict.faults)
-    return [f for f in verdict.faults if f[0] < drive.drive_s]
-
-
 @settings(max_examples=300 if thorough() else 60, deadline=None)
 @given(drive=envelope_drives(INSIDE))
 def test_a_healthy_chair_inside_its_envelope_sends_no_alarm(tmp_path_factory, drive: ev.Drive) -> None:
     verdict = _run(tmp_path_factory, drive)
-    faults = _judged(drive, verdict)
-    assert not faults, f"{drive.describe()}: {faults}\n{drive.toml()}"
+    assert not verdict.faults, f"{drive.describe()}: {verdict.faults}\n{drive.toml()}"
     if drive.grade_fraction <= LIMIT_FREE:
         assert not verdict.limits, f"{drive.describe()}: {verdict.limits}\n{drive.toml()}"
 

@@ -17,6 +17,15 @@ load"). The cases:
   current limit, carries the chair alone while its partner brakes to its setpoint.
   Under the effort lead alone it latched ``MOTOR_R``/``MOTOR_L``; a partner held back
   by its own setpoint now excuses the lead.
+
+And the eight drives of ``benchmarks/envelope.py`` (seed 0) that still latched a fault
+under that rule, kept in ``tests/data/envelope_drives/``, all turning near the rated grade
+or coming off a band: a wheel standing at full torque while its partner rolls back
+(``ENC_STALL_L``: now the chair's limit), a P term beyond the clamp winding the integral
+backward on a climb (``ENC_REVERSED_L``: the chair rolled back under its own PID), a
+partner braking short of its setpoint as its PID unwinds off a descent (``MOTOR_L``,
+``MOTOR_R``), and the outer wheel at the current limit 0.49 rad/s ahead of the inner one
+(``MOTOR_R``: FAULT_EFFORT_LEAD 0.45).
 """
 
 from __future__ import annotations
@@ -26,6 +35,8 @@ from pathlib import Path
 import pytest
 
 from wcdrive.sim import runner, scenario
+
+ENVELOPE_DRIVES = Path(__file__).parents[1] / "data" / "envelope_drives"
 
 
 def _band(occupant: float, slope_deg: float, to_x: float, speed: float, seconds: float) -> str:
@@ -82,3 +93,10 @@ def test_a_dead_motor_on_the_1in20_band_is_named(tmp_path: Path, side: str) -> N
     text = CASES["1in20_band_150kg_1mps"] + f'[[fault]]\nat = 3.5\nkind = "motor_dead"\nside = "{side}"\n'
     faults = [e for e in _events(tmp_path, text) if e.startswith("EVT:FAULT")]
     assert faults and faults[0] == f"EVT:FAULT,MOTOR_{side[0].upper()}", faults
+
+
+@pytest.mark.parametrize("path", sorted(ENVELOPE_DRIVES.glob("*.toml")), ids=lambda p: p.stem)
+def test_the_envelope_drives_that_faulted_latch_nothing(path: Path) -> None:
+    """Each drive as ``benchmarks/envelope.py --failing`` wrote it: no ``EVT:FAULT``."""
+    events = [line for _, line in runner.run(scenario.load(str(path))).link.events]
+    assert not [e for e in events if e.startswith("EVT:FAULT")], events

@@ -35,6 +35,10 @@ def compute_pid(setpoint: float, measurement: float, integral: float, prev_meas:
     clamped = -_OUT_MAX if output < -_OUT_MAX else (_OUT_MAX if output > _OUT_MAX else output)
     if output != clamped:
         integral = div(sub(sub(clamped, p_term), d_term), ki)
+        # never past zero: a P term beyond the clamp on its own would wind the integral
+        # against the saturation, and the wheel would be driven backward once the error fell
+        if (integral > 0.0) != (clamped > 0.0):
+            integral = 0.0
     return clamped, integral
 
 
@@ -128,7 +132,15 @@ def effort_leads(applied_pwm: int, applied_dir: int, setpoint: float, measured: 
     # a partner held back by its own setpoint (a spin, a sharp turn, a stop) holds the
     # chair back: this wheel's effort goes into that
     held_back = sub(other, other_setpoint) if setpoint > 0.0 else sub(other_setpoint, other)
-    if held_back < C.FAULT_EFFORT_OVERRUN and effort >= add(other_work, C.FAULT_EFFORT_LEAD_PWM):
+    # a partner braking below the current limit while short of its setpoint by
+    # FAULT_EFFORT_SHORTFALL of it and FAULT_EFFORT_OVERRUN (its PID unwinding after a
+    # descent or a cut of its setpoint) slows the chair of its own accord; one braking at
+    # the limit may be holding a dead wheel's chair
+    braking_short = (-C.FAULT_EFFORT_MAX < other_effort < 0.0
+                     and other_progress < mul(C.FAULT_EFFORT_SHORTFALL, abs(other_setpoint))
+                     and other_progress < sub(abs(other_setpoint), C.FAULT_EFFORT_OVERRUN))
+    if (held_back < C.FAULT_EFFORT_OVERRUN and not braking_short
+            and effort >= add(other_work, C.FAULT_EFFORT_LEAD_PWM)):
         return True
     if effort <= -C.FAULT_EFFORT_MAX and other_effort >= add(effort, C.FAULT_EFFORT_LEAD_PWM):
         return True
@@ -216,6 +228,16 @@ def at_limit(check: int, leads: bool, stalls: bool, other_strains: bool, other_r
             and (other_strains or other_reverse != 0 or other_runaway != 0 or other_effort != 0))
 
 
+def stalls_loaded(setpoint: float, prev_measured: float, other: float) -> bool:
+    """``stallsLoaded``: a stalled wheel that stood (slower than FAULT_STANDING_SPEED
+    when the PID last ran) while the other wheel rolls FAULT_STANDING_SPEED or more
+    against this wheel's setpoint: the chair pivots back about the standing wheel, which
+    its full torque (FAULT_STALL_PWM_STANDING) cannot move: the chair's limit. A cut
+    encoder's wheel turns its way and carries the chair with it."""
+    along = other if setpoint > 0.0 else -other
+    return abs(prev_measured) < C.FAULT_STANDING_SPEED and along <= -C.FAULT_STANDING_SPEED
+
+
 def check_wheel(delta: int, illegal: int, storm: int, applied_pwm: int, applied_dir: int,
                 setpoint: float, measured: float, other: float, other_pwm: int, other_overruns: bool,
                 stall_ticks: int, reverse_ticks: int, runaway_ticks: int,
@@ -232,9 +254,10 @@ def check_wheel(delta: int, illegal: int, storm: int, applied_pwm: int, applied_
     reversed encoder too: the one whose reading flipped sign with its setpoint."""
     if storm or illegal >= C.FAULT_ILLEGAL_PER_TICK:
         return WHEEL_IMPLAUSIBLE, stall_ticks, reverse_ticks, runaway_ticks, effort
-    # a wheel that stands beside a standing partner may stand on a grade below the
-    # motor's full torque
-    standing = abs(prev_measured) < C.FAULT_STANDING_SPEED and abs(other) < C.FAULT_STANDING_SPEED
+    # a wheel that stands while its partner does not carry the chair its way (stands, or
+    # rolls back) may stand on a grade below the motor's full torque
+    other_along = other if setpoint > 0.0 else -other
+    standing = abs(prev_measured) < C.FAULT_STANDING_SPEED and other_along < C.FAULT_STANDING_SPEED
     stall_pwm = C.FAULT_STALL_PWM_STANDING if standing else C.FAULT_STALL_PWM
     driven = (applied_pwm >= stall_pwm and setpoint != 0.0
               and (applied_dir == C.HIGH) == (setpoint > 0.0))
@@ -308,6 +331,12 @@ def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_
                                          s.reverseTicksR, s.runawayTicksR, s.effortTicksR)
     limit_r = not s.holding and at_limit(check_r, leads_r, stalling(s.setpointR, s.filtVelR), strain_l,
                                          s.reverseTicksL, s.runawayTicksL, s.effortTicksL)
+    # a wheel that stood at full torque while its partner rolled back against its way:
+    # the chair pivots back about it, beyond what the motors hold (a turn on a grade)
+    if not s.holding and check_l == WHEEL_STALLED and check_r != WHEEL_STALLED:
+        limit_l = limit_l or stalls_loaded(s.setpointL, s.prevMeasL, s.filtVelR)
+    if not s.holding and check_r == WHEEL_STALLED and check_l != WHEEL_STALLED:
+        limit_r = limit_r or stalls_loaded(s.setpointR, s.prevMeasR, s.filtVelL)
     # the limit, or a load both wheels share short of it (no lead): not a fault
     if limit_l or (check_l == WHEEL_NO_EFFECT and not leads_l):
         check_l = WHEEL_OK

@@ -294,7 +294,8 @@ static int check_wheel(int64_t delta, int64_t illegal, int64_t storm, int64_t pw
                        int64_t *runaway, Effort *e, double prev_measured) {
     if (storm || illegal >= K.illegal_per_tick)
         return WHEEL_FAULT;
-    int standing = fabs(prev_measured) < K.standing_speed && fabs(other) < K.standing_speed;
+    double other_along = setpoint > 0.0 ? other : -other;
+    int standing = fabs(prev_measured) < K.standing_speed && other_along < K.standing_speed;
     int64_t stall_pwm = standing ? K.stall_pwm_standing : K.stall_pwm;
     int driven = pwm >= stall_pwm && setpoint != 0.0 && ((dir == K.high) == (setpoint > 0.0));
     int stalled = driven && delta == 0;
@@ -336,8 +337,11 @@ static double compute_pid(double setpoint, double measurement, double *integral,
     double output = f_add(f_add(p_term, f_mul(ki, in)), d_term);
     double m = K.pid_out_max;
     double clamped = output < -m ? -m : (output > m ? m : output);
-    if (output != clamped)
+    if (output != clamped) {
         in = f_div(f_sub(f_sub(clamped, p_term), d_term), ki);
+        if ((in > 0.0) != (clamped > 0.0))
+            in = 0.0;
+    }
     *integral = in;
     return clamped;
 }
