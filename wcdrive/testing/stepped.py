@@ -31,13 +31,12 @@ from wcdrive.plant.params import ChairParams
 from wcdrive.protocol.codec import (
     MAX_ANGULAR,
     MAX_LINEAR,
-    SEQ_MAX,
     Event,
     Feedback,
     LineDecoder,
     Message,
-    frame,
 )
+from wcdrive.protocol.exchange import Exchange
 from wcdrive.protocol.motion import velocity_command, wheel_command
 
 #: How many of the board's messages ``SteppedChair.messages`` keeps (the newest).
@@ -61,7 +60,7 @@ class SteppedChair:
         self.events: deque[str] = deque(maxlen=history)
         #: The last ``ENC:...`` feedback line (None before the first control tick).
         self.feedback: Feedback | None = None
-        self._seq = 0
+        self._exchange = Exchange()
         self._odometry = WheelOdometry()
         self._callbacks: list[Callable[[Telemetry], None]] = []
         self._samples: deque[Telemetry] = deque(maxlen=history)
@@ -87,12 +86,17 @@ class SteppedChair:
         """Raw bytes onto the board's RX wire, from now, at 115200 baud."""
         self.loop.send(data)
 
+    @property
+    def _seq(self) -> int:
+        """The sequence number of the last frame sent (0 before the first)."""
+        return self._exchange.last_seq
+
     def command(self, body: bytes) -> None:
         """``body`` (``x:0.300,t:0.000,``, ``hello``, ``reset``, ``set:kp=2`` ...) as a
-        protocol v3 frame with the next sequence number, as ``Wheelchair`` sends it:
-        the board takes it before and after a ``hello``."""
-        self._seq = self._seq % SEQ_MAX + 1
-        self.send(frame(body, self._seq))
+        protocol v3 frame with the next sequence number, as ``Wheelchair`` sends it
+        (numbered by the same ``wcdrive.protocol.exchange.Exchange``): the board takes
+        it before and after a ``hello``."""
+        self.send(self._exchange.next_frame(body)[1])
 
     def set_velocity(self, linear: float, angular: float) -> None:
         """A CMDVEL frame (m/s, rad/s), validated and encoded as ``Wheelchair`` sends it
