@@ -1,5 +1,6 @@
 """Shared by the ROS 2 bridge's tests: run the independent DDS peer
-(``dds_peer.py``) in another process, and pick ROS domains no other run uses."""
+(``dds_peer.py``) in another process, pick ROS domains no other run uses, and the
+stock ROS 2 Jazzy rclpy (``jazzy_python``: the cached venv of ``jazzy_env.py``)."""
 
 from __future__ import annotations
 
@@ -8,8 +9,11 @@ import json
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 from typing import Any
+
+import pytest
 
 PEER = Path(__file__).with_name("dds_peer.py")
 _DOMAINS = itertools.count(100 + (os.getpid() % 40) * 3)
@@ -38,3 +42,31 @@ def run_peer(domain: int, mode: str, *args: str, timeout: float = 90.0) -> dict[
                             capture_output=True, text=True, timeout=timeout)
     assert result.returncode == 0, result.stderr[-3000:]
     return dict(json.loads(result.stdout.strip().splitlines()[-1]))
+
+
+@pytest.fixture(scope="session")
+def jazzy_python() -> Path:
+    """The Python of a venv with the stock ROS 2 Jazzy rclpy on Fast DDS, built once
+    per machine and cached (``jazzy_env``): ``jazzy_python_or_skip``."""
+    return jazzy_python_or_skip()
+
+
+def jazzy_python_or_skip(ci: bool | None = None) -> Path:
+    """``jazzy_env.jazzy_python()``. Without a Python 3.12 the test is skipped, saying
+    where it looked; with ``CI=true`` (``ci``) that is a failure, as a failed build
+    always is."""
+    from tests.ros2 import jazzy_env
+
+    ci = os.environ.get("CI") == "true" if ci is None else ci
+    start = time.monotonic()
+    try:
+        python, info = jazzy_env.jazzy_python()
+    except LookupError as exc:
+        if ci:
+            pytest.fail(f"CI=true: {exc}")
+        pytest.skip(str(exc))
+    except jazzy_env.JazzyEnvError as exc:
+        pytest.fail(f"building the stock ROS 2 Jazzy venv: {exc}")
+    state = "cached" if info.get("cached") else f"built: {info.get('seconds')}"
+    print(f"stock Jazzy rclpy venv {python} ({state}; {time.monotonic() - start:.1f} s here)")
+    return python

@@ -25,7 +25,7 @@ def test_the_topic_table_is_the_nodes() -> None:
     for name, note, direction, msgtype, profile, digest in rows:
         assert digest == store.hash_rihs01(msgtype), (name, msgtype)
         documented[(name, note, direction)] = (msgtype, profile.strip())
-    expected = {(t.name, "", t.direction): (t.msgtype, t.profile.describe()) for t in TOPICS}
-    expected[("/cmd_vel", "`--twist`", "sub")] = ("geometry_msgs/msg/Twist", qos.DEFAULT.describe())
+    expected = {(t.name, "", t.direction): (t.msgtype, t.live.describe()) for t in TOPICS}
+    expected[("/cmd_vel", "`--twist`", "sub")] = ("geometry_msgs/msg/Twist", qos.COMMAND.describe())
     expected[("ros_discovery_info", "no `rt/`", "pub")] = (ENTITIES_INFO, qos.DISCOVERY.describe())
     assert documented == expected

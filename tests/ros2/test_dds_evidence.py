@@ -26,7 +26,9 @@ from wcdrive.ros2.dds.node import ChairNode, ImuTap, Options
 
 #: What ROS 2 gives each endpoint: (reliable, transient local, depth). rclcpp's
 #: SystemDefaultsQoS/QoS(10) for data, SensorDataQoS for the IMU, tf2_ros' broadcasters
-#: for /tf (100) and /tf_static (transient local, 1), rmw_dds_common's graph topic.
+#: for /tf (100) and /tf_static (transient local, 1), rmw_dds_common's graph topic;
+#: /cmd_vel read best effort, so that best-effort writers (Jazzy's controller stack)
+#: match as reliable ones do.
 EXPECTED_QOS = {
     ("pub", "rt/odom", "nav_msgs::msg::dds_::Odometry_"): (True, False, 10),
     ("pub", "rt/tf", "tf2_msgs::msg::dds_::TFMessage_"): (True, False, 100),
@@ -37,7 +39,7 @@ EXPECTED_QOS = {
     ("pub", "rt/scan", "sensor_msgs::msg::dds_::LaserScan_"): (False, False, 5),
     ("pub", "ros_discovery_info",
      "rmw_dds_common::msg::dds_::ParticipantEntitiesInfo_"): (True, True, 1),
-    ("sub", "rt/cmd_vel", "geometry_msgs::msg::dds_::TwistStamped_"): (True, False, 10),
+    ("sub", "rt/cmd_vel", "geometry_msgs::msg::dds_::TwistStamped_"): (False, False, 10),
     ("sub", "rt/estop", "std_msgs::msg::dds_::Bool_"): (True, False, 10),
     ("sub", "rt/estop_reset", "std_msgs::msg::dds_::Empty_"): (True, False, 10),
 }

@@ -99,3 +99,31 @@ def test_the_dds_node_offers_the_tables_qos() -> None:
                 assert bridge.qos(name) == profile
     finally:
         ros.close()
+
+
+def test_the_dds_node_reads_with_the_tables_reader_qos() -> None:
+    """``/cmd_vel`` is read best effort (``Topic.live``: the row's ``reader``), so that a
+    best-effort writer matches; ``/estop`` and ``/estop_reset`` reliably; the recording
+    still offers ``/cmd_vel`` as its publisher does (reliable)."""
+    from cyclonedds.core import Policy
+
+    from tests.ros2.conftest import IdleRobot as Idle
+    from tests.ros2.conftest import fresh_domain
+    from wcdrive.ros2.dds.graph import RosNode
+
+    assert not topics.by_name("/cmd_vel").live.reliable
+    assert bridge.qos("/cmd_vel") == topics.by_name("/cmd_vel").profile == topics.DEFAULT
+    ros = RosNode("wcdrive", domain=fresh_domain())
+    try:
+        node = dds_node.ChairNode(Idle(), ros, dds_node.Options())  # type: ignore[arg-type]
+        readers = {"/cmd_vel": node._cmd_reader, "/estop": node._estop_reader,
+                   "/estop_reset": node._reset_reader}
+        for name, reader in readers.items():
+            profile = topics.by_name(name).live
+            q = reader.get_qos()
+            reliable = isinstance(q[Policy.Reliability], Policy.Reliability.Reliable)
+            durable = q[Policy.Durability] == Policy.Durability.TransientLocal
+            assert (reliable, durable, q[Policy.History].depth) == (
+                profile.reliable, profile.transient_local, profile.depth), name
+    finally:
+        ros.close()

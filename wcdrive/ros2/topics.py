@@ -10,8 +10,18 @@ The profiles are rclcpp's: ``DEFAULT`` (reliable, volatile, keep last 10),
 ``rclcpp::SensorDataQoS``), ``CLOCK`` (best effort, keep last 1), ``TF`` (tf2_ros'
 dynamic broadcaster: reliable, volatile, keep last 100), ``TF_STATIC`` (reliable,
 transient local, keep last 1: tf2's static broadcaster and map_server, so a late
-subscriber still gets the static transforms and the map) and ``DISCOVERY``
-(``ros_discovery_info``).
+subscriber still gets the static transforms and the map), ``DISCOVERY``
+(``ros_discovery_info``) and ``COMMAND`` (best effort, volatile, keep last 10).
+
+A row's ``profile`` is what its publisher offers, and so what a recording offers it
+with; the DDS node reads a topic with the row's ``reader`` profile where it has one
+(``Topic.live``). ``/cmd_vel`` is offered as rclcpp's publishers offer it (``DEFAULT``,
+reliable: a recording played back then matches best-effort and reliable readers
+alike) and read ``COMMAND``, best effort: a best-effort reader matches a best-effort
+writer, as Jazzy's ``diff_drive_controller`` stacks publish their commands, and a
+reliable one, as ``ros2 topic pub`` and rclcpp's default do; a reliable reader would
+match only the second. ``/estop`` and ``/estop_reset`` are read reliably: a latched
+e-stop sample is sent again until the bridge has it.
 """
 
 from __future__ import annotations
@@ -19,8 +29,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["CLOCK", "DEFAULT", "DISCOVERY", "SENSOR_DATA", "TABLE", "TF", "TF_STATIC", "Profile",
-           "Topic", "by_name"]
+__all__ = ["CLOCK", "COMMAND", "DEFAULT", "DISCOVERY", "SENSOR_DATA", "TABLE", "TF", "TF_STATIC",
+           "Profile", "Topic", "by_name"]
 
 
 @dataclass(frozen=True)
@@ -56,6 +66,7 @@ CLOCK = Profile("clock", reliable=False, transient_local=False, depth=1)
 TF = Profile("tf", reliable=True, transient_local=False, depth=100)
 TF_STATIC = Profile("tf_static", reliable=True, transient_local=True, depth=1)
 DISCOVERY = Profile("ros_discovery_info", reliable=True, transient_local=True, depth=1)
+COMMAND = Profile("command", reliable=False, transient_local=False, depth=10)
 
 ODOMETRY = "nav_msgs/msg/Odometry"
 TF_MESSAGE = "tf2_msgs/msg/TFMessage"
@@ -72,11 +83,12 @@ EMPTY = "std_msgs/msg/Empty"
 
 @dataclass(frozen=True)
 class Topic:
-    """One row: the ROS ``name``, ``msgtype``, QoS ``profile``, the header's
-    ``frame`` (None: the message has no header, or an empty frame), the DDS node's
-    ``direction`` ("pub", "sub", or None: not on the live node), whether an MCAP
-    recording or the Foxglove view carries it (``recorded``), and ``rate`` (for
-    docs/ros2.md)."""
+    """One row: the ROS ``name``, ``msgtype``, QoS ``profile`` (its publisher's), the
+    header's ``frame`` (None: the message has no header, or an empty frame), the DDS
+    node's ``direction`` ("pub", "sub", or None: not on the live node), whether an MCAP
+    recording or the Foxglove view carries it (``recorded``), ``rate`` (for
+    docs/ros2.md) and the DDS node's ``reader`` profile when it reads the topic with
+    another than ``profile``."""
 
     name: str
     msgtype: str
@@ -85,6 +97,13 @@ class Topic:
     direction: str | None
     recorded: bool
     rate: str
+    reader: Profile | None = None
+
+    @property
+    def live(self) -> Profile:
+        """The QoS of the DDS node's endpoint: ``reader`` for a subscription that has
+        one, else ``profile``."""
+        return self.reader if self.direction == "sub" and self.reader is not None else self.profile
 
 
 #: Every topic (docs/ros2.md's table is the DDS node's rows).
@@ -98,7 +117,8 @@ TABLE: tuple[Topic, ...] = (
           "each turn of the lidar (10 Hz, sim:// and simavr:// with lidar=)"),
     Topic("/diagnostics", DIAGNOSTICS, DEFAULT, None, "pub", False, "1 Hz"),
     Topic("/clock", CLOCK_MESSAGE, CLOCK, None, "pub", False, "with /odom, only with --sim-time"),
-    Topic("/cmd_vel", TWIST_STAMPED, DEFAULT, None, "sub", True, "the publisher's (>= 2 Hz to keep moving)"),
+    Topic("/cmd_vel", TWIST_STAMPED, DEFAULT, None, "sub", True, "the publisher's (>= 2 Hz to keep moving)",
+          reader=COMMAND),
     Topic("/estop", BOOL, DEFAULT, None, "sub", False, "on demand"),
     Topic("/estop_reset", EMPTY, DEFAULT, None, "sub", False, "on demand"),
     Topic("/map", MAP, TF_STATIC, "map", None, True, "once, at the start of a run among walls"),

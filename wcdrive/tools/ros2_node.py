@@ -4,6 +4,16 @@ DDS, for Nav2, slam_toolbox, robot_localization on this machine (docs/ros2.md).
     wcdrive ros2 --url sim://                     this host only (the default)
     wcdrive ros2 --url /dev/ttyACM0 --no-tf       an EKF publishes odom -> base_link
     wcdrive ros2 --url sim:// --network           the LAN: anyone in the domain can drive
+    wcdrive ros2 sim:// --ros-args --params-file controllers.yaml -r __node:=wheelchair_controller
+                                                  in a ROS 2 stack, as its diff_drive_controller
+
+The URL may come first, without ``--url``. ``--ros-args … [--]`` takes ROS 2's own
+arguments as rcl reads them (``wcdrive.ros2.rosargs``): ``-r``/``--remap`` rules
+(topics, ``__node:=``, ``__ns:=``), ``-p``/``--param name:=value`` and
+``--params-file FILE``; the parameters are diff_drive_controller's names and the
+bridge's own (``wcdrive.ros2.controller``). They are checked before DDS is joined: a
+bad rule, an unknown parameter or a value of the wrong type ends the command at once
+(status 2), naming what to fix.
 
 It joins ``ROS_DOMAIN_ID`` (``--domain``) before connecting, so that a DDS stack
 that cannot start fails before the chair is touched; then connects, starts a
@@ -24,6 +34,7 @@ import sys
 import threading
 import time
 from types import FrameType
+from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
 #: URL schemes of simulated robots (no person in a chair).
@@ -54,12 +65,40 @@ def faster_than_real_time(url: str) -> bool:
     return speed > 1.0 or query.get("realtime", ["1"])[0] == "0"
 
 
+class RosArgsParser(argparse.ArgumentParser):
+    """The ``ros2`` subcommand's parser: ROS 2's arguments (``--ros-args … --``, and
+    deprecated bare remap rules) are taken out as rcl takes them
+    (``wcdrive.ros2.rosargs.parse_arguments``) into ``ros_args`` (or, when rcl would
+    refuse them, ``ros_args_error``, which ``run`` raises); the rest is parsed as usual."""
+
+    def parse_known_args(self, args: Any = None, namespace: Any = None) -> Any:
+        """``argparse.ArgumentParser.parse_known_args``, ROS arguments taken out first."""
+        from wcdrive.ros2.rosargs import RosArguments, RosArgumentsError, parse_arguments
+
+        argv = list(sys.argv[1:] if args is None else args)
+        ros, error = RosArguments(), None
+        try:
+            ros, argv = parse_arguments(argv)
+        except RosArgumentsError as exc:         # raised by run(), as every error of the command
+            error = exc
+            argv = argv[:argv.index("--ros-args")] if "--ros-args" in argv else argv
+        parsed, extras = super().parse_known_args(argv, namespace)
+        parsed.ros_args, parsed.ros_args_error = ros, error
+        return parsed, extras
+
+
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Adds ``ros2`` to the ``wcdrive`` command's subcommands."""
     p = sub.add_parser("ros2", help="the chair as a ROS 2 node on DDS (no ROS install needed)",
                        description="The chair (any URL connect() takes) as a ROS 2 node on DDS, "
-                                   "without a ROS install: docs/ros2.md.")
-    p.add_argument("--url", default="sim://", help="the robot: any URL connect() takes (default sim://)")
+                                   "without a ROS install: docs/ros2.md. ROS 2's own arguments "
+                                   "follow --ros-args: -r/--remap FROM:=TO, -p/--param NAME:=VALUE, "
+                                   "--params-file FILE, ended by --.",
+                       epilog="e.g. wcdrive ros2 sim:// --ros-args --params-file controllers.yaml "
+                              "-r __node:=wheelchair_controller")
+    p.__class__ = RosArgsParser          # ROS arguments out first, as rcl takes them
+    p.add_argument("url_arg", nargs="?", metavar="URL", help="the robot (or --url)")
+    p.add_argument("--url", default=None, help="the robot: any URL connect() takes (default sim://)")
     p.add_argument("--name", default="wcdrive", help="the node's name (default wcdrive)")
     p.add_argument("--domain", type=int, help="the ROS 2 domain (default $ROS_DOMAIN_ID, else 0)")
     p.add_argument("--twist", action="store_true",
@@ -67,8 +106,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-tf", action="store_true", help="do not publish odom -> base_link (an EKF does)")
     p.add_argument("--cmd-timeout", type=float, default=0.5,
                    help="stop when no good /cmd_vel came for this long (s, default 0.5)")
-    p.add_argument("--max-age", type=float, default=0.5,
-                   help="drop a TwistStamped stamped further than this from now (s, default 0.5)")
+    p.add_argument("--max-age", type=float, default=None,
+                   help="drop a TwistStamped stamped further than this from now (s, default 0.5, "
+                        "or the cmd_vel_timeout parameter)")
     p.add_argument("--sim-time", choices=("auto", "on", "off"), default="auto",
                    help="publish /clock and stamp with the board's clock (auto: when the "
                         "backend runs faster than real time)")
@@ -85,40 +125,85 @@ def _terminate(signum: int, frame: FrameType | None) -> None:
     raise SystemExit(128 + signum)
 
 
+def configure(args: argparse.Namespace) -> tuple[Any, Any, str]:
+    """(the node's ``NodeNames``, its ``StackConfig``, the URL) from the command line:
+    the remap rules and parameters of ``--ros-args`` applied to the node ``--name``, as
+    rclpy applies them; ``WcdriveFileError`` for what cannot be taken."""
+    from wcdrive.errors import WcdriveFileError
+    from wcdrive.ros2.controller import configure as configure_parameters
+    from wcdrive.ros2.names import NodeNames
+
+    if getattr(args, "ros_args_error", None) is not None:
+        raise args.ros_args_error
+    if args.url_arg is not None and args.url is not None and args.url_arg != args.url:
+        raise WcdriveFileError(f"two URLs: {args.url_arg} and --url {args.url}: give one")
+    url = args.url_arg or args.url or "sim://"
+    ros_args = args.ros_args
+    for warning in ros_args.warnings:
+        print(f"wcdrive ros2: warning: {warning}", file=sys.stderr, flush=True)
+    names = NodeNames.init(args.name, "/", ros_args.remaps)
+    values = ros_args.parameters.for_node(names.fully_qualified_name)
+    where = (f" (from {', '.join(ros_args.param_files)})" if ros_args.param_files else "")
+    config = configure_parameters(values, names.namespace, names.fully_qualified_name + where)
+    return names, config, url
+
+
 def run(args: argparse.Namespace) -> int:
     """``wcdrive ros2`` (module docstring)."""
     import wcdrive
     from wcdrive.ros2.dds.config import domain_id
     from wcdrive.ros2.dds.graph import RosNode
 
+    names, config, url = configure(args)           # before anything: a bad argument stops here
     domain = domain_id() if args.domain is None else args.domain
-    if args.network and not simulated(args.url):
+    if args.network and not simulated(url):
         print(NETWORK_WARNING.format(domain=domain), file=sys.stderr, flush=True)
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGTERM, _terminate)
-    ros = RosNode(args.name, domain=domain, network=args.network, peers=tuple(args.peer),
+    ros = RosNode(names.name, names.namespace, domain=domain, network=args.network, peers=tuple(args.peer),
                   interface=args.interface)            # first: a DDS stack that fails, fails here
     from wcdrive.ros2.dds.node import ChairNode, ImuTap, Options
 
     try:
-        tap = ImuTap() if args.url.startswith(("sim://", "simavr://", "wcsim://", "wcavr://")) else None
-        chair = wcdrive.connect(args.url, ros=tap) if tap is not None else wcdrive.connect(args.url)
+        tap = ImuTap() if url.startswith(("sim://", "simavr://", "wcsim://", "wcavr://")) else None
+        chair = wcdrive.connect(url, ros=tap) if tap is not None else wcdrive.connect(url)
         with chair:
-            sim_time = {"on": True, "off": False}.get(args.sim_time, faster_than_real_time(args.url))
-            options = Options(twist=args.twist, publish_tf=not args.no_tf,
-                              cmd_timeout=args.cmd_timeout, max_age=args.max_age, sim_time=sim_time)
+            sim_time = {"on": True, "off": False}.get(args.sim_time, faster_than_real_time(url))
+            options = Options(twist=args.twist, publish_tf=not args.no_tf, cmd_timeout=args.cmd_timeout,
+                              sim_time=sim_time, names=names).with_parameters(config)
+            if args.max_age is not None:
+                options.max_age = args.max_age
+            if args.sim_time != "auto":          # the flag over use_sim_time
+                options.sim_time = sim_time
             node = ChairNode(chair, ros, options, imu=tap).start()
             try:
                 where = "the network" if args.network else "this host only"
-                print(f"wcdrive ros2: node /{args.name} on ROS 2 domain {domain} ({where}), driving "
-                      f"{args.url}; /cmd_vel is {'Twist' if args.twist else 'TwistStamped'}"
-                      + (", /clock on" if sim_time else "") + "; Ctrl-C to stop", flush=True)
+                topics = node.topic_names
+                print(f"wcdrive ros2: node {names.fully_qualified_name} on ROS 2 domain {domain} ({where}), "
+                      f"driving {url}; {topics['/cmd_vel']} is {'Twist' if args.twist else 'TwistStamped'}, "
+                      f"odometry on {topics['/odom']}" + (", /clock on" if options.sim_time else "")
+                      + "; Ctrl-C to stop", flush=True)
+                if config.given:
+                    print(f"wcdrive ros2: parameters: {_describe(config)}", flush=True)
                 end = time.monotonic() + args.seconds if args.seconds else None
                 while end is None or time.monotonic() < end:
                     time.sleep(0.1)
             finally:
                 node.close()            # stops the chair, leaves the graph; then the link closes
                 print(f"wcdrive ros2: /cmd_vel {dict(sorted(node.gate.counts.items()))}", flush=True)
+                if node.limiter.active:         # control periods each limit was active in
+                    counts = dict(sorted(node.limiter.counts.items()))
+                    print(f"wcdrive ros2: limits active {counts or 'never'}", flush=True)
     finally:
         ros.close()
     return 0
+
+
+def _describe(config: Any) -> str:
+    """The parameters given, and those taken but not used, for the start-up line."""
+    used = [name for name in config.given if name not in config.unused]
+    text = f"{len(used)} applied ({', '.join(used)})"
+    if config.unused:
+        text += (f"; taken but not used: {', '.join(config.unused)} (the chair's own geometry and "
+                 "odometry rule those)")
+    return text

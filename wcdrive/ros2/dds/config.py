@@ -11,6 +11,22 @@ neither sees the bridge nor can reach it: the bridge has no locator but 127.0.0.
 ``xml(network=True)``: Cyclone's own choice of network interface, multicast discovery
 (the SPDP group 239.255.0.1), plus unicast ``peers`` for a network that blocks
 multicast. Anyone in the domain on that network can then publish ``/cmd_vel``.
+
+In both, for the sake of Fast DDS (ROS 2 Jazzy's default middleware):
+
+- ``Internal/GenerateKeyhash``: every keyed sample, and so the disposals and
+  unregistrations of the discovery topics the bridge sends when it leaves (SIGTERM,
+  Ctrl-C, ``RosNode.close``), carries the key hash inline. Cyclone sends a disposal
+  without it by default (a key payload only), which Fast DDS 2.14 ignores: the bridge's
+  endpoints then stayed in a Fast DDS node's graph until their lease ran out (10 s).
+- ``Discovery/SPDPInterval`` (``SPDP_INTERVAL``) and
+  ``Discovery/InitialLocatorPruneDelay`` (``inf``): the bridge announces itself to
+  every configured peer address (here the discovery ports of the first
+  ``MAX_PARTICIPANTS`` participants on 127.0.0.1) every ``SPDP_INTERVAL``, for as long
+  as it runs. By default Cyclone 11 pings an address where nobody answers once at
+  start, again only after 30 s, and drops it after 30 s: a Fast DDS node started later
+  on Jazzy's default discovery range (SUBNET: multicast, which the bridge does not
+  join by default) was never found.
 """
 
 from __future__ import annotations
@@ -25,6 +41,8 @@ from wcdrive.errors import WcdriveError
 MAX_DOMAIN_ID = 232
 #: How many participants on this host the loopback discovery probes for.
 MAX_PARTICIPANTS = 32
+#: How often the bridge announces itself (SPDP) to each peer address, answered or not.
+SPDP_INTERVAL = "1s"
 
 
 def domain_id(environ: dict[str, str] | None = None) -> int:
@@ -61,5 +79,8 @@ def xml(network: bool = False, peers: Sequence[str] = (), interface: str | None 
         discovery += f"<MaxAutoParticipantIndex>{MAX_PARTICIPANTS}</MaxAutoParticipantIndex>"
         if peers:
             discovery += "<Peers>" + "".join(f"<Peer address={quoteattr(p)}/>" for p in peers) + "</Peers>"
+    discovery += (f"<SPDPInterval>{SPDP_INTERVAL}</SPDPInterval>"
+                  "<InitialLocatorPruneDelay>inf</InitialLocatorPruneDelay>")
     return (f'<CycloneDDS><Domain id="any"><General>{general}</General>'
-            f"<Discovery>{discovery}</Discovery></Domain></CycloneDDS>")
+            f"<Discovery>{discovery}</Discovery>"
+            "<Internal><GenerateKeyhash>true</GenerateKeyhash></Internal></Domain></CycloneDDS>")

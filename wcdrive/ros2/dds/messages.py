@@ -4,21 +4,33 @@
 
 Frames follow REP 105: ``odom`` -> ``base_link`` is the odometry's transform; the
 wheel joints are ``left_wheel_joint`` and ``right_wheel_joint`` (rad, forward
-positive).
+positive) unless named otherwise (``left_wheel_names``).
+
+``base_pose``: the odometry of a base frame ``offset`` m ahead of the drive axle's
+midpoint (the axle's odometry is the chair's): the odom frame is the axle's odom frame
+moved back by ``offset``, so that the base frame starts at the origin; the pose is
+that point's, ``(x + offset·(cos θ - 1), y + offset·sin θ, θ)``, and its twist, in the
+base frame, ``(v, offset·ω, ω)``: the same forward speed, and the sideways speed of a
+point ahead of the axle when the chair turns. The covariances go through the same maps
+(``J Σ Jᵀ``).
 """
 
 from __future__ import annotations
 
+import math
 from typing import Any
+
+import numpy as np
 
 from wcdrive.ros2 import bridge
 from wcdrive.ros2.bridge import BASE_FRAME as BASE_FRAME
 from wcdrive.ros2.bridge import ODOM_FRAME as ODOM_FRAME
 from wcdrive.ros2.bridge import header, quaternion
-from wcdrive.ros2.bridge import joint_state as joint_state
 from wcdrive.ros2.bridge import stamp as stamp
 
 IMU_FRAME = bridge.IMU_FRAME
+#: The wheels' joints when no names are given.
+WHEEL_JOINTS = bridge.WHEEL_JOINTS
 #: diagnostic_msgs/DiagnosticStatus levels.
 OK, WARN, ERROR = 0, 1, 2
 
@@ -28,11 +40,57 @@ def seconds(time: dict[str, int]) -> float:
     return time["sec"] + time["nanosec"] * 1e-9
 
 
-def odometry(t: float, estimate: Any, frame: str = ODOM_FRAME, child: str = BASE_FRAME) -> dict[str, Any]:
-    """``nav_msgs/msg/Odometry`` of an ``OdometryEstimate`` (its 6x6 covariances)."""
+def base_pose(x: float, y: float, theta: float, linear: float, angular: float, offset: float
+              ) -> tuple[float, float, float, float, float, float]:
+    """(x, y, θ, forward speed, sideways speed, yaw rate) of the base frame ``offset`` m
+    ahead of the axle whose odometry is ``x, y, theta, linear, angular`` (module
+    docstring)."""
+    c, s = math.cos(theta), math.sin(theta)
+    return x + offset * (c - 1.0), y + offset * s, theta, linear, offset * angular, angular
+
+
+def _moved(covariance: Any, row: int, column: int, value: float) -> np.ndarray:
+    """``J Σ Jᵀ`` for the identity ``J`` with ``J[row, column] = value``."""
+    jacobian = np.eye(6)
+    jacobian[row, column] = value
+    sigma = np.asarray(covariance, dtype=float).reshape(6, 6)
+    return np.asarray(jacobian @ sigma @ jacobian.T)
+
+
+def odometry(t: float, estimate: Any, frame: str = ODOM_FRAME, child: str = BASE_FRAME,
+             offset: float = 0.0, pose_diagonal: tuple[float, ...] | None = None,
+             twist_diagonal: tuple[float, ...] | None = None) -> dict[str, Any]:
+    """``nav_msgs/msg/Odometry`` of an ``OdometryEstimate``: its 6x6 covariances, or the
+    fixed diagonals given (as diff_drive_controller's ``pose_covariance_diagonal``);
+    for a base frame ``offset`` m ahead of the axle (``base_pose``)."""
     pose = estimate.pose
-    return bridge.odometry(t, pose.x, pose.y, pose.theta, estimate.linear, estimate.angular,
-                           estimate.pose_covariance, estimate.twist_covariance, frame, child)
+    x, y, theta, vx, vy, wz = base_pose(pose.x, pose.y, pose.theta, estimate.linear, estimate.angular,
+                                        offset)
+    pose_cov, twist_cov = estimate.pose_covariance, estimate.twist_covariance
+    if offset:
+        pose_cov = _moved(_moved(pose_cov, 0, 5, -offset * math.sin(theta)), 1, 5, offset * math.cos(theta))
+        twist_cov = _moved(twist_cov, 1, 5, offset)
+    if pose_diagonal is not None:
+        pose_cov = np.diag(np.asarray(pose_diagonal, dtype=float))
+    if twist_diagonal is not None:
+        twist_cov = np.diag(np.asarray(twist_diagonal, dtype=float))
+    message = bridge.odometry(t, x, y, theta, vx, wz, pose_cov, twist_cov, frame, child)
+    message["twist"]["twist"]["linear"]["y"] = vy
+    return message
+
+
+def joint_state(t: float, positions: tuple[float, float], velocities: tuple[float, float],
+                frame: str = BASE_FRAME, left: tuple[str, ...] = (WHEEL_JOINTS[0],),
+                right: tuple[str, ...] = (WHEEL_JOINTS[1],)) -> dict[str, Any]:
+    """``sensor_msgs/msg/JointState`` of the two wheels (rad, rad/s, forward positive):
+    ``positions`` and ``velocities`` are (left, right); each name of ``left`` gets the
+    left wheel's, each of ``right`` the right's (diff_drive_controller's
+    ``left_wheel_names``, ``right_wheel_names``)."""
+    names = [*left, *right]
+    sides = [0] * len(left) + [1] * len(right)
+    return {"header": header(t, frame), "name": names,
+            "position": [float(positions[i]) for i in sides],
+            "velocity": [float(velocities[i]) for i in sides], "effort": []}
 
 
 def transform(t: float, frame: str, child: str, x: float = 0.0, y: float = 0.0, z: float = 0.0,

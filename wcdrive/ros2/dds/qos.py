@@ -3,7 +3,9 @@
 A ``Profile`` is what ``rclcpp`` names a QoS: reliability, durability, history depth
 (``wcdrive.ros2.topics``, the one topic table, defines them). The profiles are
 rclcpp's: ``DEFAULT`` (reliable, volatile, keep last 10: ``/odom``,
-``/joint_states``, ``/diagnostics``, ``/cmd_vel``), ``SENSOR_DATA`` (best effort,
+``/joint_states``, ``/diagnostics``, ``/estop``, ``/estop_reset``), ``COMMAND`` (best
+effort, volatile, keep last 10: the ``/cmd_vel`` reader, which so matches best-effort
+and reliable writers alike), ``SENSOR_DATA`` (best effort,
 volatile, keep last 5: ``/imu``, ``/scan``), ``CLOCK`` (best effort, keep last 1),
 ``TF`` (tf2_ros' dynamic broadcaster: reliable, volatile, keep last 100), ``TF_STATIC``
 (reliable, transient local, keep last 1: a late subscriber still gets the static
@@ -19,10 +21,10 @@ from __future__ import annotations
 
 from cyclonedds.core import Policy, Qos
 
-from wcdrive.ros2.topics import CLOCK, DEFAULT, DISCOVERY, SENSOR_DATA, TF, TF_STATIC, Profile
+from wcdrive.ros2.topics import CLOCK, COMMAND, DEFAULT, DISCOVERY, SENSOR_DATA, TF, TF_STATIC, Profile
 
-__all__ = ["CLOCK", "DEFAULT", "DISCOVERY", "SENSOR_DATA", "TF", "TF_STATIC", "Profile", "qos", "user_data"]
-
+__all__ = ["CLOCK", "COMMAND", "DEFAULT", "DISCOVERY", "SENSOR_DATA", "TF", "TF_STATIC", "Profile", "qos",
+           "user_data"]
 
 
 def user_data(type_hash: str) -> bytes:
