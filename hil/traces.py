@@ -10,7 +10,8 @@ to 60,000 edges/s and boots with ``millis()`` just below its 2**32 wrap; and pro
 v3: frames with sequence numbers and good, bad or missing CRCs (one or more flipped
 bits, lower-case hex, no sequence number, the ``$`` flipped to ``,``), hello (which
 turns the TLM lines on and from then on refuses unframed lines, but for stops and
-estop), get/set of every parameter in and out of range, estop and reset; bursts of
+estop), get/set of every parameter in and out of range (and, in a quarter of the traces,
+``feedback_form`` 1 from the start: the feedback lines' ros2_control tail), estop and reset; bursts of
 20 to 150 commands back to back (the output budget is spent), floods of long ``set:``
 frames at top speed (``flood``: loop() falls behind, received bytes are lost and
 accounted for) and encoder storms of 60,000 to 500,000 edges/s (the storm guard, the
@@ -21,6 +22,8 @@ one (``wcdrive.hil.profiles``).
 """
 
 from __future__ import annotations
+
+import zlib
 
 import numpy as np
 
@@ -36,6 +39,9 @@ from wcdrive.hil.trace_base import (  # Draw, RandomDraw, HypothesisDraw, Trace:
 )
 from wcdrive.plant.encoders import EdgeTrain, edges_from_trajectory, state_for_count
 from wcdrive.protocol.codec import SEQ_MAX, crc16, frame
+
+#: One trace in this many sets ``feedback_form`` 1 first.
+FEEDBACK_FORM_EVERY = 4
 
 __all__ = ["FIRST_COMMAND_S", "MAX_TRACE_EDGE_RATE", "Draw", "HypothesisDraw", "RandomDraw", "Trace",
            "generate_trace"]
@@ -358,10 +364,18 @@ def generate_trace(draw: Draw, duration: float) -> Trace:
         storms = []
     trace = Trace(duration=duration, serial=serial, encoders=encoders, millis_start=millis_start,
                   storms=storms)
+    # A quarter of the traces tell the board feedback_form 1 before their first command,
+    # so that its feedback lines carry the wheels' tail while they are unframed (until a
+    # hello:4, a reset that loads no saved form, or a set: or defaults of their own).
+    # Chosen by the CRC of the writes drawn so far, not drawn, so that every seed draws
+    # what it drew before (the seeds the tests name keep their traces).
+    form_first = (getattr(draw, "feedback_forms", True)
+                  and zlib.crc32(b"".join(data for _, data in serial)) % FEEDBACK_FORM_EVERY == 0)
     # The last draw: a seed's trace without a profile is the trace it was before them.
-
     if getattr(draw, "profiles", True) and not storms and not flooded and draw.boolean(PROFILE_P):
         trace = motion_profile(draw, trace)
+    if form_first:
+        trace.serial.insert(0, (FIRST_COMMAND_S, b"set:feedback_form=1\n"))
     return trace
 
 

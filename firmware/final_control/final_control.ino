@@ -221,6 +221,7 @@ float maxWheel = WC_MAX_WHEEL_SPEED;        // rad/s: WHEEL range, CMDVEL and PP
 float maxAccel = WC_MAX_ACCEL;              // rad/s^2: normal setpoint ramp
 float estopDecel = WC_EMERGENCY_DECEL;      // rad/s^2: watchdog, PPM loss and e-stop ramp
 uint16_t watchdogMs = WC_WATCHDOG_MS;
+uint8_t feedbackForm = WC_FEEDBACK_FORM;    // 1: the unframed feedback line ends in the wheels' r/l fields
 
 float lastTravel = 0.0f;                    // m/s of travel of the last command
 // Pivot on reversal: stop, rotate in place for WC_PIVOT_TICKS, then the command.
@@ -893,6 +894,14 @@ static void acceptCommand(uint8_t newMode, float right, float left) {
   lastTravel = travel;
 }
 
+// printWheel: <label><p|n><|v|>, the magnitude with 2 decimals as VEL prints it: the
+// tail of a feedback line in feedback_form 1 (a sign of its own would read as "-?").
+static void printWheel(const __FlashStringHelper* label, float v) {
+  line.print(label);
+  line.write(v < 0.0f ? 'n' : 'p');
+  line.print(fabs(v), 2);
+}
+
 // TLM:<millis>,<rx bytes>,<seq>,<pwmL>,<pwmR>,<dirL>,<dirR>,<illegalL>,<illegalR>,
 //     <flags>,<rejected>,<crc rejected>,<free RAM>,<faults>   (protocol/PROTOCOL.md)
 static void sendTelemetry(uint32_t now) {
@@ -1185,7 +1194,16 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
   line.print(',');
   line.print(rawVelR, 2);
   line.print(F(",MODE:"));
-  line.println(mode == WC_MODE_WHEEL ? F("WHEEL") : mode == WC_MODE_CMDVEL ? F("CMDVEL") : F("PPM"));
+  line.print(mode == WC_MODE_WHEEL ? F("WHEEL") : mode == WC_MODE_CMDVEL ? F("CMDVEL") : F("PPM"));
+  // feedback_form 1, for hosts that never say hello:4 (a ros2_control hardware interface
+  // written for the seed-era board reads r[pn]<rad/s> and l[pn]<rad/s>): the wheels'
+  // speeds again, right first as in its commands, the sign as a letter. A framed line
+  // stays as it was, so a v4 host's worst tick still fits the output budget.
+  if (feedbackForm && !linesFramed) {
+    printWheel(F(",r"), rawVelR);
+    printWheel(F(",l"), rawVelL);
+  }
+  line.println();
   line.send();
   if (tlmEnabled) sendTelemetry(now);
 
@@ -1232,9 +1250,12 @@ static const char* const REASONS[] = {
   R_PARAM, R_UNFRAMED, R_FAULT, R_OVERRUN, R_LIMIT,
 };
 
-// Runtime parameters: name, variable, range. watchdog_ms (the last) is an integer.
-#define PARAM_COUNT 10
+// Runtime parameters: name, variable, range. The first PARAM_FLOATS are floats;
+// watchdog_ms and feedback_form (the last two) are integers.
+#define PARAM_COUNT 11
+#define PARAM_FLOATS 9
 #define PARAM_WATCHDOG 9
+#define PARAM_FEEDBACK_FORM 10
 static const char P_KP_L[] PROGMEM = "kp_l";
 static const char P_KI_L[] PROGMEM = "ki_l";
 static const char P_KD_L[] PROGMEM = "kd_l";
@@ -1245,18 +1266,19 @@ static const char P_MAX_WHEEL[] PROGMEM = "max_wheel";
 static const char P_MAX_ACCEL[] PROGMEM = "max_accel";
 static const char P_ESTOP_DECEL[] PROGMEM = "estop_decel";
 static const char P_WATCHDOG[] PROGMEM = "watchdog_ms";
+static const char P_FEEDBACK_FORM[] PROGMEM = "feedback_form";
 static const char* const PARAM_NAMES[PARAM_COUNT] = {
   P_KP_L, P_KI_L, P_KD_L, P_KP_R, P_KI_R, P_KD_R, P_MAX_WHEEL, P_MAX_ACCEL, P_ESTOP_DECEL,
-  P_WATCHDOG,
+  P_WATCHDOG, P_FEEDBACK_FORM,
 };
-static float* const PARAM_VARS[PARAM_COUNT - 1] = {
+static float* const PARAM_VARS[PARAM_FLOATS] = {
   &kpL, &kiL, &kdL, &kpR, &kiR, &kdR, &maxWheel, &maxAccel, &estopDecel,
 };
-static const float PARAM_MIN[PARAM_COUNT - 1] = {
+static const float PARAM_MIN[PARAM_FLOATS] = {
   WC_GAIN_P_MIN, WC_GAIN_I_MIN, 0.0f, WC_GAIN_P_MIN, WC_GAIN_I_MIN, 0.0f, WC_MAX_WHEEL_MIN, WC_ACCEL_MIN,
   WC_DECEL_MIN,
 };
-static const float PARAM_MAX[PARAM_COUNT - 1] = {
+static const float PARAM_MAX[PARAM_FLOATS] = {
   WC_GAIN_P_MAX, WC_GAIN_I_MAX, WC_GAIN_D_MAX, WC_GAIN_P_MAX, WC_GAIN_I_MAX, WC_GAIN_D_MAX,
   WC_MAX_WHEEL_SPEED, WC_ACCEL_MAX, WC_DECEL_MAX,
 };
@@ -1282,6 +1304,8 @@ static void answer(ParseResult r, int32_t seq, uint8_t data) {
     line.print(',');
     if (replyParam == PARAM_WATCHDOG) {
       line.println(watchdogMs);
+    } else if (replyParam == PARAM_FEEDBACK_FORM) {
+      line.println(feedbackForm);
     } else {
       line.println(*PARAM_VARS[replyParam], 4);
     }
@@ -1534,6 +1558,11 @@ static ParseResult parseSet(uint8_t& data) {
     if (ms < 0) return ERR_NUMBER;
     if (ms < WC_WATCHDOG_MIN_MS || ms > WC_WATCHDOG_MAX_MS) return ERR_RANGE;
     watchdogMs = (uint16_t)ms;
+  } else if (i == PARAM_FEEDBACK_FORM) {
+    int32_t form = parseDigits(eq + 1, 4);
+    if (form < 0) return ERR_NUMBER;
+    if (form > WC_FEEDBACK_FORM_MAX) return ERR_RANGE;
+    feedbackForm = (uint8_t)form;
   } else {
     float v;
     ParseResult r = parseNumber(eq + 1, false, v);
@@ -1549,10 +1578,12 @@ static ParseResult parseSet(uint8_t& data) {
 // ---------------------------------------------------------------------------
 // Parameters in EEPROM (protocol/PROTOCOL.md, "Parameters in EEPROM"). The block at
 // WC_EEPROM_PARAMS_ADDR: the layout version (WC_EEPROM_LAYOUT), the 9 float parameters in
-// table order (binary32, little-endian), watchdog_ms (uint16), then the CRC-16/XMODEM of
-// those 39 bytes (uint16, little-endian): 41 bytes.
+// table order (binary32, little-endian), watchdog_ms (uint16), feedback_form (uint8), then
+// the CRC-16/XMODEM of those 40 bytes (uint16, little-endian): 42 bytes.
 // ---------------------------------------------------------------------------
-#define EE_DATA_BYTES (1 + 4 * (PARAM_COUNT - 1) + 2)
+#define EE_WATCHDOG_AT (1 + 4 * PARAM_FLOATS)
+#define EE_FORM_AT (EE_WATCHDOG_AT + 2)
+#define EE_DATA_BYTES (EE_FORM_AT + 1)
 #define EE_BLOCK_BYTES (EE_DATA_BYTES + 2)
 static uint8_t eeBlock[EE_BLOCK_BYTES];   // what save writes
 uint8_t eeNext = EE_BLOCK_BYTES;          // the next byte of eeBlock to compare and write
@@ -1606,8 +1637,9 @@ ISR(EE_READY_vect) {
 static ParseResult saveParams() {
   if (eeBusy) return ERR_BUSY;
   eeBlock[0] = WC_EEPROM_LAYOUT;
-  for (uint8_t i = 0; i < PARAM_COUNT - 1; i++) memcpy(eeBlock + 1 + 4 * i, PARAM_VARS[i], 4);
-  memcpy(eeBlock + 1 + 4 * (PARAM_COUNT - 1), &watchdogMs, 2);
+  for (uint8_t i = 0; i < PARAM_FLOATS; i++) memcpy(eeBlock + 1 + 4 * i, PARAM_VARS[i], 4);
+  memcpy(eeBlock + EE_WATCHDOG_AT, &watchdogMs, 2);
+  eeBlock[EE_FORM_AT] = feedbackForm;
   uint16_t crc = eeCrc(eeBlock);
   memcpy(eeBlock + EE_DATA_BYTES, &crc, 2);
   eeNext = 0;
@@ -1624,6 +1656,7 @@ static ParseResult restoreDefaults() {
   maxAccel = WC_MAX_ACCEL;
   estopDecel = WC_EMERGENCY_DECEL;
   watchdogMs = WC_WATCHDOG_MS;
+  feedbackForm = WC_FEEDBACK_FORM;
   return PARSE_OK;
 }
 
@@ -1640,25 +1673,26 @@ static void loadParams() {
   uint16_t crc;
   memcpy(&crc, b + EE_DATA_BYTES, 2);
   uint16_t ms;
-  memcpy(&ms, b + 1 + 4 * (PARAM_COUNT - 1), 2);
+  memcpy(&ms, b + EE_WATCHDOG_AT, 2);
   if (blank) {
     why = F("blank");
   } else if (b[0] != WC_EEPROM_LAYOUT) {
     why = F("version");
   } else if (crc != eeCrc(b)) {
     why = F("crc");
-  } else if (ms < WC_WATCHDOG_MIN_MS || ms > WC_WATCHDOG_MAX_MS) {
+  } else if (ms < WC_WATCHDOG_MIN_MS || ms > WC_WATCHDOG_MAX_MS || b[EE_FORM_AT] > WC_FEEDBACK_FORM_MAX) {
     why = F("range");
   } else {
-    for (uint8_t i = 0; i < PARAM_COUNT - 1; i++) {
+    for (uint8_t i = 0; i < PARAM_FLOATS; i++) {
       float v;
       memcpy(&v, b + 1 + 4 * i, 4);
       if (!(v >= PARAM_MIN[i] && v <= PARAM_MAX[i])) why = F("range");   // NaN too
     }
   }
   if (why == NULL) {
-    for (uint8_t i = 0; i < PARAM_COUNT - 1; i++) memcpy(PARAM_VARS[i], b + 1 + 4 * i, 4);
+    for (uint8_t i = 0; i < PARAM_FLOATS; i++) memcpy(PARAM_VARS[i], b + 1 + 4 * i, 4);
     watchdogMs = ms;
+    feedbackForm = b[EE_FORM_AT];
     sendEvent(F("PARAMS_LOADED"));
   } else {
     line.print(F("EVT:PARAMS_DEFAULT,"));

@@ -128,7 +128,7 @@
 // ---- Parameters in EEPROM (save / defaults; protocol/PROTOCOL.md) ----------
 #define WC_EEPROM_SIZE 4096        // bytes of the ATmega2560's EEPROM, erased to 0xFF
 #define WC_EEPROM_PARAMS_ADDR 0    // EEPROM address of the parameter block
-#define WC_EEPROM_LAYOUT 1         // the block's first byte: its layout version (a blank EEPROM holds 0xFF)
+#define WC_EEPROM_LAYOUT 2         // the block's first byte: its layout version (a blank EEPROM holds 0xFF; 1 was the block before feedback_form)
 
 // ---- Ranges of the runtime parameters (get:/set:; the defaults are the constants above) ---
 #define WC_GAIN_P_MIN 1.0f         // kp_l, kp_r in [GAIN_P_MIN, GAIN_P_MAX] (tests/firmware/test_gain_safety.py: pure integral control oscillates)
@@ -143,5 +143,7 @@
 #define WC_DECEL_MAX 50.0f
 #define WC_WATCHDOG_MIN_MS 100     // watchdog_ms in [WATCHDOG_MIN_MS, WATCHDOG_MAX_MS]
 #define WC_WATCHDOG_MAX_MS 1000    // docs/safety.md: the stopping distance grows with it
+#define WC_FEEDBACK_FORM 0         // default of feedback_form: 0, the feedback line ENC:<l>,<r>,VEL:<l>,<r>,MODE:<m> alone
+#define WC_FEEDBACK_FORM_MAX 1     // feedback_form in [0, FEEDBACK_FORM_MAX]; 1 appends ,r[pn]<|vel r|>,l[pn]<|vel l|> to each unframed feedback line (ros2_control hardware interfaces)
 
 #endif

@@ -80,7 +80,7 @@ SMALL = {"pwmL": (0, 255), "pwmR": (0, 255), "dirL": (0, 1), "dirR": (0, 1), "mo
          "reverseTicksR": (0, 4), "runawayTicksL": (0, 6), "runawayTicksR": (0, 6),
          "effortTicksL": (0, 12), "effortTicksR": (0, 12), "effortPwmL": (0, 255),
          "effortPwmR": (0, 255), "estopLatched": (0, 1), "ppmLost": (0, 1), "txCredit": (0, 200),
-         "stormTickL": (0, 1), "stormTickR": (0, 1), "errLinesThisTick": (0, 5)}
+         "stormTickL": (0, 1), "stormTickR": (0, 1), "errLinesThisTick": (0, 5), "feedbackForm": (0, 1)}
 
 
 @st.composite

@@ -231,8 +231,8 @@ def _wire_out_of_range(name: str) -> st.SearchStrategy[bytes]:
     """Text the codec would refuse but the board parses and finds out of range."""
     p = BY_NAME[name]
     if p.integer:
-        return st.one_of(st.integers(int(p.high) + 1, 9999), st.integers(0, int(p.low) - 1)).map(
-            lambda v: b"%d" % v)
+        below = [st.integers(0, int(p.low) - 1)] if p.low > 0 else []
+        return st.one_of(st.integers(int(p.high) + 1, 9999), *below).map(lambda v: b"%d" % v)
     above = st.floats(1.01, 1000.0).map(lambda k: p.high * k + 0.01)
     if p.low > 0:
         above = above | st.floats(0.0, 0.99).map(lambda k: p.low * k)

@@ -77,7 +77,7 @@ def test_wheel_frame_matches_the_dbc(right, left, seq) -> None:
 @given(st.sampled_from(sorted(PARAM_RANGES)), st.data(), seqs)
 def test_param_set_reaches_the_board_as_the_same_binary32(name, data, seq) -> None:
     low, high = PARAM_RANGES[name]
-    if name == "watchdog_ms":
+    if PARAMS[cc.PARAM_NAMES.index(name)].integer:
         value = data.draw(st.integers(int(low), int(high)))
     else:
         value = data.draw(st.floats(low, high).map(lambda x: round(x, data.draw(st.integers(0, 7)))))

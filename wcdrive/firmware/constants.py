@@ -132,6 +132,10 @@ EEPROM_SIZE = integer("EEPROM_SIZE")
 EEPROM_PARAMS_ADDR = integer("EEPROM_PARAMS_ADDR")
 EEPROM_LAYOUT = integer("EEPROM_LAYOUT")
 
+# The feedback line's form (feedback_form)
+FEEDBACK_FORM = integer("FEEDBACK_FORM")
+FEEDBACK_FORM_MAX = integer("FEEDBACK_FORM_MAX")
+
 GAIN_P_MIN = f32(real("GAIN_P_MIN"))
 GAIN_P_MAX = f32(real("GAIN_P_MAX"))
 GAIN_I_MIN = f32(real("GAIN_I_MIN"))

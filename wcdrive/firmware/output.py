@@ -51,12 +51,35 @@ def refill_credit(s: FirmwareState, elapsed: int) -> None:
 
 
 def feedback_line(s: FirmwareState) -> bytes:
-    """``ENC:<l>,<r>,VEL:<l>,<r>,MODE:<mode>``, the line every ``controlTick`` sends."""
+    """``ENC:<l>,<r>,VEL:<l>,<r>,MODE:<mode>``, the line every ``controlTick`` sends;
+    with ``feedbackForm`` 1 and the lines unframed, ``,r<p|n><|vel r|>,l<p|n><|vel l|>``
+    follows ``MODE`` (``wheel_tail``).
+
+    The tail is for hosts that never say ``hello:4`` (a ros2_control hardware interface
+    written for the seed-era board); a framed line stays as it was, so the worst tick
+    of a v4 host still fits the output budget."""
+    tail = wheel_tail(s) if s.feedbackForm and not s.linesFramed else b""
     return b"".join((
         b"ENC:", print_long(s.encTickL), b",", print_long(s.encTickR),
         b",VEL:", print_float(s.rawVelL, 2), b",", print_float(s.rawVelR, 2),
-        b",MODE:", MODE_NAMES[s.mode].encode(), CRLF,
+        b",MODE:", MODE_NAMES[s.mode].encode(), tail, CRLF,
     ))
+
+
+def wheel_tail(s: FirmwareState) -> bytes:
+    """The tail ``controlTick`` prints in ``feedback_form`` 1:
+    ``,r<p|n><|rawVelR|>,l<p|n><|rawVelL|>``, the right wheel first as in the commands
+    ``rp5.0,lp3.0,``; rad/s, forward positive."""
+    return print_wheel(b",r", s.rawVelR) + print_wheel(b",l", s.rawVelL)
+
+
+def print_wheel(label: bytes, v: float) -> bytes:
+    r"""``printWheel``: ``<label><p|n><|v|>``, the magnitude printed as ``VEL`` prints it
+    (2 decimals).
+
+    The sign is a letter (``n`` below zero, else ``p``) and the number has none, so a
+    plugin that reads ``r([pn])-?(\d*\.?\d+)`` takes the whole magnitude."""
+    return label + (b"n" if v < 0 else b"p") + print_float(abs(v), 2)
 
 
 def send_event(what: str) -> bytes:

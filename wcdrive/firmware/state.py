@@ -15,8 +15,9 @@ from wcdrive.firmware.constants import HIGH, MODE_CMDVEL
 from wcdrive.firmware.params import PARAMS
 
 #: The EEPROM parameter block (``EE_BLOCK_BYTES``): the layout version, the float
-#: parameters, ``watchdog_ms`` (2 bytes) and a CRC-16 (2 bytes).
-EE_BLOCK_BYTES = 1 + 4 * (len(PARAMS) - 1) + 2 + 2
+#: parameters (4 bytes each), ``watchdog_ms`` (2 bytes), ``feedback_form`` (1 byte) and a
+#: CRC-16 (2 bytes).
+EE_BLOCK_BYTES = 1 + 4 * sum(1 for p in PARAMS if not p.integer) + 2 + 1 + 2
 
 #: The controller floats compared bit for bit against the firmware's SRAM.
 FLOAT_FIELDS = (
@@ -33,8 +34,8 @@ INT_FIELDS = (
     "lastControlTime", "tickCount", "pivotPhase", "pivotTicksLeft", "cmdSinceTick", "watchdogArmed",
     "lastCmdTime", "emergencyStop", "ppmLost", "stillTicks", "parked", "rejectedCount",
     "errSuppressed", "errLinesThisTick", "cmdLen", "cmdCommas", "cmdDiscarding",
-    "illTickL", "illTickR", "watchdogMs", "estopLatched", "tlmEnabled", "linesFramed", "lineCounter",
-    "unframedLine", "lastSeq",
+    "illTickL", "illTickR", "watchdogMs", "feedbackForm", "estopLatched", "tlmEnabled", "linesFramed",
+    "lineCounter", "unframedLine", "lastSeq",
     "rxCount", "crcRejected", "stormTickL", "stormTickR", "faultFlags", "stallTicksL",
     "stallTicksR", "reverseTicksL", "reverseTicksR", "runawayTicksL", "runawayTicksR", "effortPwmL",
     "effortPwmR",
@@ -108,6 +109,7 @@ class FirmwareState:
     maxAccel: float = C.MAX_ACCEL
     estopDecel: float = C.EMERGENCY_DECEL
     watchdogMs: int = C.WATCHDOG_MS
+    feedbackForm: int = C.FEEDBACK_FORM
     lastTravel: float = 0.0
     pivotPhase: int = 0
     pivotTicksLeft: int = 0

@@ -23,6 +23,7 @@ from wcdrive.avr.avrlibc import strtod
 from wcdrive.avr.f32 import bits
 from wcdrive.errors import WcdriveError
 from wcdrive.protocol.codec import (
+    INTEGER_PARAMS,
     PARAM_RANGES,
     Ack,
     Boot,
@@ -185,7 +186,7 @@ def frame_to_command(can_id: int, data: bytes) -> bytes:
         name = PARAM_NAMES[index].encode()
         if op_flags & 0x7F == 1:
             body = b"get:" + name
-        elif name == b"watchdog_ms":
+        elif name.decode() in INTEGER_PARAMS:
             body = b"set:" + name + b"=%d" % round(value)
         else:
             body = b"set:" + name + b"=" + board_text(value)
@@ -309,7 +310,7 @@ def _reply_line(data: bytes) -> bytes:
         return b"EVT:%s\r\n" % EVENTS[code].encode()
     if kind == KIND_PAR:
         name = PARAM_NAMES[code]
-        text = str(round(value)) if name == "watchdog_ms" else f"{value:.4f}"
+        text = str(round(value)) if name in INTEGER_PARAMS else f"{value:.4f}"
         return f"PAR:{name},{text}\r\n".encode()
     if kind == KIND_HELLO:
         build = struct.unpack("<I", data[4:8])[0]

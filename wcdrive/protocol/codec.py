@@ -98,6 +98,8 @@ SAVE = b"save\n"
 DEFAULTS = b"defaults\n"
 #: The runtime parameters and their ranges (protocol/PROTOCOL.md, "Parameters").
 PARAM_RANGES: dict[str, tuple[float, float]] = {p.name: (p.low, p.high) for p in PARAMETERS}
+#: The parameters that take whole numbers (1 to 4 digits on the wire).
+INTEGER_PARAMS = frozenset(p.name for p in PARAMETERS if p.integer)
 
 
 def _param_name(name: str) -> str:
@@ -117,9 +119,10 @@ def encode_set(name: str, value: float) -> bytes:
     value = float(value)
     if not (low <= value <= high):
         raise ValueError(f"{name}={value} is outside {low} .. {high}")
-    if name == "watchdog_ms":
+    if name in INTEGER_PARAMS:
         if value != int(value):
-            raise ValueError("watchdog_ms is a whole number of milliseconds")
+            unit = " of milliseconds" if name == "watchdog_ms" else ""
+            raise ValueError(f"{name} is a whole number{unit}")
         return f"set:{name}={int(value)}".encode()
     if abs(value) < 1e-99:
         # 0 in binary32 as on the board, and "1e-100" has more exponent digits than
@@ -154,7 +157,8 @@ def encode_ppm(channels: list[int] | tuple[int, ...]) -> bytes:
 
 @dataclass(frozen=True, slots=True)
 class Feedback:
-    """``ENC:l,r,VEL:l,r,MODE:m``: raw counts (left mirrored) and rad/s (2 decimals)."""
+    """``ENC:l,r,VEL:l,r,MODE:m``: raw counts (left mirrored) and rad/s (2 decimals);
+    also the line with ``feedback_form`` 1's ``,r<p|n><v>,l<p|n><v>`` after ``MODE``."""
 
     count_left: int
     count_right: int
@@ -347,7 +351,10 @@ Message = (Feedback | ExtendedTelemetry | Error | Event | Boot | Hello | Param |
 
 _NUMBER = rb"-?(?:\d+(?:\.\d*)?|nan|inf|ovf)"
 _FEEDBACK = re.compile(
-    rb"ENC:(-?\d+),(-?\d+),VEL:(" + _NUMBER + rb"),(" + _NUMBER + rb"),MODE:(WHEEL|CMDVEL|PPM)")
+    rb"ENC:(-?\d+),(-?\d+),VEL:(" + _NUMBER + rb"),(" + _NUMBER + rb"),MODE:(WHEEL|CMDVEL|PPM)"
+    # feedback_form 1: the wheels' speeds again, for ros2_control plugins (the VEL fields
+    # carry the same numbers, so the tail is matched and left)
+    rb"(?:,r[pn](?:\d+\.\d+|nan|inf|ovf),l[pn](?:\d+\.\d+|nan|inf|ovf))?")
 
 
 _MODES = {b"WHEEL": "WHEEL", b"CMDVEL": "CMDVEL", b"PPM": "PPM"}

@@ -12,7 +12,7 @@
     wcdrive pty --eddie [--speed S] [--eol tolerant]           a simulated Eddie board on a pty
     wcdrive can-gateway --chair URL_OR_PATH --interface I --channel C
                                                          a chair's serial port on a CAN bus
-    wcdrive ros2 [--url URL] [--twist] [--no-tf] [--network [--peer HOST]]
+    wcdrive ros2 [URL] [--twist] [--no-tf] [--network [--peer HOST]] [--ros-args ...]
                                                          the chair as a ROS 2 node on DDS (docs/ros2.md)
     wcdrive sweep SPEC.toml [--scheduler tcp://HOST:8786 | --workers N | --serial] [--out rows.csv]
                                                          many sim runs on Dask, one row each

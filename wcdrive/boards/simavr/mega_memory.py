@@ -47,7 +47,7 @@ VARIABLE_FORMATS = {
           "runawayTicksR", "stormL", "stormR",
           "resetCause", "effortPwmL", "effortPwmR", "effortTicksL", "effortTicksR", "eeNext", "eeBusy",
           "holding", "holdRollaway", "brakeReleased", "overspeedTicksL", "overspeedTicksR",
-          "limitLatched"),
+          "limitLatched", "feedbackForm"),
 }
 _FORMAT_OF = {name: fmt for fmt, names in VARIABLE_FORMATS.items() for name in names}
 

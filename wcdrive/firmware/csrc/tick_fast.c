@@ -83,7 +83,7 @@ static double f_from_int(int64_t n) { return rnd((double)n); }   /* |n| < 2**53 
     X(effortPwmR) X(effortSpeedR) X(effortSetpointR) X(effortTicksR) \
     X(pwmL) X(pwmR) X(dirL) X(dirR) X(setpointL) X(setpointR) X(targetL) X(targetR) \
     X(prevMeasL) X(prevMeasR) X(cmdSinceTick) X(lastCmdTime) X(watchdogArmed) \
-    X(watchdogMs) X(emergencyStop) X(estopDecel) X(maxAccel) X(stillTicks) X(parked) \
+    X(watchdogMs) X(feedbackForm) X(emergencyStop) X(estopDecel) X(maxAccel) X(stillTicks) X(parked) \
     X(integralL) X(integralR) X(outputL) X(outputR) X(kpL) X(kiL) X(kdL) X(kpR) X(kiR) \
     X(kdR) X(pivotPhase) X(pivotTicksLeft) X(pendingL) X(pendingR) X(mode) X(txDropped) \
     X(tlmEnabled) X(linesFramed) X(lineCounter) X(errLinesThisTick) X(rxCount) X(lastSeq) X(estopLatched) X(ppmLost) \
@@ -635,6 +635,12 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
     print_float2(&line, D(rawVelR));
     puts_(&line, ",MODE:");
     put(&line, PyBytes_AS_STRING(mode_name), (int)PyBytes_GET_SIZE(mode_name));
+    if (I(feedbackForm) && !I(linesFramed)) {   /* wheel_tail */
+        puts_(&line, D(rawVelR) < 0.0 ? ",rn" : ",rp");
+        print_float2(&line, fabs(D(rawVelR)));
+        puts_(&line, D(rawVelL) < 0.0 ? ",ln" : ",lp");
+        print_float2(&line, fabs(D(rawVelL)));
+    }
     puts_(&line, "\r\n");
     send(&v, &out, &line);
     v.written[F_txCredit] = v.written[F_txDropped] = 1;
