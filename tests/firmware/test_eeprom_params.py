@@ -51,7 +51,7 @@ def _event(boot: bytes) -> str:
 
 
 def test_saved_parameters_survive_a_reset() -> None:
-    """hello, set every kind of parameter, save, wait for the writes (41 bytes x 3.4 ms),
+    """hello, set every kind of parameter, save, wait for the writes (42 bytes x 3.4 ms),
     reset (DTR): the new boot loads them, says so, and the port agrees bit for bit."""
     trace = Trace(1.2, _frames([b"hello", *TUNED, b"save"]), resets=[(0.9, "external")])
     recording = _same(trace)

@@ -16,7 +16,7 @@ import pytest
 from tests.conftest import thorough
 from wcdrive.eddie import runner as eddie_runner
 from wcdrive.sim import contract, runner, scenario
-from wcdrive.sim.expect import parse
+from wcdrive.sim.expect import matches, parse
 from wcdrive.sim.scenario import ScenarioError
 from wcdrive.tools.cli import main
 
@@ -110,6 +110,14 @@ def test_a_malformed_table_is_a_scenario_error_that_names_the_key(tmp_path: Path
     with pytest.raises(ScenarioError, match=re.escape(named)) as err:
         _with(tmp_path, "square", table)
     assert "[expect]" in str(err.value) and "square.toml" in str(err.value)
+
+
+def test_a_kind_of_alternatives_matches_any_of_them() -> None:
+    """``A|B``: either answer; each side as a kind of its own (a ``*`` prefix, a comma)."""
+    kind = "FAULT,ENC_STALL_*|STALLED_ON_GRADE"
+    assert matches(kind, "FAULT,ENC_STALL_R") and matches(kind, "STALLED_ON_GRADE")
+    assert not matches(kind, "FAULT,MOTOR_R") and not matches(kind, "OVERSPEED")
+    assert matches("OVERSPEED | ROLLAWAY", "ROLLAWAY") and not matches("OVERSPEED|ROLLAWAY", "ROLLAWAYS")
 
 
 def test_the_table_parses_to_what_it_says() -> None:

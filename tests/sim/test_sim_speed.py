@@ -36,6 +36,7 @@ from hypothesis import strategies as st
 from tests.support.sim_digest import FIELDS, RECORDED, digest, fields
 from wcdrive.avr.timer0 import OVERFLOW_CYCLES
 from wcdrive.boards.port_loop import F_CPU, PortLoop
+from wcdrive.firmware.eeprom import BLOCK_BYTES
 from wcdrive.firmware.final_control import Firmware
 from wcdrive.host.odometry import OdometryParams, WheelOdometry
 from wcdrive.plant import ChairParams, Gyro, Plant
@@ -500,7 +501,7 @@ def test_an_eeprom_save_completes_on_the_event_loop() -> None:
     out = b"".join(data for _, data in b.output)
     assert b"ERR:busy" not in out
     last = dict(zip([f.name for f in dataclasses.fields(Firmware().state)], b.states[-1], strict=True))
-    assert last["eeBusy"] == 0 and last["eeNext"] == 41
+    assert last["eeBusy"] == 0 and last["eeNext"] == BLOCK_BYTES
 
 
 @pytest.mark.parametrize("ahead", [1, 2, 3])

@@ -21,11 +21,13 @@
 **Events.** A kind is an ``EVT:`` line without ``EVT:``; a listed kind matches the line
 equal to it or starting with it and a comma (``FAULT`` matches every fault,
 ``FAULT,MOTOR_L`` one); a kind ending in ``*`` matches every line that starts with the
-rest (``FAULT,ENC_STALL_*``: either side). The informational kinds (``INFORMATIONAL``: the parameter
-block's ``PARAMS_LOADED`` and ``PARAMS_DEFAULT``) are ignored; every other kind is an
-alarm (``FAULT,*``, ``OVERSPEED``, ``ROLLAWAY``, ``STALLED_ON_GRADE``, ``WATCHDOG``,
-``ESTOP``, ``PPM_LOST``, and any kind not known here), and an alarm line that no kind of
-``events``, ``allow`` or ``[[expect.event]]`` matches is a miss. Except a ``WATCHDOG``
+rest (``FAULT,ENC_STALL_*``: either side); alternatives joined by ``|`` match where any
+does (``FAULT,ENC_STALL_*|STALLED_ON_GRADE``: either answer must come). The
+informational kinds (``INFORMATIONAL``: the parameter block's ``PARAMS_LOADED`` and
+``PARAMS_DEFAULT``) are ignored; every other kind is an alarm (``FAULT,*``,
+``OVERSPEED``, ``ROLLAWAY``, ``STALLED_ON_GRADE``, ``WATCHDOG``, ``ESTOP``, ``PPM_LOST``,
+and any kind not known here), and an alarm line that no kind of ``events``, ``allow``
+or ``[[expect.event]]`` matches is a miss. Except a ``WATCHDOG``
 that follows another alarm (the board has stopped already and refuses motion, so the
 host's commands no longer keep its watchdog fed) or comes after the host's last command
 (an open-loop scenario ends with a stop and then says nothing for ``settle_s``; a
@@ -141,7 +143,10 @@ class Expect:
 
 
 def matches(kind: str, body: str) -> bool:
-    """Whether a listed ``kind`` matches an event line's body (``EVT:`` stripped)."""
+    """Whether a listed ``kind`` matches an event line's body (``EVT:`` stripped); a
+    kind of alternatives joined by ``|`` matches where any of them does."""
+    if "|" in kind:
+        return any(matches(k.strip(), body) for k in kind.split("|"))
     if kind.endswith("*"):
         return body.startswith(kind[:-1])
     return body == kind or body.startswith(kind + ",")
