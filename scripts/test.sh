@@ -13,7 +13,8 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-DEBIAN_PACKAGES=(gcc-avr avr-libc arduino-core-avr simavr libsimavr-dev libelf-dev make gcc avrdude)
+# cmake and g++: the stock ROS 2 Jazzy client's tf2_msgs is built from its .msg (tests/ros2/jazzy_env.py)
+DEBIAN_PACKAGES=(gcc-avr avr-libc arduino-core-avr simavr libsimavr-dev libelf-dev make gcc avrdude cmake g++)
 # Python's headers, for the port's C fast path (wcdrive/avr/csrc/f32_fast.c), when the
 # interpreter does not bring its own (Debian's python3 keeps them in python3-dev).
 python3 -c 'import os, sysconfig, sys; sys.exit(not os.path.exists(os.path.join(sysconfig.get_paths()["include"], "Python.h")))' \
