@@ -20,9 +20,9 @@ Modes (``--mode``):
   ``ROS_STATIC_PEERS``, ``ROS_LOCALHOST_ONLY``): how long until it lists ``/wcdrive``
   and until the first ``/odom`` arrives.
 
-- ``replica`` (``check_stack_replica``): for a later check of a bridge configured as a
+- ``replica`` (``check_stack_replica``): a bridge configured as a
   ``diff_drive_controller`` named after the chair (``--controller``: its node and
-  ``/<controller>/odom``, ``/<controller>/cmd_vel``); no test uses it yet.
+  ``/<controller>/odom``, ``/<controller>/cmd_vel``), with its TF left to the stack.
 
     ROS_DOMAIN_ID=150 RMW_IMPLEMENTATION=rmw_fastrtps_cpp venv/bin/python jazzy_client.py \\
         --mode main --bridge-pid 1234
@@ -330,6 +330,11 @@ def check_stack_replica(client: Client, controller: str, seconds: float = 2.0) -
     client.drive(pub, 0.3, seconds)
     x1 = samples[-1][1].pose.pose.position.x if samples else None
     out["moved_m"] = None if x0 is None or x1 is None else round(x1 - x0, 3)
+    out["top_speed_mps"] = round(max((abs(m.twist.twist.linear.x) for _, m in samples), default=0.0), 3)
+    # the stack's EKF owns odom -> base_link and its robot_state_publisher the static
+    # frames: the bridge publishes neither, so no frame gets a second parent
+    out["tf_publishers"] = {t: [i.node_name for i in client.node.get_publishers_info_by_topic(t)]
+                            for t in ("/tf", "/tf_static")}
     out["incompatible_qos"] = list(client.incompatible)
     return out
 
@@ -348,7 +353,7 @@ def main() -> int:
     rclpy.init()
     try:
         if args.mode == "replica":
-            result = check_stack_replica(Client("jazzy_replica"), args.controller)
+            result = check_stack_replica(Client("jazzy_replica"), args.controller, seconds=4.0)
         else:
             result = run_main(args) if args.mode == "main" else run_discover(args)
     finally:

@@ -14,6 +14,11 @@ namespace). Run with wcdrive's Python:
    ``/wcdrive`` and its first ``/odom``;
 4. B gets SIGTERM.
 
+Meanwhile, while the late joiners wait, bridge C starts as a stack replaces its drive
+with it (``--params-file`` with a ``diff_drive_controller`` YAML, ``-r
+__node:=wheelchair_controller``; ``REPLICA_YAML``) and the ``replica`` client drives it
+as the stack would (``replica`` in the JSON).
+
 Prints one JSON object: ``main``, ``discovery`` (by setting), the bridges' exit codes,
 how long A took to exit after the SIGTERM, and ``late_s`` (when the probes started).
 
@@ -43,11 +48,30 @@ PROBES: dict[str, dict[str, str]] = {
 }
 
 
-def start_bridge(domain: int, url: str) -> subprocess.Popen[str]:
-    """``wcdrive ros2 --url URL`` in ``domain``, once it says its node is up."""
+#: The controller a stack names its drive after, and its YAML as the stack has it: the
+#: EKF owns odom -> base_link, robot_state_publisher the static frames, and the
+#: controller limits the speed.
+CONTROLLER = "wheelchair_controller"
+REPLICA_LIMIT_MPS = 0.2
+REPLICA_YAML = f"""{CONTROLLER}:
+  ros__parameters:
+    left_wheel_names: ["left_wheel_joint"]
+    right_wheel_names: ["right_wheel_joint"]
+    enable_odom_tf: false
+    publish_static_tf: false
+    linear:
+      x:
+        max_velocity: {REPLICA_LIMIT_MPS}
+"""
+
+
+def start_bridge(domain: int, url: str, *ros_args: str) -> subprocess.Popen[str]:
+    """``wcdrive ros2 --url URL`` in ``domain`` (with ``--ros-args`` ``ros_args`` when
+    given), once it says its node is up."""
+    extra = ["--ros-args", *ros_args] if ros_args else []
     bridge = subprocess.Popen([sys.executable, "-m", "wcdrive", "ros2", "--url", url, "--domain",
-                               str(domain)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                              cwd=REPO)
+                               str(domain), *extra], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                              text=True, cwd=REPO)
     assert bridge.stdout is not None
     line = bridge.stdout.readline()
     if "wcdrive ros2: node /" not in line:
@@ -82,11 +106,11 @@ def stop(process: subprocess.Popen[str]) -> None:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--python", required=True, help="the venv's Python (jazzy_env)")
-    parser.add_argument("--domains", required=True, help="A,B: the two bridges' ROS domains")
+    parser.add_argument("--domains", required=True, help="A,B,C: the three bridges' ROS domains")
     parser.add_argument("--world", required=True, help="bridge A's world (a wall file)")
     parser.add_argument("--late", type=float, default=32.0, help="start the late joiners this long after B")
     args = parser.parse_args()
-    domain_a, domain_b = (int(d) for d in args.domains.split(","))
+    domain_a, domain_b, domain_c = (int(d) for d in args.domains.split(","))
     out: dict[str, Any] = {}
     started: list[subprocess.Popen[str]] = []
     try:
@@ -105,6 +129,15 @@ def main() -> int:
         else:
             out["bridge_exit"] = bridge.returncode
             out["bridge_stderr"] = bridge.stderr.read()[-2000:] if bridge.stderr else ""
+        params = Path(args.world).with_name("controllers.yaml")
+        params.write_text(REPLICA_YAML)
+        replica_bridge = start_bridge(domain_c, "sim://", "--params-file", str(params),
+                                      "-r", f"__node:={CONTROLLER}")
+        started.append(replica_bridge)
+        replica = client(args.python, domain_c, "--mode", "replica", "--controller", CONTROLLER)
+        started.append(replica)
+        out["replica"] = result_of(replica, timeout=60)
+        stop(replica_bridge)
         time.sleep(max(0.0, t0 + args.late - time.monotonic()))
         out["late_s"] = round(time.monotonic() - t0, 1)
         probes = {name: client(args.python, domain_b, "--mode", "discover", "--name", f"late_{i}",

@@ -18,6 +18,11 @@ and each check a function of ``CHECKS``, all of them run and every failure named
   stops it under a continuing stream, ``/estop_reset`` releases it;
 - after SIGTERM the bridge's node, endpoints and matches leave the client's graph
   within 1 s;
+- a stack replica: the bridge configured from a ``diff_drive_controller`` YAML and
+  ``-r __node:=wheelchair_controller``; a BEST_EFFORT TwistStamped writer on
+  ``/wheelchair_controller/cmd_vel`` drives it within the YAML's speed limit, an
+  EKF-style reader gets ``/wheelchair_controller/odom``, and the bridge publishes no
+  ``/tf`` and no ``/tf_static`` (the stack's EKF and robot_state_publisher own them);
 - four late joiners (LOCALHOST, ``ROS_STATIC_PEERS``, SUBNET, ``ROS_LOCALHOST_ONLY``),
   started more than 30 s after a bridge (Cyclone's default pruning of unanswered
   peer addresses), each find it and its ``/odom`` within a few seconds.
@@ -63,7 +68,8 @@ def stage(jazzy_python: Path, world: Path) -> dict[str, Any]:
     JSON, the late joiners', the bridges' exit codes."""
     world.write_text("walls = [[5.0, -3.0, 5.0, 3.0]]\n")          # 5 m ahead: room to drive
     run = [sys.executable, "-m", "tests.ros2.jazzy_stage", "--python", str(jazzy_python),
-           "--domains", f"{fresh_domain()},{fresh_domain()}", "--world", str(world), "--late", str(LATE_S)]
+           "--domains", f"{fresh_domain()},{fresh_domain()},{fresh_domain()}", "--world", str(world),
+           "--late", str(LATE_S)]
     netns = _netns()
     command = ["unshare", "-rn", "sh", "-c", NETNS + "exec " + shlex.join(run)] if netns else run
     out = subprocess.run(command, capture_output=True, text=True, timeout=300, cwd=REPO)
@@ -103,6 +109,23 @@ def types_hashes_and_qos_as_rclpy_sees_them(run: dict[str, Any]) -> None:
         durability = "transient_local" if p.transient_local else "volatile"
         assert seen["durability"] == durability, (row.name, seen)
         assert seen["depth"] in (0, p.depth), (row.name, seen)   # DDS discovery carries no depth
+
+
+@check
+def a_stack_replica_takes_the_bridge_in_place_of_its_drive(run: dict[str, Any]) -> None:
+    from tests.ros2.jazzy_stage import CONTROLLER, REPLICA_LIMIT_MPS
+
+    replica = run["replica"]
+    assert "error" not in replica, replica
+    assert replica["node_listed"] is not None, replica
+    assert replica["matched_s"] is not None, replica          # the BEST_EFFORT writer matched
+    odom, cmd = (replica["endpoints"][f"/{CONTROLLER}/{t}"] for t in ("odom", "cmd_vel"))
+    assert [e["dir"] for e in odom] == ["pub"] and [e["dir"] for e in cmd] == ["sub"], replica
+    # asked for 0.3 m/s for 4 s under the YAML's 0.2 m/s limit: it drives, up to the limit
+    assert replica["moved_m"] is not None and 0.2 < replica["moved_m"] < 4.0 * REPLICA_LIMIT_MPS, replica
+    assert 0.75 * REPLICA_LIMIT_MPS < replica["top_speed_mps"] <= REPLICA_LIMIT_MPS + 0.02, replica
+    assert replica["tf_publishers"] == {"/tf": [], "/tf_static": []}, replica
+    assert replica["incompatible_qos"] == [], replica
 
 
 @check
@@ -173,6 +196,7 @@ def test_the_bridge_under_a_stock_jazzy_rclpy(jazzy_python: Path, tmp_path: Path
     assert "error" not in main, main
     print(json.dumps({k: v for k, v in main.items() if k not in ("table", "data")}))
     print(f"after SIGTERM, gone from the graph in (s): {main.get('leave')}")
+    print(f"stack replica: {run.get('replica')}")
     for setting, probe in run.get("discovery", {}).items():
         print(f"{setting}: started {run.get('late_s')} s after the bridge, listed it in "
               f"{probe.get('node_s')} s, first /odom in {probe.get('odom_s')} s")
