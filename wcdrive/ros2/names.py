@@ -29,7 +29,7 @@ A rule that rcl refuses raises ``RosNameError`` (a ``WcdriveFileError``) saying 
 from __future__ import annotations
 
 import re
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 
 from wcdrive.errors import WcdriveFileError
@@ -190,23 +190,25 @@ def _parse_remap(text: str) -> RemapRule:
     elif kind == URL_TOPIC:
         service = False
         lx.accept()
-    start = lx.position
-    if lx.peek() in (TILDE_SLASH, FORWARD_SLASH):
-        lx.accept()
-    _match_token(lx)
-    while lx.peek() != SEPARATOR:
-        lx.expect(FORWARD_SLASH, "expected '/' or ':=' in the name to match")
-        _match_token(lx)
+    start = _name(lx, _match_token, SEPARATOR, "expected '/' or ':=' in the name to match")
     match = text[start:lx.position]
     lx.accept()                                         # :=
+    start = _name(lx, _replacement_token, EOF, "expected '/' or the end in the replacement")
+    return RemapRule("name", text[start:], match=match, node=node, topic=topic, service=service, text=text)
+
+
+def _name(lx: Lookahead, token: Callable[[Lookahead], None], end: str, message: str) -> int:
+    """A name of ``token``s joined by ``/`` (after an optional leading ``~/`` or ``/``)
+    up to ``end``, the match side's ``:=`` or the replacement's end; returns where it
+    started."""
     start = lx.position
     if lx.peek() in (TILDE_SLASH, FORWARD_SLASH):
         lx.accept()
-    _replacement_token(lx)
-    while lx.peek() != EOF:
-        lx.expect(FORWARD_SLASH, "expected '/' or the end in the replacement")
-        _replacement_token(lx)
-    return RemapRule("name", text[start:], match=match, node=node, topic=topic, service=service, text=text)
+    token(lx)
+    while lx.peek() != end:
+        lx.expect(FORWARD_SLASH, message)
+        token(lx)
+    return start
 
 
 def _match_token(lx: Lookahead) -> None:
