@@ -22,7 +22,8 @@ Modes (``--mode``):
 
 - ``replica`` (``check_stack_replica``): a bridge configured as a
   ``diff_drive_controller`` named after the chair (``--controller``: its node and
-  ``/<controller>/odom``, ``/<controller>/cmd_vel``), with its TF left to the stack.
+  ``/<controller>/odom``, ``/<controller>/cmd_vel``), with its TF left to the stack,
+  and its ``/scan`` as the stack's lidar driver would publish it.
 
     ROS_DOMAIN_ID=150 RMW_IMPLEMENTATION=rmw_fastrtps_cpp venv/bin/python jazzy_client.py \\
         --mode main --bridge-pid 1234
@@ -312,10 +313,21 @@ def run_discover(args: argparse.Namespace) -> dict[str, Any]:
     return result
 
 
+def scan_summary(scan: Any) -> dict[str, Any]:
+    """What a scan filter relies on: the angle span, beam count, ``range_min``, frame,
+    the intensities seen, and every return as (stated angle, range)."""
+    returns = [[round(scan.angle_min + i * scan.angle_increment, 6), round(r, 4)]
+               for i, r in enumerate(scan.ranges) if math.isfinite(r)]
+    return {"frame_id": scan.header.frame_id, "angle_min": scan.angle_min, "angle_max": scan.angle_max,
+            "beams": len(scan.ranges), "range_min": scan.range_min,
+            "intensities": sorted({round(v, 3) for v in scan.intensities}), "returns": returns}
+
+
 def check_stack_replica(client: Client, controller: str, seconds: float = 2.0) -> dict[str, Any]:
     """A later check of a bridge under an existing stack: the node named after the
     ``diff_drive_controller`` (``/<controller>``), odometry on ``/<controller>/odom``
-    read as an EKF reads it, a BEST_EFFORT TwistStamped writer on
+    read as an EKF reads it, ``/scan`` read as a scan filter reads it (sensor data QoS;
+    a scan taken standing: ``scan_summary``), a BEST_EFFORT TwistStamped writer on
     ``/<controller>/cmd_vel`` that moves it; what the graph and the data showed."""
     odom_topic, cmd_topic = f"/{controller}/odom", f"/{controller}/cmd_vel"
     out: dict[str, Any] = {
@@ -324,8 +336,10 @@ def check_stack_replica(client: Client, controller: str, seconds: float = 2.0) -
     pub = client.publisher(cmd_topic, TwistStamped, BEST_EFFORT)
     out["matched_s"] = client.spin_until(lambda: pub.get_subscription_count() > 0, 5.0)
     out["endpoints"] = {t: client.endpoints(t, controller) for t in (odom_topic, cmd_topic)}
-    samples = client.received[odom_topic]
-    client.spin_until(lambda: bool(samples), 5.0)
+    client.subscribe("/scan", LaserScan, qos_profile_sensor_data)   # as a scan filter reads it
+    samples, scans = client.received[odom_topic], client.received["/scan"]
+    client.spin_until(lambda: bool(samples) and bool(scans), 5.0)
+    out["scan"] = scan_summary(scans[-1][1]) if scans else None        # taken standing
     x0 = samples[-1][1].pose.pose.position.x if samples else None
     client.drive(pub, 0.3, seconds)
     x1 = samples[-1][1].pose.pose.position.x if samples else None

@@ -14,10 +14,11 @@ namespace). Run with wcdrive's Python:
    ``/wcdrive`` and its first ``/odom``;
 4. B gets SIGTERM.
 
-Meanwhile, while the late joiners wait, bridge C starts as a stack replaces its drive
-with it (``--params-file`` with a ``diff_drive_controller`` YAML, ``-r
-__node:=wheelchair_controller``; ``REPLICA_YAML``) and the ``replica`` client drives it
-as the stack would (``replica`` in the JSON).
+Meanwhile, while the late joiners wait, bridge C (``sim://`` among ``REPLICA_WALLS``
+with a lidar) starts as a stack replaces its drive with it (``--params-file`` with a
+``diff_drive_controller`` YAML and the stack's lidar mount, ``-r
+__node:=wheelchair_controller``; ``REPLICA_YAML``) and the ``replica`` client reads its
+scans and drives it as the stack would (``replica`` in the JSON).
 
 Prints one JSON object: ``main``, ``discovery`` (by setting), the bridges' exit codes,
 how long A took to exit after the SIGTERM, and ``late_s`` (when the probes started).
@@ -50,15 +51,25 @@ PROBES: dict[str, dict[str, str]] = {
 
 #: The controller a stack names its drive after, and its YAML as the stack has it: the
 #: EKF owns odom -> base_link, robot_state_publisher the static frames, and the
-#: controller limits the speed.
+#: controller limits the speed. The lidar is the stack's: an RPLidar S3 under the
+#: seat, head down and facing back (its URDF joint's origin), run by ``rplidar_ros``
+#: with ``inverted:=true``.
 CONTROLLER = "wheelchair_controller"
 REPLICA_LIMIT_MPS = 0.2
+#: The URDF's laser joint: x, y, z (m), roll, pitch, yaw (rad).
+REPLICA_MOUNT = (-0.30, 0.0, 0.25, 3.14159, 0.0, 3.14159)
+#: The replica's world (m, the chair at the origin facing +x): a wall 5 m ahead, and a
+#: shorter one on the left only, so that a mirrored scan lands nowhere.
+REPLICA_WALLS = [[5.0, -3.0, 5.0, 3.0], [1.0, 2.0, 3.0, 2.0]]
 REPLICA_YAML = f"""{CONTROLLER}:
   ros__parameters:
     left_wheel_names: ["left_wheel_joint"]
     right_wheel_names: ["right_wheel_joint"]
     enable_odom_tf: false
     publish_static_tf: false
+    lidar_mount: [{", ".join(map(str, REPLICA_MOUNT))}]
+    lidar_driver: rplidar_ros
+    lidar_inverted: true
     linear:
       x:
         max_velocity: {REPLICA_LIMIT_MPS}
@@ -129,10 +140,11 @@ def main() -> int:
         else:
             out["bridge_exit"] = bridge.returncode
             out["bridge_stderr"] = bridge.stderr.read()[-2000:] if bridge.stderr else ""
-        params = Path(args.world).with_name("controllers.yaml")
+        params, world = (Path(args.world).with_name(name) for name in ("controllers.yaml", "replica.toml"))
         params.write_text(REPLICA_YAML)
-        replica_bridge = start_bridge(domain_c, "sim://", "--params-file", str(params),
-                                      "-r", f"__node:={CONTROLLER}")
+        world.write_text(f"walls = {json.dumps(REPLICA_WALLS)}\n")
+        replica_bridge = start_bridge(domain_c, f"sim://?world={world}&lidar=rplidar_s3", "--params-file",
+                                      str(params), "-r", f"__node:={CONTROLLER}")
         started.append(replica_bridge)
         replica = client(args.python, domain_c, "--mode", "replica", "--controller", CONTROLLER)
         started.append(replica)

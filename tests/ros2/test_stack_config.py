@@ -107,6 +107,10 @@ def test_the_command_line_takes_ros_arguments_as_rcl_does(tmp_path: Path) -> Non
     (["--ros-args", "-p"], "trailing -p"),
     (["--ros-args", "--custom"], "unknown ROS arguments: ['--custom']"),
     (["a", "--url", "b"], "two URLs"),
+    (["--ros-args", "-p", "lidar_mount:=[0.0, 0.0, 0.3, 0.5, 0.0, 0.0]"], "only 0 or pi"),
+    (["--ros-args", "-p", "lidar_mount:=[0.0, 0.0, 0.3]"], "needs 6 values"),
+    (["--ros-args", "-p", "lidar_driver:=urg_node"], "one of sllidar_ros2, rplidar_ros"),
+    (["/dev/ttyACM0", "--ros-args", "-p", "lidar_inverted:=true"], "not a simulated robot"),
 ])
 def test_what_the_bridge_cannot_take_is_named(argv: list[str], says: str) -> None:
     with pytest.raises(WcdriveFileError) as caught:
@@ -123,7 +127,8 @@ def test_an_unknown_parameter_lists_the_known_ones() -> None:
                  "twist_covariance_diagonal", "linear.x.max_velocity", "linear.x.min_velocity",
                  "linear.x.max_acceleration", "angular.z.max_velocity", "angular.z.max_acceleration",
                  "publish_static_tf", "base_frame_offset_x", "lidar_frame_id", "imu_frame_id",
-                 "use_sim_time"):
+                 "use_sim_time", "lidar_mount", "lidar_driver", "lidar_inverted",
+                 "lidar_angle_compensate"):
         assert name in first, name
     assert "'wheels_per_side'" in first
 
@@ -235,6 +240,36 @@ class _ChairWithLidar(IdleRobot):
 
     def stop(self) -> None:
         pass
+
+
+def test_the_lidar_parameters_mount_the_simulated_lidar(tmp_path: Path) -> None:
+    """A URDF's laser joint (yaw pi, roll pi as ``3.14159``) and the driver's launch
+    options, given as parameters, are the simulated lidar's: in place of the URL's own
+    options of those names, in degrees there."""
+    import wcdrive
+
+    yaml = tmp_path / "controllers.yaml"
+    yaml.write_text("wheelchair_controller:\n  ros__parameters:\n"
+                    "    lidar_mount: [-0.30, 0.0, 0.25, 3.14159, 0.0, 3.14159]\n"
+                    "    lidar_driver: rplidar_ros\n    lidar_inverted: true\n")
+    url = ros2_node.configure(_args(
+        "sim://?lidar=rplidar_s3&lidar_driver=sllidar_ros2&speed=2", "--ros-args", "--params-file",
+        str(yaml), "-r", "__node:=wheelchair_controller", "-p", "lidar_angle_compensate:=false"))[2]
+    assert url.startswith("sim://?lidar=rplidar_s3&speed=2&lidar_mount=-0.3,0.0,0.25,180.0,0.0,179.99")
+    assert url.endswith("&lidar_driver=rplidar_ros&lidar_inverted=true&lidar_angle_compensate=false")
+    from wcdrive.host.wheelchair import Wheelchair
+
+    with wcdrive.connect(url) as chair:
+        assert isinstance(chair, Wheelchair)
+        lidar = chair.lidar
+    assert lidar is not None
+    mount, driver = lidar.mount, lidar.driver
+    assert (mount.x, mount.y, mount.z) == (-0.3, 0.0, 0.25)
+    assert mount.inverted and mount.driver_inverted and mount.yaw == pytest.approx(math.pi, abs=1e-5)
+    assert (driver.name, driver.angle_compensate) == ("rplidar_ros", False)
+    # a URL without a lidar: the parameters need one to mount, and say so
+    with pytest.raises(Exception, match="needs lidar=rplidar_s3"):
+        wcdrive.connect(ros2_node.configure(_args("sim://", "--ros-args", "-p", "lidar_inverted:=true"))[2])
 
 
 @pytest.mark.parametrize("static", [True, False])

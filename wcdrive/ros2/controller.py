@@ -25,7 +25,12 @@ defines it and what the bridge does with it:
   robot_state_publisher owns the static transforms), ``base_frame_offset_x`` (how far
   ``base_frame_id`` is ahead of the drive axle's midpoint, m: odometry is reported for
   that point, and the lidar's transform measured from it), ``lidar_frame_id`` and
-  ``imu_frame_id``.
+  ``imu_frame_id``; and the simulated lidar's mount and driver (``lidar_mount``: x, y,
+  z in m and roll, pitch, yaw in rad, as a URDF joint's ``origin`` gives them;
+  ``lidar_driver``: ``sllidar_ros2`` or ``rplidar_ros``; ``lidar_inverted`` and
+  ``lidar_angle_compensate``, that driver's ``inverted`` and ``angle_compensate``):
+  ``lidar_url_options`` turns them into the URL options of the same names
+  (``wcdrive.transports.urlhandler.board_serial.LIDAR_DETAILS``: degrees there).
 
 Types are rclcpp's: a parameter declared a double takes a double only (``50`` is an
 integer: write ``50.0``), as a node built with generate_parameter_library refuses it.
@@ -46,7 +51,7 @@ from typing import Any
 from wcdrive.ros2.limits import AxisLimits
 from wcdrive.ros2.params import ParameterError, Value
 
-__all__ = ["PARAMETERS", "Parameter", "StackConfig", "configure"]
+__all__ = ["PARAMETERS", "Parameter", "StackConfig", "configure", "lidar_url_options"]
 
 DDC = "diff_drive_controller"
 CI = "controller_interface"
@@ -81,6 +86,30 @@ def _frame(v: Any) -> str | None:
 
 def _finite(v: Any) -> str | None:
     return None if math.isfinite(v) else "must be finite"
+
+
+#: How far (rad) a mount's roll or pitch may be from a multiple of pi and be taken as
+#: it: a URDF's ``3.14159`` is pi.
+PI_SNAP_RAD = 1e-3
+
+
+def _mount(v: Any) -> str | None:
+    if len(v) != 6:
+        return f"needs 6 values (x, y, z in m, roll, pitch, yaw in rad), not {len(v)}"
+    if not all(math.isfinite(x) for x in v):
+        return "must be finite numbers"
+    for name, angle in (("roll", v[3]), ("pitch", v[4])):
+        turns = angle / math.pi
+        if abs(turns - round(turns)) * math.pi > PI_SNAP_RAD:
+            return (f"{name} {angle:g} rad: only 0 or pi is modelled (the scan plane level, "
+                    "head up or down)")
+    return None
+
+
+def _driver(v: Any) -> str | None:
+    from wcdrive.plant.lidar_driver import DRIVERS
+
+    return None if v in DRIVERS else f"must be one of {', '.join(DRIVERS)}"
 
 
 @dataclass(frozen=True)
@@ -145,7 +174,13 @@ PARAMETERS: dict[str, Parameter] = {p.name: p for p in [
     Parameter("base_frame_offset_x", "double", 0.0, BRIDGE, True, _finite),
     Parameter("lidar_frame_id", "string", "laser", BRIDGE, True, _frame),
     Parameter("imu_frame_id", "string", "imu_link", BRIDGE, True, _frame),
+    Parameter("lidar_mount", "double_array", [], BRIDGE, True, _mount),
+    Parameter("lidar_driver", "string", "sllidar_ros2", BRIDGE, True, _driver),
+    Parameter("lidar_inverted", "bool", False, BRIDGE, True),
+    Parameter("lidar_angle_compensate", "bool", True, BRIDGE, True),
 ]}
+#: The parameters that configure the simulated lidar (``lidar_url_options``).
+LIDAR_PARAMETERS = ("lidar_mount", "lidar_driver", "lidar_inverted", "lidar_angle_compensate")
 
 
 @dataclass
@@ -170,6 +205,7 @@ class StackConfig:
     linear: AxisLimits = field(default_factory=AxisLimits)
     angular: AxisLimits = field(default_factory=AxisLimits)
     use_sim_time: bool | None = None
+    lidar: dict[str, Any] = field(default_factory=dict)
     given: dict[str, Any] = field(default_factory=dict)
     unused: list[str] = field(default_factory=list)
 
@@ -267,4 +303,23 @@ def configure(values: dict[str, Value], namespace: str = "/", node: str = "the n
                                  f"diff_drive_controller refuses them: {exc}") from None
         setattr(config, axis.split(".")[0], limits)
     config.use_sim_time = given.get("use_sim_time")
+    config.lidar = {name: given[name] for name in LIDAR_PARAMETERS if name in given}
     return config
+
+
+def lidar_url_options(config: StackConfig) -> dict[str, str]:
+    """The URL options (``lidar_mount=x,y,z,roll,pitch,yaw`` in m and degrees,
+    ``lidar_driver=``, ``lidar_inverted=``, ``lidar_angle_compensate=``) that give a
+    simulated chair the lidar the parameters ``config.lidar`` describe; a roll or pitch
+    within ``PI_SNAP_RAD`` of a multiple of pi is that multiple."""
+    out: dict[str, str] = {}
+    for name, value in config.lidar.items():
+        if name == "lidar_mount":
+            x, y, z, *angles = (float(v) for v in value)
+            roll, pitch = (180.0 * round(a / math.pi) for a in angles[:2])
+            out[name] = ",".join(repr(v) for v in (x, y, z, roll, pitch, math.degrees(angles[2])))
+        elif isinstance(value, bool):
+            out[name] = "true" if value else "false"
+        else:
+            out[name] = str(value)
+    return out

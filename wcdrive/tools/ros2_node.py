@@ -145,7 +145,26 @@ def configure(args: argparse.Namespace) -> tuple[Any, Any, str]:
     values = ros_args.parameters.for_node(names.fully_qualified_name)
     where = (f" (from {', '.join(ros_args.param_files)})" if ros_args.param_files else "")
     config = configure_parameters(values, names.namespace, names.fully_qualified_name + where)
-    return names, config, url
+    return names, config, with_lidar_parameters(url, config)
+
+
+def with_lidar_parameters(url: str, config: Any) -> str:
+    """``url`` with the simulated lidar the parameters ask for (``lidar_mount`` and the
+    rest: ``wcdrive.ros2.controller.lidar_url_options``) in place of its own options of
+    those names: the parameters are the stack's word on the lidar. On a URL that is not
+    a simulated robot they are a ``WcdriveFileError``: a real lidar has its own driver."""
+    from wcdrive.errors import WcdriveFileError
+    from wcdrive.ros2.controller import lidar_url_options
+
+    options = lidar_url_options(config)
+    if not options:
+        return url
+    if not simulated(url):
+        raise WcdriveFileError(f"{', '.join(options)}: these parameters set the simulated lidar, and {url} "
+                               "is not a simulated robot (a real lidar has its own driver node)")
+    base, _, query = url.partition("?")
+    kept = [pair for pair in query.split("&") if pair and pair.partition("=")[0] not in options]
+    return base + "?" + "&".join(kept + [f"{name}={value}" for name, value in options.items()])
 
 
 def run(args: argparse.Namespace) -> int:
