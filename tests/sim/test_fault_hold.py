@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.support.depth import cases
 from tests.support.grade import bundled
 from wcdrive.sim import runner, scenario
 from wcdrive.sim.result import STANDSTILL_SPEED
@@ -23,9 +24,12 @@ BACKENDS = ("port", pytest.param("simavr", marks=pytest.mark.simavr))
 FAULTS = {"encoder_cut": "EVT:FAULT,ENC_STALL_L", "encoder_reversed": "EVT:FAULT,ENC_REVERSED_L"}
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
-@pytest.mark.parametrize("brake", ["", "_brake"], ids=["no-brake", "brake"])
-@pytest.mark.parametrize("kind", sorted(FAULTS))
+#: Each fault with and without a brake on the port; on simavr (4 to 5 s each) each fault
+#: and each brake once at the fast depth, all four at the thorough one.
+@pytest.mark.parametrize(("kind", "brake", "backend"), cases(
+    [(kind, brake) for kind in sorted(FAULTS) for brake in ("", "_brake")],
+    [f"{kind}-{'brake' if brake else 'no-brake'}" for kind in sorted(FAULTS) for brake in ("", "_brake")],
+    fast_simavr=["encoder_cut-no-brake", "encoder_reversed-brake"]))
 def test_a_fault_down_1_in_12_comes_to_rest_and_stays(kind: str, brake: str, backend: str) -> None:
     """Down 1:12 at 0.5 m/s, the left encoder fails at 1.5 s: the fault latches, the chair
     comes to rest within 4 s and 1.0 m of it and then moves at most 0.03 m over the rest

@@ -5,6 +5,7 @@ rows, and one-line errors with their exit statuses."""
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -98,9 +99,11 @@ def dask_cluster(tmp_path_factory: pytest.TempPathFactory):
         import json
 
         address = json.loads(info.read_text())["address"]
+        # its own process group: the nanny and the worker process it starts
         procs.append(subprocess.Popen([sys.executable, "-m", "dask", "worker", address, "--nworkers", "1",
                                        "--nthreads", "1", "--no-dashboard"],
-                                      stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env))
+                                      stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env,
+                                      start_new_session=True))
         from dask.distributed import Client
 
         with Client(address, timeout="30s") as client:
@@ -109,11 +112,17 @@ def dask_cluster(tmp_path_factory: pytest.TempPathFactory):
     finally:
         for proc in reversed(procs):
             proc.terminate()
-        for proc in procs:
+        for k, proc in enumerate(procs):
             try:
-                proc.wait(timeout=20)
+                # A worker still inside a run (the one the Ctrl-C test left going) cannot
+                # stop it: its nanny would wait 8 s before killing it. 2 s, then the group.
+                proc.wait(timeout=2 if k else 20)
             except subprocess.TimeoutExpired:
-                proc.kill()
+                if k:
+                    os.killpg(proc.pid, signal.SIGKILL)
+                else:
+                    proc.kill()
+                proc.wait()
 
 
 def test_sweep_on_a_real_dask_scheduler_equals_the_serial_run(tmp_path: Path, dask_cluster: str,
@@ -145,7 +154,14 @@ def test_verify_on_a_real_dask_scheduler_equals_the_local_run(dask_cluster: str,
     assert "mismatches=0 lost_bytes=0 stalls=0" in on_dask
 
 
-def test_an_unreachable_scheduler_is_a_connection_failure(tmp_path: Path, capsys) -> None:
+def test_an_unreachable_scheduler_is_a_connection_failure(tmp_path: Path, capsys,
+                                                          monkeypatch: pytest.MonkeyPatch) -> None:
+    # Dask retries a refused connection until the client's timeout (the sweep's 10 s):
+    # the same real Client, given 1 s, fails the same way, 9 s sooner.
+    from dask import distributed
+
+    client = distributed.Client
+    monkeypatch.setattr(distributed, "Client", lambda address, timeout: client(address, timeout="1s"))
     status = wcdrive_main(["sweep", str(_spec(tmp_path)), "--scheduler", "tcp://127.0.0.1:9"])
     err = capsys.readouterr().err
     assert status == console.CONNECTION, err
