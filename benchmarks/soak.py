@@ -22,7 +22,10 @@ pulse, as a reopened port or a brown-out). The report, and the check of each:
   1 cm of the pose before it);
 - no gap between ticks over 60 ms of board time (``TLM``'s millis; none across a reset);
 - no unexpected event: only ``WATCHDOG`` after a pause, ``ESTOP`` after an e-stop,
-  ``BOARD_RESET`` and ``PARAMS_*`` after a reset.
+  ``BOARD_RESET`` and ``PARAMS_*`` after a reset, ``NOT_NEUTRAL`` and ``NEUTRAL`` after
+  a stall (the watchdog stopped the chair in it, and the command the host drove on with
+  went out before it read so: refused until its neutral, docs/safety.md "Neutral before
+  motion").
 
 On ``sim://`` the board is paced by the host's program (``HostPacedClock``): it runs,
 at most ``speed`` times the wall clock, only as far as the host's next step (0.1 s of
@@ -65,6 +68,7 @@ import serial
 import wcdrive
 from wcdrive.boards.port_loop import F_CPU, PortLoop
 from wcdrive.boards.sim_board import GYRO_HISTORY
+from wcdrive.errors import WcdriveNeutralError
 from wcdrive.host.telemetry import Reset, Telemetry
 from wcdrive.plant import ChairParams, Gyro, Plant
 from wcdrive.protocol.codec import Event, LineStats
@@ -74,7 +78,8 @@ from wcdrive.protocol.codec import Event, LineStats
 MEMORY_BOUND = 300_000
 #: s of board time between ticks beyond which a gap is reported.
 TICK_GAP = 0.060
-EXPECTED_EVENTS = ("WATCHDOG", "ESTOP", "BOARD_RESET", "PARAMS_LOADED", "PARAMS_DEFAULT")
+EXPECTED_EVENTS = ("WATCHDOG", "ESTOP", "BOARD_RESET", "PARAMS_LOADED", "PARAMS_DEFAULT",
+                   "NOT_NEUTRAL", "NEUTRAL")
 
 
 @dataclass
@@ -353,6 +358,7 @@ def soak(backend: str, hours: float, speed: float, seed: int, record: Path | Non
     try:
         with pace.answering():
             chair.wait_for_handshake(10.0)
+            chair.wait_for_neutral(10.0)            # as connect(): it drives after a neutral
         chair.history_limit = 1000
         end = hours * 3600.0
         expect: set[str] = set()
@@ -406,6 +412,7 @@ def soak(backend: str, hours: float, speed: float, seed: int, record: Path | Non
                 sent.frozen = False
                 with pace.answering():
                     chair.wait_for_boot(seen, 10.0)     # the new board's BOOT read, hello answered
+                    chair.wait_for_neutral(10.0)        # the program drives on: a neutral first
                 pace.silent(0.5)
                 continue
             stop_at = board.time + length
@@ -414,12 +421,18 @@ def soak(backend: str, hours: float, speed: float, seed: int, record: Path | Non
             while board.time < stop_at:
                 try:
                     chair.set_velocity(linear, angular)
+                except WcdriveNeutralError:             # a stall's watchdog stop: drive on
+                    with pace.answering():              # after a neutral command
+                        chair.wait_for_neutral(10.0)
+                    continue
                 except wcdrive.WcdriveError as exc:
                     report.failures.append(f"{board.time:.1f} s: {exc}")
                     break
                 if board.time >= stall_at:                # the host stops sending, then drives on
                     report.stalls += 1
-                    expect.add("WATCHDOG")
+                    # a watchdog stop in the stall: the board refuses the command the host
+                    # sends on before it has read of the stop, until a neutral one
+                    expect.update(("WATCHDOG", "NOT_NEUTRAL", "NEUTRAL"))
                     stall_at = math.inf
                     pace.silent(rng.uniform(0.2, 1.5))
                     continue

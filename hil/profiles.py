@@ -31,6 +31,9 @@ PROFILE_MAX_SPEED = 30.0
 #: setpoints down at the default e-stop rate (at most 17.59 rad/s at 15 rad/s^2), the
 #: chair parks, and ``reset`` clears any fault or e-stop.
 PREAMBLE_S = 1.3
+#: A neutral command this long before the first motion: the board has confirmed it
+#: (NEUTRAL_TICKS ticks) by then.
+NEUTRAL_LEAD_S = 0.12
 #: The least time each profile is given after its preamble (s).
 _PROFILE_MIN_S = {"grade": 1.2, "dead_motor": 1.0, "overrun": 1.2, "parked_drift": 0.8}
 
@@ -110,12 +113,15 @@ def motion_profile(draw: Draw, trace: Trace) -> Trace:
     hello = any(b"hello" in data for _, data in kept)
     script = _Script(hello or draw.boolean(0.3), draw.integer(0, SEQ_MAX))
     start = t0 + (draw.real(0.0, 0.03) if at_boot else 0.0)
-    if not at_boot:
+    if at_boot:                    # after the boot, neutral before motion
+        script.send(draw, t0, b"rp0,lp0,")
+        start += NEUTRAL_LEAD_S
+    else:
         script.send(draw, t0, b"defaults")
         script.send(draw, t0 + 0.005, b"estop")
         script.send(draw, t0 + 0.7, b"reset")
-        script.send(draw, t0 + PREAMBLE_S - 0.05, b"reset")
-        script.send(draw, t0 + PREAMBLE_S - 0.03, b"rp0,lp0,")
+        script.send(draw, t0 + PREAMBLE_S - 0.20, b"reset")
+        script.send(draw, t0 + PREAMBLE_S - 0.15, b"rp0,lp0,")      # neutral, confirmed by the start
         start = t0 + PREAMBLE_S
     accel = float(MAX_ACCEL)
     if draw.boolean(0.3):

@@ -42,6 +42,12 @@ from wcdrive.protocol.codec import SEQ_MAX, crc16, frame
 
 #: One trace in this many sets ``feedback_form`` 1 first.
 FEEDBACK_FORM_EVERY = 4
+#: Three traces in four start as a well-behaved host does after a boot: a neutral command
+#: first, the drawn writes NEUTRAL_LEAD_S later (once the board confirmed neutral); the
+#: fourth drives from its first write, and its motion is refused until a neutral command
+#: comes (chosen by the CRC of the writes, not drawn: every seed draws what it drew before).
+NEUTRAL_FIRST_EVERY = 4
+NEUTRAL_LEAD_S = 0.12
 
 __all__ = ["FIRST_COMMAND_S", "MAX_TRACE_EDGE_RATE", "Draw", "HypothesisDraw", "RandomDraw", "Trace",
            "generate_trace"]
@@ -352,6 +358,9 @@ def generate_trace(draw: Draw, duration: float) -> Trace:
             t += draw.real(0.0, 0.02)        # bursts: several commands within a tick
         else:
             t += draw.real(0.03, 0.35)       # inside a pivot, often
+    if zlib.crc32(b"".join(data for _, data in serial)) % NEUTRAL_FIRST_EVERY != 1:
+        serial = [(FIRST_COMMAND_S, b"rp0,lp0,\n")] + [
+            (t + NEUTRAL_LEAD_S, data) for t, data in serial if t + NEUTRAL_LEAD_S < duration - 0.05]
     encoders = {side: encoder_motion(draw, duration) for side in ("left", "right")}
     storms = []
     if draw.boolean(0.12):

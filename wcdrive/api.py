@@ -164,7 +164,8 @@ def _scan_source(port: Port) -> ScanSource | None:
 def connect(url: str = "sim://", *, boot_timeout: float = 10.0, record: bool | str = False,
             legacy: bool = False, link_timeout: float | None = None, ros: Any = None,
             **options: Any) -> Wheelchair | Robot:
-    """Opens ``url``, waits for the board's boot and feedback, says hello (module
+    """Opens ``url``, waits for the board's boot and feedback, says hello, and sends a
+    neutral command the board confirms (``wcdrive.host.neutral``; module
     docstring). ``record``: keep every byte both ways (``chair.recording``) for
     ``wcdrive.tools.replay``; ``record="run.mcap"``: write ROS 2 messages (odometry, tf, the
     wheels, the commands, the board's lines; on a simulated board its ground truth and
@@ -237,6 +238,7 @@ def connect(url: str = "sim://", *, boot_timeout: float = 10.0, record: bool | s
     try:
         chair.wait_for_telemetry(boot_timeout)   # the Mega resets on open: wait for it
         chair.wait_for_handshake(boot_timeout)
+        chair.wait_for_neutral(boot_timeout)     # booted: it drives after a neutral command
     except BaseException:
         chair.close()
         raise

@@ -7,7 +7,8 @@ catches it all; each error also keeps the built-in base it had before, so an old
 - The board and the link (this module): ``WcdriveConnectionError`` (with
   ``WcdrivePermissionError``, also a ``PermissionError``, and ``WcdriveBusyError``),
   ``WcdriveTimeoutError`` (also a ``TimeoutError``), ``WcdriveProtocolError`` and
-  ``WcdriveCommandError`` (with ``WcdriveEstopError`` and its ``WcdriveFaultError``).
+  ``WcdriveCommandError`` (with ``WcdriveEstopError`` and its ``WcdriveFaultError``,
+  and ``WcdriveNeutralError``).
 - A file or a configuration wcdrive cannot use: ``WcdriveFileError``, also a
   ``ValueError``. Its subclasses live beside what they read: ``ChairFileError``
   (``wcdrive.plant.params``), ``WorldError`` (``wcdrive.plant.world``), ``MapFileError``
@@ -84,3 +85,12 @@ class WcdriveFaultError(WcdriveEstopError):
     def __init__(self, message: str, faults: tuple[str, ...]) -> None:
         super().__init__(message, "fault")
         self.faults = faults
+
+
+class WcdriveNeutralError(WcdriveCommandError):
+    """Motion refused: the board drives only after a neutral (zero) command, after a
+    boot, a reset, a watchdog stop or a PPM loss. Call ``stop()`` (or
+    ``wait_for_neutral()``) once the command it held should no longer drive the chair."""
+
+    def __init__(self, message: str) -> None:
+        super().__init__(message, "neutral")

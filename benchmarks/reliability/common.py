@@ -10,6 +10,7 @@ from pathlib import Path
 from wcdrive.firmware.params import PARAMS
 from wcdrive.firmware.state import FirmwareState
 from wcdrive.protocol.codec import board_unframe, frame
+from wcdrive.protocol.motion import velocity_command
 from wcdrive.protocol.spec import integer, real
 
 ElfPath = str | Path | None
@@ -23,6 +24,17 @@ MAX_WHEEL = real("MAX_WHEEL_SPEED")
 #: protocol v4: the board frames its lines from its answer on
 HELLO_FRAME = frame(b"hello:4", 1)
 TICK_MS = 50
+NEUTRAL_TICKS = integer("NEUTRAL_TICKS")
+#: The neutral prelude (protocol/PROTOCOL.md, "Neutral before motion"): after a boot the
+#: board drives only once a neutral command has stood NEUTRAL_TICKS ticks. After hello a
+#: host sends the stop ``Wheelchair.stop`` sends (``connect`` does), the hello's seq + 1;
+#: before hello, the opening of the seed era's ros2_control plugin.
+NEUTRAL_FRAME = frame(velocity_command(0.0, 0.0), 2)
+NEUTRAL_LEGACY = b"rp0.0,lp0.0,\n"
+#: How long the firmware runs after the prelude before the hostile input: what
+#: ``wcdrive.host.neutral`` waits for a board whose telemetry carries no state (NEUTRAL_TICKS
+#: ticks, the tick the stop came in, one to spare).
+NEUTRAL_WAIT_S = (NEUTRAL_TICKS + 2) * TICK_MS / 1000
 HANG_S = 0.050                      # a line (port) or a byte (firmware) must be done within a tick
 
 QUICK = {"port_lines": 20_000, "port_frames": 20_000, "legacy_frames": 20_000,
@@ -50,6 +62,11 @@ def motion_in(d: dict[str, float | int]) -> Motion:
     pivot = int(d["pivotPhase"])
     return (int(d["mode"]), float(d["targetL"]), float(d["targetR"]), pivot,
             float(d["pendingL"]) if pivot else 0.0, float(d["pendingR"]) if pivot else 0.0)
+
+
+def neutral_prelude(strict: bool) -> bytes:
+    """The neutral command a host sends after boot (after its hello with ``strict``)."""
+    return NEUTRAL_FRAME if strict else NEUTRAL_LEGACY
 
 
 def is_stop(m: Motion) -> bool:
@@ -123,6 +140,16 @@ class R1Slice:
     controls_ok: Counter[str] = field(default_factory=Counter)
     #: valid drives refused because a fault was latched when they came (firmware R1)
     refused_latched: int = 0
+    #: valid drives refused (``neutral``) because the board waited for neutral when they
+    #: came: after a wait the stream itself started (a PPM loss frame, a watchdog stop
+    #: of a motion after silence, an e-stop or fault released by ``reset``)
+    refused_neutral: int = 0
+    #: lines (any source) that drove while the board waited for neutral: a safety violation
+    neutral_motions: int = 0
+    #: waits for neutral the stream started (after the prelude)
+    neutral_waits: int = 0
+    #: runs whose neutral prelude did not bring the board to neutral before the stream
+    preludes_failed: int = 0
     #: faults latched, by flags (firmware R1: its encoders stand still, so only a stalled
     #: wheel's or the driver's fault can latch)
     latched: Counter[int] = field(default_factory=Counter)
@@ -149,6 +176,7 @@ class R2Result:
     acked: Counter[str] = field(default_factory=Counter)
     commands: int = 0                    # commands the frames split into (oracle)
     refused: int = 0                     # of those, refused (rejectedCount)
+    preludes_failed: int = 0             # boards the neutral prelude did not bring to neutral
     answers: Counter[str] = field(default_factory=Counter)
     crashes: int = 0
     hangs: int = 0

@@ -17,6 +17,8 @@ if TYPE_CHECKING:
 from .common import (
     HANG_S,
     HELLO_FRAME,
+    NEUTRAL_TICKS,
+    NEUTRAL_WAIT_S,
     PARAM_FIELDS,
     TICK_MS,
     ElfPath,
@@ -27,6 +29,7 @@ from .common import (
     is_stop,
     motion_in,
     motion_of,
+    neutral_prelude,
     params_of,
 )
 from .inputs import r1_lines
@@ -41,7 +44,10 @@ class PortBoard:
     command stream whips the chair about (a new motion every 50 ms) until the encoder
     fault checks take a wheel for reversed or stalled, which latches a fault
     that refuses motion until a ``reset`` once parked; so a latched fault is cleared
-    after its tick (``faults`` counts them). ``strict`` says hello first."""
+    after its tick (``faults`` counts them). ``strict`` says hello first. Then the
+    neutral prelude a host sends after boot (``neutral_prelude``), ticked until the board
+    no longer waits for neutral (``neutral``: it does not, at most NEUTRAL_TICKS + 2
+    ticks later)."""
 
     def __init__(self, strict: bool) -> None:
         from wcdrive.plant import ChairParams, Plant
@@ -54,6 +60,12 @@ class PortBoard:
         if strict:
             self.fw.feed(HELLO_FRAME)
             self.tick()
+        self.fw.feed(neutral_prelude(strict))
+        for _ in range(NEUTRAL_TICKS + 2):
+            self.tick()
+            if not self.fw.state.needNeutral:
+                break
+        self.neutral = not self.fw.state.needNeutral
 
     def tick(self) -> None:
         s = self.fw.state
@@ -71,10 +83,17 @@ class PortBoard:
 
 def _check_line(st: R1Slice, source: str, line: bytes, strict: bool, drove: bool,
                 accepted: bool, params_changed: bool, answers: list[str] | None,
-                stopped: bool, check: bool = True) -> None:
+                stopped: bool, check: bool = True, neutral_motion: bool = False,
+                refused_neutral: bool = False) -> None:
     """Books one line's outcome (``answers`` None: not attributed to the line; ``check``
-    False: counted only)."""
+    False: counted only; ``neutral_motion``: it drove while the board waited for
+    neutral; ``refused_neutral``: a valid drive refused ``neutral`` while it waited)."""
     st.lines[source] += 1
+    if neutral_motion:
+        st.neutral_motions += 1
+        if len(st.examples) < 10:
+            st.examples.append(f"{'strict' if strict else 'legacy'} {source} {line!r}: "
+                               "drove while the board waited for neutral")
     if not check:
         return
     if source in ("random", "mutated"):
@@ -92,6 +111,9 @@ def _check_line(st: R1Slice, source: str, line: bytes, strict: bool, drove: bool
                                        f"{'drove' if drove else 'changed a parameter'}")
         return
     st.controls[source] += 1
+    if source == "drive" and refused_neutral:
+        st.refused_neutral += 1
+        return
     if source == "drive":
         ok = drove
     elif source == "stop":
@@ -107,13 +129,17 @@ def _check_line(st: R1Slice, source: str, line: bytes, strict: bool, drove: bool
 
 
 def port_r1(n: int, rng: random.Random, strict: bool) -> R1Slice:
-    """R1 on the port: ``n`` lines, a tick after each."""
+    """R1 on the port: ``n`` lines, a tick after each, on a board that had its neutral
+    prelude. Whether the board waits for neutral is read from its state
+    (``needNeutral``) before the line and after it."""
     st = R1Slice()
     board = PortBoard(strict)
+    st.preludes_failed += not board.neutral
     clock = time.perf_counter
     for source, line in r1_lines(rng, n, strict):
         s = board.fw.state
         m0, p0, sup0 = motion_of(s), params_of(s), s.errSuppressed
+        waiting = bool(s.needNeutral)
         t0 = clock()
         try:
             out = board.fw.feed(line)
@@ -123,6 +149,7 @@ def port_r1(n: int, rng: random.Random, strict: bool) -> R1Slice:
             if len(st.examples) < 10:
                 st.examples.append(f"crash on {line!r}: {error!r}")
             board = PortBoard(strict)
+            st.preludes_failed += not board.neutral
             continue
         dt = clock() - t0
         st.worst_s = max(st.worst_s, dt)
@@ -137,9 +164,15 @@ def port_r1(n: int, rng: random.Random, strict: bool) -> R1Slice:
         if not kinds:
             st.silent[group] += 1
         st.suppressed += s.errSuppressed - sup0
+        st.neutral_waits += bool(s.needNeutral) and not waiting
+        refused = (waiting and not drove
+                   and any(kind in ("ERR:neutral", "NAK:neutral") for kind in kinds))
         _check_line(st, source, line, strict, drove, accepted, params_of(s) != p0, kinds,
-                    is_stop(m1))
+                    is_stop(m1), neutral_motion=drove and (waiting or bool(s.needNeutral)),
+                    refused_neutral=refused)
+        waiting = bool(s.needNeutral)
         board.tick()
+        st.neutral_waits += bool(s.needNeutral) and not waiting
     return st
 
 
@@ -213,6 +246,24 @@ def byte_effects(rec: Recording, cycles: list[int], totals: Lockstep) -> Iterato
     totals.lost_bytes += len(cycles) - k
 
 
+def neutral_waits(rec: Recording) -> int:
+    """The waits for neutral the firmware began in this run after its first (the boot's,
+    which the prelude ends): ``needNeutral`` going from 0 to 1."""
+    previous = int(rec.initial["needNeutral"])
+    waits = 0
+    for ev in rec.events:
+        flag = int(ev.after["needNeutral"])
+        waits += flag and not previous
+        previous = flag
+    return waits
+
+
+def _exec_offset(line: bytes, strict: bool) -> int:
+    """Where in a valid command's line the board acts on it: at the line end for a frame,
+    at the comma of its last field for a bare command."""
+    return len(line) - 1 if strict else len(line.rstrip(b"\r\n")) - 1
+
+
 def _book_latches(st: R1Slice, rec: Recording) -> None:
     """Counts the faults the firmware latched in this run, by flags."""
     previous = int(rec.initial["faultFlags"])
@@ -226,7 +277,9 @@ def _book_latches(st: R1Slice, rec: Recording) -> None:
 def firmware_r1(n: int, rng: random.Random, elf: ElfPath, chunk: int | None = None
                 ) -> dict[str, R1Slice]:
     """R1 on the firmware: chunks of ``chunk`` lines (default: 300, or a tenth of ``n``
-    for small runs), four strict ones to a legacy one."""
+    for small runs), four strict ones to a legacy one, each after the neutral prelude
+    (the hello, a stop, ``NEUTRAL_WAIT_S``). Whether the board waits for neutral is read
+    from its SRAM (``needNeutral``) at each byte."""
     if chunk is None:
         chunk = max(20, min(300, n // 10))
     slices = {"strict": R1Slice(lockstep=Lockstep()), "legacy": R1Slice(lockstep=Lockstep())}
@@ -239,11 +292,15 @@ def firmware_r1(n: int, rng: random.Random, elf: ElfPath, chunk: int | None = No
         st = slices["strict" if strict else "legacy"]
         assert st.lockstep is not None
         lines = list(r1_lines(rng, count, strict))
-        prefix = HELLO_FRAME if strict else b""
+        prefix = (HELLO_FRAME if strict else b"") + neutral_prelude(strict)
         line_of = [-1] * len(prefix)
-        chunks = [(0.0, prefix)] if prefix else []
-        for i, (_, line) in enumerate(lines):
-            chunks.append((rng.uniform(0.0, 0.060) if rng.random() < 0.05 else 0.0, line))
+        exec_at = [-1] * count
+        chunks = [(0.0, prefix)]
+        for i, (source, line) in enumerate(lines):
+            pause = rng.uniform(0.0, 0.060) if rng.random() < 0.05 else 0.0
+            chunks.append(((NEUTRAL_WAIT_S if i == 0 else 0.0) + pause, line))
+            if source == "drive":
+                exec_at[i] = len(line_of) + _exec_offset(line, strict)
             line_of.extend([i] * len(line))
         rec, cycles = lockstep_run(chunks, elf, st.lockstep)
         if rec is None:
@@ -253,41 +310,53 @@ def firmware_r1(n: int, rng: random.Random, elf: ElfPath, chunk: int | None = No
         drove = [False] * count
         params = [False] * count
         latched = [False] * count
+        in_wait = [False] * count           # drove while the board waited for neutral
+        refused = [False] * count           # a valid drive refused: waiting for neutral
         sup0 = None
         _book_latches(st, rec)
+        st.neutral_waits += neutral_waits(rec)
         for k, before, after in byte_effects(rec, cycles, st.lockstep):
             i = line_of[k]
             if i < 0:
                 continue
             if sup0 is None:
                 sup0 = int(before["errSuppressed"])
+                st.preludes_failed += bool(before["needNeutral"])
             if before["faultFlags"]:
                 latched[i] = True
             m1 = motion_in(after)
             arm = bool(after["cmdSinceTick"]) and not before["cmdSinceTick"]
             if not is_stop(m1) and (arm or m1 != motion_in(before)):
                 drove[i] = True
+                if before["needNeutral"] or after["needNeutral"]:
+                    in_wait[i] = True
+            if (k == exec_at[i] and before["needNeutral"] and after["notNeutralSent"]
+                    and not after["neutralSeen"] and after["rejectedCount"] != before["rejectedCount"]):
+                refused[i] = True
             if any(before[f] != after[f] for f in PARAM_FIELDS):
                 params[i] = True
         end = rec.events[-1].after if rec.events else rec.initial
         st.suppressed += int(end["errSuppressed"]) - (sup0 or 0)
         kinds = answer_kinds(rec.tx)
-        if strict:                                  # the hello's answer aside
-            kinds.remove("HELLO")
-            kinds.remove("ACK")
+        if strict:                                  # the hello's answers and the stop's aside
+            for kind in ("HELLO", "ACK", "ACK"):
+                if kind in kinds:
+                    kinds.remove(kind)
         for kind in kinds:
             st.answers["all", kind] += 1
         for i, (source, line) in enumerate(lines):
             # Only driving controls are checked here: a stop or a get/set may leave no
             # trace in SRAM when the state already matches; the port checks those. A
-            # valid drive that came while a fault was latched is refused, as it must be.
+            # valid drive that came while a fault was latched is refused, as it must be;
+            # so is one that came while the board waited for neutral (``refused``).
             if source == "drive" and not drove[i] and latched[i]:
                 st.lines[source] += 1
                 st.controls[source] += 1
                 st.refused_latched += 1
                 continue
             _check_line(st, source, line, strict, drove[i], False, params[i], None, False,
-                        check=source in ("random", "mutated", "drive"))
+                        check=source in ("random", "mutated", "drive"), neutral_motion=in_wait[i],
+                        refused_neutral=refused[i])
     for st in slices.values():
         assert st.lockstep is not None
         st.worst_s = st.lockstep.max_latency_s

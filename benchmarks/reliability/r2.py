@@ -3,8 +3,10 @@ lines before hello and a model of v2 (``legacy_rates``)."""
 
 from __future__ import annotations
 
+import copy
 import random
 import time
+from dataclasses import fields
 
 from wcdrive.firmware import commands
 from wcdrive.firmware.final_control import Firmware
@@ -14,6 +16,10 @@ from wcdrive.protocol.codec import frame
 from .common import (
     HANG_S,
     HELLO_FRAME,
+    NEUTRAL_FRAME,
+    NEUTRAL_LEGACY,
+    NEUTRAL_TICKS,
+    NEUTRAL_WAIT_S,
     PARAM_FIELDS,
     SEQ_MAX,
     TICK_MS,
@@ -41,9 +47,11 @@ def _executed(fw: Firmware, rest: Motion, params: tuple[float | int, ...]) -> bo
 
 
 def port_r2(n: int, rng: random.Random) -> R2Result:
-    """R2 on the port: ``n`` corrupted motion frames after hello, a tick after each."""
+    """R2 on the port: ``n`` corrupted motion frames after hello and the neutral prelude,
+    a tick after each."""
     res = R2Result()
     board = PortBoard(strict=True)
+    res.preludes_failed += not board.neutral
     rest, params = motion_of(board.fw.state), params_of(board.fw.state)
     clock = time.perf_counter
     for _ in range(n):
@@ -57,6 +65,7 @@ def port_r2(n: int, rng: random.Random) -> R2Result:
             res.crashes += 1
             res.examples.append(f"crash on {line!r}: {error!r}")
             board = PortBoard(strict=True)
+            res.preludes_failed += not board.neutral
             continue
         dt = clock() - t0
         res.worst_s = max(res.worst_s, dt)
@@ -75,15 +84,17 @@ def port_r2(n: int, rng: random.Random) -> R2Result:
                                 f"{'executed' if executed else ''}")
         if executed:
             board = PortBoard(strict=True)
+            res.preludes_failed += not board.neutral
         else:
             board.tick()
     return res
 
 
 def firmware_r2(n: int, rng: random.Random, elf: ElfPath, chunk: int = 500) -> R2Result:
-    """R2 on the firmware: chunks of ``chunk`` corrupted frames after hello, at wire speed.
-    Nothing may change the motion, the parameters or the e-stop, arm the watchdog or be
-    ACKed (the hello's ACK aside), and every command must be refused."""
+    """R2 on the firmware: chunks of ``chunk`` corrupted frames after hello and the
+    neutral prelude (a stop, ``NEUTRAL_WAIT_S``), at wire speed. Nothing may change the
+    motion, the parameters or the e-stop, arm the watchdog or be ACKed (the hello's and
+    the stop's ACK aside), and every command must be refused."""
     totals = Lockstep()
     res = R2Result(lockstep=totals)
     while n > 0:
@@ -92,11 +103,12 @@ def firmware_r2(n: int, rng: random.Random, elf: ElfPath, chunk: int = 500) -> R
         lines = [corrupt(rng, frame(cmdvel_command(rng), rng.randint(0, SEQ_MAX)))
                  for _ in range(count)]
         data = b"".join(line for _, line in lines)
-        rec, cycles = lockstep_run([(0.0, HELLO_FRAME + data)], elf, totals)
+        prefix = HELLO_FRAME + NEUTRAL_FRAME
+        rec, cycles = lockstep_run([(0.0, prefix), (NEUTRAL_WAIT_S, data)], elf, totals)
         if rec is None:
             res.crashes += 1
             continue
-        line_of = [-1] * len(HELLO_FRAME)
+        line_of = [-1] * len(prefix)
         for i, (_, line) in enumerate(lines):
             line_of.extend([i] * len(line))
         executed = [False] * count
@@ -107,6 +119,7 @@ def firmware_r2(n: int, rng: random.Random, elf: ElfPath, chunk: int = 500) -> R
             if i < 0:
                 continue
             if rejected0 is None:
+                res.preludes_failed += bool(before["needNeutral"])
                 rejected0 = int(before["rejectedCount"])
                 fw_rest = motion_in(before)
                 params0 = tuple(before[f] for f in PARAM_FIELDS)
@@ -116,9 +129,9 @@ def firmware_r2(n: int, rng: random.Random, elf: ElfPath, chunk: int = 500) -> R
         end = rec.events[-1].after
         res.refused += int(end["rejectedCount"]) - (rejected0 or 0)
         kinds = answer_kinds(rec.tx)
-        acks = kinds.count("ACK") - 1                        # the hello's
+        acks = kinds.count("ACK") - 2                        # the hello's and the stop's
         res.answers.update(kinds)
-        res.answers["ACK"] -= 1
+        res.answers["ACK"] -= 2
         res.answers["HELLO"] -= 1
         for i, (kind, line) in enumerate(lines):
             res.frames[kind] += 1
@@ -180,10 +193,34 @@ def v2_unframe(buf: bytes) -> tuple[str | None, int, bytes]:
     return None, seq, buf[start:n - 3]
 
 
-def _outcome(fw: Firmware, intended: Motion) -> str:
+def neutral_board() -> FirmwareState:
+    """The state of a board at rest that never said hello, after the neutral prelude a
+    host of the seed's era sends (``NEUTRAL_LEGACY``, then NEUTRAL_TICKS ticks)."""
+    fw = Firmware()
+    fw.feed(NEUTRAL_LEGACY)
+    for k in range(1, NEUTRAL_TICKS + 3):
+        fw.tick(k * TICK_MS, 0, 0)
+        if not fw.state.needNeutral:
+            return fw.state
+    raise RuntimeError("the neutral prelude did not bring the board to neutral")
+
+
+_MUTABLE = ("eeprom", "eeBlock", "cmdBuf")
+
+
+def _clone(state: FirmwareState) -> Firmware:
+    """A board in a copy of ``state`` (a shallow copy with its buffers copied: a deep
+    copy takes five times as long)."""
+    s = copy.copy(state)
+    for name in _MUTABLE:
+        setattr(s, name, bytearray(getattr(state, name)))
+    return Firmware(s)
+
+
+def _outcome(fw: Firmware, intended: Motion, rest: Motion) -> str:
     s = fw.state
     m = motion_of(s)
-    if not s.cmdSinceTick and m == motion_of(FirmwareState()):
+    if not s.cmdSinceTick and m == rest:
         return "refused"
     if m == intended:
         return "same"
@@ -192,30 +229,34 @@ def _outcome(fw: Firmware, intended: Motion) -> str:
 
 def legacy_rates(n: int, rng: random.Random) -> Legacy:
     """``n`` corrupted v1 lines and ``n`` corrupted v2 frames (model), each on a fresh
-    board at rest that never said hello."""
+    board at rest that never said hello, after its neutral prelude (``neutral_board``)."""
     res = Legacy()
+    start = neutral_board()
+    assert {f.name for f in fields(start)
+            if isinstance(getattr(start, f.name), (bytearray, list, dict, set))} == set(_MUTABLE)
+    rest = motion_of(start)
     for _ in range(n):
         cmd = cmdvel_command(rng)
-        clean = Firmware()
+        clean = _clone(start)
         clean.feed(cmd + b"\n")
         intended = motion_of(clean.state)
         kind, line = corrupt(rng, cmd + b"\n")
-        fw = Firmware()
+        fw = _clone(start)
         fw.feed(line)
-        res.v1[kind, _outcome(fw, intended)] += 1
+        res.v1[kind, _outcome(fw, intended, rest)] += 1
         res.frames[kind] += 1
     saved = commands.unframe
     commands.unframe = v2_unframe  # type: ignore[assignment]   # the model: v3's port, v2's frame check
     try:
         for _ in range(n):
             cmd = cmdvel_command(rng)
-            clean = Firmware()
+            clean = _clone(start)
             clean.feed(cmd + b"\n")
             intended = motion_of(clean.state)
             kind, line = corrupt(rng, v2_frame(cmd, rng.randint(0, SEQ_MAX)))
-            fw = Firmware()
+            fw = _clone(start)
             out = fw.feed(line)
-            outcome = _outcome(fw, intended)
+            outcome = _outcome(fw, intended, rest)
             res.v2[kind, outcome] += 1
             res.frames_v2[kind] += 1
             if outcome == "different" and b"ACK:" in out:

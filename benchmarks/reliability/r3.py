@@ -33,6 +33,7 @@ PERIOD_S = integer("CONTROL_PERIOD_MS") / 1000
 HOST_PERIOD_S = 0.05            # the host's motion commands: 20 Hz
 STANDSTILL_MPS = 0.01
 RECOVERY_TIMEOUT_S = 5.0
+NEUTRAL_TIMEOUT_S = 2.0         # for the board to confirm a neutral command (host seconds at pace 1)
 _ACK = re.compile(rb"ACK:(\d+)(?:#[0-9A-F]{2}\*[0-9A-F]{4})?\r\n")   # plain (v3) or framed (v4)
 _BOOT = re.compile(rb"BOOT:[^,\r\n]*,([A-Z_]+)\r\n")
 
@@ -141,7 +142,10 @@ class R3Trial:
     travel_m: float = 0.0
     noticed_s: float | None = None      # the host: LinkLost, a refused motion call, or BOARD_RESET
     noticed_by: str = ""
-    recovered_s: float | None = None    # the host drives again (after a reset or a replug: hello again)
+    #: the host drives again: a motion call passes once the board confirmed neutral (after a
+    #: replug, hello answered again first); a DTR reset: hello answered again (None when it
+    #: never drove again after it)
+    recovered_s: float | None = None
     rehandshake: bool = False           # hello answered again after the fault
     boot_cause: str = ""                # as the host reported it (BOARD_RESET,<cause>), or its BOOT line
     executed_before_hello: int = 0      # frames the board executed after its reset, before a new hello
@@ -258,7 +262,8 @@ def executed_before_hello(board_tx: bytes) -> int:
 class _Rig:
     """The firmware in simavr with the chair on its pins, at real time (times ``pace``),
     behind a ``MegaCable``, driven by a ``Wheelchair`` as a program would, whose
-    link timeout is stretched by 1 / ``pace`` too."""
+    link timeout is stretched by 1 / ``pace`` too: after the handshake it sends the
+    neutral prelude (``wait_for_neutral``, as ``connect`` does)."""
 
     def __init__(self, elf: ElfPath, rng: random.Random, pace: float = 1.0) -> None:
         from wcdrive.host.wheelchair import LINK_TIMEOUT, Wheelchair
@@ -277,6 +282,7 @@ class _Rig:
                                 link_timeout=LINK_TIMEOUT / pace)
         self.chair.on_link(lambda event: self.link_events.append((time.monotonic(), event)))
         self.chair.wait_for_handshake(10.0)
+        self.chair.wait_for_neutral(NEUTRAL_TIMEOUT_S / pace)
 
     def close(self) -> None:
         try:
@@ -289,7 +295,10 @@ def _r3_trial(rig: _Rig, kind: str, rng: random.Random) -> R3Trial:
     """Drives at a random speed for 0.6-1.0 s, then the fault at a random moment
     between two commands; the host keeps commanding until it notices, then waits until
     the chair has stopped; then the link comes back (replugged: a DTR reset on open)
-    and the host must drive again."""
+    and the host must drive again: once the link is back (after a reset or a replug:
+    once hello was answered again) it sends stops until the board confirms neutral
+    (``wait_for_neutral``: the board refuses motion after a reset or a watchdog stop of
+    motion until then, and a program must do so itself), then a motion call must pass."""
     from wcdrive.errors import WcdriveError
     from wcdrive.host.telemetry import LinkLost
 
@@ -368,6 +377,7 @@ def _r3_trial(rig: _Rig, kind: str, rng: random.Random) -> R3Trial:
     while time.monotonic() < deadline:
         if ready():
             try:
+                chair.wait_for_neutral(max(0.05 * stretch, deadline - time.monotonic()))
                 chair.set_velocity(0.0, 0.0)
             except WcdriveError:
                 pass

@@ -117,6 +117,9 @@ def _r1_cell(slices: dict[str, R1Slice], firmware: bool) -> str:
     params = s.invalid_param_changes + g.invalid_param_changes
     drives = s.controls["drive"] + g.controls["drive"]
     drives_ok = s.controls_ok["drive"] + g.controls_ok["drive"]
+    refused = s.refused_neutral + g.refused_neutral
+    waits = s.neutral_waits + g.neutral_waits
+    in_wait = s.neutral_motions + g.neutral_motions
     worst = max(s.worst_s, g.worst_s) * 1e3
     if firmware:
         ls = [x.lockstep for x in (s, g) if x.lockstep]
@@ -128,7 +131,9 @@ def _r1_cell(slices: dict[str, R1Slice], firmware: bool) -> str:
     text = (f"{_n(total)} lines ({_n(s.total)} after hello, {_n(g.total)} before): "
             f"**{crashes} crashes, {hangs} hangs** ({slowest}), "
             f"**{motions} motions** and {params} parameter changes from "
-            f"{_n(invalid)} invalid lines; valid motions carried out {_n(drives_ok)}/{_n(drives)}")
+            f"{_n(invalid)} invalid lines; **{in_wait} motions while the board waited for neutral** "
+            f"({_n(waits)} waits the stream began); valid motions carried out {_n(drives_ok)}/{_n(drives)}"
+            + (f", {_n(refused)} refused while it waited for neutral" if refused else ""))
     if firmware:
         mism = sum(x.mismatches for x in ls)
         text += (f"; **port = firmware: {mism} mismatches** in {_n(sum(x.events for x in ls))} "
@@ -177,8 +182,9 @@ def markdown(res: Results) -> str:
 
 def _r1_details(res: Results) -> list[str]:
     out = ["| R1 slice | lines (random / mutated / valid) | invalid (oracle) | motions from invalid "
-           "| mutations that are valid input (of which drove) | valid drive / stop / get-set carried out |",
-           "|---|---|---|---|---|---|"]
+           "| mutations that are valid input (of which drove) | waits for neutral the stream began "
+           "(motions during them) | valid drive / stop / get-set carried out |",
+           "|---|---|---|---|---|---|---|"]
     for side, slices in (("port", res.r1_port), ("firmware", res.r1_firmware)):
         for name, st in slices.items():
             valid = st.total - st.lines["random"] - st.lines["mutated"]
@@ -186,10 +192,13 @@ def _r1_details(res: Results) -> list[str]:
                             for k in ("drive", "stop", "param") if st.controls[k])
             if st.refused_latched:
                 ok += f" ({_n(st.refused_latched)} drives refused: a fault latched)"
+            if st.refused_neutral:
+                ok += f" ({_n(st.refused_neutral)} drives refused: waiting for neutral)"
             out.append(f"| {side}, {'after hello' if name == 'strict' else 'before hello (legacy)'} | "
                        f"{_n(st.lines['random'])} / {_n(st.lines['mutated'])} / {_n(valid)} | "
                        f"{_n(st.invalid)} | {st.invalid_motions} | {_n(st.mutated_valid)} "
-                       f"({_n(st.mutated_valid_drove)}) | {ok} |")
+                       f"({_n(st.mutated_valid_drove)}) | {_n(st.neutral_waits)} ({st.neutral_motions}) "
+                       f"| {ok} |")
     return out
 
 
@@ -287,7 +296,9 @@ def problems(res: Results) -> list[str]:
                    st.invalid_motions, "parameter changes from invalid input":
                    st.invalid_param_changes,
                    "valid motions not carried out": st.controls["drive"] - st.controls_ok["drive"]
-                   - st.refused_latched,
+                   - st.refused_latched - st.refused_neutral,
+                   "motions while the board waited for neutral": st.neutral_motions,
+                   "neutral preludes that left the board waiting": st.preludes_failed,
                    "faults latched but a still wheel's": sum(
                        n for flags, n in st.latched.items() if flags & ~STILL_WHEEL_FAULTS)}
             if side == "port":
@@ -305,7 +316,8 @@ def problems(res: Results) -> list[str]:
             continue
         bad = {"executed": sum(r.executed.values()), "ACKed": sum(r.acked.values()),
                "crashes": r.crashes, "hangs": r.hangs,
-               "commands not refused": r.commands - r.refused}
+               "commands not refused": r.commands - r.refused,
+               "neutral preludes that left the board waiting": r.preludes_failed}
         if r.lockstep is not None:
             bad["port/firmware mismatches"] = r.lockstep.mismatches
         found += [f"R2 {side}: {v} {k}" for k, v in bad.items() if v]

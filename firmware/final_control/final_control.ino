@@ -256,6 +256,18 @@ bool limitLatched = false;                 // the chair's limit halted it: motio
 
 bool estopLatched = false;                  // e-stop: motion refused until "reset"
 
+// Neutral before motion (ISO 7176-14, control signal at switch-on): after a boot, a fault
+// or e-stop reset, a watchdog stop and a PPM loss, motion is refused (ERR:neutral) until
+// a neutral (zero) command has stood for WC_NEUTRAL_TICKS ticks with no motion command
+// after it. A host that streams its last command across a reset does not move the chair.
+bool needNeutral = true;                    // motion refused until neutral is confirmed
+bool neutralSeen = false;                   // a neutral command came, no motion command since
+uint8_t neutralTicks = 0;                   // ticks since then
+bool notNeutralSent = false;                // a motion command refused in this wait
+bool notNeutralPending = false;             // ...and EVT:NOT_NEUTRAL not sent yet (the tick sends it)
+uint8_t notNeutralTicks = 0;                // ticks of this wait without a neutral command
+bool neutralFault = false;                  // EVT:DEFLECTED: refused for WC_NEUTRAL_FAULT_TICKS
+
 // Faults (EVT:FAULT,<name>; docs/safety.md): latched until "reset", motion refused, motors off.
 #define FAULT_STALL_L 0x01
 #define FAULT_STALL_R 0x02
@@ -595,6 +607,18 @@ static void emergencyHalt() {
   emergencyStop = true;
 }
 
+// Motion needs a neutral command first (needNeutral): a new wait, or the one under way
+// goes on (its refusal already announced, its fault count running).
+static void requireNeutral() {
+  if (!needNeutral) {
+    notNeutralSent = false;
+    notNeutralTicks = 0;
+    neutralFault = false;
+  }
+  needNeutral = true;
+  neutralSeen = false;
+}
+
 // What one wheel's encoder showed over the interval that just ended, driven at
 // appliedPwm in direction appliedDir (the last tick's) with setpoint (the last tick's):
 // WHEEL_OK; WHEEL_SUSPECT (no count although driven toward a setpoint, or measured
@@ -908,9 +932,11 @@ static void sendTelemetry(uint32_t now) {
   uint8_t flags = (watchdogArmed ? 1 : 0) | (emergencyStop ? 2 : 0) | (estopLatched ? 4 : 0) |
                   (ppmLost ? 8 : 0) | (parked ? 16 : 0) | (uint8_t)(pivotPhase << 5) |
                   (faultFlags != 0 ? 128 : 0);
+  // state: bit 0 waiting for neutral (motion refused), 1 the neutral fault
+  uint8_t state = (needNeutral ? 1 : 0) | (neutralFault ? 2 : 0);
   const uint32_t fields[] = {
     now, rxCount, lastSeq, pwmL, pwmR, dirL, dirR, illTickL, illTickR, flags, rejectedCount,
-    crcRejected, freeRam, faultFlags, rxLostTick, lateTicks,
+    crcRejected, freeRam, faultFlags, rxLostTick, lateTicks, state,
   };
   line.print(F("TLM:"));
   for (uint8_t i = 0; i < sizeof(fields) / sizeof(fields[0]); i++) {
@@ -1076,9 +1102,34 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
     watchdogArmed = true;
   }
   if (watchdogArmed && now - lastCmdTime >= watchdogMs) {
+    // A stop of motion the host asked for: when the link comes back, its first command
+    // must be neutral. (After a neutral command there is no stale motion to resume.)
+    bool driving = targetL != 0.0f || targetR != 0.0f || pivotPhase != PIVOT_NONE;
     watchdogArmed = false;
     emergencyHalt();
+    if (driving) requireNeutral();
     sendEvent(F("WATCHDOG"));
+  } else if (needNeutral) {
+    // The wait for neutral, at most one event a tick (none beside WATCHDOG: the output
+    // budget's worst tick): the refusal (EVT:NOT_NEUTRAL); the neutral command stood
+    // WC_NEUTRAL_TICKS ticks, confirmed (EVT:NEUTRAL when something was refused
+    // meanwhile); refused WC_NEUTRAL_FAULT_TICKS ticks without a neutral command, a
+    // deflected control (EVT:DEFLECTED, until neutral).
+    if (notNeutralPending) {
+      notNeutralPending = false;
+      sendEvent(F("NOT_NEUTRAL"));
+    } else if (neutralSeen) {
+      if (++neutralTicks >= WC_NEUTRAL_TICKS) {
+        if (notNeutralSent) sendEvent(F("NEUTRAL"));
+        needNeutral = false;
+        neutralSeen = false;
+        notNeutralSent = false;
+        neutralFault = false;
+      }
+    } else if (notNeutralSent && !neutralFault && ++notNeutralTicks >= WC_NEUTRAL_FAULT_TICKS) {
+      neutralFault = true;
+      sendEvent(F("DEFLECTED"));
+    }
   }
 
   float maxChange = (emergencyStop ? estopDecel : maxAccel) * dt;
@@ -1215,7 +1266,7 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
 // ---------------------------------------------------------------------------
 enum ParseResult : uint8_t {
   PARSE_OK, ERR_SYNTAX, ERR_NUMBER, ERR_RANGE, ERR_FIELDS, ERR_OVERLONG, ERR_CHECKSUM, ERR_ESTOP,
-  ERR_BUSY, ERR_PARAM, ERR_UNFRAMED, ERR_FAULT, ERR_OVERRUN, ERR_LIMIT
+  ERR_BUSY, ERR_PARAM, ERR_UNFRAMED, ERR_FAULT, ERR_OVERRUN, ERR_LIMIT, ERR_NEUTRAL
 };
 // What a command answers besides ACK/ERR.
 enum DataReply : uint8_t { DATA_NONE, DATA_HELLO, DATA_PARAM };
@@ -1245,9 +1296,10 @@ static const char R_UNFRAMED[] PROGMEM = "unframed";
 static const char R_FAULT[] PROGMEM = "fault";
 static const char R_OVERRUN[] PROGMEM = "overrun";
 static const char R_LIMIT[] PROGMEM = "limit";
+static const char R_NEUTRAL[] PROGMEM = "neutral";
 static const char* const REASONS[] = {
   R_SYNTAX, R_SYNTAX, R_NUMBER, R_RANGE, R_FIELDS, R_OVERLONG, R_CHECKSUM, R_ESTOP, R_BUSY,
-  R_PARAM, R_UNFRAMED, R_FAULT, R_OVERRUN, R_LIMIT,
+  R_PARAM, R_UNFRAMED, R_FAULT, R_OVERRUN, R_LIMIT, R_NEUTRAL,
 };
 
 // Runtime parameters: name, variable, range. The first PARAM_FLOATS are floats;
@@ -1412,6 +1464,27 @@ static bool refusedUnframed(float right, float left) {
   return unframedLine && (right != 0.0f || left != 0.0f);
 }
 
+// While the board waits for neutral (needNeutral), a motion command is refused and
+// restarts the wait (EVT:NOT_NEUTRAL, once a wait, from the next tick); a neutral one
+// starts the count the tick confirms.
+static bool refusedNotNeutral(float right, float left) {
+  if (!needNeutral) return false;
+  if (right != 0.0f || left != 0.0f) {
+    neutralSeen = false;
+    if (!notNeutralSent) {
+      notNeutralSent = true;
+      notNeutralPending = true;
+    }
+    return true;
+  }
+  if (!neutralSeen) {
+    neutralSeen = true;
+    neutralTicks = 0;
+  }
+  notNeutralTicks = 0;
+  return false;
+}
+
 // A motion command: the wheel targets, unless the e-stop is latched (then a stop
 // is accepted and changes nothing, and anything else is refused).
 static ParseResult moveTo(uint8_t newMode, float right, float left) {
@@ -1422,6 +1495,7 @@ static ParseResult moveTo(uint8_t newMode, float right, float left) {
     if (right != 0.0f || left != 0.0f) return ERR_LIMIT;
     limitLatched = false;   // a stop: the host has seen the limit, and what it sends next drives
   }
+  if (refusedNotNeutral(right, left)) return ERR_NEUTRAL;
   acceptCommand(newMode, right, left);
   return PARSE_OK;
 }
@@ -1487,6 +1561,7 @@ static ParseResult parsePpm() {
     mode = WC_MODE_PPM;
     cmdSinceTick = true;
     emergencyHalt();
+    requireNeutral();   // the transmitter back: its stick must come to neutral first
     if (!ppmLost) sendEvent(F("PPM_LOST"));
     ppmLost = true;
     return PARSE_OK;
@@ -1504,6 +1579,7 @@ static ParseResult parsePpm() {
     if (right != 0.0f || left != 0.0f) return ERR_LIMIT;
     limitLatched = false;   // a stop: the host has seen the limit, and what it sends next drives
   }
+  if (refusedNotNeutral(right, left)) return ERR_NEUTRAL;
   ppmLost = false;
   acceptCommand(WC_MODE_PPM, right, left);
   return PARSE_OK;
@@ -1523,6 +1599,7 @@ static ParseResult latchEstop() {
 // off); encoders masked by the storm guard come back.
 static ParseResult resetEstop() {
   if ((estopLatched || faultFlags != 0) && !parked) return ERR_BUSY;
+  if (estopLatched || faultFlags != 0) requireNeutral();
   estopLatched = false;
   if (faultFlags != 0) holding = false;   // the hold restarts with both wheels, where they are
   faultFlags = 0;

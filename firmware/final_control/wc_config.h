@@ -24,6 +24,8 @@
 #define WC_CONTROL_PERIOD_MS 50UL  // control tick and feedback period
 #define WC_WATCHDOG_MS 500UL       // default of watchdog_ms: no valid command for this long -> emergency stop
 #define WC_PIVOT_TICKS 6           // pivot length in control ticks (300 ms nominal)
+#define WC_NEUTRAL_TICKS 2         // control ticks a neutral (zero) command must stand, no motion command after it, before the board drives after a boot, a fault or e-stop reset, a watchdog stop or a PPM loss (ISO 7176-14, control signal at switch-on): 100 ms nominal
+#define WC_NEUTRAL_FAULT_TICKS 100 // control ticks (5 s) of refused motion commands without a neutral one: EVT:DEFLECTED, a deflected control latched until neutral (the 5 s commercial controllers latch after)
 
 // ---- Geometry and encoders (seed section 1.4.2) ----------------------------
 #define WC_CPR 10000.0f            // counts per wheel revolution (2500 PPR x4)

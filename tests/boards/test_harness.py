@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import serial
 
-from tests.support.boards import FEEDBACK, ChairOnPins, boot, send_and_run
+from tests.support.boards import FEEDBACK, NEUTRAL, ChairOnPins, boot, neutral, send_and_run
 from wcdrive.boards.simavr.mega_board import MegaBoard
 from wcdrive.boards.simavr.virtual_mega import F_CPU, VirtualMega
 from wcdrive.firmware import constants as C
@@ -105,16 +105,19 @@ def test_quadrature_states_follow_the_seed_table() -> None:
 
 def test_commands_give_expected_pwm_and_dir(mega: VirtualMega) -> None:
     boot(mega)
+    neutral(mega)
     send_and_run(mega, b"rp4.0,ln4.0,", 0.101)    # two ticks: setpoints 0.25 and 0.5
-    # With still wheels the PID output is Kp*e + Ki*integral; the port says exactly.
+    # With still wheels the PID output is Kp*e + Ki*integral; the port says exactly
+    # (its own neutral command first, two ticks).
     from wcdrive.firmware.final_control import Firmware
 
-    port = Firmware(boot_millis=int(mega.read("lastControlTime")) - 100)
-    port.feed(b"rp4.0,ln4.0,")
+    port = Firmware(boot_millis=int(mega.read("lastControlTime")) - 200)
     now = port.state.lastControlTime
-    for _ in range(2):
-        now += 50
-        port.tick(now, 0, 0)
+    for command in (NEUTRAL, b"rp4.0,ln4.0,"):
+        port.feed(command)
+        for _ in range(2):
+            now += 50
+            port.tick(now, 0, 0)
     assert (mega.pwm("left"), mega.pwm("right")) == (port.state.pwmL, port.state.pwmR)
     assert mega.direction("right") == 1 and mega.direction("left") == 0
     assert 0 < mega.pwm("right") < 255
@@ -122,13 +125,19 @@ def test_commands_give_expected_pwm_and_dir(mega: VirtualMega) -> None:
 
 def test_full_duty_reads_255(mega: VirtualMega) -> None:
     rig = ChairOnPins(mega, battery_voltage=20.0)    # a weak battery: the PID saturates
-    for _ in range(40):
+    # Booted, a neutral command, and the host's commands from 0.2 s: 3.9 s of them, as
+    # from 0.1 s before neutral before motion (the one at 0 s, sent during setup(), was
+    # garbled: ERR:syntax).
+    rig.run_for(0.06)
+    rig.neutral(seconds=0.14)
+    for _ in range(39):
         rig.send_and_run(b"rp17.59,lp17.59,", 0.1)
     assert mega.pwm("left") == 255 and mega.pwm("right") == 255   # analogWrite(255) is digitalWrite
 
 
 def test_read_named_float(mega: VirtualMega) -> None:
     boot(mega)
+    neutral(mega)
     send_and_run(mega, b"rp5.0,lp3.0,", 0.11)
     assert mega.read("targetR") == 5.0
     assert mega.read("setpointR") in (0.25, 0.5, 0.75)
@@ -138,8 +147,9 @@ def test_read_named_float(mega: VirtualMega) -> None:
 def _run_trace(elf) -> tuple[list, list]:
     with VirtualMega(elf) as mega:
         mega.encoder_edges("left", ramp_counts(5000))
-        mega.send(b"x:0.5,t:0.3,\n", at=int(0.05 * F_CPU))
-        mega.send(b"junk,rp1,lp2,", at=int(0.3 * F_CPU))
+        mega.send(b"x:0,t:0,\n", at=int(0.02 * F_CPU))      # neutral first
+        mega.send(b"x:0.5,t:0.3,\n", at=int(0.15 * F_CPU))
+        mega.send(b"junk,rp1,lp2,", at=int(0.4 * F_CPU))
         mega.run_for(1.0)
         return mega.take_tx(), [(h.cycle, h.function, h.arg) for h in mega.take_hits()]
 
@@ -158,11 +168,15 @@ def test_pyserial_talks_to_the_pty(elf) -> None:
             deadline = time.monotonic() + 20
             while b"MODE:CMDVEL" not in got and time.monotonic() < deadline:
                 got += port.read(port.in_waiting or 1)
+            port.write(b"x:0,t:0,\n")               # neutral first; it stands 2 ticks
+            got = b""
+            while got.count(b"MODE:CMDVEL") < 4 and time.monotonic() < deadline:
+                got += port.read(port.in_waiting or 1)
             port.write(b"rp1.5,lp1.5,\n")
             got = b""
             while b"MODE:WHEEL" not in got and time.monotonic() < deadline:
                 got += port.read(port.in_waiting or 1)
-            assert b"MODE:WHEEL" in got
+            assert b"MODE:WHEEL" in got and b"ERR:" not in got
         finally:
             port.close()
 

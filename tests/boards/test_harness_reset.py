@@ -250,11 +250,19 @@ def framed(command: bytes, seq: int) -> bytes:
     return frame(command, seq)
 
 
+#: The neutral command a host sends before motion ("Neutral before motion"): the board
+#: drives once it has stood NEUTRAL_TICKS ticks (0.12 s is enough wherever it lands).
+NEUTRAL = encode_wheel(0.0, 0.0)
+
+
 def drive(mega: VirtualMega) -> None:
-    """Boots, says hello and drives both wheels (the wheels held still: the PID winds up)."""
+    """Boots, says hello, sends its neutral command and drives both wheels (the wheels
+    held still: the PID winds up)."""
     mega.run_for(0.02)
     mega.send(framed(b"hello", 1))
     mega.run_for(0.06)
+    mega.send(framed(NEUTRAL, 100))
+    mega.run_for(0.12)
     for seq in range(2, 6):
         mega.send(framed(encode_wheel(6.0, 6.0), seq))
         mega.run_for(0.05)
@@ -288,13 +296,19 @@ def test_the_firmware_is_unpowered_from_the_first_instruction_after_a_reset(
         assert reset.mcusr == {"external": EXTRF, "brownout": BORF, "power_on": PORF}[cause]
         assert mega.mcusr == 0                           # read and cleared at boot
         assert "ACK:" not in text                        # nothing executed again
-        # the board speaks again: hello, then a motion frame
+        # the board speaks again: hello; the host's motion frame, as it was before the
+        # reset, is refused (neutral before motion); a neutral frame, then it drives
         mega.send(framed(b"hello", 6))
         mega.run_for(0.1)
         assert "HELLO:3," in mega.take_tx_text()
         mega.send(framed(encode_wheel(6.0, 6.0), 7))
         mega.run_for(0.2)
-        assert "ACK:7" in mega.take_tx_text() and mega.pwm("left") > 0
+        assert "NAK:7,neutral" in mega.take_tx_text() and mega.pwm("left") == 0
+        mega.send(framed(NEUTRAL, 8))
+        mega.run_for(0.12)
+        mega.send(framed(encode_wheel(6.0, 6.0), 9))
+        mega.run_for(0.2)
+        assert "ACK:9" in mega.take_tx_text() and mega.pwm("left") > 0
 
 
 def test_a_live_board_resets_on_a_dtr_pulse(elf: Path) -> None:
@@ -315,6 +329,13 @@ def test_a_live_board_resets_on_a_dtr_pulse(elf: Path) -> None:
 
         read_for(0.1)
         board.write(framed(b"hello", 1))
+        board.write(framed(NEUTRAL, 100))
+        # until a TLM line's state (its last field) says the neutral has stood
+        deadline = time.monotonic() + 20
+        while (not any(line.startswith(b"TLM:") and line.endswith(b",0")
+                       for line in bytes(received).split(b"\r\n"))
+               and time.monotonic() < deadline):
+            read_for(0.05)
         for seq in range(2, 12):
             board.write(framed(encode_wheel(3.0, 3.0), seq))
             read_for(0.05)

@@ -185,7 +185,11 @@ def test_the_worst_tick_fits_the_refill() -> None:
         send(FirmwareState(linesFramed=1, lineCounter=255), line, out)
         return len(out)
 
-    lines = [feedback_line(s), send_telemetry(s, 2**32 - 1), send_event("WATCHDOG")]
+    s.neutralFault = 1                 # the state at its widest
+    # the tick's own event: WATCHDOG, or (never beside it) one of the wait for neutral's
+    tick_event = max((send_event(e) for e in ("WATCHDOG", "NOT_NEUTRAL", "NEUTRAL", "DEFLECTED")),
+                     key=sent)
+    lines = [feedback_line(s), send_telemetry(s, 2**32 - 1), tick_event]
     tick = sum(map(sent, lines))
     answered = []                      # a data line comes only with an ACK
     for i, p in enumerate(PARAMS):     # every parameter at its largest

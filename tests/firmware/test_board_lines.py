@@ -77,11 +77,13 @@ def test_after_hello4_every_line_is_a_frame_in_turn(chunks: list[bytes]) -> None
 
 
 def test_before_hello_the_lines_are_the_seeds() -> None:
-    """A host that never says hello gets v1/v3 lines, no frame, no counter."""
+    """A host that never says hello gets v1/v3 lines, no frame, no counter (its neutral
+    command first, which stands two ticks: then it drives)."""
     fw = Firmware()
-    out = _drive(fw, [b"x:0.500,t:0.100,", b"rp05.00,lp03.00,", b""], 0)
+    out = _drive(fw, [b"x:0.000,t:0.000,\n", b"", b"x:0.500,t:0.100,", b"rp05.00,lp03.00,", b""], 0)
     lines = _lines(out)
     assert lines and all(line.startswith(b"ENC:") and b"#" not in line for line in lines)
+    assert fw.state.targetR != 0.0                      # driven, not refused
     assert fw.state.linesFramed == 0 and fw.state.lineCounter == 0
 
 

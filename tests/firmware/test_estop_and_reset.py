@@ -11,7 +11,7 @@ import re
 import numpy as np
 import pytest
 
-from tests.support.boards import ChairOnPins, boot, send_and_run
+from tests.support.boards import ChairOnPins, boot, neutral, send_and_run
 from wcdrive.boards.simavr.virtual_mega import VirtualMega
 from wcdrive.firmware import constants as C
 from wcdrive.firmware.final_control import FREE_RAM, Firmware
@@ -31,6 +31,7 @@ def _drive(mega: VirtualMega, command: bytes, seconds: float) -> bytes:
 def test_estop_in_motion_ramps_down_refuses_motion_and_resets_once_parked(mega) -> None:
     rig = ChairOnPins(mega)
     rig.run_for(0.1)
+    rig.neutral()
     for _ in range(15):
         rig.send_and_run(b"rp6.0,lp6.0,\n", 0.1)
     assert mega.read("setpointR") == pytest.approx(6.0)
@@ -49,6 +50,10 @@ def test_estop_in_motion_ramps_down_refuses_motion_and_resets_once_parked(mega) 
     assert b"ERR:" not in rig.send_and_run(b"reset\n", 0.06)
     assert mega.read("estopLatched") == 0
     assert mega.read("setpointR") == 0.0          # a reset alone does not move the chair
+    # Neutral before motion: the released e-stop takes a neutral command before motion.
+    assert b"ERR:neutral" in rig.send_and_run(b"rp2.0,lp2.0,\n", 0.2)
+    assert mega.read("targetR") == 0.0 and mega.read("setpointR") == 0.0
+    rig.neutral()
     rig.send_and_run(b"rp2.0,lp2.0,\n", 0.2)
     assert mega.read("targetR") == 2.0 and mega.read("setpointR") > 0.0
 
@@ -56,6 +61,7 @@ def test_estop_in_motion_ramps_down_refuses_motion_and_resets_once_parked(mega) 
 def test_watchdog_timeout_parameter(mega) -> None:
     boot(mega, 0.1)
     assert b"PAR:watchdog_ms,200\r\n" in send_and_run(mega, b"set:watchdog_ms=200\n", 0.01)
+    neutral(mega)
     send_and_run(mega, b"rp3.0,lp3.0,\n", 0.0)
     sent_at = mega.cycle
     out = b""
@@ -69,6 +75,7 @@ def test_watchdog_timeout_parameter(mega) -> None:
 def test_gains_and_ramp_parameters_change_the_loop(mega) -> None:
     boot(mega, 0.1)
     send_and_run(mega, b"set:max_accel=2.0\n", 0.01)
+    neutral(mega)
     send_and_run(mega, b"rp5.0,lp5.0,\n", 0.0)
     start = mega.read("setpointR")
     mega.run_for(0.05)
@@ -80,6 +87,7 @@ def test_gains_and_ramp_parameters_change_the_loop(mega) -> None:
 
 def test_tlm_lines_follow_feedback_after_hello_and_carry_the_tick_inputs(mega) -> None:
     boot(mega, 0.1)
+    neutral(mega)
     out = send_and_run(mega, b"hello\n" + frame(b"rp1.0,lp1.0,", 41), 0.3)
     assert b"HELLO:3,final_control,%s,%s\r\n" % (C.FIRMWARE_VERSION.encode(), C.BUILD_ID.encode()) in out
     assert b"ACK:41\r\n" in out
@@ -121,6 +129,7 @@ def test_emergency_stops_end_with_the_motors_unpowered(mega) -> None:
     """After the e-stop's ramp the PID no longer drives the motors on its integrators:
     PWM 0 as soon as the setpoints reach zero, even while the wheels still turn."""
     boot(mega, 0.1)
+    neutral(mega)
     _drive(mega, b"rp3.0,lp3.0,\n", 1.0)
     # The wheels keep turning at 1 rad/s (a chair rolling on), whatever the motors do.
     t0 = mega.time

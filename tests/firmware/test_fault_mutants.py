@@ -26,11 +26,30 @@ pytestmark = pytest.mark.simavr
 
 COUNTS_PER_RAD = 10000 / (2 * math.pi)
 HIGH = 1
+#: Every driven trace opens as a host does after a boot: a neutral command at 10 ms, which
+#: has stood NEUTRAL_TICKS ticks by LEAD (protocol/PROTOCOL.md, "Neutral before motion").
+#: The times the tests give (commands, the wheels' motion, the trace's length) count from
+#: LEAD: whole control ticks (4), so the ticks fall about where they did before the rule.
+#: (Not 3: the motor check's reference restarts on any rise of the dragged wheel's
+#: measured speed, the encoder's quantisation jitter included, so whether MOTOR_L
+#: latches within its 1.5 s depends on the ticks' millisecond phase against the edges:
+#: with 0.15 s it had not latched by 2.5 s.)
+LEAD = 0.2
+NEUTRAL = (0.01, b"rp0,lp0,\n")
+
+
+def _trace(duration: float, serial: list[tuple[float, bytes]], encoders: dict[str, EdgeTrain]) -> Trace:
+    """A trace of ``duration`` s from LEAD on, after the neutral command: ``serial``'s
+    times from LEAD (``encoders`` from ``_track``, already so)."""
+    return Trace(duration=duration + LEAD, serial=[NEUTRAL, *((round(t + LEAD, 4), d) for t, d in serial)],
+                 encoders=encoders)
 
 
 def _track(points: list[tuple[float, float]], mirrored: bool = False) -> EdgeTrain:
     """The edges of a wheel whose angle (rad) moves linearly between ``(t, angle)``
-    points (the left wheel is mounted mirrored: its counts run backwards)."""
+    points, times from LEAD (still before it; the left wheel is mounted mirrored: its
+    counts run backwards)."""
+    points = [(0.0, points[0][1]), *((t + LEAD, a) for t, a in points)]
     sign = -1 if mirrored else 1
     times = np.array([t for t, _ in points])
     counts = np.array([0.5 + sign * a * COUNTS_PER_RAD for _, a in points])
@@ -99,9 +118,9 @@ def test_a_stall_latches_on_the_exact_tick_the_protocol_says() -> None:
     """Left encoder cut at 0.40 s under drive: the fault latches at the tick where the
     wheel has been driven without a count for FAULT_STALL_TICKS ticks in a row, not one
     tick later (kills ``>`` for ``>=``)."""
-    trace = Trace(duration=1.0, serial=_commands(b"rp3.0,lp3.0,", 0.02, 1.0),
-                  encoders={"left": _steady(3.0, 0.02, 0.40, mirrored=True),
-                            "right": _steady(3.0, 0.02, 1.0)})
+    trace = _trace(1.0, _commands(b"rp3.0,lp3.0,", 0.02, 1.0),
+                   encoders={"left": _steady(3.0, 0.02, 0.40, mirrored=True),
+                             "right": _steady(3.0, 0.02, 1.0)})
     recording = _run(trace)
     runs, due = _stall_oracle(recording, "L")
     assert due is not None, runs
@@ -113,14 +132,14 @@ def test_a_stall_latches_on_the_exact_tick_the_protocol_says() -> None:
 def _brake_then_lock_trace() -> Trace:
     """Both wheels at their 3 rad/s setpoint; from 1.0 s the left one is pushed to 6 rad/s
     (downhill), so the PID brakes it hard (duty against the setpoint); just before the tick
-    at 1.301 s it locks until 1.43 s (the two ticks after that one see no count, the duty
+    at 1.301 s (from LEAD) it locks until 1.43 s (the two ticks after that one see no count, the duty
     still against the setpoint as the first of them starts), then rolls on at 3 rad/s."""
     lock, roll = 1.3005, 1.43
     at_lock = 2.94 + 6 * (lock - 1.0)
     left = _track([(0.0, 0.0), (0.02, 0.0), (1.0, 2.94), (lock, at_lock), (roll, at_lock),
                    (1.8, at_lock + 3 * (1.8 - roll))], mirrored=True)
-    return Trace(duration=1.8, serial=_commands(b"rp3.0,lp3.0,", 0.02, 1.8),
-                 encoders={"left": left, "right": _steady(3.0, 0.02, 1.8)})
+    return _trace(1.8, _commands(b"rp3.0,lp3.0,", 0.02, 1.8),
+                  encoders={"left": left, "right": _steady(3.0, 0.02, 1.8)})
 
 
 def test_a_wheel_braked_without_a_count_is_not_a_stall() -> None:
@@ -156,17 +175,17 @@ def test_a_suspect_tick_holds_the_wheels_output() -> None:
     setpoint, holds that wheel's PID output, integral and duty (kills the PID running on
     a suspect wheel): after the left encoder is cut, and while the right one counts
     backwards."""
-    cut = Trace(duration=1.0, serial=_commands(b"rp3.0,lp3.0,", 0.02, 1.0),
-                encoders={"left": _steady(3.0, 0.02, 0.40, mirrored=True),
-                          "right": _steady(3.0, 0.02, 1.0)})
+    cut = _trace(1.0, _commands(b"rp3.0,lp3.0,", 0.02, 1.0),
+                 encoders={"left": _steady(3.0, 0.02, 0.40, mirrored=True),
+                           "right": _steady(3.0, 0.02, 1.0)})
     recording = _run(cut)
     suspect = [i for i, (_, a, _) in enumerate(_ticks(recording))
                if 0 < a["stallTicksL"] < C.FAULT_STALL_TICKS and not a["faultFlags"]]
     _assert_held(recording, "L", suspect)
 
-    swapped = Trace(duration=1.2, serial=_commands(b"rp3.0,lp3.0,", 0.02, 1.2),
-                    encoders={"left": _steady(3.0, 0.02, 1.2, mirrored=True),
-                              "right": _steady(-3.0, 0.02, 1.2)})
+    swapped = _trace(1.2, _commands(b"rp3.0,lp3.0,", 0.02, 1.2),
+                     encoders={"left": _steady(3.0, 0.02, 1.2, mirrored=True),
+                               "right": _steady(-3.0, 0.02, 1.2)})
     recording = _run(swapped)
     suspect = [i for i, (_, a, _) in enumerate(_ticks(recording))
                if 0 < a["reverseTicksR"] < C.FAULT_REVERSE_TICKS and not a["faultFlags"]]
@@ -181,9 +200,9 @@ def test_effort_without_progress_latches_a_motor_fault() -> None:
     setpoint: its duty climbs FAULT_EFFORT_PWM above its lowest and stays there for
     FAULT_EFFORT_TICKS ticks with no gain in speed: MOTOR_L, the left motor off and the
     right one, still turning, braked (kills ``noEffect`` never tripping)."""
-    trace = Trace(duration=1.5, serial=_commands(b"rp3.0,lp3.0,", 0.02, 1.5),
-                  encoders={"left": _steady(0.5, 0.02, 1.5, mirrored=True),
-                            "right": _steady(3.0, 0.02, 1.5)})
+    trace = _trace(1.5, _commands(b"rp3.0,lp3.0,", 0.02, 1.5),
+                   encoders={"left": _steady(0.5, 0.02, 1.5, mirrored=True),
+                             "right": _steady(3.0, 0.02, 1.5)})
     recording = _run(trace)
     assert _events(recording.tx) == [b"EVT:FAULT,MOTOR_L"]
     ticks = _ticks(recording)
@@ -211,8 +230,8 @@ def test_an_estop_brakes_from_a_zeroed_integrator() -> None:
         return _track(points, mirrored)
 
     serial = [*_commands(b"rp3.0,lp3.0,", 0.02, 1.0), (1.02, b"estop\n")]
-    recording = _run(Trace(duration=1.3, serial=serial,
-                           encoders={"left": wheel(True), "right": wheel(False)}))
+    recording = _run(_trace(1.3, serial,
+                            encoders={"left": wheel(True), "right": wheel(False)}))
     assert _events(recording.tx) == [b"EVT:ESTOP"]
     ticks = _ticks(recording)
     first = next(i for i, (_, a, _) in enumerate(ticks) if a["estopLatched"])

@@ -9,7 +9,8 @@ import re
 
 import pytest
 
-from tests.support.boards import FEEDBACK, ChairOnPins, boot, ms, send_and_run
+from tests.conftest import thorough
+from tests.support.boards import FEEDBACK, NEUTRAL, NEUTRAL_PPM, ChairOnPins, boot, ms, neutral, send_and_run
 from wcdrive.avr.f32 import f32
 from wcdrive.boards.simavr.virtual_mega import F_CPU, VirtualMega
 from wcdrive.firmware.final_control import Firmware
@@ -47,11 +48,17 @@ VALID = [
 @pytest.mark.parametrize(("command", "mode", "right", "left"), VALID)
 def test_answers_each_command_kind(mega: VirtualMega, command: bytes, mode: str,
                                    right: float | None, left: float | None) -> None:
+    zero = NEUTRAL_PPM if mode == "PPM" else NEUTRAL     # the host's neutral command first
     boot(mega)
+    neutral(mega, zero)
     out = send_and_run(mega, command, 0.12)
     lines = FEEDBACK.findall(out)
     assert lines and lines[-1][4].decode() == mode
     port = Firmware()
+    port.tick(50, 0, 0)
+    port.feed(zero)
+    port.tick(100, 0, 0)
+    port.tick(150, 0, 0)
     port.feed(command)
     assert mega.read("targetR") == port.state.targetR
     assert mega.read("targetL") == port.state.targetL
@@ -65,13 +72,15 @@ def test_answers_each_command_kind(mega: VirtualMega, command: bytes, mode: str,
 
 def test_seed_kinematics_example(mega: VirtualMega) -> None:
     boot(mega)
+    neutral(mega)
     send_and_run(mega, b"x:0.5,t:0.2,", 0.06)
     assert mega.read("targetR") == pytest.approx(3.65, abs=0.005)
     assert mega.read("targetL") == pytest.approx(2.91, abs=0.005)
 
 
 def test_newline_less_command_takes_effect_at_the_next_tick(mega: VirtualMega) -> None:
-    boot(mega, 0.075)   # between ticks
+    boot(mega, 0.075)
+    neutral(mega, seconds=0.1)     # stood 2 ticks; still between ticks
     cycles = mega.send(b"x:0.500,t:0.100,")
     done = cycles[-1] + 1500
     mega.break_on("controlTick")
@@ -140,6 +149,7 @@ def test_malformed_commands_change_nothing_in_motion(elf, command: bytes, reason
     for extra in (b"", command):
         with VirtualMega(elf) as mega:
             boot(mega)
+            neutral(mega)
             send_and_run(mega, b"x:0.400,t:0.100,", 0.22)
             send_and_run(mega, extra, 0.1)
             send_and_run(mega, b"x:0.400,t:0.100,", 0.1)
@@ -164,13 +174,19 @@ def _pwm_zero_time(rig: ChairOnPins, until: float) -> tuple[float | None, float]
     return zero_since, fastest_at_zero
 
 
-@pytest.mark.parametrize("speed", [0.5, 3.0, 10.0, 17.59])
+#: rad/s: the slowest and the top speed at the fast depth, the two between as well at the
+#: thorough one (the run grows with the speed: 0.6 to 2.9 s on simavr).
+WATCHDOG_SPEEDS = [0.5, 3.0, 10.0, 17.59] if thorough() else [0.5, 17.59]
+
+
+@pytest.mark.parametrize("speed", WATCHDOG_SPEEDS)
 def test_watchdog_brakes_the_chair_then_unpowers_the_motors(mega: VirtualMega, speed: float) -> None:
     """After the last command the watchdog ramps the setpoints down and the PID keeps
     braking the wheels until they turn slower than BRAKE_DONE_SPEED; then the motors are
     unpowered (parked). The chair on the pins is the ground truth."""
     rig = ChairOnPins(mega)
     rig.run_for(0.06)
+    rig.neutral()
     command = f"rp{speed},lp{speed},".encode()
     settle = speed / 5.0 + 0.5
     t = mega.time
@@ -192,6 +208,7 @@ def test_watchdog_brakes_the_chair_then_unpowers_the_motors(mega: VirtualMega, s
 def test_stop_command_leaves_the_motors_unpowered(mega: VirtualMega) -> None:
     rig = ChairOnPins(mega)
     rig.run_for(0.06)
+    rig.neutral()
     for _ in range(10):
         rig.send_and_run(b"rp2.0,lp2.0,", 0.1)
     assert mega.pwm("left") > 0
@@ -205,6 +222,7 @@ def test_stop_command_leaves_the_motors_unpowered(mega: VirtualMega) -> None:
 def test_ppm_loss_stops_and_is_reported(mega: VirtualMega) -> None:
     rig = ChairOnPins(mega)
     rig.run_for(0.06)
+    rig.neutral(NEUTRAL_PPM)
     frame = b"ppm:1500,1800,1500,1500,1500,1500,1500,1500,"
     for _ in range(8):
         rig.send_and_run(frame, 0.05)
@@ -219,6 +237,7 @@ def test_ppm_loss_stops_and_is_reported(mega: VirtualMega) -> None:
 def test_reversal_stops_pivots_then_applies_the_command(mega: VirtualMega) -> None:
     rig = ChairOnPins(mega)
     rig.run_for(0.06)
+    rig.neutral()
     for _ in range(5):
         rig.send_and_run(b"x:0.3,t:0,", 0.1)
     rig.send_and_run(b"x:-0.3,t:0,", 0.01)
@@ -243,6 +262,7 @@ def test_reversal_stops_pivots_then_applies_the_command(mega: VirtualMega) -> No
 def test_stop_command_cancels_a_pivot(mega: VirtualMega) -> None:
     rig = ChairOnPins(mega)
     rig.run_for(0.06)
+    rig.neutral()
     for _ in range(5):
         rig.send_and_run(b"x:0.3,t:0,", 0.1)
     rig.send_and_run(b"x:-0.3,t:0,", 0.03)

@@ -13,6 +13,10 @@ The step, as a user drives it (``step_response``), on the port at the Mega's tim
 
 * ``hello``, then ``set:`` for every parameter given, each a v3 frame that must be
   ACKed, 25 ms apart (at most two answers a tick, under ``ERR_LINES_PER_TICK``);
+* a neutral CMDVEL frame ``x:0.000,t:0.000`` every ``COMMAND_PERIOD`` for
+  ``NEUTRAL_FRAMES`` periods before the step (the board drives only once a neutral
+  command has stood ``NEUTRAL_TICKS`` ticks: protocol/PROTOCOL.md, "Neutral before
+  motion"; streamed, as a host forwarding cmd_vel does, so no watchdog fires before it);
 * from ``STEP_AT``, a CMDVEL frame ``x:<v>,t:0`` every ``COMMAND_PERIOD`` (40 ms, less
   than a control period, so no ``watchdog_ms`` the board accepts can fire);
 * the run lasts until ``WINDOW_S`` after both wheels have settled (below).
@@ -96,6 +100,9 @@ STEP_AT = 0.4
 COMMAND_PERIOD = 0.04
 #: s between the set: frames.
 SET_PERIOD = 0.025
+#: Neutral frames before the step, COMMAND_PERIOD apart: the first has stood
+#: NEUTRAL_TICKS (2) ticks of 50 ms by the step, wherever between ticks it came.
+NEUTRAL_FRAMES = 3
 #: m/s: the magnitudes of the step.
 SPEED_MIN, SPEED_MAX = 0.3, 2.0
 #: m/s: the steps of the explicit cases.
@@ -224,8 +231,10 @@ def step_response(values: dict[str, float], speed: float, *, window_s: float = W
         t += SET_PERIOD
         sent[name] = wire_value(BY_NAME[name], value)
         set_seqs[send(f"set:{name}={sent[name]}".encode(), t)] = name
-    step_at = max(STEP_AT, t + SET_PERIOD)
+    step_at = max(STEP_AT, t + SET_PERIOD + NEUTRAL_FRAMES * COMMAND_PERIOD)
     command = encode_cmdvel(speed, 0.0)
+    for k in range(NEUTRAL_FRAMES, 0, -1):     # the host's neutral first, then the step
+        send(encode_cmdvel(0.0, 0.0), step_at - k * COMMAND_PERIOD)
 
     rows: list[tuple[float, float, float]] = []
     next_command = step_at

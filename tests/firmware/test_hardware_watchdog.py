@@ -52,6 +52,8 @@ def _hang_in_control_tick(mega: VirtualMega) -> int:
 def test_a_hung_loop_is_reset_by_the_watchdog_and_the_motors_are_unpowered(elf) -> None:
     mega = VirtualMega(elf)
     rig = ChairOnPins(mega)
+    rig.run_for(0.06)                                     # booted
+    rig.neutral(b"x:0.000,t:0.000,\n")                  # the host's neutral first
     for _ in range(10):                                   # driving at 0.5 m/s
         rig.send_and_run(b"x:0.500,t:0.000,", 0.1)
     assert mega.pwm("left") > 0 and mega.pwm("right") > 0
@@ -69,6 +71,7 @@ def test_a_hung_loop_is_reset_by_the_watchdog_and_the_motors_are_unpowered(elf) 
     text = bytes(b for c, b in mega.tx_log if c >= reset.cycle)
     assert text.startswith(b"BOOT:final_control,WATCHDOG\r\n"), text[:60]
     assert mega.read("resetCause") & 0x08
+    assert mega.read("needNeutral") == 1                 # rebooted: motion waits for neutral
     mega.close()
 
 

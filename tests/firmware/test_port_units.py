@@ -108,18 +108,30 @@ def test_stop_parks_with_integrators_reset() -> None:
 
 
 
+def _ready() -> Firmware:
+    """A board just booted whose host sent its neutral command first, which stood
+    NEUTRAL_TICKS ticks: it takes motion commands ("Neutral before motion")."""
+    fw = Firmware()
+    fw.tick(50, 0, 0)
+    fw.feed(b"x:0.000,t:0.000,\n")
+    fw.tick(100, 0, 0)
+    fw.tick(150, 0, 0)
+    assert fw.state.needNeutral == 0
+    return fw
+
+
 @pytest.mark.parametrize(("command", "right", "left"), [
     (b"x:0.5,t:0.2,", 3.65, 2.91), (b"x:0.5,t:0,", 3.28, 3.28), (b"x:0,t:0.5,", 0.935, -0.935),
 ])
 def test_seed_kinematics(command: bytes, right: float, left: float) -> None:
-    fw = Firmware()
+    fw = _ready()
     fw.feed(command)
     assert fw.state.targetR == pytest.approx(right, abs=0.005)
     assert fw.state.targetL == pytest.approx(left, abs=0.005)
 
 
 def test_cmdvel_beyond_the_wheel_limit_keeps_the_curvature() -> None:
-    fw = Firmware()
+    fw = _ready()
     fw.feed(b"x:2.6,t:1.0,")
     right, left = fw.state.targetR, fw.state.targetL
     assert max(abs(right), abs(left)) <= C.MAX_WHEEL_SPEED * (1 + 1e-6)

@@ -2,7 +2,10 @@
 one that never says hello gets the seed's lines, unframed, and drives. Two such hosts
 exist: the guide's CMDVEL host (``x:0.500,t:0.100,`` with no line end) and a
 ros2_control hardware interface for this chair, which writes ``rp05.00,lp03.00,``
-wheel commands with no line end at 100 Hz."""
+wheel commands with no line end at 100 Hz. Each opens with a neutral command, as the
+board asks after a boot ("Neutral before motion"): the ros2_control interface writes
+``rp0.0,lp0.0,`` and a line end and waits 2 s before streaming, and the guide's host
+forwards ROS cmd_vel, zero (``x:0.000,t:0.000,``) until someone drives."""
 
 from __future__ import annotations
 
@@ -14,13 +17,19 @@ from wcdrive.boards.simavr.virtual_mega import VirtualMega
 pytestmark = pytest.mark.simavr
 
 
-def _drive(mega: VirtualMega, command: bytes, rate_hz: float, seconds: float) -> bytes:
+def _drive(mega: VirtualMega, opening: list[tuple[bytes, float]], command: bytes, rate_hz: float,
+           seconds: float) -> tuple[bytes, bytes]:
+    """The host's ``opening`` (each write, then the time until the next), then
+    ``command`` at ``rate_hz`` for ``seconds``: what the board sent during each."""
     chair = ChairOnPins(mega)
     boot(mega)
+    first = bytearray()
+    for data, wait in opening:
+        first += chair.send_and_run(data, wait)
     out = bytearray()
     for _ in range(round(seconds * rate_hz)):
         out += chair.send_and_run(command, 1.0 / rate_hz)
-    return bytes(out)
+    return bytes(first), bytes(out)
 
 
 def _seed_lines(out: bytes) -> list[tuple[bytes, ...]]:
@@ -34,7 +43,10 @@ def _seed_lines(out: bytes) -> list[tuple[bytes, ...]]:
 
 def test_the_ros2_control_host_drives_at_100_hz_without_line_ends(elf) -> None:
     with VirtualMega(elf) as mega:
-        out = _drive(mega, b"rp05.00,lp03.00,", 100.0, 3.0)
+        opening, out = _drive(mega, [(b"rp0.0,lp0.0,\n", 2.0)], b"rp05.00,lp03.00,", 100.0, 3.0)
+        # the 2 s wait outlasts the watchdog: it stops the zero command (nothing to stop)
+        assert opening.count(b"EVT:WATCHDOG\r\n") == 1
+        _seed_lines(opening.replace(b"EVT:WATCHDOG\r\n", b""))
         fields = _seed_lines(out)
         assert len(fields) >= 59                            # 20 Hz feedback, none lost
         assert {f[4] for f in fields[5:]} == {b"WHEEL"}
@@ -47,7 +59,8 @@ def test_the_ros2_control_host_drives_at_100_hz_without_line_ends(elf) -> None:
 
 def test_the_guides_cmdvel_host_drives_without_line_ends(elf) -> None:
     with VirtualMega(elf) as mega:
-        out = _drive(mega, b"x:0.500,t:0.100,", 10.0, 3.0)
+        opening, out = _drive(mega, [(b"x:0.000,t:0.000,", 0.1)] * 3, b"x:0.500,t:0.100,", 10.0, 3.0)
+        _seed_lines(opening)
         fields = _seed_lines(out)
         assert {f[4] for f in fields[5:]} == {b"CMDVEL"}
         right, left = mega.read("targetR"), mega.read("targetL")

@@ -15,6 +15,7 @@ from hypothesis import strategies as st
 
 import wcdrive
 from tests.support.board_of import board_of
+from wcdrive.errors import WcdriveNeutralError
 from wcdrive.host.boardclock import BoardClock, ClockFilter
 
 
@@ -112,6 +113,8 @@ def test_a_reset_mid_drive_keeps_the_pose_and_tells_the_subscribers() -> None:
             while board.plant.time - start < seconds:
                 try:
                     chair.set_velocity(0.4, 0.0)
+                except WcdriveNeutralError:          # reset: drives on after a neutral
+                    chair.wait_for_neutral()
                 except wcdrive.WcdriveError:         # during the reset's hello
                     pass
                 time.sleep(0.02)

@@ -20,6 +20,7 @@ import pytest
 import wcdrive
 from tests.support.board_of import board_of
 from wcdrive.boards.sim_board import SimulatedBoard
+from wcdrive.errors import WcdriveNeutralError
 
 #: Simulated seconds per wall-clock second the "loaded" board manages.
 LOADED = 4.0
@@ -55,12 +56,17 @@ def muted(monkeypatch):
 
 def _drive(chair: wcdrive.Wheelchair, seconds: float) -> int:
     """Sends a velocity at 10 Hz for ``seconds`` of wall clock; returns how many calls
-    raised (the link was down)."""
+    raised because the link was down. At 10 Hz of wall clock a fast board's watchdog
+    stops the chair between two calls; the board then drives only after a neutral
+    command (docs/safety.md, "Neutral before motion"), which the program sends, as it
+    should, when the call says so."""
     refused = 0
     end = time.monotonic() + seconds
     while time.monotonic() < end:
         try:
             chair.set_velocity(0.5, 0.2)
+        except WcdriveNeutralError:
+            chair.stop()
         except wcdrive.WcdriveConnectionError:
             refused += 1
         time.sleep(0.1)

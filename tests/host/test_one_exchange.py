@@ -7,9 +7,11 @@ from __future__ import annotations
 import pytest
 
 import wcdrive
-from wcdrive.protocol.codec import MAX_ANGULAR
+from wcdrive.protocol.codec import MAX_ANGULAR, encode_cmdvel
 from wcdrive.protocol.exchange import Exchange
 from wcdrive.testing.stepped import SteppedChair
+
+STOP = encode_cmdvel(0.0, 0.0)
 
 
 class _Spy:
@@ -30,9 +32,9 @@ class _Spy:
 class _WiredChair(SteppedChair):
     """A ``SteppedChair`` that keeps what it puts on the board's wire."""
 
-    def __init__(self) -> None:
-        super().__init__()
-        self.wire: list[bytes] = []
+    def __init__(self, *, neutral: bool = True) -> None:
+        self.wire: list[bytes] = []                 # before: the constructor may send
+        super().__init__(neutral=neutral)
 
     def send(self, data: bytes) -> None:
         self.wire.append(data)
@@ -57,9 +59,13 @@ def test_wheelchair_and_stepped_chair_number_their_frames_through_one_exchange(
     from_host_core = spy.frames[:len(host)]
 
     spy.frames.clear()
-    stepped = _WiredChair()
+    stepped = _WiredChair(neutral=False)            # its opening as connect()'s, below
     for _ in range(sum(b":hello:4*" in line for line in host)):   # the handshake's hellos
         stepped.command(b"hello:4")
+    # connect()'s neutral commands (wait_for_neutral: one, and more until the board
+    # confirms one); the program's own stop() is the last line
+    for _ in range(sum(b":" + STOP + b"*" in line for line in host[:-1])):
+        stepped.stop()
     stepped.set_velocity(0.3, 0.0)
     stepped.set_wheels(left=1.0, right=2.0)
     stepped.set_velocity(0.0, MAX_ANGULAR)

@@ -31,6 +31,7 @@ import serial
 import wcdrive
 from tests.support.board_of import board_of
 from wcdrive.boards.sim_board import SimulatedBoard
+from wcdrive.errors import WcdriveNeutralError
 from wcdrive.host.handshake import Handshake
 from wcdrive.host.requests import Request
 from wcdrive.protocol.codec import board_frame, board_unframe, encode_cmdvel, encode_ppm
@@ -185,12 +186,15 @@ def test_a_garbled_first_hello_is_retried(rig) -> None:
     tamper.tx.edit(_garble_hellos(1))
     start = time.monotonic()
     with wcdrive.connect(path) as chair:
-        took = time.monotonic() - start
         assert chair.protocol_version == 4 and chair.firmware == "final_control"
         assert "checksum" in chair.errors
     hellos = re.findall(rb"\$\d+:hello:4\*[0-9A-F]{4}", b"".join(tamper.written))
     assert len(hellos) == 2 and hellos[0] != hellos[1]
     assert board_of(tamper).loop.fw.state.crcRejected == 1
+    # connect() then waits for the board to confirm its neutral command: the time that
+    # counts is the second hello's, on the wire
+    again = next(t for t, data in tamper.port.recording.sent if hellos[1] in data)
+    took = again - start
     assert took < Handshake.HELLO_WAITS[0], took       # retried on its ERR, not after its wait
 
 
@@ -353,6 +357,12 @@ def test_a_board_that_resets_mid_session_is_handshaken_again(rig) -> None:
         _wait(lambda: chair.events.count("BOARD_RESET") == 2 and state.tlmEnabled,
               "the second handshake", timeout=3.0)
         assert not state.estopLatched and not chair.estop_latched
+        # the reset was not the program's: the new board drives after the neutral the
+        # program sends once it decides to drive on (docs/safety.md, "Neutral before motion")
+        assert chair.wait_for_handshake(5.0) == 4 and chair.needs_neutral
+        with pytest.raises(WcdriveNeutralError):
+            chair.set_velocity(0.3, 0.0)
+        chair.wait_for_neutral()
         chair.set_velocity(0.3, 0.0)
         _wait(lambda: state.targetL > 0, "the new board to drive", timeout=2.0)
 

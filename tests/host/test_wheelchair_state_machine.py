@@ -43,14 +43,24 @@ in order and checks, after every step:
   each ``set_param``/``estop``/``reset_estop`` call makes the board accept its command
   exactly once, whatever was lost on the way;
 - the link is up (``link_ok``) between steps, and its events alternate, ``LinkLost``
-  then ``LinkRestored``.
+  then ``LinkRestored``;
+- neutral before motion (docs/safety.md): the board waits for a neutral command from
+  its boot, a ``reset`` that released the e-stop and a watchdog stop of motion (not of
+  a stop), until one has stood ``NEUTRAL_TICKS`` ticks with no motion after it; motion
+  it refuses meanwhile starts the count over. The host refuses motion
+  (``WcdriveNeutralError``, nothing sent) only while the board waits or its latest TLM
+  line said so, and sends motion the board refuses only when the wait began after that
+  line. The program sends its neutral as connect() does at the start, by ``stop`` or
+  ``wait_for_neutral`` after a watchdog stop or a reconnect, and ``reset_estop``
+  returns once the board has confirmed one.
 
 Each step also checks its own call: a motion call sends one line, which the board takes
 as the kinematics of the arguments (to the 3 decimals on the wire) and refuses only for
 a wheel speed beyond its ``max_wheel``. Run time: the board runs 5 to 20 times faster
-than the wall clock and every wait is on its clock; the default profile (20 examples of
-50 steps) takes 10 to 25 s, ``ci`` (capped at 100 examples) 65 to 110 s on 2 cores (a
-freeze costs a link timeout of wall-clock time, so it runs once an example at most).
+than the wall clock and every wait is on its clock; the fast depth (10 examples of 50
+steps) takes 5 to 13 s, the thorough one (capped at 100 examples) 65 to 110 s on 2
+cores (a freeze costs a link timeout of wall-clock time, so it runs once an example at
+most).
 """
 
 from __future__ import annotations
@@ -69,10 +79,11 @@ from hypothesis.errors import InvalidArgument
 from hypothesis.stateful import RuleBasedStateMachine, initialize, invariant, precondition, rule
 
 import wcdrive
+from tests.conftest import thorough
 from tests.support.board_of import board_of
 from wcdrive.avr.avrlibc import strtod
 from wcdrive.boards.sim_board import SimulatedBoard
-from wcdrive.errors import WcdriveCommandError, WcdriveConnectionError, WcdriveEstopError
+from wcdrive.errors import WcdriveCommandError, WcdriveConnectionError, WcdriveEstopError, WcdriveNeutralError
 from wcdrive.firmware import constants as C
 from wcdrive.firmware.commands import parse
 from wcdrive.firmware.state import FirmwareState
@@ -105,21 +116,33 @@ class Line:
 
 @dataclass(frozen=True)
 class WatchdogStop:
-    """A tick that sent ``EVT:WATCHDOG``: its ``millis`` and the firmware's ``lastCmdTime``."""
+    """A tick that sent ``EVT:WATCHDOG``: its ``millis``, the firmware's ``lastCmdTime``
+    and whether the firmware waits for a neutral command after it (``needNeutral``)."""
 
     millis: int
     last_command: int
+    waits: bool
+
+
+@dataclass(frozen=True)
+class NeutralWait:
+    """The firmware began (``waits``) or ended its wait for a neutral command
+    (``needNeutral``): on a line it finished or on a tick, at ``millis``."""
+
+    millis: int
+    waits: bool
 
 
 class BoardProbe:
-    """Logs, on the board's thread, every line the firmware of ``board`` finishes and
-    every watchdog stop (by wrapping ``Firmware.feed``/``tick`` of that one board)."""
+    """Logs, on the board's thread, every line the firmware of ``board`` finishes, every
+    watchdog stop and every change of its wait for a neutral command (by wrapping
+    ``Firmware.feed``/``tick`` of that one board)."""
 
     FRAMED = re.compile(rb"\$(\d{1,5}):(.*)\*[0-9A-F]{4}", re.S)
 
     def __init__(self, board: SimulatedBoard) -> None:
         self.board = board
-        self.log: list[Line | WatchdogStop] = []
+        self.log: list[Line | WatchdogStop | NeutralWait] = []
         self._line = bytearray()
         fw, timer = board.loop.fw, board.loop.timer
         feed, tick = fw.feed, fw.tick
@@ -129,17 +152,22 @@ class BoardProbe:
             for chunk in re.split(rb"(?<=\n)", data):
                 if not chunk:
                     continue
-                rejected = fw.state.rejectedCount
+                rejected, waits = fw.state.rejectedCount, fw.state.needNeutral
                 out += feed(chunk)
                 self._line += chunk
                 if chunk.endswith(b"\n"):
                     self._finish(timer.millis, fw.state.rejectedCount == rejected)
+                if fw.state.needNeutral != waits:
+                    self.log.append(NeutralWait(timer.millis, bool(fw.state.needNeutral)))
             return bytes(out)
 
         def probed_tick(now: int, *args: int, **kwargs: int) -> bytes:
+            waits = fw.state.needNeutral
             out = tick(now, *args, **kwargs)
             if b"EVT:WATCHDOG" in out:
-                self.log.append(WatchdogStop(now, fw.state.lastCmdTime))
+                self.log.append(WatchdogStop(now, fw.state.lastCmdTime, bool(fw.state.needNeutral)))
+            elif fw.state.needNeutral != waits:
+                self.log.append(NeutralWait(now, bool(fw.state.needNeutral)))
             return out
 
         with board._lock:
@@ -295,10 +323,13 @@ class WheelchairMachine(RuleBasedStateMachine):
         self.chair = wcdrive.Wheelchair(self._open(), reopen=self._open, reconnect_timeout=10.0,
                                         link_timeout=1.0, stop_on_signals=False)
         self.chair.on_link(self.link_events.append)
-        # as wcdrive.connect does: the board boots, then the handshake
+        # as wcdrive.connect does: the board boots, then the handshake and a neutral
+        # command the board confirms (it drives only after one)
         self.chair.wait_for_telemetry(WALL_TIMEOUT)
         assert self.chair.wait_for_handshake(WALL_TIMEOUT) == 4
+        self.chair.wait_for_neutral(WALL_TIMEOUT)
         self._settle()
+        assert not self.waits
 
     def _open(self) -> Link:
         link = Link(self.speed, self.seed)
@@ -313,6 +344,12 @@ class WheelchairMachine(RuleBasedStateMachine):
         self.armed = False                  # a motion command is in force: the watchdog may stop it
         self.command_millis = 0
         self.board_estop = False
+        # neutral before motion: the board waits for a neutral command from its boot on
+        self.waits = True
+        self.neutral_since: int | None = None   # the neutral command the wait counts from
+        self.waits_began: int | None = 0        # the board's millis: the wait began
+        self.waits_ended: int | None = None     # ... and ended, the last time
+        self.last_watchdog: int | None = None
         self.seqs_done: set[int] = set()
         self.consumed = 0
         self.lost_seen = 0
@@ -365,16 +402,42 @@ class WheelchairMachine(RuleBasedStateMachine):
             _note("a pivot in progress")
         return snapshot, lines
 
-    def _apply(self, entries: list[Line | WatchdogStop]) -> None:
+    def _begin_wait(self, millis: int) -> None:
+        self.waits, self.neutral_since, self.waits_began = True, None, millis
+
+    def _apply(self, entries: list[Line | WatchdogStop | NeutralWait]) -> None:
         for e in entries:
             if isinstance(e, WatchdogStop):
                 assert self.armed, f"watchdog stop at {e.millis} ms with no motion command in force"
                 assert e.millis - e.last_command >= self.params["watchdog_ms"], (
                     f"watchdog stop {e.millis - e.last_command} ms after the last command, "
                     f"watchdog_ms is {self.params['watchdog_ms']}")
-                self.target, self.armed = (0.0, 0.0), False
+                # a stop of motion: the board waits for a neutral command; after a stop
+                # command it asks for nothing
+                if self.target != (0.0, 0.0):
+                    self._begin_wait(e.millis)
+                assert e.waits == self.waits, (e, self.target)
+                self.target, self.armed, self.last_watchdog = (0.0, 0.0), False, e.millis
+                continue
+            if isinstance(e, NeutralWait):
+                if e.waits:
+                    assert self.waits, f"the board began to wait for neutral at {e.millis} ms unasked"
+                else:
+                    # confirmed: a neutral command stood NEUTRAL_TICKS ticks, no motion after it
+                    assert self.waits and self.neutral_since is not None, e
+                    assert e.millis - self.neutral_since >= (C.NEUTRAL_TICKS - 1) * C.CONTROL_PERIOD_MS, (
+                        e, self.neutral_since)
+                    self.waits, self.neutral_since, self.waits_ended = False, None, e.millis
                 continue
             if not e.accepted:
+                motion = (e.body not in self.link.corrupted and e.body not in (b"estop", b"reset")
+                          and not e.body.startswith((b"set:", b"get:", b"hello")))
+                result = parse(e.body, self.params["max_wheel"]) if motion else "not motion"
+                if not isinstance(result, str) and result is not None and result[1:] != (0.0, 0.0):
+                    # motion refused: the e-stop, or the wait for neutral (which starts over)
+                    assert self.board_estop or self.waits, f"the board refused {e.body!r}"
+                    if not self.board_estop:
+                        self.neutral_since = None
                 continue
             if e.seq is not None:
                 assert e.seq not in self.seqs_done, (
@@ -384,6 +447,8 @@ class WheelchairMachine(RuleBasedStateMachine):
             if body == b"estop":
                 self.board_estop, self.target, self.armed = True, (0.0, 0.0), False
             elif body == b"reset":
+                if self.board_estop:            # released: motion after a neutral command
+                    self._begin_wait(e.millis)
                 self.board_estop = False
             elif body.startswith(b"set:"):
                 name, text = body[4:].decode().split("=")
@@ -398,6 +463,10 @@ class WheelchairMachine(RuleBasedStateMachine):
                 if self.board_estop:
                     assert right == 0.0 and left == 0.0, f"moved while latched: {body!r}"
                     continue
+                if self.waits:
+                    assert right == 0.0 and left == 0.0, f"moved while waiting for neutral: {body!r}"
+                    if self.neutral_since is None:
+                        self.neutral_since = e.millis
                 self.mode, self.target, self.armed = mode, (right, left), True
                 self.command_millis = e.millis
 
@@ -416,6 +485,23 @@ class WheelchairMachine(RuleBasedStateMachine):
         assert self.chair is not None
         return self.chair
 
+    def _host_telemetry(self) -> int | None:
+        """The board's millis in the host's latest TLM line (None: none since the board
+        reset or released its e-stop)."""
+        status = self._chair().status
+        return None if status is None else status.millis
+
+    def _host_may_wait(self, seen: int | None) -> bool:
+        """Whether the host may refuse motion for a neutral command (``WcdriveNeutralError``)
+        when its latest TLM line, before the call, was the board's at ``seen`` ms: the
+        board waits for one, or did at that line (the host learns of the end from the
+        next), or the host has read no TLM line since a reset (it assumes the wait until
+        one says), or an ``EVT:WATCHDOG`` came after that line (the TLM line of its tick
+        follows at once and says whether the stop asks for a neutral command)."""
+        if self.waits or seen is None:
+            return True
+        return any(t is not None and t > seen for t in (self.waits_ended, self.last_watchdog))
+
     # ---- motion ----------------------------------------------------------------------
     def _motion(self, call: Callable[[], None], mode: int, right: float, left: float, tol: float) -> None:
         """``call`` sends one motion line, unless the e-stop is latched (then it raises,
@@ -430,7 +516,18 @@ class WheelchairMachine(RuleBasedStateMachine):
             self._settle()
             return
         max_wheel = self.params["max_wheel"]
-        call()
+        seen = self._host_telemetry()
+        try:
+            call()
+        except WcdriveNeutralError:
+            # the board waits for a neutral command (a watchdog stop of motion, a reset,
+            # the e-stop released) and the host knows: nothing sent
+            assert self.link.written == written, "a refused motion was sent"
+            _, lines = self._settle()
+            assert lines == [], lines
+            assert self._host_may_wait(seen), f"refused for neutral, the board waits for none (TLM at {seen})"
+            _note("the host refused motion: the board waits for a neutral command")
+            return
         _, lines = self._settle()
         assert len(lines) == 1 and lines[0].seq is not None, lines     # framed, not awaited
         line = lines[0]
@@ -440,6 +537,14 @@ class WheelchairMachine(RuleBasedStateMachine):
             assert result == "range" and beyond, (
                 f"the board refused {line.body!r} ({result}) for ({right}, {left}) rad/s")
             assert not line.accepted
+            return
+        if not line.accepted:
+            # refused for neutral (``_apply`` checked that the board waited): the wait
+            # began after the host's latest TLM line, which it could not know of yet
+            assert seen is not None and self.waits_began is not None and self.waits_began > seen, (
+                f"the host sent {line.body!r} while the board waited for neutral since "
+                f"{self.waits_began} ms, its TLM at {seen} ms said so")
+            _note("the board refused motion the host sent before it read of the wait for neutral")
             return
         assert line.accepted, line
         assert result is not None
@@ -493,12 +598,18 @@ class WheelchairMachine(RuleBasedStateMachine):
         never be sent."""
         chair = self._chair()
         too_fast = min(MAX_WHEEL, self.params["max_wheel"] + 0.5)
+        sent = 0
         for _ in range(n):
-            chair.set_wheels(too_fast, too_fast)
+            seen, written = self._host_telemetry(), self.link.written
+            try:
+                chair.set_wheels(too_fast, too_fast)
+                sent += 1
+            except WcdriveNeutralError:             # refused at the host: nothing sent
+                assert self.link.written == written and self._host_may_wait(seen)
         value = chair.get_param(name)
         snapshot, lines = self._settle()
         refused = encode_wheel(too_fast, too_fast)
-        assert [(e.body, e.accepted) for e in lines if e.body == refused] == [(refused, False)] * n
+        assert [(e.body, e.accepted) for e in lines if e.body == refused] == [(refused, False)] * sent
         self._expect_lines([e for e in lines if e.body != refused], also=f"get:{name}".encode())
         self._check_printed(name, value, snapshot)
 
@@ -514,12 +625,33 @@ class WheelchairMachine(RuleBasedStateMachine):
 
     @rule()
     def reset_estop(self) -> None:
+        """Releasing a latched e-stop, the host also sends the neutral command the board
+        then waits for, and returns once the board has confirmed it."""
         chair = self._chair()
+        released = self.latched
         chair.reset_estop(timeout=WALL_TIMEOUT)
         assert not chair.estop_latched
         self.latched = False
         _, lines = self._settle()
-        self._expect_lines(lines, b"reset")
+        stop = encode_cmdvel(0.0, 0.0)
+        self._expect_lines([e for e in lines if e.body != stop], b"reset")
+        if released:
+            assert [e.accepted for e in lines if e.body == stop][:1] == [True], lines
+            assert not self.waits, "reset_estop() returned before the board took a neutral command"
+        else:
+            assert not any(e.body == stop for e in lines), lines
+
+    @precondition(lambda self: not self.latched)
+    @rule()
+    def wait_for_neutral(self) -> None:
+        """The program drives on after a watchdog stop or a reset: it sends stops until
+        the board has confirmed one (at once when the board waits for none)."""
+        chair = self._chair()
+        chair.wait_for_neutral(WALL_TIMEOUT)
+        _, lines = self._settle()
+        stop = encode_cmdvel(0.0, 0.0)
+        assert lines and all(e.body == stop and e.accepted for e in lines), lines
+        assert not self.waits, "wait_for_neutral() returned before the board took a neutral command"
 
     @precondition(lambda self: self.latched)
     @rule(v=st.floats(0.0005, MAX_LINEAR), backwards=st.booleans())
@@ -667,6 +799,9 @@ class WheelchairMachine(RuleBasedStateMachine):
         bodies = [e.body for e in lines if e.accepted]
         assert bodies[:1] == [b"hello:4"], lines
         assert [b for b in bodies if b != b"hello:4"] == ([b"estop"] if self.latched else []), lines
+        # a reset the program did not ask for: it drives on after a neutral command of
+        # its own (stop() or wait_for_neutral()), not the host's
+        assert self.waits and chair.needs_neutral
 
     # ---- invariants --------------------------------------------------------------------
     @invariant()
@@ -680,6 +815,7 @@ class WheelchairMachine(RuleBasedStateMachine):
         kinds = [type(e) for e in self.link_events]
         assert kinds == [LinkLost, LinkRestored] * (len(kinds) // 2), kinds
         assert bool(s.estopLatched) == self.board_estop == self.latched, (s.estopLatched, self.latched)
+        assert bool(s.needNeutral) == self.waits, (s.needNeutral, self.waits)
         assert chair.estop_latched == self.latched
         for p in PARAMETERS:
             assert getattr(s, p.field) == self.params[p.name], (p.name, getattr(s, p.field))
@@ -690,7 +826,7 @@ class WheelchairMachine(RuleBasedStateMachine):
 
 
 WheelchairMachine.TestCase.settings = settings(
-    max_examples=min(settings().max_examples, 100),    # ci: 65 to 110 s on 2 cores
+    max_examples=min(settings().max_examples, 100 if thorough() else 10),    # ci: 65 to 110 s on 2 cores
     stateful_step_count=50,
     deadline=None,
     suppress_health_check=[HealthCheck.too_slow],

@@ -1,5 +1,11 @@
 """protocol/: the generated header is in sync, and the golden vectors pass on both
-sides: the Python port and the firmware in simavr."""
+sides: the Python port and the firmware in simavr.
+
+Each vector runs on a board that has booted and then taken a host's neutral command,
+which has stood NEUTRAL_TICKS ticks (protocol/PROTOCOL.md, "Neutral before motion"),
+its answers discarded: the same prelude, tick for tick, on both sides (``_prelude_port``,
+``_prelude_firmware``). The vector's input comes just past a tick, and its reply is read
+before the next one."""
 
 from __future__ import annotations
 
@@ -52,6 +58,32 @@ def _check(v: dict, reply_lines: list[str], mode: int, right: float, left: float
     assert left == pytest.approx(v["targets"][1], abs=1e-3), v["name"]
 
 
+#: The prelude's neutral command: a zero CMDVEL command, the mode a board boots in.
+NEUTRAL = b"x:0.000,t:0.000,\n"
+
+
+def _prelude_port() -> Firmware:
+    """The port just past its first tick (as the board after ``boot``), given ``NEUTRAL``,
+    and two ticks on: the neutral has stood, just past the second."""
+    fw = Firmware()
+    fw.tick(C.CONTROL_PERIOD_MS, 0, 0)
+    fw.feed(NEUTRAL)
+    fw.tick(2 * C.CONTROL_PERIOD_MS, 0, 0)
+    fw.tick(3 * C.CONTROL_PERIOD_MS, 0, 0)
+    assert fw.state.needNeutral == 0
+    return fw
+
+
+def _prelude_firmware(mega: VirtualMega) -> None:
+    """``_prelude_port`` on the firmware: just past the first tick, ``NEUTRAL``, two ticks
+    on (just past the second), what the board sent discarded."""
+    boot(mega, 0.058)                     # just past the first tick and its lines
+    mega.send(NEUTRAL)
+    mega.run_for(0.1)                     # the second tick after it, just past
+    mega.take_tx()
+    assert mega.read("needNeutral") == 0
+
+
 def _lines(data: bytes) -> list[str]:
     return [line for line in data.decode("latin-1").split("\r\n")
             if line and not line.startswith(("ENC:", "BOOT:"))]
@@ -59,8 +91,7 @@ def _lines(data: bytes) -> list[str]:
 
 @pytest.mark.parametrize("v", VECTORS, ids=lambda v: v["name"])
 def test_vector_on_the_port(v: dict) -> None:
-    fw = Firmware()
-    fw.tick(C.CONTROL_PERIOD_MS, 0, 0)        # just past the first tick, as on the board
+    fw = _prelude_port()
     out = fw.feed(v["input"].encode("latin-1"))
     _check(v, _lines(out), fw.state.mode, fw.state.targetR, fw.state.targetL,
            lambda name: getattr(fw.state, name))
@@ -70,7 +101,7 @@ def test_vector_on_the_port(v: dict) -> None:
 @pytest.mark.parametrize("v", VECTORS, ids=lambda v: v["name"])
 def test_vector_on_the_firmware(elf, v: dict) -> None:
     with VirtualMega(elf) as mega:
-        boot(mega, 0.058)                     # just past the first tick and its lines
+        _prelude_firmware(mega)
         mega.send(v["input"].encode("latin-1"))
         mega.run_for(0.04)                    # the bytes are in, the next tick not yet
         text = bytes(b for _, b in mega.take_tx())

@@ -90,7 +90,10 @@ def test_downhill_beyond_the_brakes_is_an_overspeed_within_0_2_s(backend: str) -
     rising = np.r_[False, np.diff(true_speed) > 0]
     physics = (true_speed > setpoint + C.OVERSPEED_MARGIN) & braking & rising
     assert physics.any()
-    assert overs[0] - t[int(np.argmax(physics))] <= 0.2
+    # judged tick to tick: the tick that sent the event (its line reaches the host a
+    # couple of ms later) against the first tick the physics showed it
+    sent = t[int(np.searchsorted(t, overs[0], side="right")) - 1]
+    assert sent - t[int(np.argmax(physics))] <= 0.2 + 1e-9
     # from the event on, the hold brakes hardest
     j = int(np.searchsorted(t, overs[0] + 0.06))
     assert np.all(r.board.pwm[j:j + 2] == -C.HOLD_PWM_MAX)
@@ -153,8 +156,9 @@ def test_a_stop_climbing_comes_to_rest_and_stays(slope: float, speed: float, bac
     assert up["drift_parked_m"] is not None and up["drift_parked_m"] <= 0.02
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
-@pytest.mark.parametrize("speed", [0.5, 1.0])
+#: Both speeds on the port; on simavr 1.0 m/s at the fast depth (the climbing stop's
+#: level run above, so the same run), both at the thorough one.
+@pytest.mark.parametrize(("speed", "backend"), cases([(0.5,), (1.0,)], ["0.5", "1.0"], fast_simavr=["1.0"]))
 def test_a_stop_on_the_level_rests_within_a_second_of_the_setpoint(speed: float, backend: str) -> None:
     """The setpoint ramps to zero at ACCEL_MAX; the chair, lagging it, comes to rest
     within a second more: an integral left from the drive does not carry it on."""

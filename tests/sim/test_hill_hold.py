@@ -131,7 +131,10 @@ def test_a_chair_parked_on_the_level_stands_at_duty_zero(backend: str) -> None:
 DEAD_AT = 8.0      # s: the left motor goes open circuit, the chair held on 1:12 since 2.6 s
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
+#: On simavr (13 simulated s) at the thorough depth; at the fast one the firmware rolls
+#: away and brakes at HOLD_PWM_MAX in tests/sim/test_grade_limits.py's 2 s park beyond
+#: the hold, on simavr.
+@pytest.mark.parametrize("backend", BACKENDS if thorough() else ["port"])
 def test_a_push_beyond_the_hold_rolls_away_and_is_braked_hardest(backend: str) -> None:
     """Held on 1:12 after the watchdog, the left motor goes open circuit: the right one
     alone cannot hold the chair (at the current limit it carries 99 N of the grade's

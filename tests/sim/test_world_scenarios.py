@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from tests.support.grade import bundled
+from wcdrive.firmware import constants as C
 from wcdrive.plant.chair import footprint
 from wcdrive.plant.params import ChairParams
 from wcdrive.plant.rosmap import FREE, OCCUPIED, UNKNOWN, OccupancyGrid, load_map, save_map
@@ -198,13 +199,22 @@ def test_the_clearance_sees_a_touch() -> None:
     assert clearance(world, np.array([[-0.02, 0.0, 0.0]])) == pytest.approx(0.02)
 
 
-def test_into_a_wall_the_firmware_latches_an_encoder_stall() -> None:
+#: The hold's least duty: a held wheel one or two counts past the deadband (the limit
+#: parks the chair against the wall under the hold).
+HOLD_LEAST = 2 * C.HOLD_GAIN
+
+
+def test_into_a_wall_the_firmware_stops_the_chair_at_its_limit() -> None:
     """At 0.5 m/s into the room's east wall: one collision, the front edge stopped on the
     wall (axle at 5.0 - 0.7 m); the impact at most the chair's momentum (a corner hits
     first, so the chair turns square and less than m v lands at once); the motors, at
-    their current limit, cannot turn the tyres on the floor (no slip), so the firmware
-    sees the encoders stand and latches EVT:FAULT,ENC_STALL_R within 0.3 s, duty 0 after
-    its ramp, and refuses the host's further commands."""
+    their current limit, cannot turn the tyres on the floor (no slip), both wheels at
+    full duty without progress: the firmware calls it the chair's limit
+    (EVT:STALLED_ON_GRADE) within 0.3 s, parks the chair under the hold (at most its
+    least duty, a count past the deadband against the wall) and refuses the host's
+    further commands (ERR:limit). Before the host sent its neutral command first, the
+    chair met the wall 0.15 s earlier and the port counted one wheel's stall first
+    (EVT:FAULT,ENC_STALL_R)."""
     r = bundled("room_wall_bump", "port")
     w = r.world
     assert w is not None and w.collisions == 1 and len(w.contacts) == 1
@@ -214,13 +224,13 @@ def test_into_a_wall_the_firmware_latches_an_encoder_stall() -> None:
     assert 0.3 * M_EFF * 0.5 < w.max_impact_ns <= M_EFF * 0.5
     assert r.truth.pose[-1, 0] == pytest.approx(5.0 - 0.7, abs=2e-3)
     assert abs(r.truth.pose[-1, 2]) < math.radians(0.1)        # pushed square to the wall
-    faults = [(t, line) for t, line in r.link.events if line.startswith("EVT:FAULT")]
-    assert [line for _, line in faults] == ["EVT:FAULT,ENC_STALL_R"]
-    assert 0.0 < faults[0][0] - first < 0.3
+    stops = [(t, line) for t, line in r.link.events if line.startswith(("EVT:FAULT", "EVT:STALLED"))]
+    assert [line for _, line in stops] == ["EVT:STALLED_ON_GRADE"]
+    assert 0.0 < stops[0][0] - first < 0.3
     t = r.truth.step_time
     touching = t > first + 0.1
     assert np.all(np.abs(r.truth.step_contact_speed[touching]) < 0.01)   # neither tyre slips
-    assert np.all(r.board.pwm[r.board.tick_time > faults[0][0] + 1.5] == 0)
+    assert np.all(r.board.pwm[r.board.tick_time > stops[0][0] + 1.5] <= HOLD_LEAST)
     assert r.link.line_counts["error"] > 0
     m = json.loads(to_json([r]))[0]
     assert m["collisions"] == 1 and m["first_collision_s"] == pytest.approx(first)
@@ -237,7 +247,8 @@ def test_into_a_wall_on_simavr_as_on_the_port() -> None:
     boards' timing differs a little), and within 0.3 s of it one stop, the same on both
     backends or not: a locked wheel (``ENC_STALL``), or, where one last encoder count
     comes in a tick later on one board, the chair's limit (``STALLED_ON_GRADE``), both
-    wheels at full duty without progress. Either way the motors are off after it."""
+    wheels at full duty without progress. After it the motors are off (a fault) or at
+    most at the hold's least duty (the limit)."""
     port, avr = bundled("room_wall_bump", "port"), bundled("room_wall_bump", "simavr")
     assert avr.world is not None and port.world is not None
     assert avr.world.collisions == port.world.collisions == 1
@@ -250,5 +261,6 @@ def test_into_a_wall_on_simavr_as_on_the_port() -> None:
         assert [line for _, line in stops] in (["EVT:FAULT,ENC_STALL_L"], ["EVT:FAULT,ENC_STALL_R"],
                                                ["EVT:STALLED_ON_GRADE"]), r.link.events
         assert 0.0 < stops[0][0] - first < 0.3
-        assert np.all(r.board.pwm[r.board.tick_time > stops[0][0] + 1.5] == 0)
+        held = 0 if stops[0][1].startswith("EVT:FAULT") else HOLD_LEAST   # a fault: duty 0
+        assert np.all(r.board.pwm[r.board.tick_time > stops[0][0] + 1.5] <= held)
     assert avr.truth.pose[-1, 0] == pytest.approx(5.0 - 0.7, abs=2e-3)

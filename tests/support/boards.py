@@ -22,6 +22,25 @@ def send_and_run(mega: VirtualMega, data: bytes, seconds: float) -> bytes:
     return bytes(b for _, b in mega.take_tx())
 
 
+#: A neutral (zero) command, as every host sends first: after a boot (and a reset that
+#: released an e-stop or a fault, a watchdog stop of motion, a PPM loss) the board
+#: refuses motion (``ERR:neutral``) until a neutral command has stood ``NEUTRAL_TICKS``
+#: (2) control ticks with no motion command after it (protocol/PROTOCOL.md, "Neutral
+#: before motion").
+NEUTRAL = b"rp0,lp0,\n"
+#: The same for a PPM host: both sticks at centre.
+NEUTRAL_PPM = b"ppm:1500,1500,1500,1500,1500,1500,1500,1500,\n"
+#: Board time a neutral command is left to stand: NEUTRAL_TICKS ticks of 50 ms, wherever
+#: between two ticks it arrived, and a margin (3 ticks).
+NEUTRAL_WAIT = 0.12
+
+
+def neutral(mega: VirtualMega, command: bytes = NEUTRAL, seconds: float = NEUTRAL_WAIT) -> bytes:
+    """Sends a neutral command and runs ``seconds`` (it stands: the board drives the next
+    motion command); returns what the board sent."""
+    return send_and_run(mega, command, seconds)
+
+
 def ms(cycles: int) -> float:
     return cycles * 1000.0 / F_CPU
 
@@ -54,6 +73,10 @@ class ChairOnPins:
         self.mega.send(data)
         self.run_for(seconds)
         return bytes(b for _, b in self.mega.take_tx())
+
+    def neutral(self, command: bytes = NEUTRAL, seconds: float = NEUTRAL_WAIT) -> bytes:
+        """``neutral`` with the chair on the pins."""
+        return self.send_and_run(command, seconds)
 
     def speeds(self) -> tuple[float, float]:
         """The wheels' true speeds (rad/s, forward positive)."""

@@ -46,7 +46,7 @@ def test_the_benchmark_sees_a_host_that_skips_the_crc(monkeypatch: pytest.Monkey
 
 def test_a_short_soak_meets_its_checks() -> None:
     soak = _load("soak")
-    report = soak.soak("sim", 0.05, 20.0, 3)
+    report = soak.soak("sim", 0.05, 100.0, 3)
     assert report.failures == [], report.failures
     assert report.sent_lines == report.lines.good > 5_000
 
@@ -78,7 +78,7 @@ def test_the_soak_sees_a_host_that_leaks(monkeypatch: pytest.MonkeyPatch) -> Non
         return feed(self, data)
 
     monkeypatch.setattr(codec.LineDecoder, "feed", leaky)
-    report = soak.soak("sim", 0.2, 50.0, 3)
+    report = soak.soak("sim", 0.2, 100.0, 3)
     assert any(f.startswith("host memory grew") for f in report.failures), report.failures
 
 

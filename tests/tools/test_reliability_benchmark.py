@@ -1,7 +1,8 @@
 """The reliability benchmark (benchmarks/reliability/, issue #14) in a tiny run, so it
-cannot rot: no motion from invalid input, no corrupted frame executed or ACKed, port =
-firmware; and shown able to fail, on a port that takes unframed motion after hello or
-frames with any CRC."""
+cannot rot: no motion from invalid input, no corrupted frame executed or ACKed, no
+motion while the board waits for neutral, port = firmware; and shown able to fail, on a
+port that takes unframed motion after hello or frames with any CRC, on one that drives
+while it waits for neutral, and without the neutral prelude."""
 
 from __future__ import annotations
 
@@ -58,9 +59,16 @@ def test_quick_run_on_the_port(rel: ModuleType, monkeypatch: pytest.MonkeyPatch)
     for name, st in res.r1_port.items():
         assert st.invalid > 500, name
         assert (st.crashes, st.hangs, st.invalid_motions, st.invalid_param_changes) == (0, 0, 0, 0)
-        assert st.controls["drive"] > 100 and st.controls_ok == st.controls, name
+        # Every valid drive carried out, but those that came while the board waited for
+        # neutral (the stream's PPM loss frames and watchdog stops begin waits): refused.
+        assert (st.neutral_motions, st.preludes_failed) == (0, 0), name
+        assert st.neutral_waits > 10 and st.refused_neutral > 10, name
+        assert st.controls_ok["drive"] > 100, name
+        assert st.controls_ok["drive"] + st.refused_neutral == st.controls["drive"], name
+        assert all(st.controls_ok[k] == st.controls[k] for k in ("stop", "param")), name
     assert res.r1_port["strict"].answers["random", "ERR:unframed"] > 0
     r2 = res.r2_port
+    assert r2.preludes_failed == 0
     assert sum(r2.frames.values()) == rel.QUICK["port_frames"]
     assert sum(r2.executed.values()) == sum(r2.acked.values()) == 0
     assert r2.refused == r2.commands > rel.QUICK["port_frames"]
@@ -101,8 +109,14 @@ def test_quick_run_on_the_firmware(rel: ModuleType, elf: Path) -> None:
         assert st.lockstep.mismatches == 0, st.lockstep.examples
         assert st.lockstep.lost_bytes == 0 and st.lockstep.extra_boots == 0
         assert (st.crashes, st.hangs, st.invalid_motions, st.invalid_param_changes) == (0, 0, 0, 0)
-        assert st.controls_ok["drive"] == st.controls["drive"] > 0, st.examples
+        assert (st.neutral_motions, st.preludes_failed) == (0, 0), st.examples
+        assert st.controls_ok["drive"] > 0, name
+        assert (st.controls_ok["drive"] + st.refused_latched + st.refused_neutral
+                == st.controls["drive"]), st.examples
+    assert sum(st.refused_neutral for st in r1.values()) > 0
+    assert rel.problems(rel.Results(0, {}, r1_firmware=r1)) == []
     r2 = rel.firmware_r2(rel.QUICK["firmware_frames"], random.Random(6), elf, chunk=200)
+    assert r2.preludes_failed == 0
     assert r2.lockstep.mismatches == 0, r2.lockstep.examples
     assert sum(r2.executed.values()) == sum(r2.acked.values()) == 0
     assert r2.refused == r2.commands > rel.QUICK["firmware_frames"]
@@ -114,6 +128,30 @@ def test_it_sees_unframed_motion_after_hello(rel: ModuleType, monkeypatch: pytes
     st = rel.port_r1(3000, random.Random(1), True)
     assert st.invalid_motions > 0
     assert any("drove" in e for e in st.examples)
+
+
+def test_it_sees_motion_while_the_board_waits_for_neutral(rel: ModuleType,
+                                                          monkeypatch: pytest.MonkeyPatch) -> None:
+    """A port that drives while it waits for neutral fails R1: the motion is a safety
+    violation, not a valid drive carried out."""
+    monkeypatch.setattr(commands, "refused_not_neutral", lambda s, right, left: False)
+    st = rel.port_r1(3000, random.Random(1), True)
+    assert st.neutral_motions > 0 and st.refused_neutral == 0
+    assert any("waited for neutral" in e for e in st.examples)
+    res = rel.Results(1, {})
+    res.r1_port["strict"] = st
+    assert any("motions while the board waited for neutral" in p for p in rel.problems(res))
+
+
+def test_it_sees_a_run_without_its_neutral_prelude(rel: ModuleType, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Without the prelude the board refuses every drive (``neutral``) until a stop in the
+    stream stands, refusals the oracle would take for correct: the run is a problem."""
+    r1 = sys.modules["wcdrive_reliability_benchmark.r1"]
+    monkeypatch.setattr(r1, "neutral_prelude", lambda strict: b"")
+    res = rel.Results(1, {})
+    res.r1_port["strict"] = st = rel.port_r1(500, random.Random(1), True)
+    assert st.preludes_failed == 1
+    assert any("neutral preludes" in p for p in rel.problems(res)), rel.problems(res)
 
 
 @pytest.mark.simavr

@@ -14,6 +14,7 @@ from wcdrive.protocol.codec import LineDecoder
 from wcdrive.sim import runner
 from wcdrive.sim.scenario import Scenario
 from wcdrive.testing import SteppedChair, strategies
+from wcdrive.testing.stepped import NEUTRAL_CONFIRM_S
 
 
 def test_plugin_is_registered_by_entry_point(pytestconfig: pytest.Config) -> None:
@@ -32,7 +33,7 @@ def test_wc_port_drives_forward_and_stops_by_watchdog(wc_port: SteppedChair) -> 
     wc_port.run(2.0)                 # no command for 2 s: the 500 ms watchdog stops it
     assert "WATCHDOG" in wc_port.events
     assert wc_port.pwm == (0, 0)
-    assert math.isclose(wc_port.time, 4.0, abs_tol=1e-3)
+    assert math.isclose(wc_port.time, NEUTRAL_CONFIRM_S + 4.0, abs_tol=1e-3)   # after its neutral
 
 
 def test_wc_faulty_port_latches_the_encoder_fault(wc_faulty_port) -> None:

@@ -69,6 +69,7 @@ def test_wheel_frame_matches_the_dbc(right, left, seq) -> None:
     fields = _decode(can_id, data)
     assert fields["right"] == pytest.approx(right) and fields["left"] == pytest.approx(left)
     fw = Firmware()
+    fw.state.needNeutral = 0            # a board that drives: its neutral command confirmed
     fw.feed(cc.frame_to_command(can_id, data))
     expected = [strtod(b"%.3f" % abs(x))[0] * (1 if x >= 0 else -1) for x in (right, left)]
     assert [fw.state.targetR, fw.state.targetL] == expected

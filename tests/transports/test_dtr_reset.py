@@ -17,6 +17,7 @@ import serial
 import wcdrive
 from wcdrive.boards.sim_board import SimulatedBoard
 from wcdrive.boards.simavr.mega_board import MegaBoard
+from wcdrive.errors import WcdriveNeutralError
 from wcdrive.transports.pty_bridge import PtyBridge
 
 
@@ -69,10 +70,17 @@ def test_wcdrive_pty_resets_its_board_at_each_open(args: list[str]) -> None:
 
 
 def _drive(chair: wcdrive.Wheelchair, seconds: float) -> None:
+    """Drives at 0.4 m/s for ``seconds``; after a reset the program drives on once the
+    board has confirmed a neutral command (docs/safety.md, "Neutral before motion"):
+    that wait does not count in ``seconds``."""
     end = time.monotonic() + seconds
     while time.monotonic() < end:
         try:
             chair.set_velocity(0.4, 0.0)
+        except WcdriveNeutralError:
+            waited = time.monotonic()
+            chair.wait_for_neutral()          # the board reset: a neutral, then on
+            end += time.monotonic() - waited
         except wcdrive.WcdriveError:
             pass                              # between the reset and the new hello
         time.sleep(0.05)

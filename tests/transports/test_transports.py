@@ -33,6 +33,9 @@ def test_seed_host_drives_the_simulated_chair() -> None:
         host = SeedHost(port)
         decoder = LineDecoder()
         feedback = []
+        for _ in range(3):                        # the ROS graph's first cmd_vel: at rest
+            host.cmd_vel_callback(_twist(0.0, 0.0))
+            time.sleep(0.005)
         for _ in range(60):                       # 10 Hz for 6 simulated s (0.3 s wall)
             host.cmd_vel_callback(_twist(0.5, 0.0))
             time.sleep(0.005)
@@ -47,6 +50,8 @@ def test_seed_host_drives_the_simulated_chair() -> None:
 
 def test_silence_stops_the_simulated_chair() -> None:
     with serial.serial_for_url("wcsim://?speed=20", timeout=0.2) as port:
+        port.write(b"x:0.000,t:0.000,")             # neutral first: the board drives after it
+        time.sleep(0.02)
         for _ in range(20):
             port.write(b"x:0.500,t:0.000,")
             time.sleep(0.005)
@@ -71,6 +76,9 @@ def test_simulated_chair_on_a_pty() -> None:
         port = serial.Serial(bridge.path, 115200, timeout=0.5)
         try:
             got = b""
+            port.write(b"rp0.0,lp0.0,\n")            # neutral first, as the seed's hosts
+            while got.count(b"ENC:") < 4:
+                got += port.read(port.in_waiting or 1)
             deadline = time.monotonic() + 10
             while b"MODE:WHEEL" not in got and time.monotonic() < deadline:
                 port.write(b"rp2.0,lp2.0,\n")
@@ -105,6 +113,8 @@ def test_unplug_is_detected_and_the_device_reopened(tmp_path) -> None:
                 time.sleep(0.01)
             assert "RECONNECTED" in chair.events
             assert chair.wait_for_handshake(10) == 4
+            assert chair.needs_neutral          # a fresh board: the program resumes with a neutral
+            chair.wait_for_neutral()
             chair.set_wheels(1.0, 1.0)
             modes = set()
             deadline = time.monotonic() + 10
@@ -132,13 +142,17 @@ def test_pyserial_miniterm_opens_wcsim_without_importing_wcdrive() -> None:
         stdin=slave, stdout=slave, stderr=slave, start_new_session=True, cwd="/")
     os.close(slave)
     seen = b""
+    neutral_at: int | None = None
     try:
         deadline = time.monotonic() + 20
         while b"MODE:WHEEL" not in seen and time.monotonic() < deadline:
             ready = __import__("select").select([master], [], [], 0.2)[0]
             if ready:
                 seen += os.read(master, 65536)
-            if b"ENC:" in seen:
+            if b"ENC:" in seen and neutral_at is None:
+                os.write(master, b"rp0.0,lp0.0,")           # neutral first, as the seed's hosts
+                neutral_at = seen.count(b"ENC:")
+            elif neutral_at is not None and seen.count(b"ENC:") >= neutral_at + 4:
                 os.write(master, b"rp1.0,lp1.0,")
         assert b"ENC:" in seen and b"MODE:WHEEL" in seen, seen[-500:]
         os.write(master, b"\x1d")                         # Ctrl-]: quit
@@ -167,12 +181,18 @@ def test_wcavr_url_opens_the_firmware_in_simavr_driving_the_chair(elf) -> None:
     try:
         assert port.readline() == b"BOOT:final_control,POWER_ON\r\n"
         got = b""
+        port.write(b"rp0.0,lp0.0,\n")                    # neutral first, as the seed's hosts
+        while got.count(b"ENC:") < 4:
+            got += port.read(port.in_waiting or 1)
         deadline = time.monotonic() + 20
         while b"MODE:WHEEL" not in got and time.monotonic() < deadline:
             port.write(b"rp2.0,lp2.0,")
             got += port.read(port.in_waiting or 1)
         assert b"MODE:WHEEL" in got
-        time.sleep(0.5)
+        more = got.count(b"ENC:") + 10
+        while got.count(b"ENC:") < more and time.monotonic() < deadline:   # 0.5 s of its time
+            port.write(b"rp2.0,lp2.0,")
+            got += port.read(port.in_waiting or 1)
         assert port.board.pose()[0] > 0.0                 # the firmware drove the chair
     finally:
         port.close()

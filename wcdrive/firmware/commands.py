@@ -21,7 +21,7 @@ from wcdrive.avr.f32 import add, constrain, div, from_int, mul, sub
 from wcdrive.errors import WcdriveError
 from wcdrive.firmware import constants as C
 from wcdrive.firmware.eeprom import restore_defaults, save_params
-from wcdrive.firmware.motion import accept_command, emergency_halt
+from wcdrive.firmware.motion import accept_command, emergency_halt, require_neutral
 from wcdrive.firmware.output import DATA_HELLO, DATA_NONE, DATA_PARAM, answer, reject, send, send_event
 from wcdrive.firmware.params import BY_NAME, PARAMS
 from wcdrive.firmware.state import FirmwareState
@@ -325,11 +325,14 @@ def move_to(s: FirmwareState, body: bytes, out: bytearray) -> str | None:
         s.mode = C.MODE_PPM
         s.cmdSinceTick = 1
         emergency_halt(s)
+        require_neutral(s)                   # the transmitter back: its stick to neutral first
         if not s.ppmLost:
             send(s, send_event("PPM_LOST"), out)
         s.ppmLost = 1
         return None
     mode, right, left = result
+    if refused_not_neutral(s, right, left):
+        return "neutral"
     if mode == C.MODE_PPM:
         s.ppmLost = 0
     accept_command(s, mode, right, left)
@@ -339,6 +342,25 @@ def move_to(s: FirmwareState, body: bytes, out: bytearray) -> str | None:
 def refused_unframed(s: FirmwareState, right: float, left: float) -> bool:
     """``refusedUnframed``: after hello, an unframed line may only set zero targets."""
     return bool(s.unframedLine) and (right != 0.0 or left != 0.0)
+
+
+def refused_not_neutral(s: FirmwareState, right: float, left: float) -> bool:
+    """``refusedNotNeutral``: while the board waits for neutral (``needNeutral``), a
+    motion command is refused and restarts the wait (``EVT:NOT_NEUTRAL``, once a wait,
+    sent by the next tick); a neutral one starts the count the tick confirms."""
+    if not s.needNeutral:
+        return False
+    if right != 0.0 or left != 0.0:
+        s.neutralSeen = 0
+        if not s.notNeutralSent:
+            s.notNeutralSent = 1
+            s.notNeutralPending = 1
+        return True
+    if not s.neutralSeen:
+        s.neutralSeen = 1
+        s.neutralTicks = 0
+    s.notNeutralTicks = 0
+    return False
 
 
 def latch_estop(s: FirmwareState, out: bytearray) -> None:
@@ -358,6 +380,8 @@ def reset_estop(s: FirmwareState) -> str | None:
     clears the ISRs' storm flags: a masked encoder counts again."""
     if (s.estopLatched or s.faultFlags) and not s.parked:
         return "busy"
+    if s.estopLatched or s.faultFlags:
+        require_neutral(s)   # released: the control must come to neutral before motion
     s.estopLatched = 0
     if s.faultFlags:
         s.holding = 0        # the hold restarts with both wheels, where they are

@@ -28,6 +28,8 @@ LINE_COUNTER_WRAP = integer("LINE_COUNTER_WRAP")
 CONTROL_PERIOD_MS = integer("CONTROL_PERIOD_MS")
 WATCHDOG_MS = integer("WATCHDOG_MS")
 PIVOT_TICKS = integer("PIVOT_TICKS")
+NEUTRAL_TICKS = integer("NEUTRAL_TICKS")
+NEUTRAL_FAULT_TICKS = integer("NEUTRAL_FAULT_TICKS")
 
 # Geometry and encoders (seed section 1.4.2)
 CPR = f32(real("CPR"))

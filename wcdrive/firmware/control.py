@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from wcdrive.avr.f32 import add, div, from_int, mul, neg, sub, to_int_trunc
 from wcdrive.firmware import constants as C
-from wcdrive.firmware.motion import PIVOT_NONE, emergency_halt, pivot_step
+from wcdrive.firmware.motion import PIVOT_NONE, emergency_halt, pivot_step, require_neutral
 from wcdrive.firmware.output import (
     feedback_line,
     refill_credit,
@@ -474,6 +474,28 @@ def _motors(s: FirmwareState, delta_l: int, delta_r: int, hardest: bool, trusted
     s.holding = 1
 
 
+def _confirm_neutral(s: FirmwareState, out: bytearray) -> None:
+    """The wait for neutral, at most one event a tick and none beside ``WATCHDOG`` (the
+    output budget's worst tick): the refusal (``EVT:NOT_NEUTRAL``); the neutral command
+    stood ``NEUTRAL_TICKS`` ticks, confirmed (``EVT:NEUTRAL`` when something was refused
+    meanwhile); refused for ``NEUTRAL_FAULT_TICKS`` ticks without a neutral command, a
+    deflected control (``EVT:DEFLECTED``, until neutral)."""
+    if s.notNeutralPending:
+        s.notNeutralPending = 0
+        send(s, send_event("NOT_NEUTRAL"), out)
+    elif s.neutralSeen:
+        s.neutralTicks = (s.neutralTicks + 1) & 0xFF
+        if s.neutralTicks >= C.NEUTRAL_TICKS:
+            if s.notNeutralSent:
+                send(s, send_event("NEUTRAL"), out)
+            s.needNeutral = s.neutralSeen = s.notNeutralSent = s.neutralFault = 0
+    elif s.notNeutralSent and not s.neutralFault:
+        s.notNeutralTicks = (s.notNeutralTicks + 1) & 0xFF
+        if s.notNeutralTicks >= C.NEUTRAL_FAULT_TICKS:
+            s.neutralFault = 1
+            send(s, send_event("DEFLECTED"), out)
+
+
 def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: bytearray,
                  illegal_l: int = 0, illegal_r: int = 0, storm_l: int = 0, storm_r: int = 0,
                  rx_lost: int = 0) -> None:
@@ -517,9 +539,15 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
         s.lastCmdTime = now & 0xFFFFFFFF
         s.watchdogArmed = 1
     if s.watchdogArmed and ((now - s.lastCmdTime) & 0xFFFFFFFF) >= s.watchdogMs:
+        # a stop of motion the host asked for: the link back, its first command is neutral
+        driving = s.targetL != 0.0 or s.targetR != 0.0 or s.pivotPhase != PIVOT_NONE
         s.watchdogArmed = 0
         emergency_halt(s)
+        if driving:
+            require_neutral(s)
         send(s, send_event("WATCHDOG"), out)
+    elif s.needNeutral:
+        _confirm_neutral(s, out)
 
     max_change = mul(s.estopDecel if s.emergencyStop else s.maxAccel, dt)
     s.setpointL = ramp_toward(s.setpointL, s.targetL, max_change)

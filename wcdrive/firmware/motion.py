@@ -44,6 +44,17 @@ def emergency_halt(s: FirmwareState) -> None:
     s.emergencyStop = 1
 
 
+def require_neutral(s: FirmwareState) -> None:
+    """``requireNeutral``: motion needs a neutral command first (``needNeutral``): a new
+    wait, or the one under way goes on (its refusal announced, its fault count running)."""
+    if not s.needNeutral:
+        s.notNeutralSent = 0
+        s.notNeutralTicks = 0
+        s.neutralFault = 0
+    s.needNeutral = 1
+    s.neutralSeen = 0
+
+
 def accept_command(s: FirmwareState, new_mode: int, right: float, left: float) -> None:
     """``acceptCommand``: a valid command's wheel targets, through the pivot: a stop
     applies at once (ending a pivot), a reversal starts one with the command pending,

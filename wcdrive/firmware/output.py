@@ -99,10 +99,12 @@ def send_telemetry(s: FirmwareState, now: int) -> bytes:
     flags = ((1 if s.watchdogArmed else 0) | (2 if s.emergencyStop else 0)
              | (4 if s.estopLatched else 0) | (8 if s.ppmLost else 0) | (16 if s.parked else 0)
              | ((s.pivotPhase << 5) & 0xFF) | (128 if s.faultFlags else 0))
+    state = (1 if s.needNeutral else 0) | (2 if s.neutralFault else 0)
     # Every field is unsigned and in range, so %d prints what Print::print prints.
-    return b"TLM:%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d\r\n" % (
+    return b"TLM:%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d\r\n" % (
         now, s.rxCount, s.lastSeq, s.pwmL, s.pwmR, s.dirL, s.dirR, s.illTickL, s.illTickR,
-        flags, s.rejectedCount, s.crcRejected, s.freeRam, s.faultFlags, s.rxLostTick, s.lateTicks)
+        flags, s.rejectedCount, s.crcRejected, s.freeRam, s.faultFlags, s.rxLostTick, s.lateTicks,
+        state)
 
 
 DATA_NONE, DATA_HELLO, DATA_PARAM = 0, 1, 2

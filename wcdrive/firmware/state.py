@@ -43,6 +43,8 @@ INT_FIELDS = (
     "lastTickTime", "lateTicks",
     "eeNext", "eeBusy", "holding", "holdRefL", "holdRefR", "holdStepL", "holdStepR", "holdRollaway",
     "brakeReleased", "overspeedTicksL", "overspeedTicksR", "limitLatched",
+    "needNeutral", "neutralSeen", "neutralTicks", "notNeutralSent", "notNeutralPending", "notNeutralTicks",
+    "neutralFault",
 )
 
 #: Globals the tick takes as inputs rather than computes (loop() measures them).
@@ -143,6 +145,14 @@ class FirmwareState:
     #: refused with ``ERR:limit`` until a stop.
     limitLatched: int = 0
     estopLatched: int = 0
+    # neutral before motion: motion refused until a neutral command stood NEUTRAL_TICKS
+    needNeutral: int = 1
+    neutralSeen: int = 0
+    neutralTicks: int = 0
+    notNeutralSent: int = 0
+    notNeutralPending: int = 0
+    notNeutralTicks: int = 0
+    neutralFault: int = 0
     faultFlags: int = 0
     stallTicksL: int = 0
     stallTicksR: int = 0

@@ -4,9 +4,9 @@
 returns the bytes ``control.control_tick`` would send, having changed ``state`` as it
 would, or None having changed nothing: then the Python tick, the reference, runs
 (``Firmware.tick`` does that). The C path declines everything but the common case: a
-fault that latches, the watchdog firing, any binary32 result that is not an ordinary
-number (``wcdrive.avr.f32`` computes those bit by bit as avr-libc does), a field of an
-unexpected type. tests/firmware/test_tick_fast.py holds it to the Python tick.
+fault that latches, the watchdog firing, a tick that waits for neutral, any binary32
+result that is not an ordinary number (``wcdrive.avr.f32`` computes those bit by bit as
+avr-libc does), a field of an unexpected type. tests/firmware/test_tick_fast.py holds it to the Python tick.
 
 ``fast`` is None (the Python tick only) without a compiler, Python's headers or a
 writable cache, or with ``WCDRIVE_PURE_TICK=1`` (or ``WCDRIVE_PURE_F32=1``) in the

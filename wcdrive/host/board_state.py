@@ -45,6 +45,12 @@ class BoardState:
         #: ``PARAMS_DEFAULT,<why>`` ("" before such a line; a board without parameters in EEPROM sends none).
         self.params_at_boot = ""
         self._check_estop = False               # the next TLM decides whether to re-latch
+        #: The board waits for a neutral command before it drives (``wcdrive.host.neutral``):
+        #: as its TLM lines say, and from its boot, an e-stop reset, ``EVT:WATCHDOG``,
+        #: ``EVT:PPM_LOST`` or ``EVT:NOT_NEUTRAL`` until the next TLM line says.
+        self.awaiting_neutral = True
+        #: TLM lines read so far.
+        self.telemetry_count = 0
 
     @property
     def faults(self) -> tuple[str, ...]:
@@ -69,6 +75,8 @@ class BoardState:
     def note_telemetry(self, msg: ExtendedTelemetry) -> None:
         """The board's latest TLM line."""
         self.status = msg
+        self.telemetry_count += 1
+        self.awaiting_neutral = msg.needs_neutral     # a board without the state never waits
 
     def note_boot(self, msg: Boot) -> None:
         """The board's ``BOOT:`` line."""
@@ -85,6 +93,10 @@ class BoardState:
         elif msg.fault is not None:
             _log.error("%s: the board latched a fault: %s", self.name, msg.fault)
             self.faults_announced.append(msg.fault)
+        elif msg.name in ("WATCHDOG", "PPM_LOST", "NOT_NEUTRAL"):
+            _log.warning("%s: %s: the board may need a neutral command before it drives again", self.name,
+                         msg.name)
+            self.awaiting_neutral = True
         else:
             _log.info("%s: board event %s", self.name, msg.name)
 
@@ -117,3 +129,4 @@ class BoardState:
         self.estop_announced = False
         self.faults_announced.clear()           # a board that reset has no fault latched
         self._check_estop = False
+        self.awaiting_neutral = True

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import math
 import threading
 import time
 from collections.abc import Callable
@@ -192,6 +193,22 @@ class Session:
         return self.link.since_last_line
 
     # ---- sending -------------------------------------------------------------------
+    def require_link(self, what: str) -> None:
+        """Raises when ``what`` cannot go out: the session is closed, the handshake
+        failed, or the link is lost."""
+        if self.closed.is_set():
+            raise WcdriveConnectionError(f"the link to {self.name} is closed: connect() again")
+        if self.handshake.error is not None:
+            raise WcdriveProtocolError(str(self.handshake.error))
+        if not self.link_ok:
+            silent = self.since_last_line
+            raise WcdriveConnectionError(
+                f"the link to {self.name} is lost: "
+                + ("no line from the board yet" if math.isinf(silent) else
+                   f"no line from the board for {silent:.2f} s (link_timeout {self.link_timeout} s)")
+                + f"; {what} not sent. The board's watchdog stops the chair; the link "
+                "recovers by itself when its lines flow again (chair.link_ok)")
+
     def send_frame(self, command: bytes, *, motion: bool = False) -> int:
         """Sends ``command`` without waiting, as a frame with a fresh sequence number
         registered in the send order (a TLM line that reports it proves that the frames

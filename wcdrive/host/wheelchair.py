@@ -21,7 +21,6 @@ The machinery is ``wcdrive.host.exit_safety``'s.
 
 from __future__ import annotations
 
-import math
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -35,11 +34,14 @@ from wcdrive.errors import (
     WcdriveError,
     WcdriveEstopError,
     WcdriveFaultError,
+    WcdriveNeutralError,
     WcdriveProtocolError,
     WcdriveTimeoutError,
 )
 from wcdrive.host.boardclock import BoardClock
 from wcdrive.host.exit_safety import install_signal_handlers, register, stop_all
+from wcdrive.host.handshake import PROTOCOL_VERSION
+from wcdrive.host.neutral import is_neutral, wait_for_neutral
 from wcdrive.host.odometry import OdometryEstimate
 from wcdrive.host.requests import Request
 from wcdrive.host.scan_feed import ScanFeed, ScanSource
@@ -247,21 +249,8 @@ class Wheelchair:
         return list(self._hub.resets)
 
     def _require_link(self, what: str) -> None:
-        """Raises when ``what`` cannot go out: the chair is closed, the handshake
-        failed, or the link is lost."""
-        session = self._session
-        if session.closed.is_set():
-            raise WcdriveConnectionError(f"the link to {session.name} is closed: connect() again")
-        if session.handshake.error is not None:
-            raise WcdriveProtocolError(str(session.handshake.error))
-        if not session.link_ok:
-            silent = session.since_last_line
-            raise WcdriveConnectionError(
-                f"the link to {session.name} is lost: "
-                + ("no line from the board yet" if math.isinf(silent) else
-                   f"no line from the board for {silent:.2f} s (link_timeout {session.link_timeout} s)")
-                + f"; {what} not sent. The board's watchdog stops the chair; the link "
-                "recovers by itself when its lines flow again (chair.link_ok)")
+        """Raises when ``what`` cannot go out (``Session.require_link``)."""
+        self._session.require_link(what)
 
     # ---- commands ----------------------------------------------------------------
     def set_velocity(self, linear: float, angular: float) -> None:
@@ -327,6 +316,7 @@ class Wheelchair:
         # Let go of the e-stop before the reset goes out: a latch the host decided on
         # after this (a hello answered late, a restored link) would follow the reset on
         # the wire and latch the board again behind the caller's back.
+        latched = self.estop_latched or bool(self.faults)
         with session.estop_lock:
             held = session.board.estop_held
             session.board.estop_held = False
@@ -336,6 +326,9 @@ class Wheelchair:
                 try:
                     session.request(Request.reset())
                     session.board.estop_released()  # the last TLM predates the reset
+                    if latched:     # released: the board drives after a neutral command
+                        session.board.awaiting_neutral = True
+                        self.wait_for_neutral(max(1.0, deadline - time.monotonic()))
                     return
                 except WcdriveCommandError as exc:
                     if exc.reason != "busy" or time.monotonic() > deadline:
@@ -441,7 +434,21 @@ class Wheelchair:
         if self.estop_latched:
             raise WcdriveEstopError(f"the e-stop of {self.url} is latched: call reset_estop() "
                                     "once it is safe", "estop")
+        if self.needs_neutral and not is_neutral(command):
+            raise WcdriveNeutralError(f"{self.url} drives only after a neutral command (after a watchdog "
+                                      "stop, a reset or a PPM loss): stop() or wait_for_neutral() first")
         self._session.send_motion(command)
+
+    @property
+    def needs_neutral(self) -> bool:
+        """True while the board refuses motion until a neutral command (``wcdrive.host.neutral``):
+        motion raises ``WcdriveNeutralError``."""
+        return self.protocol_version == PROTOCOL_VERSION and self._session.board.awaiting_neutral
+
+    def wait_for_neutral(self, timeout: float = 2.0) -> None:
+        """Sends stops until the board confirms neutral (``wcdrive.host.neutral``)."""
+        wait_for_neutral(self._session.board, self.stop, timeout, self.url,
+                         telemetry=self.protocol_version != 1)
 
     # ---- handshake and telemetry ------------------------------------------------------
     def wait_for_handshake(self, timeout: float = 5.0) -> int:

@@ -178,7 +178,9 @@ class Error:
 
 @dataclass(frozen=True, slots=True)
 class Event:
-    """``EVT:<name>``: ``WATCHDOG``, ``PPM_LOST``, ``ESTOP``; on a grade ``ROLLAWAY``,
+    """``EVT:<name>``: ``WATCHDOG``, ``PPM_LOST``, ``ESTOP``; ``NOT_NEUTRAL`` (motion
+    refused until a neutral command), ``NEUTRAL`` (neutral confirmed after that),
+    ``DEFLECTED`` (refused 5 s without one); on a grade ``ROLLAWAY``,
     ``OVERSPEED``, ``STALLED_ON_GRADE`` (the chair's limits, not faults); ``FAULT,<fault>`` (a latched
     fault: ``ENC_STALL_L``, ``ENC_REVERSED_R``, ``DRIVER_DEAD``, ...; PROTOCOL.md), or at
     boot ``PARAMS_LOADED`` / ``PARAMS_DEFAULT,<why>`` (the parameters saved in EEPROM)."""
@@ -265,6 +267,21 @@ class ExtendedTelemetry:
     #: Control ticks that ran more than a period late since boot (the 50 ms grid then
     #: starts again from that tick).
     late: int = 0
+    #: Bit 0: the board waits for a neutral command (motion refused, ``ERR:neutral``);
+    #: bit 1: the neutral fault (refused 5 s without one). Boards before this field end
+    #: at ``late`` (None).
+    state: int | None = None
+
+    @property
+    def needs_neutral(self) -> bool:
+        """State bit 0: motion is refused until a neutral (zero) command stands."""
+        return bool(self.state and self.state & 1)
+
+    @property
+    def neutral_fault(self) -> bool:
+        """State bit 1: motion was refused for 5 s without a neutral command (a control
+        deflected at switch-on, or stuck)."""
+        return bool(self.state and self.state & 2)
 
     @property
     def fault_latched(self) -> bool:
@@ -367,7 +384,7 @@ def _float(text: bytes) -> float:
     return float(text)
 
 
-_TLM = re.compile(rb"TLM:(\d+(?:,\d+){12}(?:,\d+){0,3})")
+_TLM = re.compile(rb"TLM:(\d+(?:,\d+){12}(?:,\d+){0,4})")
 _HELLO = re.compile(rb"HELLO:(\d+),([\w.-]+)(?:,([\w.-]+),([0-9a-f]+))?")
 _PARAM = re.compile(rb"PAR:(\w+),(\d+(?:\.\d+)?)")
 _ACK = re.compile(rb"ACK:(\d+)")

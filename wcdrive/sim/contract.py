@@ -58,12 +58,19 @@ class Miss:
         return f"{self.scenario} ({self.backend}): {self.what}: {self.detail}"
 
 
+#: m/s: the true speed above which the chair is moving (``first_motion_s``).
+MOVING_MPS = 0.05
+
+
 def figures(result: SimResult) -> dict[str, object]:
-    """The figures a Mega run's bounds name: ``SimResult.metrics`` and ``max_speed_mps``
-    (the chair's largest true speed over the run)."""
+    """The figures a Mega run's bounds name: ``SimResult.metrics``, ``max_speed_mps``
+    (the chair's largest true speed over the run) and ``first_motion_s`` (when its true
+    speed first passed ``MOVING_MPS``; None: never)."""
     out = result.metrics()
     speed = result.truth.step_speed
     out["max_speed_mps"] = float(speed.max()) if speed.size else 0.0
+    moving = np.flatnonzero(speed > MOVING_MPS)
+    out["first_motion_s"] = float(result.truth.step_time[moving[0]]) if moving.size else None
     return out
 
 

@@ -24,9 +24,10 @@ equal to it or starting with it and a comma (``FAULT`` matches every fault,
 rest (``FAULT,ENC_STALL_*``: either side); alternatives joined by ``|`` match where any
 does (``FAULT,ENC_STALL_*|STALLED_ON_GRADE``: either answer must come). The
 informational kinds (``INFORMATIONAL``: the parameter block's ``PARAMS_LOADED`` and
-``PARAMS_DEFAULT``) are ignored; every other kind is an alarm (``FAULT,*``,
-``OVERSPEED``, ``ROLLAWAY``, ``STALLED_ON_GRADE``, ``WATCHDOG``, ``ESTOP``, ``PPM_LOST``,
-and any kind not known here), and an alarm line that no kind of ``events``, ``allow``
+``PARAMS_DEFAULT``, and ``NEUTRAL``, a neutral command confirmed after a refusal) are
+ignored; every other kind is an alarm (``FAULT,*``, ``OVERSPEED``, ``ROLLAWAY``,
+``STALLED_ON_GRADE``, ``WATCHDOG``, ``ESTOP``, ``PPM_LOST``, ``NOT_NEUTRAL``,
+``DEFLECTED``, and any kind not known here), and an alarm line that no kind of ``events``, ``allow``
 or ``[[expect.event]]`` matches is a miss. Except a ``WATCHDOG``
 that follows another alarm (the board has stopped already and refuses motion, so the
 host's commands no longer keep its watchdog fed) or comes after the host's last command
@@ -34,7 +35,8 @@ host's commands no longer keep its watchdog fed) or comes after the host's last 
 closed-loop one once it reached its goal): that is the host leaving, not an alarm.
 
 **Figures.** Every other key of ``[expect]`` names a figure of the run (``FIGURES``:
-``SimResult.metrics``'s, ``max_speed_mps`` (the chair's largest speed over the run), and
+``SimResult.metrics``'s, ``max_speed_mps`` (the chair's largest speed over the run),
+``first_motion_s`` (when the chair first moved faster than 5 cm/s; None: never), and
 Eddie's: ``wcdrive.eddie.runner.figures``). ``{ min = .., max = .. }`` bounds it (either
 side may be left out), a bare number or true/false must equal it; a figure the run does
 not have (None: e.g. a drift where the chair never came to rest) misses every bound.
@@ -52,7 +54,7 @@ import math
 from dataclasses import dataclass
 
 #: The kinds of ``EVT:`` line that are not alarms.
-INFORMATIONAL = ("PARAMS_LOADED", "PARAMS_DEFAULT")
+INFORMATIONAL = ("PARAMS_LOADED", "PARAMS_DEFAULT", "NEUTRAL")
 #: What an event's window may count from: the start of the run, the first fault
 #: (``fault_at_s``), the last stop (``stop_at_s``), the first stall of the chair while the
 #: host still commands motion, the first runaway of both wheels under braking
@@ -66,7 +68,7 @@ _STOP_FIGURES = ("stop_at_s", "max_speed_after_stop_mps", "rest_at_s", "stopping
 FIGURES = (
     *_STOP_FIGURES,
     "max_tick_gap_ms", "fault_at_s", "pwm_zero_after_fault_s", "standstill_after_fault_s",
-    "travel_after_fault_m", "peak_speed_after_fault_mps", "max_speed_mps",
+    "travel_after_fault_m", "peak_speed_after_fault_mps", "max_speed_mps", "first_motion_s",
     "collisions", "first_collision_s", "max_impact_ns", "contact_s",
     "goal_error_m", "goal_reached_s", "goal_within_tolerance", "firmware_differences",
     "truth_x", "truth_y", "truth_heading_deg", "tracking_rms_rad_s", "ticks", "simulated_s",

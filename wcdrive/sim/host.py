@@ -27,7 +27,7 @@ from wcdrive.plant import Gyro
 from wcdrive.plant.params import ChairParams
 from wcdrive.protocol.codec import Feedback, LineDecoder
 from wcdrive.protocol.motion import velocity_command
-from wcdrive.sim.scenario import Scenario
+from wcdrive.sim.scenario import MOTION_START_S, Scenario
 
 Pose = tuple[float, float, float]
 
@@ -105,7 +105,7 @@ class Pilot:
         self.host = host
         self.localization = scenario.follow.localization
         self.period = round(F_CPU / scenario.host_rate_hz)
-        self.next = round(0.02 * F_CPU)
+        self.next = round(MOTION_START_S * F_CPU)
         self.settle = round(scenario.settle_s * F_CPU)
         self.sent: list[tuple[int, bytes]] = []
         self.done_at: int | None = None

@@ -84,7 +84,7 @@ def fault_time(scenario: Scenario, wire: WireSchedule) -> float | None:
     silence, the time at which the last byte that started before it reached the board.
     None when the scenario has neither."""
     triggers: list[tuple[float, bool]] = [(f.at, f.kind == "link_cut") for f in scenario.faults]
-    t0 = 0.02
+    t0 = scenario.segments_start
     for seg in scenario.segments:
         if seg.kind == "silence":
             triggers.append((t0, True))
@@ -119,7 +119,7 @@ def stop_time(scenario: Scenario, wire: WireSchedule, events: list[tuple[float, 
         if done_at is not None:
             candidates.append(done_at)
     else:
-        t0 = 0.02
+        t0 = scenario.segments_start
         start: float | None = 0.0
         for seg in scenario.segments:
             if _commands_motion(seg):
@@ -128,7 +128,7 @@ def stop_time(scenario: Scenario, wire: WireSchedule, events: list[tuple[float, 
                 start = _last_byte_before(wire, t0) if seg.kind == "silence" else t0
             t0 += seg.duration
         candidates.append(t0 if start is None else start)
-    end_of_segments = 0.02 + sum(seg.duration for seg in scenario.segments)
+    end_of_segments = scenario.segments_start + sum(seg.duration for seg in scenario.segments)
     for f in scenario.faults:
         if f.kind == "link_cut" and (f.duration is None or f.at + f.duration >= end_of_segments):
             candidates.append(_last_byte_before(wire, f.at))

@@ -93,7 +93,7 @@ def standstill_bound(speed: float, max_braking: float, limit_speed: float, kind:
 def commanded_speed(scenario: Scenario, t: float) -> float:
     """m/s: the linear speed the scenario's host commands at time ``t`` (the wheel
     speeds' mean for a ``wheel`` segment; 0 for stop, silence and PPM)."""
-    t0 = 0.02
+    t0 = scenario.segments_start
     for seg in scenario.segments:
         if t < t0 + seg.duration:
             if seg.kind == "cmdvel":
@@ -110,7 +110,7 @@ def trigger(scenario: Scenario) -> tuple[str, Fault | None]:
     earliest fault, or "silence" when a ``silence`` segment comes first, with that fault
     (None for a silence); ("none", None) when it has neither."""
     found: list[tuple[float, str, Fault | None]] = [(f.at, f.kind, f) for f in scenario.faults]
-    t0 = 0.02
+    t0 = scenario.segments_start
     for seg in scenario.segments:
         if seg.kind == "silence":
             found.append((t0, "silence", None))

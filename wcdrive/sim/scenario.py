@@ -5,6 +5,8 @@
     host_rate_hz = 10        # the host re-sends its current command this often
     repeat = 4               # the segment list, this many times (default 1)
     settle_s = 1.5           # after the last segment: a stop, then this long (default)
+    neutral_first = true     # a neutral command before the first segment (default; the
+                             #   board drives only after one: false shows it refusing)
     [chair]                  # optional ChairParams overrides, e.g. friction_left = 0.1
     [params]                 # optional runtime parameters the host sets first,
     watchdog_ms = 1000       #    set:<name>=<value> (protocol v2), e.g. kp_l, estop_decel
@@ -118,11 +120,19 @@ from wcdrive.sim.expect import Expect
 from wcdrive.sim.expect import parse as parse_expect
 
 BUNDLED = Path(__file__).resolve().parent / "scenarios"
+#: When a scenario's host sends its neutral command: the board refuses motion after a
+#: boot until a neutral command has stood NEUTRAL_TICKS ticks (docs/safety.md).
+NEUTRAL_AT_S = 0.008
+#: When its first motion command goes out: the neutral confirmed by then (two ticks,
+#: 100 ms), and 20 ms into a tick as the first command was before the neutral came (the
+#: bundled scenarios' commands keep their phase against the board's 50 ms ticks, so the
+#: figures measured before stay comparable).
+MOTION_START_S = 0.17
 _KINDS = ("cmdvel", "wheel", "ppm", "stop", "silence")
 _FAULT_KEYS = ("at", "kind", "side", "duration", "rate_hz")
 #: The keys a scenario file may have at its top level.
-TOP_KEYS = ("name", "description", "host_rate_hz", "repeat", "settle_s", "chair", "params", "segment",
-            "fault", "path", "follow", "world", "lidar", "expect")
+TOP_KEYS = ("name", "description", "host_rate_hz", "repeat", "settle_s", "neutral_first", "chair", "params",
+            "segment", "fault", "path", "follow", "world", "lidar", "expect")
 _GEOMETRY_KEYS = ("map", "walls", "boxes", "circles")
 _LIDAR_KEYS = ("model", "x", "y", "z", "yaw_deg", "roll_deg", "driver_inverted")
 _WORLD_KEYS = ("slope_deg", "downhill_heading_deg", "ramp", *_GEOMETRY_KEYS, "file", "start")
@@ -165,6 +175,9 @@ class Scenario:
     segments: tuple[Segment, ...]
     host_rate_hz: float = 10.0
     settle_s: float = 1.5
+    #: The host sends a neutral command first (``NEUTRAL_AT_S``), its first segment from
+    #: ``MOTION_START_S``; False: its first segment from 20 ms, with no neutral before it.
+    neutral_first: bool = True
     chair: dict[str, float] = field(default_factory=dict)
     source: Path | None = None
     faults: tuple[Fault, ...] = ()
@@ -200,13 +213,23 @@ class Scenario:
         """``ChairParams`` with the scenario's ``[chair]`` overrides."""
         return dataclasses.replace(ChairParams(), **self.chair)  # type: ignore[arg-type]
 
+    @property
+    def segments_start(self) -> float:
+        """s: when the first segment's command goes out (``MOTION_START_S``; 20 ms
+        without ``neutral_first``); each segment starts where the one before ends."""
+        return MOTION_START_S if self.neutral_first else 0.02
+
     def host_commands(self) -> list[tuple[float, bytes]]:
-        """(time, bytes) the host sends: the ``[params]`` settings at 5 ms, then each
-        segment's command at ``host_rate_hz`` from 20 ms, then a stop."""
+        """(time, bytes) the host sends: the ``[params]`` settings at 5 ms, a neutral
+        command at ``NEUTRAL_AT_S`` (the board drives only after one; ``neutral_first``),
+        then each segment's command at ``host_rate_hz`` from ``MOTION_START_S`` (20 ms
+        without the neutral), then a stop."""
         out: list[tuple[float, bytes]] = [(0.005, encode_set(name, value) + b"\n")
                                           for name, value in self.board_params.items()]
+        if self.neutral_first:
+            out.append((NEUTRAL_AT_S, velocity_command(0.0, 0.0)))
+        t0 = self.segments_start
         period = 1.0 / self.host_rate_hz
-        t0 = 0.02
         for seg in self.segments:
             data = seg.command()
             n = max(1, round(seg.duration / period))
@@ -284,6 +307,9 @@ def load(name_or_path: str, *, extra: Collection[str] = ()) -> Scenario:
     rate = float(data.get("host_rate_hz", 10.0))
     if not 0.5 <= rate <= 100.0:
         raise ScenarioError(f"{path}: host_rate_hz must be within 0.5..100")
+    neutral_first = data.get("neutral_first", True)
+    if not isinstance(neutral_first, bool):
+        raise ScenarioError(f"{path}: neutral_first must be true or false")
     terrain, world, start = _world(data.get("world", {}), path)
     lidar = _lidar(data.get("lidar"), path)
     expect = None
@@ -295,7 +321,7 @@ def load(name_or_path: str, *, extra: Collection[str] = ()) -> Scenario:
     scenario = Scenario(
         name=str(data.get("name", path.stem)), description=str(data.get("description", "")),
         segments=tuple(segments) * repeat, host_rate_hz=rate,
-        settle_s=float(data.get("settle_s", 1.5)), chair=chair, source=path,
+        settle_s=float(data.get("settle_s", 1.5)), neutral_first=neutral_first, chair=chair, source=path,
         path=waypoints, follow=follow, terrain=terrain, world=world, start=start, lidar=lidar,
         expect=expect,
     )

@@ -41,15 +41,22 @@ from wcdrive.protocol.motion import velocity_command, wheel_command
 
 #: How many of the board's messages ``SteppedChair.messages`` keeps (the newest).
 MESSAGE_HISTORY = 10_000
+#: How long a new ``SteppedChair`` runs after its neutral command: the board has
+#: confirmed it (NEUTRAL_TICKS ticks) by then.
+NEUTRAL_CONFIRM_S = (C.NEUTRAL_TICKS + 1) * C.CONTROL_PERIOD_MS / 1000.0
 
 
 class SteppedChair:
     """The port (``wcdrive.firmware``) and the plant in one ``PortLoop``, stepped by
     ``run``. ``faults`` (``wcdrive.plant.faults.Fault``) are injected as a scenario's
-    ``[[fault]]`` entries are; ``seed`` seeds the gyro."""
+    ``[[fault]]`` entries are; ``seed`` seeds the gyro. Like ``connect``, it starts with a
+    neutral command and runs ``NEUTRAL_CONFIRM_S`` until the board has confirmed it (it
+    drives only after one); ``neutral=False`` leaves the board waiting for one, at
+    time 0."""
 
     def __init__(self, params: ChairParams | None = None, *, faults: Sequence[Fault] = (),
-                 seed: int = 0, dt: float = 0.001, history: int = MESSAGE_HISTORY) -> None:
+                 seed: int = 0, dt: float = 0.001, history: int = MESSAGE_HISTORY,
+                 neutral: bool = True) -> None:
         self.params = params or ChairParams()
         self.plant = Plant(self.params)
         self.loop = PortLoop(self.plant, Gyro(self.params, seed), dt=dt, faults=faults)
@@ -65,6 +72,9 @@ class SteppedChair:
         self._callbacks: list[Callable[[Telemetry], None]] = []
         self._samples: deque[Telemetry] = deque(maxlen=history)
         self._closed = False
+        if neutral:
+            self.stop()
+            self.run(NEUTRAL_CONFIRM_S)
 
     @property
     def time(self) -> float:

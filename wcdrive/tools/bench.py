@@ -44,7 +44,7 @@ from typing import Any, Protocol, cast
 import wcdrive
 from wcdrive._util.resources import firmware_dir
 from wcdrive.boards.simavr.build import build_dir, firmware_elf
-from wcdrive.errors import WcdriveError
+from wcdrive.errors import WcdriveError, WcdriveNeutralError
 from wcdrive.host.robot import Robot
 from wcdrive.protocol.codec import ExtendedTelemetry, Feedback, LineDecoder
 from wcdrive.sim import scenario
@@ -318,6 +318,7 @@ def run_scenario(name: str, url: str, *, speed: float = 1.0,
             if announce is not None:
                 announce(f"driving {sc.name} on {url} (firmware {chair.firmware} "
                          f"{chair.firmware_version}, build {chair.build_id}; Ctrl-C stops the chair)")
+            refused = 0
             with tqdm(total=round(sc.duration, 1), unit="s", desc=sc.name, disable=None if progress else True,
                       bar_format="{desc}: {bar} {n:.1f}/{total:.1f} s") as bar:
                 for segment in sc.segments:
@@ -325,7 +326,11 @@ def run_scenario(name: str, url: str, *, speed: float = 1.0,
                     end = time.monotonic() + segment.duration / speed
                     while time.monotonic() < end:
                         if command is not None:
-                            chair.send_command(command)
+                            try:
+                                chair.send_command(command)
+                            except WcdriveNeutralError:     # after a reset mid-run, as wcdrive
+                                refused += 1                # sim's host: refused, not sent
+                                recording.meta["refused_neutral"] = refused
                         time.sleep(period)
                         bar.update(min(period * speed, bar.total - bar.n))
             chair.stop()

@@ -69,6 +69,10 @@ def test_garbage_on_the_line_then_the_controller_still_arrives(stream: bytes) ->
     chair.run(0.6)
     chair.command(b"reset")     # whatever the garbage latched (an e-stop), reset it once parked
     chair.run(1.5)
+    # and the motion it started, stopped by the board's watchdog (or the e-stop just
+    # released): the board drives again only after a neutral command has stood 2 ticks
+    chair.stop()
+    chair.run(0.15)
     drive(chair, GoToGoal((1.0, 0.0)), 12.0)
     assert chair.pose[0] > 0.0
 

@@ -129,11 +129,28 @@ def test_byte_reads_give_the_lines_of_bulk_reads(backend: Backend) -> None:
     assert a[:k] == b[:k]
 
 
-def _drive_and_read(port: Port, chunk: int, wheel_lines: int) -> list[bytes]:
+def _neutral(port: Port) -> None:
+    """A neutral command (one with a CAN form), standing for 3 of the board's ticks: a
+    board just out of reset drives only after one (docs/safety.md, "Neutral before
+    motion")."""
+    port.write(encode_cmdvel(0.0, 0.0) + b"\n")
+    read_until(port, n_feedback(4))
+
+
+def _drive_and_read(port: Port, chunk: int, wheel_lines: int, neutral: bool = False) -> list[bytes]:
     """Drives both wheels forward (the command resent well within the watchdog) and
-    reads ``chunk`` bytes at a time until ``wheel_lines`` feedback lines say WHEEL."""
+    reads ``chunk`` bytes at a time until ``wheel_lines`` feedback lines say WHEEL.
+    ``neutral``: first a neutral command, which a board just out of reset needs before it
+    drives (docs/safety.md, "Neutral before motion"), standing for 3 of the board's
+    ticks (3 feedback lines)."""
     command = encode_wheel(2.0, 2.0) + b"\n"
     data = bytearray()
+    if neutral:
+        port.write(encode_wheel(0.0, 0.0) + b"\n")
+        deadline = time.monotonic() + 30
+        while data.count(b"ENC:") < 4:
+            assert time.monotonic() < deadline, bytes(data[-300:])
+            data += port.read(chunk)
     next_command = 0.0
     deadline = time.monotonic() + 30
     while True:
@@ -155,7 +172,7 @@ def test_byte_reads_of_a_moving_chair(backend: Backend) -> None:
     the right one counts up, the left one down (it is mirrored)."""
     port = backend.open(timeout=0.05)
     wait_alive(backend, port)
-    bytewise = _drive_and_read(port, 1, 20)
+    bytewise = _drive_and_read(port, 1, 20, neutral=True)
     bulk = _drive_and_read(port, 4096, 20)
     for lines in (bytewise, bulk):
         assert_well_formed(lines[1:])
@@ -195,6 +212,7 @@ def test_a_write_larger_than_the_rx_ring(backend: Backend) -> None:
     there the check is the mode that follows (a known cost of unsequenced CAN commands)."""
     port = backend.open(timeout=0.1)
     wait_alive(backend, port)
+    _neutral(port)
     burst = (encode_cmdvel(0.1, 0.0) + b"\n") * 100 + frame(encode_wheel(1.0, 1.0), 4242)
     assert len(burst) > 1500
     written, _ = call_within(5.0, lambda: port.write(burst))
@@ -223,6 +241,7 @@ def test_lines_split_and_joined_across_writes(backend: Backend) -> None:
             assert port.write(request[i:i + 1]) == 1
         read_until(port, n_talked(backend, 1))
         return
+    _neutral(port)
     port.write(b"".join(frame(encode_wheel(0.5, 0.5), seq) for seq in (11, 12, 13)))
     # and a tick after them: the board answers at most 3 commands a tick
     data = read_until(port, n_feedback(1, after=b"ACK:13\r\n"))

@@ -47,7 +47,8 @@ VARIABLE_FORMATS = {
           "runawayTicksR", "stormL", "stormR",
           "resetCause", "effortPwmL", "effortPwmR", "effortTicksL", "effortTicksR", "eeNext", "eeBusy",
           "holding", "holdRollaway", "brakeReleased", "overspeedTicksL", "overspeedTicksR",
-          "limitLatched", "feedbackForm"),
+          "limitLatched", "feedbackForm", "needNeutral", "neutralSeen", "neutralTicks", "notNeutralSent",
+          "notNeutralPending", "notNeutralTicks", "neutralFault"),
 }
 _FORMAT_OF = {name: fmt for fmt, names in VARIABLE_FORMATS.items() for name in names}
 

@@ -16,6 +16,8 @@
  *   - a tick in which a fault latches, a wheel's check trips at all (a fault or the
  *     chair's limit), an overspeed parks the chair or the watchdog fires (they send
  *     events and halt);
+ *   - a tick while the board waits for neutral (needNeutral: after a boot, a reset, a
+ *     watchdog stop or a PPM loss, a few ticks at most while a host is well behaved);
  *   - a mode that MODE_NAMES does not name.
  * Each binary32 operation is one IEEE double operation rounded once to binary32, as
  * f32.py (and f32_fast.c) computes the ordinary case. The whole tick is computed into
@@ -89,7 +91,8 @@ static double f_from_int(int64_t n) { return rnd((double)n); }   /* |n| < 2**53 
     X(tlmEnabled) X(linesFramed) X(lineCounter) X(errLinesThisTick) X(rxCount) X(lastSeq) X(estopLatched) X(ppmLost) \
     X(rejectedCount) X(crcRejected) X(freeRam) \
     X(holding) X(holdRefL) X(holdRefR) X(holdStepL) X(holdStepR) \
-    X(brakeReleased) X(overspeedTicksL) X(overspeedTicksR) X(overspeedFromL) X(overspeedFromR)
+    X(brakeReleased) X(overspeedTicksL) X(overspeedTicksR) X(overspeedFromL) X(overspeedFromR) \
+    X(needNeutral) X(neutralFault)
 
 #define ENUM(name) F_##name,
 enum { FIELDS(ENUM) N_FIELDS };
@@ -436,6 +439,8 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
         if (!read_int(s, f, &v))
             Py_RETURN_NONE;
     }
+    if (I(needNeutral))
+        Py_RETURN_NONE;             /* waiting for neutral (after a boot, a reset, a stop): the Python tick */
     PyObject *mode_name = PyDict_GetItemWithError(mode_names, *slot(s, F_mode));
     if (mode_name == NULL) {
         if (PyErr_Occurred())
@@ -648,12 +653,13 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
         int64_t flags = (I(watchdogArmed) ? 1 : 0) | (I(emergencyStop) ? 2 : 0)
                         | (I(estopLatched) ? 4 : 0) | (I(ppmLost) ? 8 : 0) | (I(parked) ? 16 : 0)
                         | (int64_t)(((uint64_t)I(pivotPhase) << 5) & 0xFF) | (I(faultFlags) ? 128 : 0);
-        int64_t tlm[16] = { now & M32, I(rxCount), I(lastSeq), I(pwmL), I(pwmR), I(dirL), I(dirR),
+        int64_t tlm[17] = { now & M32, I(rxCount), I(lastSeq), I(pwmL), I(pwmR), I(dirL), I(dirR),
                             I(illTickL), I(illTickR), flags, I(rejectedCount), I(crcRejected),
-                            I(freeRam), I(faultFlags), I(rxLostTick), I(lateTicks) };
+                            I(freeRam), I(faultFlags), I(rxLostTick), I(lateTicks),
+                            (I(needNeutral) ? 1 : 0) | (I(neutralFault) ? 2 : 0) };
         Buf t = { .n = 0 };
         puts_(&t, "TLM:");
-        for (int k = 0; k < 16; k++) {
+        for (int k = 0; k < 17; k++) {
             if (k)
                 puts_(&t, ",");
             put_ll(&t, (long long)tlm[k]);
