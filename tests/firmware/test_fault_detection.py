@@ -35,7 +35,15 @@ def _wheel(rad_s: float, t0: float, t1: float, mirrored: bool = False) -> EdgeTr
 
 
 def _commands(command: bytes, t0: float, t1: float, period: float = 0.1) -> list[tuple[float, bytes]]:
-    return [(t, command) for t in np.arange(t0, t1, period)]
+    """``command`` every ``period`` s from ``t0``, after a neutral command at 10 ms (the
+    board drives only once one stood: docs/safety.md, "Neutral before motion"); ``t0``
+    at least ``T0``."""
+    return [(0.01, NEUTRAL), *((t, command) for t in np.arange(t0, t1, period))]
+
+
+#: When the traces' drives start: their neutral command has stood by then.
+T0 = 0.17
+NEUTRAL = b"rp0,lp0,\n"
 
 
 def _run(trace: Trace) -> tuple[Recording, bytes]:
@@ -64,8 +72,8 @@ def test_a_wheel_driven_without_counts_latches_a_stall_and_parks() -> None:
     FAULT_STALL_TICKS ticks of the duty reaching FAULT_STALL_PWM; the left motor at
     duty 0, the right one, still turning, braked by its PID (not parked), the brake
     engaged."""
-    trace = Trace(duration=1.5, serial=_commands(b"rp3.0,lp3.0,", 0.02, 1.5),
-                  encoders={"right": _wheel(3.0, 0.02, 1.5)})
+    trace = Trace(duration=1.65, serial=_commands(b"rp3.0,lp3.0,", T0, 1.65),
+                  encoders={"right": _wheel(3.0, T0, 1.65)})
     recording, tx = _run(trace)
     assert _events(tx) == [b"EVT:FAULT,ENC_STALL_L"]
     faults, _ = _fault_tick(recording)
@@ -81,19 +89,19 @@ def test_a_wheel_driven_without_counts_latches_a_stall_and_parks() -> None:
 def test_the_stall_is_caught_before_the_duty_runs_away() -> None:
     """The duty of the stalled wheel never winds up past what it had when the counts
     stopped plus one PID step: a suspect tick holds the output."""
-    trace = Trace(duration=1.0, serial=_commands(b"rp3.0,lp3.0,", 0.02, 1.0),
-                  encoders={"left": _wheel(3.0, 0.02, 0.40, mirrored=True),
-                            "right": _wheel(3.0, 0.02, 1.0)})
+    trace = Trace(duration=1.15, serial=_commands(b"rp3.0,lp3.0,", T0, 1.15),
+                  encoders={"left": _wheel(3.0, T0, 0.55, mirrored=True),
+                            "right": _wheel(3.0, T0, 1.15)})
     recording, tx = _run(trace)
     assert _events(tx) == [b"EVT:FAULT,ENC_STALL_L"]
     _, at = _fault_tick(recording)
-    assert at - 0.40 <= (C.FAULT_STALL_TICKS + 1) * 0.05 + 0.005
+    assert at - 0.55 <= (C.FAULT_STALL_TICKS + 1) * 0.05 + 0.005
     duties = [ev.pwm[0] for ev in recording.events if ev.kind == "tick"]
     assert max(duties) <= 2.55 * 100 * 0.45, duties      # never near full power
 
 
 def test_both_wheels_driven_without_counts_is_driver_dead() -> None:
-    trace = Trace(duration=1.5, serial=_commands(b"x:0.5,t:0,", 0.02, 1.5))
+    trace = Trace(duration=1.65, serial=_commands(b"x:0.5,t:0,", T0, 1.65))
     recording, tx = _run(trace)
     assert _events(tx) == [b"EVT:FAULT,DRIVER_DEAD"]
     assert _fault_tick(recording)[0] == 0x40
@@ -102,15 +110,15 @@ def test_both_wheels_driven_without_counts_is_driver_dead() -> None:
 def test_counts_against_the_setpoint_latch_a_reversed_encoder() -> None:
     """Right encoder wired A/B swapped: it counts backwards while the wheel is driven
     forward. ENC_REVERSED_R after FAULT_REVERSE_TICKS ticks beyond FAULT_REVERSE_SPEED."""
-    trace = Trace(duration=1.5, serial=_commands(b"rp3.0,lp3.0,", 0.02, 1.5),
-                  encoders={"left": _wheel(3.0, 0.02, 1.5, mirrored=True),
-                            "right": _wheel(-3.0, 0.02, 1.5)})
+    trace = Trace(duration=1.65, serial=_commands(b"rp3.0,lp3.0,", T0, 1.65),
+                  encoders={"left": _wheel(3.0, T0, 1.65, mirrored=True),
+                            "right": _wheel(-3.0, T0, 1.65)})
     recording, tx = _run(trace)
     assert _events(tx) == [b"EVT:FAULT,ENC_REVERSED_R"]
     faults, at = _fault_tick(recording)
     assert faults == 0x08
     # The setpoint passes 1 rad/s after 0.2 s (5 rad/s^2); three ticks later at most.
-    assert at <= 0.02 + 1.0 / 5.0 + (C.FAULT_REVERSE_TICKS + 1) * 0.05 + 0.01
+    assert at <= T0 + 1.0 / 5.0 + (C.FAULT_REVERSE_TICKS + 1) * 0.05 + 0.01
 
 
 def test_illegal_transitions_latch_an_implausible_encoder() -> None:
@@ -151,11 +159,11 @@ def test_reset_releases_a_fault_once_parked_and_motion_resumes() -> None:
     """After a stall fault, framed motion is NAKed with "fault", a stop is accepted, and
     ``reset`` (parked: at once) releases it; the TLM line carries flag bit 7 and the
     fault bits while latched."""
-    serial = [(0.02, frame(b"hello", 1))]
-    serial += [(t, frame(b"rp3.0,lp3.0,", 2 + k)) for k, t in enumerate(np.arange(0.1, 0.8, 0.1))]
-    serial += [(0.85, frame(b"rp1.0,lp1.0,", 50)), (0.9, frame(b"x:0,t:0,", 51)),
-               (0.95, frame(b"reset", 52)), (1.1, frame(b"x:0,t:0,", 53))]
-    trace = Trace(duration=1.3, serial=serial)
+    serial = [(0.02, frame(b"hello", 1)), (0.04, frame(b"x:0,t:0,", 40))]     # and neutral first
+    serial += [(t, frame(b"rp3.0,lp3.0,", 2 + k)) for k, t in enumerate(np.arange(0.25, 0.95, 0.1))]
+    serial += [(1.0, frame(b"rp1.0,lp1.0,", 50)), (1.05, frame(b"x:0,t:0,", 51)),
+               (1.1, frame(b"reset", 52)), (1.25, frame(b"x:0,t:0,", 53))]
+    trace = Trace(duration=1.45, serial=serial)
     recording, tx = _run(trace)
     lines = tx.split(b"\r\n")
     assert b"NAK:50,fault" in lines and b"ACK:51" in lines and b"ACK:52" in lines

@@ -24,7 +24,7 @@ from wcdrive.plant.faults import Fault
 from wcdrive.plant.terrain import Ramp, Terrain
 from wcdrive.sim import runner, safety, scenario
 from wcdrive.sim.result import BoardLog, GroundTruth, Odometry, SimResult
-from wcdrive.sim.scenario import Scenario, Segment
+from wcdrive.sim.scenario import MOTION_START_S, Scenario, Segment
 from wcdrive.tools.cli import main as wcdrive_main
 
 GRADE_1IN12 = math.degrees(math.atan(1 / 12))
@@ -99,12 +99,14 @@ def _stop_at(segments: tuple[Segment, ...], faults: tuple[Fault, ...] = (),
 
 
 DRIVE = Segment("cmdvel", (0.5, 0.0), 2.0)
+#: When the first segment starts (after the host's neutral command).
+T0 = MOTION_START_S
 
 
 def test_the_stop_is_the_start_of_the_last_stretch_without_motion() -> None:
     stop = Segment("stop", (), 2.0)
-    assert _stop_at((DRIVE, stop, DRIVE, stop, Segment("cmdvel", (0.0, 0.0), 1.0))) == pytest.approx(6.02)
-    assert _stop_at((DRIVE, stop, DRIVE)) == pytest.approx(6.02)               # the closing stop
+    assert _stop_at((DRIVE, stop, DRIVE, stop, Segment("cmdvel", (0.0, 0.0), 1.0))) == pytest.approx(6.0 + T0)
+    assert _stop_at((DRIVE, stop, DRIVE)) == pytest.approx(6.0 + T0)               # the closing stop
     assert _stop_at((stop, Segment("silence", (), 2.0))) == 0.0               # parked from the start
     assert _stop_at((DRIVE,), settle_s=0.0) is None                            # the run ends driving
 
@@ -114,19 +116,19 @@ def test_a_silence_stops_from_the_last_byte_as_the_fault_figures_count() -> None
     commands = [(round(t * F_CPU), d) for t, d in sc.host_commands() if t < sc.duration]
     wire = runner.wire_schedule(commands)
     assert runner.stop_time(sc, wire, []) == runner.fault_time(sc, wire)
-    assert _stop_at((DRIVE, Segment("silence", (), 2.0), Segment("stop", (), 1.0))) < 2.02
+    assert _stop_at((DRIVE, Segment("silence", (), 2.0), Segment("stop", (), 1.0))) < 2.0 + T0
 
 
 def test_a_latched_fault_or_a_lasting_link_cut_is_the_stop() -> None:
     stop = Segment("stop", (), 2.0)
     cut = Fault("encoder_cut", 1.0, "left")
     assert _stop_at((DRIVE, stop), (cut,), [(1.1, "EVT:FAULT,ENC_STALL_L")]) == 1.0
-    assert _stop_at((DRIVE, stop), (cut,)) == pytest.approx(2.02)              # no fault latched
+    assert _stop_at((DRIVE, stop), (cut,)) == pytest.approx(2.0 + T0)              # no fault latched
     assert _stop_at((DRIVE, stop), events=[(1.3, "EVT:FAULT,MOTOR_L")]) == 1.3   # none injected
-    assert _stop_at((DRIVE, stop), (Fault("reset", 1.0),)) == pytest.approx(2.02)
+    assert _stop_at((DRIVE, stop), (Fault("reset", 1.0),)) == pytest.approx(2.0 + T0)
     link = _stop_at((DRIVE, stop), (Fault("link_cut", 1.05),))
     assert link is not None and 0.92 < link < 1.05                             # the last byte
-    assert _stop_at((DRIVE, stop), (Fault("link_cut", 1.05, duration=0.5),)) == pytest.approx(2.02)
+    assert _stop_at((DRIVE, stop), (Fault("link_cut", 1.05, duration=0.5),)) == pytest.approx(2.0 + T0)
 
 
 # ---- on the plant ---------------------------------------------------------------------------
@@ -154,8 +156,8 @@ def test_after_a_stop_on_the_level_the_chair_only_slows() -> None:
     result = runner.run(Scenario("stop", "", (Segment("cmdvel", (0.5, 0.0), 3.0), Segment("stop", (), 8.0)),
                                  settle_s=0.0))
     m = result.stop_metrics()
-    assert m["stop_at_s"] == pytest.approx(3.02)
-    assert m["max_speed_after_stop_mps"] == pytest.approx(safety.speed_at(result, 3.02 + DT), abs=1e-3)
+    assert m["stop_at_s"] == pytest.approx(3.0 + MOTION_START_S)
+    assert m["max_speed_after_stop_mps"] == pytest.approx(safety.speed_at(result, 3.0 + T0 + DT), abs=1e-3)
     assert 0.1 < m["stopping_distance_m"] < 0.5
     # a straight line: the drift is the path after the rest
     assert m["drift_parked_m"] == pytest.approx(m["travel_after_stop_m"] - m["stopping_distance_m"], abs=2e-3)
@@ -197,4 +199,4 @@ def test_sim_json_reports_the_floor_and_the_stop(tmp_path: Path) -> None:
     [m] = json.loads(out.getvalue())
     assert m["ramps"] == [{"from_x": 1.0, "to_x": 4.6, "slope_deg": -4.764}]
     assert m["downhill_heading_deg"] == 90.0 and m["slope_by_time"] == [[0.0, 1.5, 0.0]]
-    assert m["stop_at_s"] == pytest.approx(1.02)
+    assert m["stop_at_s"] == pytest.approx(1.0 + MOTION_START_S)
