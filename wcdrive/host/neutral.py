@@ -26,6 +26,8 @@ __all__ = ["CONFIRM_S", "is_neutral", "wait_for_neutral"]
 #: How long the board takes at most to confirm a neutral command: NEUTRAL_TICKS ticks
 #: and the tick it arrived in, with a tick to spare for the line that says so.
 CONFIRM_S = (integer("NEUTRAL_TICKS") + 2) * integer("CONTROL_PERIOD_MS") / 1000.0
+#: The board's ticks (TLM lines) after a stop by which it surely confirmed it.
+CONFIRM_TICKS = integer("NEUTRAL_TICKS") + 2
 #: How often a stop goes out again while the host waits.
 _RESEND_S = 0.1
 
@@ -56,7 +58,9 @@ def wait_for_neutral(board: BoardState, stop: Callable[[], None], timeout: float
     while board.telemetry_count == seen or board.awaiting_neutral:
         status = board.status
         if board.telemetry_count != seen and status is not None and status.state is None:
-            time.sleep(CONFIRM_S)               # the board says nothing of it: its own time
+            # the board says nothing of it (the CAN mapping's TLM): its own ticks, counted
+            while board.telemetry_count < seen + CONFIRM_TICKS and time.monotonic() < deadline:
+                time.sleep(0.01)
             board.awaiting_neutral = False
             return
         now = time.monotonic()
