@@ -23,11 +23,11 @@ from wcdrive.protocol.spec import integer
 
 __all__ = ["CONFIRM_S", "is_neutral", "wait_for_neutral"]
 
-#: How long the board takes at most to confirm a neutral command: NEUTRAL_TICKS ticks
-#: and the tick it arrived in, with a tick to spare for the line that says so.
-CONFIRM_S = (integer("NEUTRAL_TICKS") + 2) * integer("CONTROL_PERIOD_MS") / 1000.0
-#: The board's ticks (TLM lines) after a stop by which it surely confirmed it.
+#: The board's ticks after a stop by which it surely confirmed it: NEUTRAL_TICKS and
+#: the tick it arrived in, with a tick to spare for the line that says so.
 CONFIRM_TICKS = integer("NEUTRAL_TICKS") + 2
+#: The same in seconds, for a board that sends no TLM line to count.
+CONFIRM_S = CONFIRM_TICKS * integer("CONTROL_PERIOD_MS") / 1000.0
 #: How often a stop goes out again while the host waits.
 _RESEND_S = 0.1
 
