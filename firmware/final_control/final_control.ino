@@ -631,8 +631,9 @@ static void requireNeutral() {
 // Measured against the setpoint does not count while the wheel came
 // WC_FAULT_REVERSE_APPROACH closer to it since prevMeasured (what the PID last ran on):
 // a healthy wheel lagging a reversal of its setpoint slows toward it; a reversed encoder
-// shows the wheel moving away, or no closer. Running away (runsAway) for
-// WC_FAULT_RUNAWAY_TICKS ticks in a row is a reversed encoder too; it holds no output.
+// shows the wheel moving away, or no closer. Running away (runsAway) counts one up a
+// tick; driving, any other tick one down (to 0), holding, to 0: WC_FAULT_RUNAWAY_TICKS is
+// a reversed encoder too.
 #define WHEEL_OK 0
 #define WHEEL_SUSPECT 1
 #define WHEEL_STALLED 2
@@ -821,7 +822,10 @@ static uint8_t checkWheel(int32_t delta, uint32_t illegal, uint8_t storm, uint8_
                  (setpoint > 0.0f) != (measured > 0.0f) && approach < WC_FAULT_REVERSE_APPROACH;
   reverseTicks = against ? reverseTicks + 1 : 0;
   if (reverseTicks >= WC_FAULT_REVERSE_TICKS) return WHEEL_REVERSED;
-  runawayTicks = runsAway(appliedPwm, appliedDir, setpoint, measured, prevMeasured) ? runawayTicks + 1 : 0;
+  // driving, a leaky count: one tick short of the gain (the speed-up wavers) does not start
+  // it over; holding, it does (the hold's wheels rolled back by a grade beyond it)
+  if (runsAway(appliedPwm, appliedDir, setpoint, measured, prevMeasured)) runawayTicks++;
+  else runawayTicks = (runawayTicks > 0 && !holding) ? runawayTicks - 1 : 0;
   if (runawayTicks >= WC_FAULT_RUNAWAY_TICKS) return WHEEL_REVERSED;
   if (noEffect(appliedPwm, appliedDir, setpoint, measured, other, otherPwm, otherOverruns, effortPwm,
                effortSpeed, effortSetpoint, effortTicks)) {

@@ -92,7 +92,7 @@
 #define WC_FAULT_REVERSE_APPROACH 0.1f // rad/s: a wheel against its setpoint that came this much closer to it since the PID last ran is slowing toward it (lagging a reversal of its setpoint): not counted
 #define WC_FAULT_RUNAWAY_PWM 26    // duty (10 %) at or above which a wheel driven against its measured motion is braking it: a braked wheel does not keep speeding up unless something pushes it, or its encoder counts against the motion
 #define WC_FAULT_RUNAWAY_GAIN 0.07f // rad/s: a wheel braked at FAULT_RUNAWAY_PWM, FAULT_REVERSE_SPEED or more beyond its setpoint, that measures at least this much faster than the speed the PID last ran on, is running away: counted
-#define WC_FAULT_RUNAWAY_TICKS 5   // ticks in a row running away: reversed encoder (the positive feedback of one whose reading flipped sign with its setpoint)
+#define WC_FAULT_RUNAWAY_TICKS 5   // net ticks running away (driving, each other tick counts one down, to 0; holding, to 0): reversed encoder (the positive feedback of one whose reading flipped sign with its setpoint)
 #define WC_FAULT_EFFORT_PWM 20     // duty rise (8 %) toward a steady setpoint without any gain in speed: the motor does not respond
 #define WC_FAULT_EFFORT_SHORTFALL 0.8f // ...while the wheel turns slower than this fraction of its setpoint
 #define WC_FAULT_EFFORT_SHORTFALL_MOTOR 0.95f // ...while the wheel turns slower than this fraction of its setpoint (the motor rule; a dead motor's wheel dragged at speed keeps most of its setpoint, a healthy one at steady speed keeps more: 92 % at 1 m/s on the level)

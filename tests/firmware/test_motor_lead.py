@@ -219,7 +219,7 @@ def _ticks_to_stall(prev_measured: float, setpoint: float = -0.89, ticks: int = 
     stall = 0
     for k in range(ticks):
         verdict, stall, _, _, _ = check_wheel(0, 0, 0, duty, direction, setpoint, 0.0, other, 0, False,
-                                              stall, 0, 0, (0, 0.0, 0.0, 0), prev_measured)
+                                              stall, 0, 0, (0, 0.0, 0.0, 0), prev_measured, False)
         if verdict == WHEEL_STALLED:
             return k + 1
     return None

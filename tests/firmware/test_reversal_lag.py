@@ -72,7 +72,7 @@ def test_turning_on_the_spot_from_motion_on_the_firmware(tmp_path) -> None:
 
 def _check(measured: float, previous: float, setpoint: float = -2.0, ticks: int = 0) -> tuple[int, int]:
     verdict, _, reverse_ticks, _, _ = check_wheel(40, 0, 0, 40, C.LOW, setpoint, measured, 0.0, 0, False,
-                                                  0, ticks, 0, (0, 0.0, 0.0, 0), previous)
+                                                  0, ticks, 0, (0, 0.0, 0.0, 0), previous, False)
     return verdict, reverse_ticks
 
 

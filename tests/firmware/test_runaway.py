@@ -161,9 +161,6 @@ def _reversed_during_a_turn(v: float, w: float, side: str,
     return seen.get("latch"), seen["peak"] - seen["speed"], travel
 
 
-@pytest.mark.xfail(thorough(), strict=True,
-                   reason="known since the neutral rule moved the drives: at the thorough depth one run "
-                          "travels 0.94 m after its encoder flipped (bound 0.9 m)")
 def test_a_reversed_encoder_is_caught_whenever_it_flips_during_a_turn() -> None:
     """0.3 to 1.6 m/s, a turn on the spot at t:+-1 or +-3 at 1.5 s, either encoder
     reversed at any moment from 1.6 to 2.6 s (each time NEUTRAL_LEAD_S later, after the

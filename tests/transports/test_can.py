@@ -120,8 +120,9 @@ enc_lines = st.builds(lambda a, b, vl, vr, m: b"ENC:%d,%d,VEL:%s,%s,MODE:%s" % (
                       st.integers(-2**31, 2**31 - 1), st.integers(-2**31, 2**31 - 1), centi, centi,
                       st.sampled_from([b"WHEEL", b"CMDVEL", b"PPM"]))
 tlm_fields = st.tuples(u32, u32, st.integers(0, 65535), st.integers(0, 255), st.integers(0, 255),
-                       st.integers(0, 1), st.integers(0, 1), u32, u32, st.integers(0, 127), u32, u32,
-                       st.integers(0, 8191))
+                       st.integers(0, 1), st.integers(0, 1), u32, u32, st.integers(0, 255), u32, u32,
+                       st.integers(0, 8191), st.integers(0, 511), st.integers(0, 65535),
+                       st.integers(0, 65535), st.integers(0, 3))
 tlm_lines = tlm_fields.map(lambda v: b"TLM:" + b",".join(b"%d" % x for x in v))
 reasons = st.sampled_from([r.encode() for r in cc.REASONS[1:]])
 reply_lines = st.one_of(
@@ -152,6 +153,20 @@ def test_board_lines_survive_the_bus_byte_for_byte(line) -> None:
         b = _decode(*frames[1])
         assert b["estop_latched"] == message.estop_latched and b["parked"] == message.parked
         assert b["pivot_phase"] == message.pivot_phase and b["free_ram"] == message.free_ram
+        e = _decode(*frames[4])
+        assert (e["faults"], e["needs_neutral"], e["deflected"]) == (
+            message.faults, message.needs_neutral, message.neutral_fault)
+
+
+def test_a_status_without_its_last_frame_makes_no_line() -> None:
+    """The TLM line is complete at WC_STATUS_E: the four frames before it alone, or a
+    WC_STATUS_E after an incomplete set, make none; counters past 16 bits saturate."""
+    line = b"TLM:1,2,3,4,5,1,0,6,7,128,8,9,100,256,70000,3,1"
+    frames = cc.message_to_frames(parse_line(line))
+    assembler = cc.TelemetryAssembler()
+    assert b"".join(assembler.feed(i, d) for i, d in frames[:4]) == b""
+    assert assembler.feed(*frames[4]) == b"TLM:1,2,3,4,5,1,0,6,7,128,8,9,100,256,65535,3,1\r\n"
+    assert b"".join(assembler.feed(i, d) for i, d in frames[2:]) == b""
 
 
 def test_gateway_on_the_virtual_bus_answers_with_the_hosts_sequence_number() -> None:
@@ -193,10 +208,14 @@ def test_can_gateway_command_serves_a_host() -> None:
     import threading
 
     import wcdrive
+    import wcdrive.transports.urlhandler.protocol_wcsim
     from wcdrive.tools.cli import main
 
+    # Imported here first, not in both threads at once: under pytest every wcdrive module
+    # is assertion-rewritten (ast.parse), and CPython 3.11.7's ast is not thread-safe
+    # ("SystemError: AST constructor recursion depth mismatch" in the gateway's thread).
     channel = f"wc-cli-{next(_channels)}"
-    gateway = threading.Thread(target=main, args=(["can-gateway", "--chair", "wcsim://?speed=5",
+    gateway = threading.Thread(target=main, args=(["--debug", "can-gateway", "--chair", "wcsim://?speed=5",
                                                     "--interface", "virtual", "--channel", channel,
                                                     "--seconds", "5"],))
     gateway.start()

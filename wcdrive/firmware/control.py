@@ -241,7 +241,7 @@ def stalls_loaded(setpoint: float, prev_measured: float, other: float) -> bool:
 def check_wheel(delta: int, illegal: int, storm: int, applied_pwm: int, applied_dir: int,
                 setpoint: float, measured: float, other: float, other_pwm: int, other_overruns: bool,
                 stall_ticks: int, reverse_ticks: int, runaway_ticks: int,
-                effort: Effort, prev_measured: float) -> tuple[int, int, int, int, Effort]:
+                effort: Effort, prev_measured: float, holding: int) -> tuple[int, int, int, int, Effort]:
     """``checkWheel``: ``(verdict, stall ticks, reverse ticks, runaway ticks, effort
     reference)`` for one wheel over the interval that ended: WHEEL_OK, WHEEL_SUSPECT
     (hold the output), or a fault. A stall is a duty toward a non-zero setpoint without
@@ -250,8 +250,10 @@ def check_wheel(delta: int, illegal: int, storm: int, applied_pwm: int, applied_
     setpoint counts toward a reversed encoder unless the wheel came FAULT_REVERSE_APPROACH closer to the
     setpoint since ``prev_measured`` (the speed the PID last ran on): a healthy wheel
     lagging a reversal of its setpoint slows toward it, a reversed encoder shows it
-    moving away. A runaway (``runs_away``) for FAULT_RUNAWAY_TICKS ticks in a row is a
-    reversed encoder too: the one whose reading flipped sign with its setpoint."""
+    moving away. A runaway (``runs_away``) counts one up a tick; driving, any other tick
+    counts one down (to 0), so a wavering speed-up is not started over; ``holding``, it
+    starts over (the hold's wheels rolled back by a grade beyond it). FAULT_RUNAWAY_TICKS
+    is a reversed encoder too: the one whose reading flipped sign with its setpoint."""
     if storm or illegal >= C.FAULT_ILLEGAL_PER_TICK:
         return WHEEL_IMPLAUSIBLE, stall_ticks, reverse_ticks, runaway_ticks, effort
     # a wheel that stands while its partner does not carry the chair its way (stands, or
@@ -273,7 +275,10 @@ def check_wheel(delta: int, illegal: int, storm: int, applied_pwm: int, applied_
     if reverse_ticks >= C.FAULT_REVERSE_TICKS:
         return WHEEL_REVERSED, stall_ticks, reverse_ticks, runaway_ticks, effort
     running = runs_away(applied_pwm, applied_dir, setpoint, measured, prev_measured)
-    runaway_ticks = (runaway_ticks + 1) & 0xFF if running else 0
+    if running:
+        runaway_ticks = (runaway_ticks + 1) & 0xFF
+    else:
+        runaway_ticks = runaway_ticks - 1 if runaway_ticks > 0 and not holding else 0
     if runaway_ticks >= C.FAULT_RUNAWAY_TICKS:
         return WHEEL_REVERSED, stall_ticks, reverse_ticks, runaway_ticks, effort
     tripped, effort = no_effect(applied_pwm, applied_dir, setpoint, measured, other, other_pwm,
@@ -313,12 +318,12 @@ def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_
     check_l, s.stallTicksL, s.reverseTicksL, s.runawayTicksL, effort_l = check_wheel(
         delta_l, ill_l, s.stormTickL, s.pwmL, s.dirL, s.setpointL, s.filtVelL, s.filtVelR,
         s.pwmR, overrun_r, s.stallTicksL, s.reverseTicksL, s.runawayTicksL,
-        (s.effortPwmL, s.effortSpeedL, s.effortSetpointL, s.effortTicksL), s.prevMeasL)
+        (s.effortPwmL, s.effortSpeedL, s.effortSetpointL, s.effortTicksL), s.prevMeasL, s.holding)
     s.effortPwmL, s.effortSpeedL, s.effortSetpointL, s.effortTicksL = effort_l
     check_r, s.stallTicksR, s.reverseTicksR, s.runawayTicksR, effort_r = check_wheel(
         delta_r, ill_r, s.stormTickR, s.pwmR, s.dirR, s.setpointR, s.filtVelR, s.filtVelL,
         s.pwmL, overrun_l, s.stallTicksR, s.reverseTicksR, s.runawayTicksR,
-        (s.effortPwmR, s.effortSpeedR, s.effortSetpointR, s.effortTicksR), s.prevMeasR)
+        (s.effortPwmR, s.effortSpeedR, s.effortSetpointR, s.effortTicksR), s.prevMeasR, s.holding)
     s.effortPwmR, s.effortSpeedR, s.effortSetpointR, s.effortTicksR = effort_r
     # effort without progress is one motor's only while its effort leads the other's
     leads_l = check_l == WHEEL_NO_EFFECT and effort_leads(s.pwmL, s.dirL, s.setpointL, s.filtVelL,

@@ -3,8 +3,8 @@ command has stood ``NEUTRAL_TICKS`` control ticks, after a boot, an e-stop or fa
 reset, a watchdog stop and a PPM loss (docs/safety.md, "Neutral before motion").
 
 ``wait_for_neutral`` sends stops until the board's ``TLM:`` line says it no longer
-waits (its state bit 0), or, for a board whose telemetry carries no state (protocol
-v1, the CAN mapping), until the board surely confirmed one. ``connect`` and
+waits (its state bit 0; on CAN, WC_STATUS_E's), or, for a board whose telemetry
+carries no state (protocol v1, a 13-field TLM line), until the board surely confirmed one. ``connect`` and
 ``reset_estop`` call it: opening a chair and releasing its e-stop are a program's own
 decisions. After a watchdog stop or a board reset mid-run they are not: motion raises
 ``WcdriveNeutralError`` until the program sends a stop itself, so that a program that
@@ -58,7 +58,7 @@ def wait_for_neutral(board: BoardState, stop: Callable[[], None], timeout: float
     while board.telemetry_count == seen or board.awaiting_neutral:
         status = board.status
         if board.telemetry_count != seen and status is not None and status.state is None:
-            # the board says nothing of it (the CAN mapping's TLM): its own ticks, counted
+            # the board says nothing of it (a 13-field TLM line): its own ticks, counted
             while board.telemetry_count < seen + CONFIRM_TICKS and time.monotonic() < deadline:
                 time.sleep(0.01)
             board.awaiting_neutral = False

@@ -53,9 +53,10 @@ STATUS_B = 0x313
 STATUS_C = 0x314
 STATUS_D = 0x315
 REPLY = 0x316
+STATUS_E = 0x317
 
 HOST_TO_CHAIR = (CMD_VEL, CMD_WHEELS, CONTROL, PARAM)
-CHAIR_TO_HOST = (FEEDBACK_ENC, FEEDBACK_VEL, STATUS_A, STATUS_B, STATUS_C, STATUS_D, REPLY)
+CHAIR_TO_HOST = (FEEDBACK_ENC, FEEDBACK_VEL, STATUS_A, STATUS_B, STATUS_C, STATUS_D, REPLY, STATUS_E)
 
 CONTROL_OPS = {1: b"hello", 2: b"estop", 3: b"reset", 4: b"save", 5: b"defaults", 6: b"hello:4"}
 PARAM_NAMES = tuple(PARAM_RANGES)
@@ -202,6 +203,10 @@ def _clamp16(x: float) -> int:
     return max(-32768, min(32767, value))
 
 
+def _sat16(count: int) -> int:
+    return min(count, 0xFFFF)
+
+
 def message_to_frames(msg: Message) -> list[tuple[int, bytes]]:
     """A decoded board line as chair-to-host frames (unknown lines have none)."""
     if isinstance(msg, Feedback):
@@ -214,7 +219,9 @@ def message_to_frames(msg: Message) -> list[tuple[int, bytes]]:
                 (STATUS_B, struct.pack("<HBBBBH", t.seq, t.pwm_left, t.pwm_right,
                                        t.dir_left | t.dir_right << 1, t.flags, t.free_ram)),
                 (STATUS_C, struct.pack("<II", t.illegal_left, t.illegal_right)),
-                (STATUS_D, struct.pack("<II", t.rejected, t.crc_rejected))]
+                (STATUS_D, struct.pack("<II", t.rejected, t.crc_rejected)),
+                (STATUS_E, struct.pack("<HHHBx", t.faults & 0xFFFF, _sat16(t.rx_lost), _sat16(t.late),
+                                       t.state or 0))]
     reply: tuple[int, int, int, float] | None = None
     if isinstance(msg, Ack):
         reply = (KIND_ACK, 0, msg.seq, 0.0)
@@ -253,7 +260,8 @@ def _index(names: tuple[str, ...], name: str) -> int:
 @dataclass
 class TelemetryAssembler:
     """Chair-to-host frames back into the board's lines (``\\r\\n``-terminated bytes):
-    a feedback line from its two frames, a TLM line from its four."""
+    a feedback line from its two frames, a TLM line from its five (0x312 to 0x315 and
+    0x317, in that order: the line is complete at 0x317)."""
 
     _enc: tuple[int, int] | None = None
     _status: dict[int, bytes] | None = None
@@ -272,22 +280,23 @@ class TelemetryAssembler:
             self._enc = None
             return (f"ENC:{left},{right},VEL:{_centi(vl)},{_centi(vr)},MODE:{MODES[mode]}\r\n"
                     .encode())
-        if can_id in (STATUS_A, STATUS_B, STATUS_C):
+        if can_id in (STATUS_A, STATUS_B, STATUS_C, STATUS_D):
             if can_id == STATUS_A:
                 self._status = {}
             if self._status is not None:
                 self._status[can_id] = bytes(data)
             return b""
-        if can_id == STATUS_D:
+        if can_id == STATUS_E:
             status, self._status = self._status, None
-            if status is None or len(status) != 3:
+            if status is None or len(status) != 4:
                 return b""
             millis, rx = struct.unpack("<II", status[STATUS_A][:8])
             seq, pwm_l, pwm_r, dirs, flags, free = struct.unpack("<HBBBBH", status[STATUS_B][:8])
             ill_l, ill_r = struct.unpack("<II", status[STATUS_C][:8])
-            rej, crc = struct.unpack("<II", data[:8])
+            rej, crc = struct.unpack("<II", status[STATUS_D][:8])
+            faults, rx_lost, late, state = struct.unpack("<HHHB", data[:7])
             values = (millis, rx, seq, pwm_l, pwm_r, dirs & 1, dirs >> 1 & 1, ill_l, ill_r, flags,
-                      rej, crc, free)
+                      rej, crc, free, faults, rx_lost, late, state)
             return b"TLM:" + b",".join(str(v).encode() for v in values) + b"\r\n"
         if can_id == REPLY:
             return _reply_line(data)

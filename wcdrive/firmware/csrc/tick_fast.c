@@ -294,7 +294,7 @@ static int check_wheel(int64_t delta, int64_t illegal, int64_t storm, int64_t pw
                        double setpoint, double measured, double other, int64_t other_pwm,
                        int other_overruns,
                        int64_t *stall, int64_t *reverse,
-                       int64_t *runaway, Effort *e, double prev_measured) {
+                       int64_t *runaway, Effort *e, double prev_measured, int holding) {
     if (storm || illegal >= K.illegal_per_tick)
         return WHEEL_FAULT;
     double other_along = setpoint > 0.0 ? other : -other;
@@ -312,7 +312,10 @@ static int check_wheel(int64_t delta, int64_t illegal, int64_t storm, int64_t pw
     *reverse = against ? ((*reverse + 1) & 0xFF) : 0;
     if (*reverse >= K.reverse_ticks)
         return WHEEL_FAULT;
-    *runaway = runs_away(pwm, dir, setpoint, measured, prev_measured) ? ((*runaway + 1) & 0xFF) : 0;
+    if (runs_away(pwm, dir, setpoint, measured, prev_measured))
+        *runaway = (*runaway + 1) & 0xFF;
+    else
+        *runaway = (*runaway > 0 && !holding) ? *runaway - 1 : 0;
     if (*runaway >= K.runaway_ticks)
         return WHEEL_FAULT;
     if (no_effect(pwm, dir, setpoint, measured, other, other_pwm, other_overruns, e))
@@ -499,9 +502,11 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
         int overrun_l = overruns(I(pwmL), I(dirL), D(setpointL), D(filtVelL));
         int overrun_r = overruns(I(pwmR), I(dirR), D(setpointR), D(filtVelR));
         check_l = check_wheel(delta_l, ill_l, I(stormTickL), I(pwmL), I(dirL), D(setpointL), D(filtVelL),
-                              D(filtVelR), I(pwmR), overrun_r, &stall_l, &rev_l, &run_l, &el, D(prevMeasL));
+                              D(filtVelR), I(pwmR), overrun_r, &stall_l, &rev_l, &run_l, &el, D(prevMeasL),
+                              (int)I(holding));
         check_r = check_wheel(delta_r, ill_r, I(stormTickR), I(pwmR), I(dirR), D(setpointR), D(filtVelR),
-                              D(filtVelL), I(pwmL), overrun_l, &stall_r, &rev_r, &run_r, &er, D(prevMeasR));
+                              D(filtVelL), I(pwmL), overrun_l, &stall_r, &rev_r, &run_r, &er, D(prevMeasR),
+                              (int)I(holding));
         if (check_l == WHEEL_FAULT || check_r == WHEEL_FAULT)
             Py_RETURN_NONE;
         SETI(stallTicksL, stall_l); SETI(reverseTicksL, rev_l);
