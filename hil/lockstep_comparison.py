@@ -37,6 +37,7 @@ from __future__ import annotations
 import numpy as np
 
 from wcdrive.avr.f32 import bits
+from wcdrive.boards.inhibits import InhibitChange, active_bits
 from wcdrive.boards.simavr.virtual_mega import F_CPU
 from wcdrive.firmware.final_control import Firmware, reset_cause_name
 from wcdrive.firmware.quadrature import ILLEGAL, QUAD_TABLE
@@ -94,6 +95,7 @@ def compare(recording: Recording) -> Report:
     w = 0
     boots = [bytearray(fw.boot_output())]           # the port's TX, boot by boot
     decoded = {side: _decoded_counts(recording.trace, side) for side in ("left", "right")}
+    inhibits = [InhibitChange(t, number, active) for t, number, active in recording.trace.inhibits]
     # What the decoder had counted when the firmware's counts started from 0 (at
     # setup(), somewhere between a reset and the first event after it): the candidates.
     offsets: dict[tuple[str, int], set[int]] = {(side, k): {0} for side in ("left", "right") for k in (0, 1)}
@@ -144,12 +146,19 @@ def compare(recording: Recording) -> Report:
                                for offset in offsets[(side, k)]):
                         mismatches.append(Mismatch(i, ticks, f"{what} {side}",
                                                    "decoder disagrees", str(value)))
+            # The inhibit inputs the tick read: what the trace put on the pins between the
+            # tick's entry and its exit.
+            inhibit = int(ev.after["inhibitTick"])
+            read = (active_bits(inhibits, ev.cycle / F_CPU), active_bits(inhibits, exit_cycle / F_CPU))
+            if inhibit not in read:
+                mismatches.append(Mismatch(i, ticks, "inhibitTick", "the trace's pins disagree",
+                                           str(inhibit)))
             # freeRam is measured by loop() just before the call: the state at entry.
             before = events[i - 1].after if i > 0 else recording.initial
             tx += fw.tick(ev.arg, latched["encTickL"], latched["encTickR"], latched["illTickL"],
                           latched["illTickR"], free_ram=int(before["freeRam"]),
                           storm_l=latched["stormTickL"], storm_r=latched["stormTickR"],
-                          rx_lost=int(ev.after["rxLostTick"]))
+                          rx_lost=int(ev.after["rxLostTick"]), inhibit=inhibit)
         # The EEPROM-ready interrupts that came before the state was read: their writes
         # touch nothing the event does, so their order within it does not matter.
         while w < len(writes) and writes[w] < ev.after_cycle:

@@ -115,6 +115,8 @@ class Trace:
     #: The motion profile the trace ends in (one of ``PROFILES``; None: none), and from when.
     profile: str | None = None
     profile_start: float = 0.0
+    #: The inhibit inputs' changes: (s, input 1 or 2, active); each starts released.
+    inhibits: list[tuple[float, int, bool]] = field(default_factory=list)
 
     def describe(self) -> str:
         """The trace as text for a failure report, one serial write a line."""
@@ -129,5 +131,7 @@ class Trace:
                          f" -> {train.end_count}")
         lines += [f"  reset ({cause}) at t={t:.4f}s" for t, cause in self.resets]
         lines += [f"  storm on {side} from {a:.4f}s to {b:.4f}s" for side, a, b in self.storms]
+        lines += [f"  inhibit {n} {'active' if on else 'released'} at t={t:.4f}s"
+                  for t, n, on in self.inhibits]
         return "\n".join(lines)
 

@@ -11,7 +11,9 @@ v3: frames with sequence numbers and good, bad or missing CRCs (one or more flip
 bits, lower-case hex, no sequence number, the ``$`` flipped to ``,``), hello (which
 turns the TLM lines on and from then on refuses unframed lines, but for stops and
 estop), get/set of every parameter in and out of range (and, in a quarter of the traces,
-``feedback_form`` 1 from the start: the feedback lines' ros2_control tail), estop and reset; bursts of
+``feedback_form`` 1 from the start: the feedback lines' ros2_control tail), estop and reset;
+the inhibit inputs pulled low and let go (a third of the traces: glitches under the
+debounce, and inputs held 0.1 to 1.5 s); bursts of
 20 to 150 commands back to back (the output budget is spent), floods of long ``set:``
 frames at top speed (``flood``: loop() falls behind, received bytes are lost and
 accounted for) and encoder storms of 60,000 to 500,000 edges/s (the storm guard, the
@@ -42,6 +44,8 @@ from wcdrive.protocol.codec import SEQ_MAX, crc16, frame
 
 #: One trace in this many sets ``feedback_form`` 1 first.
 FEEDBACK_FORM_EVERY = 4
+#: One trace in this many pulls the inhibit inputs low and lets them go (``inhibit_changes``).
+INHIBIT_EVERY = 3
 #: Three traces in four start as a well-behaved host does after a boot: a neutral command
 #: first, the drawn writes NEUTRAL_LEAD_S later (once the board confirmed neutral); the
 #: fourth drives from its first write, and its motion is refused until a neutral command
@@ -385,7 +389,27 @@ def generate_trace(draw: Draw, duration: float) -> Trace:
         trace = motion_profile(draw, trace)
     if form_first:
         trace.serial.insert(0, (FIRST_COMMAND_S, b"set:feedback_form=1\n"))
+    # Inhibits from the same CRC, never drawn: a seed's writes and encoders stay its own
+    # (and not in a motion profile, whose rule an inhibit's stop would cut short).
+    crc = zlib.crc32(b"".join(data for _, data in serial))
+    if getattr(draw, "inhibits", True) and trace.profile is None and crc % INHIBIT_EVERY == 2:
+        trace.inhibits = inhibit_changes(np.random.default_rng(crc), duration)
     return trace
+
+
+def inhibit_changes(rng: np.random.Generator, duration: float) -> list[tuple[float, int, bool]]:
+    """One to four changes of the inhibit inputs over ``duration`` s, (s, input, active):
+    an input pulled low, let go after 0.01 to 1.5 s (a glitch under the debounce, or a
+    charger plugged and pulled); both inputs at once at times."""
+    changes: list[tuple[float, int, bool]] = []
+    for _ in range(int(rng.integers(1, 3))):
+        number = int(rng.integers(1, 3))
+        start = float(rng.uniform(0.05, max(0.06, duration - 0.1)))
+        held = float(rng.choice([rng.uniform(0.01, 0.06), rng.uniform(0.1, 1.5)]))
+        changes.append((round(start, 4), number, True))
+        if start + held < duration:
+            changes.append((round(start + held, 4), number, False))
+    return sorted(changes)
 
 
 def flood(draw: Draw, serial: list[tuple[float, bytes]], duration: float

@@ -94,3 +94,12 @@ class WcdriveNeutralError(WcdriveCommandError):
 
     def __init__(self, message: str) -> None:
         super().__init__(message, "neutral")
+
+
+class WcdriveInhibitError(WcdriveCommandError):
+    """Motion refused: an inhibit input of the board is engaged (the charger plugged in,
+    say; ``chair.inhibited``). It ends when the input is released (a latching one, after
+    ``reset_estop()`` too); then the board wants a neutral command first."""
+
+    def __init__(self, message: str) -> None:
+        super().__init__(message, "inhibit")

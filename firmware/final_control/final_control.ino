@@ -268,6 +268,21 @@ bool notNeutralPending = false;             // ...and EVT:NOT_NEUTRAL not sent y
 uint8_t notNeutralTicks = 0;                // ticks of this wait without a neutral command
 bool neutralFault = false;                  // EVT:DEFLECTED: refused for WC_NEUTRAL_FAULT_TICKS
 
+// Inhibit inputs (ISO 7176-14, inhibit while charging; the seat raised): two pins read
+// at each tick, active LOW, debounced over WC_INHIBIT_DEBOUNCE_TICKS ticks. Engaged,
+// an input of speed 0 stops the chair along the normal ramp and refuses motion
+// (ERR:inhibit); any other caps the wheels at its share of max_wheel. A latching input
+// stays engaged until released and a reset. Released, motion needs neutral first.
+// Bit 0 is input 1, bit 1 input 2.
+#define INHIBIT_STOP_MASK ((WC_INHIBIT_1_SPEED == 0.0f ? 1 : 0) | (WC_INHIBIT_2_SPEED == 0.0f ? 2 : 0))
+#define INHIBIT_LATCH_MASK ((WC_INHIBIT_1_LATCH ? 1 : 0) | (WC_INHIBIT_2_LATCH ? 2 : 0))
+uint8_t inhibitTick = 0;                    // the inputs as the tick read them (1: active, pin LOW)
+uint8_t inhibitStable = 0;                  // ...debounced
+uint8_t inhibitCountL = 0, inhibitCountR = 0;   // ticks input 1 / 2 has read other than inhibitStable
+uint8_t inhibitLatched = 0;                 // latching inputs engaged, until released and a reset
+uint8_t inhibitOn = 0;                      // the inputs engaged as of the last tick
+uint8_t inhibitPending = 0;                 // events to send: bit 0/1 input 1 on/off, bit 2/3 input 2
+
 // Faults (EVT:FAULT,<name>; docs/safety.md): latched until "reset", motion refused, motors off.
 #define FAULT_STALL_L 0x01
 #define FAULT_STALL_R 0x02
@@ -619,6 +634,51 @@ static void requireNeutral() {
   neutralSeen = false;
 }
 
+// The inhibit inputs engaged (debounced, or latched).
+static uint8_t inhibitEngaged() { return inhibitStable | inhibitLatched; }
+
+// One input's debounce: the read level must differ from the debounced one for
+// WC_INHIBIT_DEBOUNCE_TICKS ticks in a row.
+static void debounceInhibit(uint8_t bit, uint8_t& count) {
+  if ((inhibitTick & bit) == (inhibitStable & bit)) {
+    count = 0;
+  } else if (++count >= WC_INHIBIT_DEBOUNCE_TICKS) {
+    inhibitStable ^= bit;
+    count = 0;
+  }
+}
+
+// The tick's inhibit inputs: debounced and latched. An input that engages with speed 0
+// stops the chair along the normal ramp, as a stop command; so does one that is released
+// (the command from before it no longer drives), which asks for neutral too. The events
+// (EVT:INHIBIT,<n>,<1|0>) go out from this tick on, one a tick.
+static void updateInhibits() {
+  uint8_t before = inhibitOn;   // a reset may have ended a latch since
+  debounceInhibit(1, inhibitCountL);
+  debounceInhibit(2, inhibitCountR);
+  inhibitLatched |= inhibitStable & INHIBIT_LATCH_MASK;
+  uint8_t after = inhibitEngaged();
+  inhibitOn = after;
+  uint8_t on = after & (uint8_t)~before, off = before & (uint8_t)~after;
+  if ((on & INHIBIT_STOP_MASK) || off) {
+    targetL = targetR = 0.0f;     // the normal ramp down, as a stop command
+    pivotPhase = PIVOT_NONE;
+    pivotTicksLeft = 0;
+    lastTravel = 0.0f;
+  }
+  if (off) requireNeutral();
+  inhibitPending |= (on & 1) | (off & 1) << 1 | (on & 2) << 1 | (off & 2) << 2;
+}
+
+// The top wheel speed the engaged inputs allow, as a share of max_wheel (1: no cap).
+static float inhibitShare() {
+  uint8_t engaged = inhibitEngaged();
+  float share = 1.0f;
+  if ((engaged & 1) && WC_INHIBIT_1_SPEED < share) share = WC_INHIBIT_1_SPEED;
+  if ((engaged & 2) && WC_INHIBIT_2_SPEED < share) share = WC_INHIBIT_2_SPEED;
+  return share;
+}
+
 // What one wheel's encoder showed over the interval that just ended, driven at
 // appliedPwm in direction appliedDir (the last tick's) with setpoint (the last tick's):
 // WHEEL_OK; WHEEL_SUSPECT (no count although driven toward a setpoint, or measured
@@ -936,8 +996,11 @@ static void sendTelemetry(uint32_t now) {
   uint8_t flags = (watchdogArmed ? 1 : 0) | (emergencyStop ? 2 : 0) | (estopLatched ? 4 : 0) |
                   (ppmLost ? 8 : 0) | (parked ? 16 : 0) | (uint8_t)(pivotPhase << 5) |
                   (faultFlags != 0 ? 128 : 0);
-  // state: bit 0 waiting for neutral (motion refused), 1 the neutral fault
-  uint8_t state = (needNeutral ? 1 : 0) | (neutralFault ? 2 : 0);
+  // state: bit 0 waiting for neutral (motion refused), 1 the neutral fault, 2 driving
+  // inhibited, 3 the speed capped by an inhibit input
+  uint8_t engaged = inhibitEngaged();
+  uint8_t state = (needNeutral ? 1 : 0) | (neutralFault ? 2 : 0) | ((engaged & INHIBIT_STOP_MASK) ? 4 : 0) |
+                  ((engaged & (uint8_t)~INHIBIT_STOP_MASK) ? 8 : 0);
   const uint32_t fields[] = {
     now, rxCount, lastSeq, pwmL, pwmR, dirL, dirR, illTickL, illTickR, flags, rejectedCount,
     crcRejected, freeRam, faultFlags, rxLostTick, lateTicks, state,
@@ -991,6 +1054,7 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
     stormTickR = stormR != 0;
     rxLostTick = rxLost;
   }
+  inhibitTick = (digitalRead(WC_PIN_INHIBIT_1) == LOW ? 1 : 0) | (digitalRead(WC_PIN_INHIBIT_2) == LOW ? 2 : 0);
   encTickL = countL + stepsL;
   encTickR = countR + stepsR;
   uint32_t illNowL = illL + illStepsL;
@@ -1100,6 +1164,7 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
     }
   }
 
+  updateInhibits();
   if (cmdSinceTick) {
     cmdSinceTick = false;
     lastCmdTime = now;
@@ -1113,6 +1178,14 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
     emergencyHalt();
     if (driving) requireNeutral();
     sendEvent(F("WATCHDOG"));
+  } else if (inhibitPending) {
+    // one inhibit event a tick, in the slot of the wait for neutral's (which waits a tick)
+    uint8_t bit = inhibitPending & (uint8_t)-inhibitPending;   // the lowest
+    inhibitPending &= (uint8_t)~bit;
+    if (bit == 1) sendEvent(F("INHIBIT,1,1"));
+    else if (bit == 2) sendEvent(F("INHIBIT,1,0"));
+    else if (bit == 4) sendEvent(F("INHIBIT,2,1"));
+    else sendEvent(F("INHIBIT,2,0"));
   } else if (needNeutral) {
     // The wait for neutral, at most one event a tick (none beside WATCHDOG: the output
     // budget's worst tick): the refusal (EVT:NOT_NEUTRAL); the neutral command stood
@@ -1137,8 +1210,19 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
   }
 
   float maxChange = (emergencyStop ? estopDecel : maxAccel) * dt;
-  setpointL = rampToward(setpointL, targetL, maxChange);
-  setpointR = rampToward(setpointR, targetR, maxChange);
+  float goalL = targetL, goalR = targetR;
+  float share = inhibitShare();
+  if (share < 1.0f) {   // an inhibit's cap: the faster wheel at its share, the curvature kept
+    float cap = maxWheel * share;
+    float peak = fabs(goalL) > fabs(goalR) ? fabs(goalL) : fabs(goalR);
+    if (peak > cap) {
+      float k = cap / peak;
+      goalL *= k;
+      goalR *= k;
+    }
+  }
+  setpointL = rampToward(setpointL, goalL, maxChange);
+  setpointR = rampToward(setpointR, goalR, maxChange);
   // Stopped (target and setpoint zero, no pivot under way), an integral that drives a
   // wheel the way it still turns is dropped: it held the chair up a grade and would carry
   // it on past the stop.
@@ -1270,7 +1354,7 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
 // ---------------------------------------------------------------------------
 enum ParseResult : uint8_t {
   PARSE_OK, ERR_SYNTAX, ERR_NUMBER, ERR_RANGE, ERR_FIELDS, ERR_OVERLONG, ERR_CHECKSUM, ERR_ESTOP,
-  ERR_BUSY, ERR_PARAM, ERR_UNFRAMED, ERR_FAULT, ERR_OVERRUN, ERR_LIMIT, ERR_NEUTRAL
+  ERR_BUSY, ERR_PARAM, ERR_UNFRAMED, ERR_FAULT, ERR_OVERRUN, ERR_LIMIT, ERR_NEUTRAL, ERR_INHIBIT
 };
 // What a command answers besides ACK/ERR.
 enum DataReply : uint8_t { DATA_NONE, DATA_HELLO, DATA_PARAM };
@@ -1301,9 +1385,10 @@ static const char R_FAULT[] PROGMEM = "fault";
 static const char R_OVERRUN[] PROGMEM = "overrun";
 static const char R_LIMIT[] PROGMEM = "limit";
 static const char R_NEUTRAL[] PROGMEM = "neutral";
+static const char R_INHIBIT[] PROGMEM = "inhibit";
 static const char* const REASONS[] = {
   R_SYNTAX, R_SYNTAX, R_NUMBER, R_RANGE, R_FIELDS, R_OVERLONG, R_CHECKSUM, R_ESTOP, R_BUSY,
-  R_PARAM, R_UNFRAMED, R_FAULT, R_OVERRUN, R_LIMIT, R_NEUTRAL,
+  R_PARAM, R_UNFRAMED, R_FAULT, R_OVERRUN, R_LIMIT, R_NEUTRAL, R_INHIBIT,
 };
 
 // Runtime parameters: name, variable, range. The first PARAM_FLOATS are floats;
@@ -1489,19 +1574,31 @@ static bool refusedNotNeutral(float right, float left) {
   return false;
 }
 
-// A motion command: the wheel targets, unless the e-stop is latched (then a stop
-// is accepted and changes nothing, and anything else is refused).
-static ParseResult moveTo(uint8_t newMode, float right, float left) {
+// The gate of every motion command (WHEEL, CMDVEL, PPM): PARSE_OK and take true to
+// drive, or why not. With the e-stop latched or a fault a stop is accepted and changes
+// nothing (take false); anything else is refused.
+static ParseResult gateMotion(float right, float left, bool& take) {
+  take = false;
+  bool stop = right == 0.0f && left == 0.0f;
   if (refusedUnframed(right, left)) return ERR_UNFRAMED;
-  if (estopLatched) return right == 0.0f && left == 0.0f ? PARSE_OK : ERR_ESTOP;
-  if (faultFlags != 0) return right == 0.0f && left == 0.0f ? PARSE_OK : ERR_FAULT;
+  if (estopLatched) return stop ? PARSE_OK : ERR_ESTOP;
+  if (faultFlags != 0) return stop ? PARSE_OK : ERR_FAULT;
   if (limitLatched) {
-    if (right != 0.0f || left != 0.0f) return ERR_LIMIT;
+    if (!stop) return ERR_LIMIT;
     limitLatched = false;   // a stop: the host has seen the limit, and what it sends next drives
   }
+  if (!stop && (inhibitEngaged() & INHIBIT_STOP_MASK)) return ERR_INHIBIT;
   if (refusedNotNeutral(right, left)) return ERR_NEUTRAL;
-  acceptCommand(newMode, right, left);
+  take = true;
   return PARSE_OK;
+}
+
+// A motion command: the wheel targets, if the gate lets it through.
+static ParseResult moveTo(uint8_t newMode, float right, float left) {
+  bool take;
+  ParseResult r = gateMotion(right, left, take);
+  if (take) acceptCommand(newMode, right, left);
+  return r;
 }
 
 // rp5.0,lp3.0,  (p/n give the sign)
@@ -1576,17 +1673,13 @@ static ParseResult parsePpm() {
   float turn = (float)shapeStick(ch[WC_PPM_TURN_CHANNEL] - WC_PPM_NEUTRAL) * perUs;
   float right = constrain(fwd - turn, -cap, cap);
   float left = constrain(fwd + turn, -cap, cap);
-  if (refusedUnframed(right, left)) return ERR_UNFRAMED;
-  if (estopLatched) return right == 0.0f && left == 0.0f ? PARSE_OK : ERR_ESTOP;
-  if (faultFlags != 0) return right == 0.0f && left == 0.0f ? PARSE_OK : ERR_FAULT;
-  if (limitLatched) {
-    if (right != 0.0f || left != 0.0f) return ERR_LIMIT;
-    limitLatched = false;   // a stop: the host has seen the limit, and what it sends next drives
+  bool take;
+  ParseResult r = gateMotion(right, left, take);
+  if (take) {
+    ppmLost = false;
+    acceptCommand(WC_MODE_PPM, right, left);
   }
-  if (refusedNotNeutral(right, left)) return ERR_NEUTRAL;
-  ppmLost = false;
-  acceptCommand(WC_MODE_PPM, right, left);
-  return PARSE_OK;
+  return r;
 }
 
 // estop: stop at the emergency rate and refuse motion until "reset".
@@ -1604,6 +1697,7 @@ static ParseResult latchEstop() {
 static ParseResult resetEstop() {
   if ((estopLatched || faultFlags != 0) && !parked) return ERR_BUSY;
   if (estopLatched || faultFlags != 0) requireNeutral();
+  inhibitLatched &= inhibitStable;   // a latched inhibit whose input is released ends (next tick)
   estopLatched = false;
   if (faultFlags != 0) holding = false;   // the hold restarts with both wheels, where they are
   faultFlags = 0;
@@ -1974,6 +2068,8 @@ void setup() {
   pinMode(WC_PIN_PWM_R, OUTPUT);
   setMotor(WC_PIN_PWM_L, WC_PIN_DIR_L, 0.0f, pwmL, dirL);
   setMotor(WC_PIN_PWM_R, WC_PIN_DIR_R, 0.0f, pwmR, dirR);
+  pinMode(WC_PIN_INHIBIT_1, INPUT_PULLUP);
+  pinMode(WC_PIN_INHIBIT_2, INPUT_PULLUP);
   pinMode(WC_PIN_ENC_L_A, INPUT);
   pinMode(WC_PIN_ENC_L_B, INPUT);
   pinMode(WC_PIN_ENC_R_A, INPUT);

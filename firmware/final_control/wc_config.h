@@ -25,6 +25,11 @@
 #define WC_WATCHDOG_MS 500UL       // default of watchdog_ms: no valid command for this long -> emergency stop
 #define WC_PIVOT_TICKS 6           // pivot length in control ticks (300 ms nominal)
 #define WC_NEUTRAL_TICKS 2         // control ticks a neutral (zero) command must stand, no motion command after it, before the board drives after a boot, a fault or e-stop reset, a watchdog stop or a PPM loss (ISO 7176-14, control signal at switch-on): 100 ms nominal
+#define WC_INHIBIT_DEBOUNCE_TICKS 2 // control ticks an inhibit input must read its new level before it counts (100 ms; commercial controllers debounce 50 to 500 ms)
+#define WC_INHIBIT_1_SPEED 0.0f    // inhibit input 1 (charger) engaged: the top wheel speed as a share of max_wheel; 0 inhibits driving (ISO 7176-14, inhibit while charging)
+#define WC_INHIBIT_1_LATCH 1       // 1: inhibit input 1 stays engaged once engaged, until released and a reset
+#define WC_INHIBIT_2_SPEED 0.3f    // inhibit input 2 (seat raised) engaged: the top wheel speed as a share of max_wheel (a speed cap)
+#define WC_INHIBIT_2_LATCH 0       // 1: inhibit input 2 latches as input 1 may; 0: it follows its input
 #define WC_NEUTRAL_FAULT_TICKS 100 // control ticks (5 s) of refused motion commands without a neutral one: EVT:DEFLECTED, a deflected control latched until neutral (the 5 s commercial controllers latch after)
 
 // ---- Geometry and encoders (seed section 1.4.2) ----------------------------
@@ -79,6 +84,8 @@
 #define WC_PIN_DIR_L 8             // PH5
 #define WC_PIN_DIR_R 11            // PB5
 #define WC_PIN_RELAY 7             // PH4, powers the SmartDriveDuo
+#define WC_PIN_INHIBIT_1 24        // PA2, inhibit input 1 (the charger): INPUT_PULLUP, active LOW (a contact to ground)
+#define WC_PIN_INHIBIT_2 25        // PA3, inhibit input 2 (the seat raised): INPUT_PULLUP, active LOW
 #define WC_PIN_BRAKE 22            // PA0, the parking brake: HIGH releases it; LOW, or an input (at reset: the driver's pull-down), engages it
 
 // ---- Fault detection (EVT:FAULT; docs/safety.md) ---------------------------

@@ -83,7 +83,10 @@ SMALL = {"pwmL": (0, 255), "pwmR": (0, 255), "dirL": (0, 1), "dirR": (0, 1), "mo
          "effortPwmR": (0, 255), "estopLatched": (0, 1), "ppmLost": (0, 1), "txCredit": (0, 200),
          "stormTickL": (0, 1), "stormTickR": (0, 1), "errLinesThisTick": (0, 5), "feedbackForm": (0, 1),
          "neutralSeen": (0, 1), "neutralTicks": (0, 3), "notNeutralSent": (0, 1), "notNeutralPending": (0, 1),
-         "notNeutralTicks": (0, 120), "neutralFault": (0, 1)}
+         "notNeutralTicks": (0, 120), "neutralFault": (0, 1), "inhibitStable": (0, 3),
+         "inhibitLatched": (0, 3), "inhibitCountL": (0, 2), "inhibitCountR": (0, 2),
+         "inhibitPending": (0, 15),
+         "inhibitOn": (0, 3)}
 
 
 @st.composite
@@ -109,7 +112,8 @@ def states(draw) -> tuple[FirmwareState, int, tuple[int, ...]]:
     inputs = (s.prevEncL + draw(moved), s.prevEncR + draw(moved),
               (s.illTickL + draw(st.integers(0, 3))) & 0xFFFFFFFF,
               (s.illTickR + draw(st.integers(0, 3))) & 0xFFFFFFFF,
-              draw(st.sampled_from((0, 0, 0, 1))), draw(st.sampled_from((0, 0, 0, 1))), draw(u32))
+              draw(st.sampled_from((0, 0, 0, 1))), draw(st.sampled_from((0, 0, 0, 1))), draw(u32),
+              draw(st.sampled_from((0, 0, 0, 0, 0, 1, 2, 3))))
     return s, now, inputs
 
 
@@ -117,9 +121,9 @@ def states(draw) -> tuple[FirmwareState, int, tuple[int, ...]]:
 @settings(max_examples=2000 if thorough() else 500)
 @given(states())
 @example((FirmwareState(lastControlTime=1000, targetL=2.0, targetR=2.0, needNeutral=0), 1050,
-          (0, 0, 0, 0, 0, 0, 0)))
+          (0, 0, 0, 0, 0, 0, 0, 0)))
 @example((FirmwareState(lastControlTime=1000, lastTickTime=1050, needNeutral=0), 1050,
-          (5, 5, 0, 0, 0, 0, 0)))  # dt 0
+          (5, 5, 0, 0, 0, 0, 0, 0)))  # dt 0
 def test_the_c_tick_agrees_with_the_python_tick(case) -> None:
     state, now, inputs = case
     agree(state, now, inputs)
@@ -142,7 +146,7 @@ def test_random_ordinary_ticks_take_the_c_path() -> None:
         now = (now + 50) & 0xFFFFFFFF
         left += int(rng.integers(-400, 400))
         right += int(rng.integers(-400, 400))
-        inputs = (left, right, 0, 0, 0, 0, 0)
+        inputs = (left, right, 0, 0, 0, 0, 0, 0)
         taken += agree(s, now, inputs)
         python_tick(s, now, *inputs)            # the trajectory goes on in Python
         s.faultFlags = 0                        # (random counts would latch faults,
@@ -155,10 +159,10 @@ def test_a_fault_or_the_watchdog_goes_to_the_python_tick() -> None:
     """A tick that latches a fault or fires the watchdog is refused, the state as it was."""
     stalled = FirmwareState(lastControlTime=1000, setpointL=2.0, targetL=2.0, pwmL=200, dirL=C.HIGH,
                             stallTicksL=C.FAULT_STALL_TICKS - 1)
-    assert fast_tick(stalled.copy(), 1050, 0, 0, 0, 0, 0, 0, 0) is None
+    assert fast_tick(stalled.copy(), 1050, 0, 0, 0, 0, 0, 0, 0, 0) is None
     assert b"EVT:FAULT" in python_tick(stalled.copy(), 1050, 0, 0, 0, 0, 0, 0, 0)
     watched = FirmwareState(lastControlTime=1000, watchdogArmed=1, lastCmdTime=0, watchdogMs=500)
-    assert fast_tick(watched.copy(), 1050, 0, 0, 0, 0, 0, 0, 0) is None
+    assert fast_tick(watched.copy(), 1050, 0, 0, 0, 0, 0, 0, 0, 0) is None
     assert b"EVT:WATCHDOG" in python_tick(watched.copy(), 1050, 0, 0, 0, 0, 0, 0, 0)
 
 
@@ -166,12 +170,12 @@ def test_an_unexpected_field_type_goes_to_the_python_tick() -> None:
     for name, value in (("targetL", 2), ("pwmL", 3.0), ("mode", True), ("tickCount", 2**70)):
         s = FirmwareState(lastControlTime=1000)
         setattr(s, name, value)
-        assert fast_tick(s, 1050, 0, 0, 0, 0, 0, 0, 0) is None, name
+        assert fast_tick(s, 1050, 0, 0, 0, 0, 0, 0, 0, 0) is None, name
 
     class Sub(FirmwareState):
         pass
 
-    assert fast_tick(Sub(lastControlTime=1000), 1050, 0, 0, 0, 0, 0, 0, 0) is None
+    assert fast_tick(Sub(lastControlTime=1000), 1050, 0, 0, 0, 0, 0, 0, 0, 0) is None
 
 
 def test_the_firmware_ticks_in_c() -> None:
@@ -261,12 +265,15 @@ def test_a_bind_that_fails_leaves_the_python_tick(monkeypatch, caplog) -> None:
 #: and a hold's start or rollaway, which set holdRollaway (the C tick takes only
 #: a hold already on, its wheels within the deadband), and a halt at the chair's limit
 #: (an overspeed, both wheels at their limit), which sets limitLatched; and the wait for
-#: neutral, whose fields only a tick that waits (declined) or the watchdog's stop of
+#: neutral and the inhibit inputs, whose fields only a tick that waits or reads an input
+#: (declined) or the watchdog's stop of
 #: motion (declined) writes. Any other field the Python tick writes, the C tick must
 #: write too.
 PYTHON_ONLY = {"emergencyStop", "faultFlags", "lastTravel", "holdRollaway", "limitLatched", "haltIntegralL",
                "haltIntegralR", "haltSetpointL", "haltSetpointR", "needNeutral", "neutralSeen",
-               "neutralTicks", "notNeutralSent", "notNeutralPending", "notNeutralTicks", "neutralFault"}
+               "neutralTicks", "notNeutralSent", "notNeutralPending", "notNeutralTicks", "neutralFault",
+               "inhibitTick", "inhibitStable", "inhibitCountL", "inhibitCountR", "inhibitLatched",
+               "inhibitPending", "inhibitOn"}
 _FIRMWARE = Path(tick_fast.__file__).resolve().parent
 
 
@@ -307,7 +314,7 @@ def c_tick_writes(text: str) -> set[str]:
 
 
 def _sources() -> tuple[dict[str, str], str]:
-    py = {m: (_FIRMWARE / f"{m}.py").read_text() for m in ("control", "motion", "output")}
+    py = {m: (_FIRMWARE / f"{m}.py").read_text() for m in ("control", "motion", "output", "inhibit")}
     return py, (_FIRMWARE / "csrc" / "tick_fast.c").read_text()
 
 

@@ -5,10 +5,12 @@ turn at once the board has been told ``feedback_form`` 1 and saved it.
 
 The plugin's serial side, as it is written: it opens the port (which resets the board:
 DTR), writes ``rp0.0,lp0.0,\\n``, waits 2 s, then writes ``r[pn]%05.2f,l[pn]%05.2f,``
-(wheel rad/s, no line end) every 10 ms, and reads lines, taking the wheel speeds from
-``r([pn])-?(\\d*\\.?\\d+)`` and ``l([pn])-?(\\d*\\.?\\d+)``. The 2 s wait is kept: it is
-the plugin's own. The board runs in real time (``--realtime``), as the chair's does, so
-the plugin's wall-clock pacing is the board's.
+(wheel rad/s, no line end) every 10 ms: zeros for ``IDLE_S`` (what diff_drive_controller
+hands it before the first ``cmd_vel`` arrives), then the phases' speeds; and it reads
+lines, taking the wheel speeds from ``r([pn])-?(\\d*\\.?\\d+)`` and
+``l([pn])-?(\\d*\\.?\\d+)``. The 2 s wait is kept: it is the plugin's own. The board
+runs in real time (``--realtime``), as the chair's does, so the plugin's wall-clock
+pacing is the board's.
 
 The port-level rules of the form are in tests/firmware/test_feedback_form.py."""
 
@@ -36,6 +38,11 @@ VEL = re.compile(r"ENC:-?\d+,-?\d+,VEL:(-?[\d.]+),(-?[\d.]+),MODE:WHEEL")
 #: The plugin's write period and its wait after the first command.
 PERIOD_S = 0.01
 ACTIVATE_WAIT_S = 2.0
+#: The zeros written before the first phase. The opening ``rp0.0,lp0.0,`` may reach the
+#: board before its receiver is on (the DTR reset's boot, slower in wall time on a
+#: loaded machine; a real Mega's bootloader takes it anyway): without these the board
+#: would never see a neutral command and would refuse every phase.
+IDLE_S = 0.3
 #: (right, left) rad/s and how long each is written: forward with a turn, then back.
 #: The chair follows slowly (its mass, the casters swinging round on the reversal), so
 #: a phase's end is not its command: the truth is the wheels' speeds, not the command.
@@ -80,7 +87,7 @@ class Plugin:
             try:
                 link.write(b"rp0.0,lp0.0,\n")
                 time.sleep(ACTIVATE_WAIT_S)
-                for right, left, seconds in phases:
+                for k, (right, left, seconds) in enumerate(((0.0, 0.0, IDLE_S), *phases)):
                     start = time.monotonic()
                     n = 0
                     while time.monotonic() < start + seconds:
@@ -88,7 +95,8 @@ class Plugin:
                             b"n" if right < 0 else b"p", abs(right), b"n" if left < 0 else b"p", abs(left)))
                         n += 1
                         time.sleep(max(0.0, start + n * PERIOD_S - time.monotonic()))
-                    spans.append((start, time.monotonic(), right, left))
+                    if k:                                   # the idle zeros are no phase
+                        spans.append((start, time.monotonic(), right, left))
             finally:
                 stop.set()
                 reader.join(timeout=2)

@@ -122,7 +122,7 @@ enc_lines = st.builds(lambda a, b, vl, vr, m: b"ENC:%d,%d,VEL:%s,%s,MODE:%s" % (
 tlm_fields = st.tuples(u32, u32, st.integers(0, 65535), st.integers(0, 255), st.integers(0, 255),
                        st.integers(0, 1), st.integers(0, 1), u32, u32, st.integers(0, 255), u32, u32,
                        st.integers(0, 8191), st.integers(0, 511), st.integers(0, 65535),
-                       st.integers(0, 65535), st.integers(0, 3))
+                       st.integers(0, 65535), st.integers(0, 15))
 tlm_lines = tlm_fields.map(lambda v: b"TLM:" + b",".join(b"%d" % x for x in v))
 reasons = st.sampled_from([r.encode() for r in cc.REASONS[1:]])
 reply_lines = st.one_of(
@@ -154,8 +154,9 @@ def test_board_lines_survive_the_bus_byte_for_byte(line) -> None:
         assert b["estop_latched"] == message.estop_latched and b["parked"] == message.parked
         assert b["pivot_phase"] == message.pivot_phase and b["free_ram"] == message.free_ram
         e = _decode(*frames[4])
-        assert (e["faults"], e["needs_neutral"], e["deflected"]) == (
-            message.faults, message.needs_neutral, message.neutral_fault)
+        assert (e["faults"], e["needs_neutral"], e["deflected"], e["drive_inhibited"], e["speed_capped"]) == (
+            message.faults, message.needs_neutral, message.neutral_fault, message.drive_inhibited,
+            message.speed_capped)
 
 
 def test_a_status_without_its_last_frame_makes_no_line() -> None:

@@ -63,8 +63,9 @@ def overflows_until(target_elapsed: int, start_fract: int = 0) -> int:
 #: the EEPROM parameters' .bss and .data; then the 26 bytes of v4's line buffer and
 #: counter, in .data since the buffer is a member of an object with a vtable: 6 cycles a
 #: byte of the start-up copy), 26,142; then the integrals and setpoints an emergency ramp
-#: keeps).
-TIMER0_START_CYCLE = 26_346 - OVERFLOW_CYCLES
+#: keeps; 26,497 with the neutral rule's; then the inhibit inputs' globals and their
+#: pin set-up).
+TIMER0_START_CYCLE = 26_557 - OVERFLOW_CYCLES
 
 
 _WINDOW_START = TIMER0_START_CYCLE + 128 * 64

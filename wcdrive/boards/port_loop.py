@@ -54,6 +54,7 @@ from wcdrive.avr.timer0 import (
     storm_window,
 )
 from wcdrive.avr.uart import UART_BYTE_CYCLES
+from wcdrive.boards.inhibits import InhibitChange, active_bits, input_number
 from wcdrive.firmware.eeprom import ReadyInterrupt
 from wcdrive.firmware.final_control import Firmware
 from wcdrive.firmware.quadrature import QuadratureDecoder
@@ -176,7 +177,7 @@ class PortLoop:
 
     def __init__(self, plant: Plant, gyro: Gyro | None = None, dt: float = 0.001,
                  firmware: Firmware | None = None, faults: Sequence[Fault] = (), *,
-                 stepped: bool = False) -> None:
+                 stepped: bool = False, inhibits: Sequence[InhibitChange] = ()) -> None:
         self.plant = plant
         #: The reference path: every Timer0 overflow in turn (``run_until``).
         self.stepped = stepped
@@ -196,6 +197,8 @@ class PortLoop:
         self._wire_free = 0
         self.output: list[tuple[int, bytes]] = [(0, self.fw.boot_output())]
         self.faults = tuple(faults)
+        #: The inhibit inputs' timeline (``set_inhibit`` adds to it).
+        self.inhibits = list(inhibits)
         self._scale = plant.p.counts_per_rev / (2.0 * math.pi)
         self._encoders = {side: _Encoder(side, self._wire(side)) for side in SIDES}
         self._left, self._right = self._encoders["left"], self._encoders["right"]
@@ -212,6 +215,12 @@ class PortLoop:
         if data:
             self._rx.push(start, bytes(data))
         self._wire_free = start + len(data) * UART_BYTE_CYCLES
+
+    def set_inhibit(self, number: int, active: bool, at: int | None = None) -> None:
+        """Inhibit input ``number`` (1 the charger, 2 the seat) active (its pin LOW) or
+        released from cycle ``at`` (default: now) on."""
+        when = self.cycle if at is None else at
+        self.inhibits.append(InhibitChange(when / F_CPU, input_number(number), active))
 
     def take_output(self) -> list[tuple[int, bytes]]:
         """What the firmware sent since the last take, as (cycle, bytes)."""
@@ -354,7 +363,8 @@ class PortLoop:
         left, right = self._left, self._right
         dl, dr = left.decoder, right.decoder
         out = fw.tick(millis, left.count(true_l), right.count(true_r), dl.illegal, dr.illegal, None,
-                      int(dl.storm), int(dr.storm))
+                      int(dl.storm), int(dr.storm),
+                      inhibit=active_bits(self.inhibits, overflow / F_CPU) if self.inhibits else 0)
         s = fw.state
         self.plant.set_drive(s.pwmL, s.dirL, s.pwmR, s.dirR)
         self.plant.set_brake(bool(s.brakeReleased))

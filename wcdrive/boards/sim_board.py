@@ -17,6 +17,7 @@ import math
 
 from wcdrive.avr.uart import UART_BYTE_CYCLES
 from wcdrive.boards.board_lidar import BoardLidar
+from wcdrive.boards.inhibits import input_number
 from wcdrive.boards.port_loop import F_CPU, PortLoop
 from wcdrive.boards.receive_buffer import DEFAULT_CAPACITY
 from wcdrive.boards.threaded import ThreadedBoard, WallClock
@@ -76,6 +77,14 @@ class SimulatedBoard(ThreadedBoard):
         """Ground truth (x, y, heading) of the simulated chair."""
         with self._lock:
             return self.plant.pose
+
+    def set_inhibit(self, name: str | int, active: bool = True) -> None:
+        """Pulls inhibit input ``name`` ("charger" or "seat", or 1, 2: ``wcdrive.boards.inhibits``)
+        low (``active``) or lets it go, from now on: what a charger plugged in or a seat
+        switch does to the board's pin."""
+        number = input_number(name)
+        with self._lock:
+            self.loop.set_inhibit(number, active)
 
     def _dtr_reset(self) -> None:
         self.loop.reset()

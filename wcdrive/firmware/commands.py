@@ -21,6 +21,7 @@ from wcdrive.avr.f32 import add, constrain, div, from_int, mul, sub
 from wcdrive.errors import WcdriveError
 from wcdrive.firmware import constants as C
 from wcdrive.firmware.eeprom import restore_defaults, save_params
+from wcdrive.firmware.inhibit import drive_inhibited
 from wcdrive.firmware.motion import accept_command, emergency_halt, require_neutral
 from wcdrive.firmware.output import DATA_HELLO, DATA_NONE, DATA_PARAM, answer, reject, send, send_event
 from wcdrive.firmware.params import BY_NAME, PARAMS
@@ -311,17 +312,9 @@ def move_to(s: FirmwareState, body: bytes, out: bytearray) -> str | None:
     result = parse(body, s.maxWheel)
     if isinstance(result, str):
         return result
-    if result is not None and refused_unframed(s, result[1], result[2]):
-        return "unframed"
-    if s.estopLatched or s.faultFlags:       # a stop (or a PPM loss) changes nothing
-        if result is None or (result[1] == 0.0 and result[2] == 0.0):
-            return None
-        return "estop" if s.estopLatched else "fault"
-    if s.limitLatched and result is not None:   # halted at the chair's limit: only a stop
-        if result[1] != 0.0 or result[2] != 0.0:
-            return "limit"
-        s.limitLatched = 0
     if result is None:                       # PPM: signal lost
+        if s.estopLatched or s.faultFlags:   # stopped already: changes nothing
+            return None
         s.mode = C.MODE_PPM
         s.cmdSinceTick = 1
         emergency_halt(s)
@@ -331,12 +324,36 @@ def move_to(s: FirmwareState, body: bytes, out: bytearray) -> str | None:
         s.ppmLost = 1
         return None
     mode, right, left = result
+    reason, take = gate_motion(s, right, left)
+    if take:
+        if mode == C.MODE_PPM:
+            s.ppmLost = 0
+        accept_command(s, mode, right, left)
+    return reason
+
+
+def gate_motion(s: FirmwareState, right: float, left: float) -> tuple[str | None, bool]:
+    """``gateMotion``: the gate of every motion command (WHEEL, CMDVEL, PPM), as
+    ``(reason it is refused or None, whether it drives)``. With the e-stop latched or a
+    fault a stop is accepted and changes nothing; anything else is refused: unframed
+    after hello, the e-stop, a fault, the chair's limit (a stop releases it), an
+    inhibit input that stops the chair, the wait for neutral."""
+    stop = right == 0.0 and left == 0.0
+    if refused_unframed(s, right, left):
+        return "unframed", False
+    if s.estopLatched:
+        return (None if stop else "estop"), False
+    if s.faultFlags:
+        return (None if stop else "fault"), False
+    if s.limitLatched:
+        if not stop:
+            return "limit", False
+        s.limitLatched = 0                   # the host has seen the limit: what it sends next drives
+    if not stop and drive_inhibited(s):
+        return "inhibit", False
     if refused_not_neutral(s, right, left):
-        return "neutral"
-    if mode == C.MODE_PPM:
-        s.ppmLost = 0
-    accept_command(s, mode, right, left)
-    return None
+        return "neutral", False
+    return None, True
 
 
 def refused_unframed(s: FirmwareState, right: float, left: float) -> bool:
@@ -382,6 +399,7 @@ def reset_estop(s: FirmwareState) -> str | None:
         return "busy"
     if s.estopLatched or s.faultFlags:
         require_neutral(s)   # released: the control must come to neutral before motion
+    s.inhibitLatched &= s.inhibitStable   # a latched inhibit whose input is released ends (next tick)
     s.estopLatched = 0
     if s.faultFlags:
         s.holding = 0        # the hold restarts with both wheels, where they are

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from wcdrive.avr.f32 import add, div, from_int, mul, neg, sub, to_int_trunc
 from wcdrive.firmware import constants as C
+from wcdrive.firmware.inhibit import capped_goals, send_inhibit_event, update_inhibits
 from wcdrive.firmware.motion import PIVOT_NONE, emergency_halt, pivot_step, require_neutral
 from wcdrive.firmware.output import (
     feedback_line,
@@ -503,10 +504,11 @@ def _confirm_neutral(s: FirmwareState, out: bytearray) -> None:
 
 def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: bytearray,
                  illegal_l: int = 0, illegal_r: int = 0, storm_l: int = 0, storm_r: int = 0,
-                 rx_lost: int = 0) -> None:
+                 rx_lost: int = 0, inhibit: int = 0) -> None:
     """``controlTick(now)`` with what it latches atomically from the interrupts: the
     encoder counts, the illegal-transition counts, the storm flags and the RX
-    interrupt's count of lost bytes (``rxLost``)."""
+    interrupt's count of lost bytes (``rxLost``); and the inhibit inputs it reads
+    (``inhibit``: bit 0 input 1, bit 1 input 2, 1 active)."""
     last_tick = s.lastControlTime if s.lastTickTime is None else s.lastTickTime
     elapsed = (now - last_tick) & 0xFFFFFFFF            # since the last tick ran
     dt = div(from_int(elapsed), 1000.0)
@@ -527,6 +529,7 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
     s.illTickL, s.illTickR = illegal_l & 0xFFFFFFFF, illegal_r & 0xFFFFFFFF
     s.stormTickL, s.stormTickR = int(bool(storm_l)), int(bool(storm_r))
     s.rxLostTick = rx_lost & 0xFFFFFFFF
+    s.inhibitTick = inhibit & 3
     delta_l = _i32(s.encTickL - s.prevEncL)
     delta_r = _i32(s.encTickR - s.prevEncR)
     s.prevEncL, s.prevEncR = s.encTickL, s.encTickR
@@ -539,6 +542,7 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
 
     check_l, check_r, halt, hardest = _check_faults(s, delta_l, delta_r, ill_l, ill_r, out)
 
+    update_inhibits(s)
     if s.cmdSinceTick:
         s.cmdSinceTick = 0
         s.lastCmdTime = now & 0xFFFFFFFF
@@ -551,12 +555,15 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
         if driving:
             require_neutral(s)
         send(s, send_event("WATCHDOG"), out)
+    elif s.inhibitPending:              # one a tick, in the wait for neutral's slot
+        send_inhibit_event(s, out)
     elif s.needNeutral:
         _confirm_neutral(s, out)
 
     max_change = mul(s.estopDecel if s.emergencyStop else s.maxAccel, dt)
-    s.setpointL = ramp_toward(s.setpointL, s.targetL, max_change)
-    s.setpointR = ramp_toward(s.setpointR, s.targetR, max_change)
+    goal_l, goal_r = capped_goals(s)
+    s.setpointL = ramp_toward(s.setpointL, goal_l, max_change)
+    s.setpointR = ramp_toward(s.setpointR, goal_r, max_change)
     # Stopped (target and setpoint zero, no pivot under way), an integral that drives a
     # wheel the way it still turns is dropped: it held the chair up a grade and would carry
     # it on past the stop.

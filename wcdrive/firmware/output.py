@@ -9,6 +9,7 @@ the same lines are dropped on both sides ("Output budget" in protocol/PROTOCOL.m
 from __future__ import annotations
 
 from wcdrive.avr.arduino_print import print_float, print_long, print_unsigned
+from wcdrive.firmware import constants as C
 from wcdrive.firmware.constants import (
     ERR_LINES_PER_TICK,
     FIRMWARE_VERSION,
@@ -99,7 +100,9 @@ def send_telemetry(s: FirmwareState, now: int) -> bytes:
     flags = ((1 if s.watchdogArmed else 0) | (2 if s.emergencyStop else 0)
              | (4 if s.estopLatched else 0) | (8 if s.ppmLost else 0) | (16 if s.parked else 0)
              | ((s.pivotPhase << 5) & 0xFF) | (128 if s.faultFlags else 0))
-    state = (1 if s.needNeutral else 0) | (2 if s.neutralFault else 0)
+    engaged = s.inhibitStable | s.inhibitLatched
+    state = ((1 if s.needNeutral else 0) | (2 if s.neutralFault else 0)
+             | (4 if engaged & C.INHIBIT_STOP_MASK else 0) | (8 if engaged & ~C.INHIBIT_STOP_MASK & 3 else 0))
     # Every field is unsigned and in range, so %d prints what Print::print prints.
     return b"TLM:%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d\r\n" % (
         now, s.rxCount, s.lastSeq, s.pwmL, s.pwmR, s.dirL, s.dirR, s.illTickL, s.illTickR,

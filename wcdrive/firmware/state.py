@@ -44,7 +44,8 @@ INT_FIELDS = (
     "eeNext", "eeBusy", "holding", "holdRefL", "holdRefR", "holdStepL", "holdStepR", "holdRollaway",
     "brakeReleased", "overspeedTicksL", "overspeedTicksR", "limitLatched",
     "needNeutral", "neutralSeen", "neutralTicks", "notNeutralSent", "notNeutralPending", "notNeutralTicks",
-    "neutralFault",
+    "neutralFault", "inhibitTick", "inhibitStable", "inhibitCountL", "inhibitCountR", "inhibitLatched",
+    "inhibitPending", "inhibitOn",
 )
 
 #: Globals the tick takes as inputs rather than computes (loop() measures them).
@@ -153,6 +154,15 @@ class FirmwareState:
     notNeutralPending: int = 0
     notNeutralTicks: int = 0
     neutralFault: int = 0
+    # inhibit inputs (bit 0 input 1, bit 1 input 2): read at the tick, debounced, latched,
+    # and the events still to send (bit 0/1 input 1 on/off, bit 2/3 input 2)
+    inhibitTick: int = 0
+    inhibitStable: int = 0
+    inhibitCountL: int = 0
+    inhibitCountR: int = 0
+    inhibitLatched: int = 0
+    inhibitOn: int = 0
+    inhibitPending: int = 0
     faultFlags: int = 0
     stallTicksL: int = 0
     stallTicksR: int = 0

@@ -16,12 +16,12 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 
-from wcdrive.errors import WcdriveTimeoutError
+from wcdrive.errors import WcdriveInhibitError, WcdriveNeutralError, WcdriveTimeoutError
 from wcdrive.host.board_state import BoardState
 from wcdrive.protocol.motion import VelocityCommand, find_motion
 from wcdrive.protocol.spec import integer
 
-__all__ = ["CONFIRM_S", "is_neutral", "wait_for_neutral"]
+__all__ = ["CONFIRM_S", "is_neutral", "refuse_unready_motion", "wait_for_neutral"]
 
 #: The board's ticks after a stop by which it surely confirmed it: NEUTRAL_TICKS and
 #: the tick it arrived in, with a tick to spare for the line that says so.
@@ -41,6 +41,22 @@ def is_neutral(command: bytes) -> bool:
     values = (motion.linear, motion.angular) if isinstance(motion, VelocityCommand) else (motion.left,
                                                                                           motion.right)
     return all(v == 0.0 for v in values)
+
+
+def refuse_unready_motion(board: BoardState, command: bytes, name: str, current: bool) -> None:
+    """Raises for a motion ``command`` the board would refuse for neutral or an inhibit
+    (``current``: it speaks this protocol version, whose TLM says both): an engaged
+    inhibit input that stops the chair (``WcdriveInhibitError``), a wait for neutral
+    (``WcdriveNeutralError``). A neutral command always goes out."""
+    if not current or is_neutral(command):
+        return
+    status = board.status
+    if status is not None and status.drive_inhibited:
+        raise WcdriveInhibitError(f"{name} has an inhibit input engaged (the charger?) and refuses "
+                                  "motion until it is released (a latching one: then reset_estop())")
+    if board.awaiting_neutral:
+        raise WcdriveNeutralError(f"{name} drives only after a neutral command (after a watchdog stop, "
+                                  "a reset, a PPM loss or an inhibit): stop() or wait_for_neutral() first")
 
 
 def wait_for_neutral(board: BoardState, stop: Callable[[], None], timeout: float, name: str, *,

@@ -34,14 +34,13 @@ from wcdrive.errors import (
     WcdriveError,
     WcdriveEstopError,
     WcdriveFaultError,
-    WcdriveNeutralError,
     WcdriveProtocolError,
     WcdriveTimeoutError,
 )
 from wcdrive.host.boardclock import BoardClock
 from wcdrive.host.exit_safety import install_signal_handlers, register, stop_all
 from wcdrive.host.handshake import PROTOCOL_VERSION
-from wcdrive.host.neutral import is_neutral, wait_for_neutral
+from wcdrive.host.neutral import refuse_unready_motion, wait_for_neutral
 from wcdrive.host.odometry import OdometryEstimate
 from wcdrive.host.requests import Request
 from wcdrive.host.scan_feed import ScanFeed, ScanSource
@@ -305,9 +304,9 @@ class Wheelchair:
             raise
 
     def reset_estop(self, timeout: float = 5.0) -> None:
-        """Release the e-stop, and any latched fault, once the chair has parked (the
-        board refuses earlier: this waits and retries until ``timeout``). The chair
-        stays at rest until a command."""
+        """Release the e-stop, any latched fault and a latched inhibit whose input is
+        released, once the chair has parked (the board refuses earlier: this waits and
+        retries until ``timeout``). The chair stays at rest until a command."""
         if self.protocol_version == 1:
             raise WcdriveProtocolError(f"{self.url} speaks protocol v1 (legacy): there is no "
                                        "e-stop to reset")
@@ -316,7 +315,7 @@ class Wheelchair:
         # Let go of the e-stop before the reset goes out: a latch the host decided on
         # after this (a hello answered late, a restored link) would follow the reset on
         # the wire and latch the board again behind the caller's back.
-        latched = self.estop_latched or bool(self.faults)
+        latched = self.estop_latched or bool(self.faults) or self.inhibited
         with session.estop_lock:
             held = session.board.estop_held
             session.board.estop_held = False
@@ -434,9 +433,8 @@ class Wheelchair:
         if self.estop_latched:
             raise WcdriveEstopError(f"the e-stop of {self.url} is latched: call reset_estop() "
                                     "once it is safe", "estop")
-        if self.needs_neutral and not is_neutral(command):
-            raise WcdriveNeutralError(f"{self.url} drives only after a neutral command (after a watchdog "
-                                      "stop, a reset or a PPM loss): stop() or wait_for_neutral() first")
+        refuse_unready_motion(self._session.board, command, self.url,
+                              self.protocol_version == PROTOCOL_VERSION)
         self._session.send_motion(command)
 
     @property
@@ -444,6 +442,13 @@ class Wheelchair:
         """True while the board refuses motion until a neutral command (``wcdrive.host.neutral``):
         motion raises ``WcdriveNeutralError``."""
         return self.protocol_version == PROTOCOL_VERSION and self._session.board.awaiting_neutral
+
+    @property
+    def inhibited(self) -> bool:
+        """True while an inhibit input that stops the chair is engaged (its latest TLM line):
+        motion raises ``WcdriveInhibitError`` (``status.speed_capped``: one caps the speed)."""
+        status = self._session.board.status
+        return status is not None and status.drive_inhibited
 
     def wait_for_neutral(self, timeout: float = 2.0) -> None:
         """Sends stops until the board confirms neutral (``wcdrive.host.neutral``)."""

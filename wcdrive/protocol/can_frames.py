@@ -62,13 +62,14 @@ CONTROL_OPS = {1: b"hello", 2: b"estop", 3: b"reset", 4: b"save", 5: b"defaults"
 PARAM_NAMES = tuple(PARAM_RANGES)
 MODES = ("WHEEL", "CMDVEL", "PPM")
 REASONS = ("", "syntax", "number", "range", "fields", "overlong", "checksum", "estop", "busy",
-           "param", "unframed", "fault", "overrun", "limit", "neutral")
+           "param", "unframed", "fault", "overrun", "limit", "neutral",
+           "inhibit")
 EVENTS = ("", "WATCHDOG", "PPM_LOST", "ESTOP", "FAULT,ENC_STALL_L", "FAULT,ENC_STALL_R",
           "FAULT,ENC_REVERSED_L", "FAULT,ENC_REVERSED_R", "FAULT,ENC_IMPLAUSIBLE_L",
           "FAULT,ENC_IMPLAUSIBLE_R", "FAULT,DRIVER_DEAD", "FAULT,MOTOR_L", "FAULT,MOTOR_R",
           "PARAMS_LOADED", "PARAMS_DEFAULT,blank", "PARAMS_DEFAULT,version", "PARAMS_DEFAULT,crc",
           "PARAMS_DEFAULT,range", "ROLLAWAY", "OVERSPEED", "STALLED_ON_GRADE", "NOT_NEUTRAL", "NEUTRAL",
-          "DEFLECTED")
+          "DEFLECTED", "INHIBIT,1,1", "INHIBIT,1,0", "INHIBIT,2,1", "INHIBIT,2,0")
 #: BOOT reply codes: the reset cause (0: the line named none).
 BOOT_CAUSES = ("", "POWER_ON", "EXTERNAL", "BROWN_OUT", "WATCHDOG", "JTAG", "NONE")
 KIND_ACK, KIND_NAK, KIND_ERR, KIND_EVT, KIND_PAR, KIND_HELLO, KIND_BOOT = range(1, 8)

@@ -268,8 +268,9 @@ class ExtendedTelemetry:
     #: starts again from that tick).
     late: int = 0
     #: Bit 0: the board waits for a neutral command (motion refused, ``ERR:neutral``);
-    #: bit 1: the neutral fault (refused 5 s without one). Boards before this field end
-    #: at ``late`` (None).
+    #: bit 1: the neutral fault (refused 5 s without one); bit 2: driving inhibited by
+    #: an inhibit input (``ERR:inhibit``); bit 3: the speed capped by one. Boards before
+    #: this field end at ``late`` (None).
     state: int | None = None
 
     @property
@@ -282,6 +283,17 @@ class ExtendedTelemetry:
         """State bit 1: motion was refused for 5 s without a neutral command (a control
         deflected at switch-on, or stuck)."""
         return bool(self.state and self.state & 2)
+
+    @property
+    def drive_inhibited(self) -> bool:
+        """State bit 2: an inhibit input that stops the chair is engaged (the charger):
+        motion is refused (``ERR:inhibit``)."""
+        return bool(self.state and self.state & 4)
+
+    @property
+    def speed_capped(self) -> bool:
+        """State bit 3: an inhibit input that caps the speed is engaged (the seat raised)."""
+        return bool(self.state and self.state & 8)
 
     @property
     def fault_latched(self) -> bool:

@@ -22,7 +22,9 @@ from typing import Protocol
 
 import numpy as np
 
+from wcdrive.boards.inhibits import InhibitChange
 from wcdrive.boards.port_loop import F_CPU, PortLoop
+from wcdrive.boards.simavr.mega_pins import INHIBIT_PINS
 from wcdrive.boards.simavr.plant_on_pins import PlantOnPins
 from wcdrive.boards.simavr.virtual_mega import VirtualMega
 from wcdrive.hil.lockstep import Event, Recorder, compare
@@ -72,6 +74,8 @@ class Rig:
     progress: Callable[[float], None] | None = None
     #: The lidar's scans (``wcdrive.sim.scanning``): polled after every tick or step.
     scanner: ScanRecorder | None = None
+    #: The inhibit inputs' timeline (the scenario's ``[[input]]`` tables).
+    inhibits: tuple[InhibitChange, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -110,7 +114,7 @@ class PortBackend:
         """``Backend.run``."""
         plant, host, log, lines, pilot = rig.plant, rig.host, rig.log, rig.lines, rig.pilot
         end_cycle, progress = rig.end_cycle, rig.progress
-        loop = self.loop(plant, rig.gyro, rig.dt, faults=rig.faults)
+        loop = self.loop(plant, rig.gyro, rig.dt, faults=rig.faults, inhibits=rig.inhibits)
         for cycle, data in rig.wire.runs:
             loop.send(data, at=cycle)
         last_progress = [0.0]
@@ -166,6 +170,8 @@ class SimavrBackend:
         mega = VirtualMega(self.elf)
         recorder = Recorder(mega)
         pins = PlantOnPins(mega, plant, rig.gyro, faults=rig.faults)
+        for change in rig.inhibits:       # active LOW: the pin pulled to ground
+            mega.set_pin(INHIBIT_PINS[change.number], 0 if change.active else 1, at=change.cycle(F_CPU))
         trains: dict[str, list[EdgeTrain]] = {"left": [], "right": []}
         tx_seen = 0
         n_events_logged = 0
@@ -220,7 +226,7 @@ class SimavrBackend:
                 encoders[side] = EdgeTrain(np.concatenate([p.times for p in parts]),
                                            np.concatenate([p.states for p in parts]), 0, 0)
         trace = Trace(duration=end_cycle / F_CPU, serial=[(c / F_CPU, d) for c, d in sorted(runs + piloted)],
-                      encoders=encoders)
+                      encoders=encoders, inhibits=[(c.at, c.number, c.active) for c in rig.inhibits])
         report = compare(recorder.recording(trace))
         mega.close()
         return BackendRun(end_cycle, Lockstep(len(report.mismatches), report.events))

@@ -119,7 +119,7 @@ def run(scenario: Scenario, *, backend: str | Backend = "port", seed: int = 0, d
         scanner = ScanRecorder(scenario.lidar, scenario.world or World(), plant,
                                np.random.default_rng([seed, _LIDAR_STREAM]), pipe)
     rig = Rig(plant, gyro, host, pilot, TickLog(), LineLog(), wire, scenario.faults, dt,
-              round(scenario.duration * F_CPU), progress, scanner)
+              round(scenario.duration * F_CPU), progress, scanner, scenario.inhibits)
     wall0 = time.perf_counter()
     try:
         with cyclic_gc_paused():

@@ -20,6 +20,10 @@
     side = "left"            # left | right | both (encoder, wheel and motor kinds)
     duration = 3.0           # optional: to the end of the scenario
     rate_hz = 200000         # encoder_noise: edges per second on channel A
+    [[input]]                # optional, any number (wcdrive.sim.scenario_inputs)
+    at = 3.0                 # s from the start
+    input = "charger"        # the inhibit input: "charger" (1) or "seat" (2)
+    active = true            # pulled LOW, or released (false); each starts released
 
 The floor is level unless a ``[world]`` table tilts it (``wcdrive.plant.terrain``):
 
@@ -105,6 +109,7 @@ from collections.abc import Collection
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from wcdrive.boards.inhibits import InhibitChange
 from wcdrive.errors import WcdriveFileError
 from wcdrive.navigation.pure_pursuit import FollowParams
 from wcdrive.plant.chair import Plant
@@ -118,6 +123,7 @@ from wcdrive.protocol.codec import encode_ppm, encode_set
 from wcdrive.protocol.motion import velocity_command, wheel_command
 from wcdrive.sim.expect import Expect
 from wcdrive.sim.expect import parse as parse_expect
+from wcdrive.sim.scenario_inputs import parse_inputs
 
 BUNDLED = Path(__file__).resolve().parent / "scenarios"
 #: When a scenario's host sends its neutral command: the board refuses motion after a
@@ -132,7 +138,7 @@ _KINDS = ("cmdvel", "wheel", "ppm", "stop", "silence")
 _FAULT_KEYS = ("at", "kind", "side", "duration", "rate_hz")
 #: The keys a scenario file may have at its top level.
 TOP_KEYS = ("name", "description", "host_rate_hz", "repeat", "settle_s", "neutral_first", "chair", "params",
-            "segment", "fault", "path", "follow", "world", "lidar", "expect")
+            "segment", "fault", "input", "path", "follow", "world", "lidar", "expect")
 _GEOMETRY_KEYS = ("map", "walls", "boxes", "circles")
 _LIDAR_KEYS = ("model", "x", "y", "z", "yaw_deg", "roll_deg", "driver_inverted")
 _WORLD_KEYS = ("slope_deg", "downhill_heading_deg", "ramp", *_GEOMETRY_KEYS, "file", "start")
@@ -195,6 +201,8 @@ class Scenario:
     lidar: Lidar | None = None
     #: What a run must show (``[expect]``, ``wcdrive.sim.expect``); None: no table.
     expect: Expect | None = None
+    #: The inhibit inputs' timeline (``[[input]]``, ``wcdrive.sim.scenario_inputs``).
+    inhibits: tuple[InhibitChange, ...] = ()
 
     @property
     def closed_loop(self) -> bool:
@@ -341,7 +349,11 @@ def load(name_or_path: str, *, extra: Collection[str] = ()) -> Scenario:
         raise ScenarioError(f"{path}: faults are [[fault]] tables")
     faults = tuple(parse_fault(raw, f"{path}: fault {i + 1}", scenario.duration)
                    for i, raw in enumerate(raw_faults))
-    return dataclasses.replace(scenario, faults=faults,
+    try:
+        inhibits = parse_inputs(data.get("input"), str(path), scenario.duration)
+    except ValueError as exc:
+        raise ScenarioError(str(exc)) from exc
+    return dataclasses.replace(scenario, faults=faults, inhibits=inhibits,
                                board_params={k: float(v) for k, v in board_params.items()})
 
 

@@ -48,7 +48,9 @@ VARIABLE_FORMATS = {
           "resetCause", "effortPwmL", "effortPwmR", "effortTicksL", "effortTicksR", "eeNext", "eeBusy",
           "holding", "holdRollaway", "brakeReleased", "overspeedTicksL", "overspeedTicksR",
           "limitLatched", "feedbackForm", "needNeutral", "neutralSeen", "neutralTicks", "notNeutralSent",
-          "notNeutralPending", "notNeutralTicks", "neutralFault"),
+          "notNeutralPending", "notNeutralTicks", "neutralFault", "inhibitTick", "inhibitStable",
+          "inhibitCountL", "inhibitCountR", "inhibitLatched", "inhibitPending",
+          "inhibitOn"),
 }
 _FORMAT_OF = {name: fmt for fmt, names in VARIABLE_FORMATS.items() for name in names}
 

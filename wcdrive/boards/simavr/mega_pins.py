@@ -18,7 +18,7 @@ from wcdrive.protocol.spec import integer
 #: The Mega 2560's Arduino pin numbers (variants/mega/pins_arduino.h) as (port letter,
 #: bit), for the pins the spec assigns.
 MEGA_PORT_BIT = {2: ("E", 4), 3: ("E", 5), 7: ("H", 4), 8: ("H", 5), 9: ("H", 6), 10: ("B", 4),
-                 11: ("B", 5), 18: ("D", 3), 19: ("D", 2), 22: ("A", 0)}
+                 11: ("B", 5), 18: ("D", 3), 19: ("D", 2), 22: ("A", 0), 24: ("A", 2), 25: ("A", 3)}
 
 
 def _pin(name: str) -> tuple[str, int]:
@@ -31,6 +31,8 @@ ENCODER_PINS = {"left": (_pin("PIN_ENC_L_A"), _pin("PIN_ENC_L_B")),
 DIR_PINS = {"left": _pin("PIN_DIR_L"), "right": _pin("PIN_DIR_R")}
 RELAY_PIN = _pin("PIN_RELAY")
 BRAKE_PIN = _pin("PIN_BRAKE")
+#: The inhibit inputs by number (1, 2): active LOW, pulled up (HIGH) when nothing drives them.
+INHIBIT_PINS = {1: _pin("PIN_INHIBIT_1"), 2: _pin("PIN_INHIBIT_2")}
 # PWM: pin 9 = OC2B on PH6, pin 10 = OC2A on PB4 (Timer2, phase-correct).
 _TCCR2A, _OCR2A, _OCR2B = 0xB0, 0xB3, 0xB4
 _PWM = {"left": (_OCR2B, 1 << 5, _pin("PIN_PWM_L")), "right": (_OCR2A, 1 << 7, _pin("PIN_PWM_R"))}

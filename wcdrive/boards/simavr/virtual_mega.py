@@ -53,6 +53,7 @@ from wcdrive.boards.simavr.mega_pins import (
     BRAKE_PIN,
     DIR_PINS,
     ENCODER_PINS,
+    INHIBIT_PINS,
     MEGA_PORT_BIT,
     RELAY_PIN,
     MegaPins,
@@ -111,10 +112,13 @@ class VirtualMega(MegaPins):
         self.resets: list[Reset] = []
         self._resets_taken = 0
         self._collect_resets()
-        # Both encoders rest at count 0, state 11, before the firmware boots.
+        # Both encoders rest at count 0, state 11, before the firmware boots; the
+        # inhibit inputs read HIGH (released), as their pull-ups hold an unwired pin.
         for side in ENCODER_PINS:
             for pin in ENCODER_PINS[side]:
                 self.set_pin(pin, 1, at=0)
+        for pin in INHIBIT_PINS.values():
+            self.set_pin(pin, 1, at=0)
         if vcd is not None:
             pins = "".join(f"{p}{b}:{n};" for n, (p, b) in self._named_pins().items())
             if self._c.wcsim_vcd_open(self._s, str(vcd).encode(), pins.encode()) != 0:

@@ -18,6 +18,8 @@
  *     events and halt);
  *   - a tick while the board waits for neutral (needNeutral: after a boot, a reset, a
  *     watchdog stop or a PPM loss, a few ticks at most while a host is well behaved);
+ *   - a tick with an inhibit input read active, engaged, debouncing or with its event
+ *     still to send;
  *   - a mode that MODE_NAMES does not name.
  * Each binary32 operation is one IEEE double operation rounded once to binary32, as
  * f32.py (and f32_fast.c) computes the ordinary case. The whole tick is computed into
@@ -92,7 +94,8 @@ static double f_from_int(int64_t n) { return rnd((double)n); }   /* |n| < 2**53 
     X(rejectedCount) X(crcRejected) X(freeRam) \
     X(holding) X(holdRefL) X(holdRefR) X(holdStepL) X(holdStepR) \
     X(brakeReleased) X(overspeedTicksL) X(overspeedTicksR) X(overspeedFromL) X(overspeedFromR) \
-    X(needNeutral) X(neutralFault)
+    X(needNeutral) X(neutralFault) \
+    X(inhibitTick) X(inhibitStable) X(inhibitCountL) X(inhibitCountR) X(inhibitLatched) X(inhibitPending) X(inhibitOn)
 
 #define ENUM(name) F_##name,
 enum { FIELDS(ENUM) N_FIELDS };
@@ -414,17 +417,18 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
         PyErr_SetString(PyExc_RuntimeError, "tick_fast: _bind() was not called");
         return NULL;
     }
-    if (nargs != 9) {
-        PyErr_SetString(PyExc_TypeError, "tick() takes 9 arguments");
+    if (nargs != 10) {
+        PyErr_SetString(PyExc_TypeError, "tick() takes 10 arguments");
         return NULL;
     }
     PyObject *s = args[0];
     if (Py_TYPE(s) != state_type)
         Py_RETURN_NONE;
-    int64_t now, count_l, count_r, illegal_l, illegal_r, storm_l, storm_r, rx_lost;
+    int64_t now, count_l, count_r, illegal_l, illegal_r, storm_l, storm_r, rx_lost, inhibit;
     if (!arg_int(args[1], &now) || !arg_int(args[2], &count_l) || !arg_int(args[3], &count_r)
         || !arg_int(args[4], &illegal_l) || !arg_int(args[5], &illegal_r)
-        || !arg_int(args[6], &storm_l) || !arg_int(args[7], &storm_r) || !arg_int(args[8], &rx_lost))
+        || !arg_int(args[6], &storm_l) || !arg_int(args[7], &storm_r) || !arg_int(args[8], &rx_lost)
+        || !arg_int(args[9], &inhibit))
         Py_RETURN_NONE;
 
     Vals v;
@@ -444,6 +448,9 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
     }
     if (I(needNeutral))
         Py_RETURN_NONE;             /* waiting for neutral (after a boot, a reset, a stop): the Python tick */
+    if (inhibit || I(inhibitTick) || I(inhibitStable) || I(inhibitCountL) || I(inhibitCountR)
+        || I(inhibitLatched) || I(inhibitPending) || I(inhibitOn))
+        Py_RETURN_NONE;             /* an inhibit input read, engaged or settling: the Python tick */
     PyObject *mode_name = PyDict_GetItemWithError(mode_names, *slot(s, F_mode));
     if (mode_name == NULL) {
         if (PyErr_Occurred())

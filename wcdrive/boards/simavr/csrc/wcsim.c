@@ -33,6 +33,7 @@
 #include <simavr/sim_irq.h>
 #include <simavr/sim_vcd_file.h>
 #include <simavr/avr_ioport.h>
+#include <simavr/avr_ioport.h>
 #include <simavr/avr_uart.h>
 #include <simavr/avr_watchdog.h>
 #include <simavr/avr_extint.h>
@@ -418,6 +419,11 @@ static void apply_event(wcsim_t *s, const wcsim_event_t *e) {
         if (p >= 0 && p < WCSIM_PORTS && e->bit < 8) {
             s->driven[p] |= (uint8_t)(1u << e->bit);
             s->level[p] = (uint8_t)((s->level[p] & ~(1u << e->bit)) | ((e->value ? 1u : 0u) << e->bit));
+            /* Driven from outside, the pin keeps its level when the firmware writes the
+             * port: simavr otherwise raises an input's internal pull-up again on every
+             * PORTx write (an INPUT_PULLUP pin beside an output the sketch writes). */
+            avr_ioport_external_t ext = { .name = e->port, .mask = s->driven[p], .value = s->level[p] };
+            avr_ioctl(s->avr, AVR_IOCTL_IOPORT_SET_EXTERNAL(e->port), &ext);
         }
         avr_irq_t *irq = avr_io_getirq(s->avr, AVR_IOCTL_IOPORT_GETIRQ(e->port), e->bit);
         if (irq) avr_raise_irq(irq, e->value);

@@ -1,0 +1,54 @@
+"""The inhibit inputs on a simulated board's pins: which input is which (``INPUTS``:
+1 the charger, 2 the seat raised; protocol/spec.toml, ``PIN_INHIBIT_1``/``_2``), a
+change of one (``InhibitChange``: from ``at`` s the input is active, its pin pulled
+LOW, or released), and what a timeline of changes holds at a moment
+(``active_bits``: bit 0 input 1, bit 1 input 2, as the firmware's tick reads them).
+
+The port takes the bits as its tick's input (``PortLoop``); the compiled firmware in
+simavr reads the pins themselves (``VirtualMega.set_pin``), so a scenario's
+``[[input]]`` timeline drives both alike.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+__all__ = ["INPUTS", "InhibitChange", "active_bits", "input_number"]
+
+#: The inhibit inputs by name.
+INPUTS = {"charger": 1, "seat": 2}
+
+
+def input_number(name: str | int) -> int:
+    """1 or 2, from an input's name (``INPUTS``) or number; ``ValueError`` otherwise."""
+    if isinstance(name, int) and not isinstance(name, bool) and name in INPUTS.values():
+        return name
+    if isinstance(name, str) and name in INPUTS:
+        return INPUTS[name]
+    raise ValueError(f"no inhibit input {name!r}: {', '.join(INPUTS)} (or 1, 2)")
+
+
+@dataclass(frozen=True)
+class InhibitChange:
+    """From ``at`` s on, inhibit input ``number`` (1 or 2) is ``active`` (pulled LOW) or not."""
+
+    at: float
+    number: int
+    active: bool
+
+    def cycle(self, f_cpu: int) -> int:
+        """The change's cycle at ``f_cpu``."""
+        return round(self.at * f_cpu)
+
+
+def active_bits(changes: Iterable[InhibitChange], t: float) -> int:
+    """The inputs active at ``t`` s by ``changes`` (in any order; each input starts
+    released): bit 0 input 1, bit 1 input 2."""
+    bits = 0
+    for change in sorted(changes, key=lambda c: c.at):
+        if change.at > t:
+            break
+        mask = 1 << (change.number - 1)
+        bits = bits | mask if change.active else bits & ~mask
+    return bits
