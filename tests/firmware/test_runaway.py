@@ -174,9 +174,9 @@ def test_a_reversed_encoder_is_caught_whenever_it_flips_during_a_turn() -> None:
     port's Timer0 grid set to the ELF's (211 cycles later): the flipped reading then
     matched the setpoint at once, and a wheel that reads its setpoint while braked, and
     speeds up 0.25 rad/s^2, is what a healthy wheel held down a grade looks like; the
-    rest of the grid stays within 1.25 rad/s and 0.81 m (docs/safety.md). The fast depth runs every fourth of the
-    840 (each speed, turn, side and moment still in, the moment turning with the case:
-    210 runs), the thorough depth all of them."""
+    rest of the grid stays within 1.25 rad/s and 0.81 m (docs/safety.md). The fast depth
+    runs every fourth of the 840 (each speed, turn, side and moment still in, the moment
+    turning with the case: 210 runs), the thorough depth all of them."""
     worst_gain = worst_travel = 0.0
     missed = []
     runs = list(itertools.product((0.3, 0.5, 0.8, 1.2, 1.6), (-1.0, 1.0, -3.0, 3.0), ("left", "right"),
