@@ -105,7 +105,7 @@ class Pilot:
         self.host = host
         self.localization = scenario.follow.localization
         self.period = round(F_CPU / scenario.host_rate_hz)
-        self.next = round(MOTION_START_S * F_CPU)
+        self.next = round((scenario.host_offset_s + MOTION_START_S) * F_CPU)
         self.settle = round(scenario.settle_s * F_CPU)
         self.sent: list[tuple[int, bytes]] = []
         self.done_at: int | None = None

@@ -111,7 +111,8 @@ def run(scenario: Scenario, *, backend: str | Backend = "port", seed: int = 0, d
     host = SimHost(params, gyro, ekf or (closed and scenario.follow.localization == "ekf"))
     pilot = Pilot(scenario, host) if closed else None
     commands = [(round(t * F_CPU), data) for t, data in scenario.host_commands()
-                if t < scenario.duration and not (closed and t >= 0.02)]   # closed: params only
+                # closed loop: the parameters and the neutral command only (the pilot drives)
+                if t < scenario.duration and not (closed and t >= scenario.host_offset_s + 0.02)]
     wire = wire_schedule(commands, scenario.faults)
     scanner, pipe = None, None
     if scenario.lidar is not None:        # no walls: every beam without a return

@@ -7,6 +7,8 @@
     settle_s = 1.5           # after the last segment: a stop, then this long (default)
     neutral_first = true     # a neutral command before the first segment (default; the
                              #   board drives only after one: false shows it refusing)
+    host_offset_s = 0.0      # the host's bytes this much later (0 to 1 s): its phase
+                             #   against the board's 50 ms ticks (default 0)
     [chair]                  # optional ChairParams overrides, e.g. friction_left = 0.1
     [params]                 # optional runtime parameters the host sets first,
     watchdog_ms = 1000       #    set:<name>=<value> (protocol v2), e.g. kp_l, estop_decel
@@ -137,7 +139,8 @@ MOTION_START_S = 0.17
 _KINDS = ("cmdvel", "wheel", "ppm", "stop", "silence")
 _FAULT_KEYS = ("at", "kind", "side", "duration", "rate_hz")
 #: The keys a scenario file may have at its top level.
-TOP_KEYS = ("name", "description", "host_rate_hz", "repeat", "settle_s", "neutral_first", "chair", "params",
+TOP_KEYS = ("name", "description", "host_rate_hz", "repeat", "settle_s", "neutral_first", "host_offset_s",
+            "chair", "params",
             "segment", "fault", "input", "path", "follow", "world", "lidar", "expect")
 _GEOMETRY_KEYS = ("map", "walls", "boxes", "circles")
 _LIDAR_KEYS = ("model", "x", "y", "z", "yaw_deg", "roll_deg", "driver_inverted")
@@ -184,6 +187,8 @@ class Scenario:
     #: The host sends a neutral command first (``NEUTRAL_AT_S``), its first segment from
     #: ``MOTION_START_S``; False: its first segment from 20 ms, with no neutral before it.
     neutral_first: bool = True
+    #: s: every byte of the host this much later (its phase against the board's ticks).
+    host_offset_s: float = 0.0
     chair: dict[str, float] = field(default_factory=dict)
     source: Path | None = None
     faults: tuple[Fault, ...] = ()
@@ -215,7 +220,7 @@ class Scenario:
         ``timeout_s``, then ``settle_s``)."""
         if self.path is not None:
             return self.follow.timeout_s + self.settle_s
-        return sum(s.duration for s in self.segments) + self.settle_s
+        return self.host_offset_s + sum(s.duration for s in self.segments) + self.settle_s
 
     def params(self) -> ChairParams:
         """``ChairParams`` with the scenario's ``[chair]`` overrides."""
@@ -224,18 +229,19 @@ class Scenario:
     @property
     def segments_start(self) -> float:
         """s: when the first segment's command goes out (``MOTION_START_S``; 20 ms
-        without ``neutral_first``); each segment starts where the one before ends."""
-        return MOTION_START_S if self.neutral_first else 0.02
+        without ``neutral_first``; ``host_offset_s`` later); each segment starts where
+        the one before ends."""
+        return self.host_offset_s + (MOTION_START_S if self.neutral_first else 0.02)
 
     def host_commands(self) -> list[tuple[float, bytes]]:
         """(time, bytes) the host sends: the ``[params]`` settings at 5 ms, a neutral
         command at ``NEUTRAL_AT_S`` (the board drives only after one; ``neutral_first``),
         then each segment's command at ``host_rate_hz`` from ``MOTION_START_S`` (20 ms
         without the neutral), then a stop."""
-        out: list[tuple[float, bytes]] = [(0.005, encode_set(name, value) + b"\n")
+        out: list[tuple[float, bytes]] = [(self.host_offset_s + 0.005, encode_set(name, value) + b"\n")
                                           for name, value in self.board_params.items()]
         if self.neutral_first:
-            out.append((NEUTRAL_AT_S, velocity_command(0.0, 0.0)))
+            out.append((self.host_offset_s + NEUTRAL_AT_S, velocity_command(0.0, 0.0)))
         t0 = self.segments_start
         period = 1.0 / self.host_rate_hz
         for seg in self.segments:
@@ -318,6 +324,9 @@ def load(name_or_path: str, *, extra: Collection[str] = ()) -> Scenario:
     neutral_first = data.get("neutral_first", True)
     if not isinstance(neutral_first, bool):
         raise ScenarioError(f"{path}: neutral_first must be true or false")
+    offset = data.get("host_offset_s", 0.0)
+    if isinstance(offset, bool) or not isinstance(offset, (int, float)) or not 0.0 <= offset < 1.0:
+        raise ScenarioError(f"{path}: host_offset_s must be a number of seconds in [0, 1), not {offset!r}")
     terrain, world, start = _world(data.get("world", {}), path)
     lidar = _lidar(data.get("lidar"), path)
     expect = None
@@ -329,7 +338,8 @@ def load(name_or_path: str, *, extra: Collection[str] = ()) -> Scenario:
     scenario = Scenario(
         name=str(data.get("name", path.stem)), description=str(data.get("description", "")),
         segments=tuple(segments) * repeat, host_rate_hz=rate,
-        settle_s=float(data.get("settle_s", 1.5)), neutral_first=neutral_first, chair=chair, source=path,
+        settle_s=float(data.get("settle_s", 1.5)), neutral_first=neutral_first,
+        host_offset_s=float(offset), chair=chair, source=path,
         path=waypoints, follow=follow, terrain=terrain, world=world, start=start, lidar=lidar,
         expect=expect,
     )

@@ -18,9 +18,11 @@ Every grade is at most the rated grade of the drawn occupant (40 to 150 kg,
 ``ChairParams.rated_grade``). Each drive is ``cmdvel = [speed, 0]`` (speed up to the
 full-speed command ``MAX_LINEAR``), then a turn ``[speed / 2, turn]`` (turn up to
 ``MAX_TURN`` rad/s either way), then a stop held ``STOP_S`` s; the host sends at 4 to
-100 Hz; the gains are the defaults or one set (kp, ki, kd) drawn over the accepted
-ranges (``protocol/spec.toml``'s ``GAIN_*``) for both wheels alike (wheels tuned far
-apart are a known open problem, docs/safety.md).
+100 Hz, its first byte 0 to 50 ms later than a scenario's (``host_offset_s``: its
+phase against the board's 50 ms ticks, which decides some knife-edge verdicts); the
+gains are the defaults or one set (kp, ki, kd) drawn over the accepted ranges
+(``protocol/spec.toml``'s ``GAIN_*``) for both wheels alike (wheels tuned far apart
+are a known open problem, docs/safety.md).
 
 Beyond the envelope (``BEYOND``): ``kerb_up``, ``kerb_down``, a 1:8 kerb cut
 (``KERB_DEG``, 1.2 m long), steeper than any occupant's rated grade. There the board may
@@ -40,6 +42,7 @@ from wcdrive.hil.traces import Draw
 from wcdrive.plant.faults import SIDED_KINDS
 from wcdrive.plant.params import ChairParams
 from wcdrive.protocol import spec
+from wcdrive.sim.scenario import MOTION_START_S
 
 #: The drive classes inside the envelope, and beyond it.
 INSIDE = ("uniform", "cross", "band_up", "band_down")
@@ -88,6 +91,8 @@ class Drive:
     fault_kind: str | None = None
     fault_at: float | None = None
     fault_side: str | None = None
+    #: s: the host's bytes this much later: its phase against the board's 50 ms ticks.
+    host_offset_s: float = 0.0
 
     @property
     def inside(self) -> bool:
@@ -96,8 +101,9 @@ class Drive:
 
     @property
     def motion_s(self) -> float:
-        """s from the start: the end of the commanded motion (segments start at 0.02 s)."""
-        return 0.02 + self.drive_s + self.turn_s
+        """s from the start: the end of the commanded motion (segments start at
+        ``MOTION_START_S``, ``host_offset_s`` later)."""
+        return self.host_offset_s + MOTION_START_S + self.drive_s + self.turn_s
 
     @property
     def grade_fraction(self) -> float:
@@ -112,7 +118,8 @@ class Drive:
         """The drive as a scenario file's text (``wcdrive sim FILE`` runs it)."""
         lines = [f'name = "{name}"',
                  f'description = "{self.describe()}"',
-                 f"host_rate_hz = {self.host_rate_hz:g}", "settle_s = 0.5", "",
+                 f"host_rate_hz = {self.host_rate_hz:g}", "settle_s = 0.5",
+                 f"host_offset_s = {self.host_offset_s:g}", "",
                  "[chair]", f"occupant_mass = {self.occupant:g}", ""]
         if self.gains is not None:
             kp, ki, kd = self.gains
@@ -142,7 +149,8 @@ class Drive:
                  f"downhill at {self.heading_deg:g} deg") if self.case in ("uniform", "cross") else \
             f"{self.grade_deg:.2f} deg band of {self.band_m:g} m ({100 * self.grade_fraction:.0f} % of rated)"
         text = (f"{self.case}: {self.occupant:g} kg, {where}, {self.speed:g} m/s for {self.drive_s:g} s, "
-                f"turn {self.turn:g} rad/s, host {self.host_rate_hz:g} Hz, {gains}")
+                f"turn {self.turn:g} rad/s, host {self.host_rate_hz:g} Hz "
+                f"+{1000 * self.host_offset_s:g} ms, {gains}")
         if self.fault_kind is not None:
             side = f" {self.fault_side}" if self.fault_side else ""
             text += f"; {self.fault_kind}{side} at {self.fault_at:g} s"
@@ -188,9 +196,12 @@ def drive(draw: Draw, cases: tuple[str, ...] = INSIDE) -> Drive:
         end = BAND_FROM + band / 2 if draw.boolean(1 / 3) else BAND_FROM + band + 1.5
         drive_s = round(min(end / speed + _RAMP_S * speed / MAX_LINEAR / 2 + 0.5, 20.0), 1)
     rate = draw.choice(HOST_RATES)
+    gains = _gains(draw)
+    # drawn last, so that a seed's other choices stay what they were before the phase
+    offset = round(draw.real(0.0, 0.05), 4)
     return Drive(case=case, occupant=occupant, grade_deg=grade, rated_deg=rated, heading_deg=heading,
                  speed=speed, turn=turn, drive_s=drive_s, turn_s=2.0, host_rate_hz=rate,
-                 gains=_gains(draw), band_m=band)
+                 gains=gains, band_m=band, host_offset_s=offset)
 
 
 def faulty(draw: Draw, base: Drive, kind: str) -> Drive:
