@@ -13,14 +13,13 @@ tests/sim/test_inhibit_plant.py watches the chair.
 
 from __future__ import annotations
 
-import re
-
 import numpy as np
 import pytest
 
+from tests.support.recordings import board_lines, recorded, tick_states
 from wcdrive.avr.f32 import f32, mul
 from wcdrive.firmware import constants as C
-from wcdrive.hil.lockstep import Recording, compare, record
+from wcdrive.hil.lockstep import Recording
 from wcdrive.hil.traces import Trace
 from wcdrive.plant.encoders import EdgeTrain, edges_from_trajectory
 from wcdrive.protocol.codec import frame
@@ -53,23 +52,9 @@ def _framed(serial: list[tuple[float, bytes]]) -> list[tuple[float, bytes]]:
 
 def _run(serial: list[tuple[float, bytes]], inhibits: list[tuple[float, int, bool]],
          duration: float, speed: float = 3.0) -> Recording:
-    trace = Trace(duration=duration, serial=_framed(serial),
-                  encoders={side: _turning(duration, side == "left", speed) for side in ("left", "right")},
-                  inhibits=inhibits)
-    recording = record(trace)
-    report = compare(recording)
-    assert report.mismatches == [], "\n".join(str(m) for m in report.mismatches[:10])
-    return recording
-
-
-def _ticks(recording: Recording) -> list[tuple[float, dict]]:
-    return [(ev.arg / 1000.0, ev.after) for ev in recording.events if ev.kind == "tick"]
-
-
-def _lines(recording: Recording, prefix: bytes) -> list[bytes]:
-    """The board's lines that start with ``prefix``, unframed."""
-    lines = (re.sub(rb"#[0-9A-F]{2}\*[0-9A-F]{4}$", b"", line) for line in recording.tx.split(b"\r\n"))
-    return [line for line in lines if line.startswith(prefix)]
+    return recorded(Trace(duration=duration, serial=_framed(serial), inhibits=inhibits,
+                          encoders={side: _turning(duration, side == "left", speed)
+                                    for side in ("left", "right")}))
 
 
 def _first(ticks: list[tuple[float, dict]], when) -> float:
@@ -85,7 +70,7 @@ def test_the_charger_input_stops_the_chair_along_the_normal_ramp_and_latches() -
     serial = [(0.02, NEUTRAL), *_every(FORWARD, 0.2, 1.5),
               (1.8, b"reset\n"), (1.9, NEUTRAL), *_every(FORWARD, 2.1, 2.6)]
     rec = _run(serial, [(0.6, 1, True), (1.2, 1, False)], 2.7)
-    ticks = _ticks(rec)
+    ticks = tick_states(rec)
     engaged = _first(ticks, lambda a: a["inhibitStable"] & 1)
     debounce = 0.05 * C.INHIBIT_DEBOUNCE_TICKS
     assert 0.6 + debounce - 0.05 <= engaged <= 0.6 + debounce + 0.001
@@ -94,12 +79,12 @@ def test_the_charger_input_stops_the_chair_along_the_normal_ramp_and_latches() -
     step = float(mul(f32(C.MAX_ACCEL), f32(0.05)))
     falls = [at[k]["setpointR"] - at[k + 1]["setpointR"] for k in range(3)]
     assert all(abs(f - step) < 1e-3 for f in falls), falls
-    assert any(line.endswith(b",inhibit") for line in _lines(rec, b"NAK:"))
-    assert _lines(rec, b"EVT:INHIBIT") == [b"EVT:INHIBIT,1,1", b"EVT:INHIBIT,1,0"]
+    assert any(line.endswith(b",inhibit") for line in board_lines(rec, b"NAK:"))
+    assert board_lines(rec, b"EVT:INHIBIT") == [b"EVT:INHIBIT,1,1", b"EVT:INHIBIT,1,0"]
     # latched: released at 1.2 s, still refused until the reset at 1.8 s
     latched = [t for t, after in ticks if after["inhibitLatched"] & 1]
     assert min(latched) == engaged and 1.75 < max(latched) < 1.85
-    tlm = [line for line in _lines(rec, b"TLM:")]
+    tlm = board_lines(rec, b"TLM:")
     assert any(int(line.split(b",")[-1]) & 4 for line in tlm)
     assert not any(after["targetR"] for t, after in ticks if engaged <= t < 2.0)
     assert any(after["targetR"] == 3.0 for t, after in ticks if 2.1 < t < 2.6)
@@ -113,14 +98,14 @@ def test_the_seat_input_caps_the_wheels_and_asks_for_neutral_when_released() -> 
     serial = [(0.02, NEUTRAL), *_every(FAST, 0.2, 1.6),
               (1.75, NEUTRAL), *_every(FAST, 1.9, 2.8)]
     rec = _run(serial, [(0.6, 2, True), (1.4, 2, False)], 2.9, speed=5.2)
-    ticks = _ticks(rec)
+    ticks = tick_states(rec)
     cap = float(mul(f32(C.MAX_WHEEL_SPEED), C.INHIBIT_2_SPEED))
     capped = [after for t, after in ticks if 1.3 <= t < 1.45]
     assert all(a["setpointR"] == pytest.approx(cap, abs=1e-6) and a["targetR"] == 8.0 for a in capped)
-    assert _lines(rec, b"EVT:INHIBIT") == [b"EVT:INHIBIT,2,1", b"EVT:INHIBIT,2,0"]
-    naks = _lines(rec, b"NAK:")
+    assert board_lines(rec, b"EVT:INHIBIT") == [b"EVT:INHIBIT,2,1", b"EVT:INHIBIT,2,0"]
+    naks = board_lines(rec, b"NAK:")
     assert any(n.endswith(b",neutral") for n in naks) and not any(n.endswith(b",inhibit") for n in naks)
-    assert any(int(line.split(b",")[-1]) & 8 for line in _lines(rec, b"TLM:"))
+    assert any(int(line.split(b",")[-1]) & 8 for line in board_lines(rec, b"TLM:"))
     released = next(t for t, after in ticks if t > 1.4 and after["needNeutral"])
     assert all(after["targetR"] == 0.0 for t, after in ticks if released <= t < 1.75)
     assert any(after["setpointR"] > cap for t, after in ticks if 2.5 < t < 2.9)
@@ -130,5 +115,5 @@ def test_a_glitch_shorter_than_the_debounce_does_nothing() -> None:
     """The charger input pulled low for less than a tick, twice: no event, no stop."""
     serial = [(0.02, NEUTRAL), *_every(FORWARD, 0.2, 1.2)]
     rec = _run(serial, [(0.61, 1, True), (0.64, 1, False), (0.81, 1, True), (0.84, 1, False)], 1.3)
-    assert _lines(rec, b"EVT:INHIBIT") == []
-    assert all(after["targetR"] == 3.0 for t, after in _ticks(rec) if 0.4 < t < 1.2)
+    assert board_lines(rec, b"EVT:INHIBIT") == []
+    assert all(after["targetR"] == 3.0 for t, after in tick_states(rec) if 0.4 < t < 1.2)

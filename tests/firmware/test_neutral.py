@@ -19,8 +19,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from tests.support.recordings import board_lines, recorded, tick_states
 from wcdrive.firmware import constants as C
-from wcdrive.hil.lockstep import Recording, compare, record
+from wcdrive.hil.lockstep import Recording
 from wcdrive.hil.traces import Trace
 from wcdrive.plant.encoders import edges_from_trajectory
 from wcdrive.protocol.codec import frame
@@ -37,21 +38,8 @@ def _every(command: bytes, t0: float, t1: float, period: float = 0.05) -> list[t
 
 
 def _run(serial: list[tuple[float, bytes]], duration: float) -> Recording:
-    trace = Trace(duration=duration, serial=sorted(serial, key=lambda w: w[0]),
-                  encoders={"left": STILL, "right": STILL})
-    recording = record(trace)
-    report = compare(recording)
-    assert report.mismatches == [], "\n".join(str(m) for m in report.mismatches[:10])
-    return recording
-
-
-def _ticks(recording: Recording) -> list[tuple[float, dict]]:
-    """(its millis() in s, the globals after it) of each control tick."""
-    return [(ev.arg / 1000.0, ev.after) for ev in recording.events if ev.kind == "tick"]
-
-
-def _lines(recording: Recording, prefix: bytes) -> list[bytes]:
-    return [line for line in recording.tx.split(b"\r\n") if line.startswith(prefix)]
+    return recorded(Trace(duration=duration, serial=sorted(serial, key=lambda w: w[0]),
+                          encoders={"left": STILL, "right": STILL}))
 
 
 def _driven(ticks: list[tuple[float, dict]], t0: float, t1: float) -> bool:
@@ -72,14 +60,14 @@ def test_a_command_streamed_from_switch_on_moves_nothing_until_neutral(command: 
     neutral = b"ppm:1500,1500,1500,1500,1500,1500,1500,1500," if command.startswith(b"ppm") else NEUTRAL
     rec = _run([*_every(command + b"\n", 0.01, 1.0), (1.0, neutral + b"\n"),
                 *_every(command + b"\n", 1.2, 2.0)], 2.2)
-    ticks = _ticks(rec)
+    ticks = tick_states(rec)
     assert not _driven(ticks, 0.0, 1.05)
     assert _driven(ticks, 1.2, 1.35)
-    errors = _lines(rec, b"ERR:")
+    errors = board_lines(rec, b"ERR:")
     refused = errors[:errors.index(b"ERR:fault")] if b"ERR:fault" in errors else errors
     assert len(refused) >= 15 and set(refused) == {b"ERR:neutral"}
-    assert _lines(rec, b"EVT:NOT_NEUTRAL") == [b"EVT:NOT_NEUTRAL"]          # once a wait
-    assert _lines(rec, b"EVT:NEUTRAL") == [b"EVT:NEUTRAL"]
+    assert board_lines(rec, b"EVT:NOT_NEUTRAL") == [b"EVT:NOT_NEUTRAL"]          # once a wait
+    assert board_lines(rec, b"EVT:NEUTRAL") == [b"EVT:NEUTRAL"]
     waited = [after["needNeutral"] for t, after in ticks]
     assert waited[0] == 1 and waited[-1] == 0
 
@@ -97,7 +85,7 @@ def test_a_framed_command_is_refused_with_a_nak_and_the_state_is_in_tlm() -> Non
     states = [int(line.split(":", 1)[1].split("#")[0].split(",")[16])
               for line in text.split("\r\n") if "TLM:" in line]
     assert states[0] == 1 and states[-1] == 0 and 1 in states[:5]
-    assert _driven(_ticks(rec), 0.75, 1.0)
+    assert _driven(tick_states(rec), 0.75, 1.0)
 
 
 def test_a_motion_command_inside_the_hold_restarts_it() -> None:
@@ -105,10 +93,10 @@ def test_a_motion_command_inside_the_hold_restarts_it() -> None:
     stood NEUTRAL_TICKS ticks), and the wait starts over."""
     rec = _run([(0.01, NEUTRAL + b"\n"), (0.04, FORWARD + b"\n"), (0.3, FORWARD + b"\n"),
                 (0.5, NEUTRAL + b"\n"), (0.7, FORWARD + b"\n")], 1.0)
-    ticks = _ticks(rec)
+    ticks = tick_states(rec)
     assert not _driven(ticks, 0.0, 0.55)
     assert _driven(ticks, 0.7, 0.85)
-    assert _lines(rec, b"ERR:")[:2] == [b"ERR:neutral", b"ERR:neutral"]
+    assert board_lines(rec, b"ERR:")[:2] == [b"ERR:neutral", b"ERR:neutral"]
 
 
 @pytest.mark.parametrize("cause", ["watchdog", "estop_reset", "ppm_lost"])
@@ -132,12 +120,12 @@ def test_after_a_stop_the_board_needs_neutral_again(cause: str) -> None:
         resume = 0.55
     writes += [*_every(go, resume, resume + 0.6), (resume + 0.6, stop), (resume + 0.8, go)]
     rec = _run(writes, resume + 1.0)
-    ticks = _ticks(rec)
+    ticks = tick_states(rec)
     assert _driven(ticks, 0.32, 0.39)
     assert not _driven(ticks, resume, resume + 0.65)
     assert _driven(ticks, resume + 0.8, resume + 0.95)
-    assert _lines(rec, b"EVT:NOT_NEUTRAL") == [b"EVT:NOT_NEUTRAL"]
-    assert set(_lines(rec, b"ERR:")) == {b"ERR:neutral"}
+    assert board_lines(rec, b"EVT:NOT_NEUTRAL") == [b"EVT:NOT_NEUTRAL"]
+    assert set(board_lines(rec, b"ERR:")) == {b"ERR:neutral"}
 
 
 def test_five_seconds_without_neutral_is_the_neutral_fault_until_neutral() -> None:
@@ -146,10 +134,10 @@ def test_five_seconds_without_neutral_is_the_neutral_fault_until_neutral() -> No
     it and the chair drives."""
     rec = _run([*_every(FORWARD + b"\n", 0.01, 5.6, 0.1), (5.6, NEUTRAL + b"\n"),
                 (5.8, FORWARD + b"\n")], 6.0)
-    ticks = _ticks(rec)
+    ticks = tick_states(rec)
     faulted = [t for t, after in ticks if after["neutralFault"]]
     assert faulted and 5.0 <= faulted[0] <= 5.1 + C.CONTROL_PERIOD_MS / 1000
-    assert _lines(rec, b"EVT:DEFLECTED") == [b"EVT:DEFLECTED"]
+    assert board_lines(rec, b"EVT:DEFLECTED") == [b"EVT:DEFLECTED"]
     assert not _driven(ticks, 0.0, 5.65)
     assert ticks[-1][1]["neutralFault"] == 0 and _driven(ticks, 5.8, 5.95)
 
@@ -159,5 +147,5 @@ def test_the_seed_era_hosts_zero_first_then_drive() -> None:
     commands at 100 Hz with no line end: it drives, nothing refused."""
     writes = [(0.01, b"rp0.0,lp0.0,\n"), *_every(b"rp03.00,lp03.00,", 2.0, 2.1, 0.01)]
     rec = _run(writes, 2.2)
-    assert _lines(rec, b"ERR:") == [] and _lines(rec, b"EVT:NOT_NEUTRAL") == []
-    assert _driven(_ticks(rec), 2.0, 2.15)
+    assert board_lines(rec, b"ERR:") == [] and board_lines(rec, b"EVT:NOT_NEUTRAL") == []
+    assert _driven(tick_states(rec), 2.0, 2.15)

@@ -13,23 +13,15 @@ from collections.abc import Iterator
 import pytest
 
 import wcdrive
+from tests.support.pty_chair import chair_on_a_pty
 from wcdrive.boards.sim_board import SimulatedBoard
 from wcdrive.host.wheelchair import Wheelchair
-from wcdrive.transports.pty_bridge import PtyBridge
 
 
 @pytest.fixture
 def rig() -> Iterator[tuple[SimulatedBoard, Wheelchair]]:
-    board = SimulatedBoard(speed=2.0)
-    bridge = PtyBridge(board.start(), on_open=board.dtr).start()
-    try:
-        chair = wcdrive.connect(bridge.device)
-        assert isinstance(chair, Wheelchair)
-        with chair:
-            yield board, chair
-    finally:
-        bridge.close()
-        board.close()
+    with chair_on_a_pty(speed=2.0) as pair:
+        yield pair
 
 
 def _until(what, timeout: float = 3.0) -> bool:

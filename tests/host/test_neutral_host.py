@@ -12,25 +12,16 @@ from collections.abc import Iterator
 
 import pytest
 
-import wcdrive
+from tests.support.pty_chair import chair_on_a_pty
 from wcdrive.boards.sim_board import SimulatedBoard
 from wcdrive.errors import WcdriveNeutralError
 from wcdrive.host.wheelchair import Wheelchair
-from wcdrive.transports.pty_bridge import PtyBridge
 
 
 @pytest.fixture
 def rig() -> Iterator[tuple[SimulatedBoard, Wheelchair]]:
-    board = SimulatedBoard()
-    bridge = PtyBridge(board.start(), on_open=board.dtr).start()
-    try:
-        chair = wcdrive.connect(bridge.device)
-        assert isinstance(chair, Wheelchair)
-        with chair:
-            yield board, chair
-    finally:
-        bridge.close()
-        board.close()
+    with chair_on_a_pty() as pair:
+        yield pair
 
 
 def _drive(chair: Wheelchair, seconds: float) -> None:

@@ -1,0 +1,28 @@
+"""A simulated board behind a pty, opened as a program opens a real chair: the host
+tests' rig."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+import wcdrive
+from wcdrive.boards.sim_board import SimulatedBoard
+from wcdrive.host.wheelchair import Wheelchair
+from wcdrive.transports.pty_bridge import PtyBridge
+
+
+@contextmanager
+def chair_on_a_pty(speed: float = 1.0) -> Iterator[tuple[SimulatedBoard, Wheelchair]]:
+    """(the board, the chair ``wcdrive.connect`` opened on its pty, which resets the
+    board as DTR does); both closed at the end."""
+    board = SimulatedBoard(speed=speed)
+    bridge = PtyBridge(board.start(), on_open=board.dtr).start()
+    try:
+        chair = wcdrive.connect(bridge.device)
+        assert isinstance(chair, Wheelchair)
+        with chair:
+            yield board, chair
+    finally:
+        bridge.close()
+        board.close()
