@@ -41,6 +41,11 @@ class InhibitChange:
         """The change's cycle at ``f_cpu``."""
         return round(self.at * f_cpu)
 
+    def applied_to(self, bits: int) -> int:
+        """``bits`` (bit 0 input 1, bit 1 input 2) with this change made."""
+        mask = 1 << (self.number - 1)
+        return bits | mask if self.active else bits & ~mask
+
 
 def active_bits(changes: Iterable[InhibitChange], t: float) -> int:
     """The inputs active at ``t`` s by ``changes`` (in any order; each input starts
@@ -49,6 +54,5 @@ def active_bits(changes: Iterable[InhibitChange], t: float) -> int:
     for change in sorted(changes, key=lambda c: c.at):
         if change.at > t:
             break
-        mask = 1 << (change.number - 1)
-        bits = bits | mask if change.active else bits & ~mask
+        bits = change.applied_to(bits)
     return bits

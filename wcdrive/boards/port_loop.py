@@ -37,6 +37,7 @@ board behind ``wcsim://`` and the pty (small steps paced to the wall clock).
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections import deque
 from collections.abc import Callable, Sequence
@@ -54,7 +55,7 @@ from wcdrive.avr.timer0 import (
     storm_window,
 )
 from wcdrive.avr.uart import UART_BYTE_CYCLES
-from wcdrive.boards.inhibits import InhibitChange, active_bits, input_number
+from wcdrive.boards.inhibits import InhibitChange, input_number
 from wcdrive.firmware.eeprom import ReadyInterrupt
 from wcdrive.firmware.final_control import Firmware
 from wcdrive.firmware.quadrature import QuadratureDecoder
@@ -197,8 +198,10 @@ class PortLoop:
         self._wire_free = 0
         self.output: list[tuple[int, bytes]] = [(0, self.fw.boot_output())]
         self.faults = tuple(faults)
-        #: The inhibit inputs' timeline (``set_inhibit`` adds to it).
-        self.inhibits = list(inhibits)
+        #: The inhibit inputs active now (bit 0 input 1, bit 1 input 2), and their
+        #: changes still to come, by time (``set_inhibit`` adds to them).
+        self.inhibit_bits = 0
+        self._inhibits_due = sorted(inhibits, key=lambda c: c.at)
         self._scale = plant.p.counts_per_rev / (2.0 * math.pi)
         self._encoders = {side: _Encoder(side, self._wire(side)) for side in SIDES}
         self._left, self._right = self._encoders["left"], self._encoders["right"]
@@ -220,7 +223,8 @@ class PortLoop:
         """Inhibit input ``number`` (1 the charger, 2 the seat) active (its pin LOW) or
         released from cycle ``at`` (default: now) on."""
         when = self.cycle if at is None else at
-        self.inhibits.append(InhibitChange(when / F_CPU, input_number(number), active))
+        bisect.insort(self._inhibits_due, InhibitChange(when / F_CPU, input_number(number), active),
+                      key=lambda c: c.at)
 
     def take_output(self) -> list[tuple[int, bytes]]:
         """What the firmware sent since the last take, as (cycle, bytes)."""
@@ -354,6 +358,13 @@ class PortLoop:
         """Whether the storm guard masks an encoder now."""
         return bool(self._left.decoder.storm or self._right.decoder.storm)
 
+    def _inhibits_at(self, cycle: int) -> int:
+        """``inhibit_bits`` once the changes due by ``cycle`` are made."""
+        due = self._inhibits_due
+        while due and due[0].at <= cycle / F_CPU:
+            self.inhibit_bits = due.pop(0).applied_to(self.inhibit_bits)
+        return self.inhibit_bits
+
     def _tick(self, fw: Firmware, overflow: int, millis: int,
               on_tick: Callable[[float], None] | None) -> None:
         """The control tick at ``overflow``: the plant brought to it, the latched counts
@@ -364,7 +375,7 @@ class PortLoop:
         dl, dr = left.decoder, right.decoder
         out = fw.tick(millis, left.count(true_l), right.count(true_r), dl.illegal, dr.illegal, None,
                       int(dl.storm), int(dr.storm),
-                      inhibit=active_bits(self.inhibits, overflow / F_CPU) if self.inhibits else 0)
+                      inhibit=self._inhibits_at(overflow))
         s = fw.state
         self.plant.set_drive(s.pwmL, s.dirL, s.pwmR, s.dirR)
         self.plant.set_brake(bool(s.brakeReleased))

@@ -82,9 +82,8 @@ class SimulatedBoard(ThreadedBoard):
         """Pulls inhibit input ``name`` ("charger" or "seat", or 1, 2: ``wcdrive.boards.inhibits``)
         low (``active``) or lets it go, from now on: what a charger plugged in or a seat
         switch does to the board's pin."""
-        number = input_number(name)
         with self._lock:
-            self.loop.set_inhibit(number, active)
+            self.loop.set_inhibit(input_number(name), active)
 
     def _dtr_reset(self) -> None:
         self.loop.reset()
