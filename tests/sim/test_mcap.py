@@ -125,16 +125,20 @@ def test_a_connected_chair_records_mcap(tmp_path: Path) -> None:
 
     path = tmp_path / "run.mcap"
     with wcdrive.connect("sim://?speed=4", record=str(path)) as chair:
-        start = time.monotonic()
+        start, recoveries = time.monotonic(), 0
         while time.monotonic() - start < 1.5:
             try:
                 chair.set_velocity(0.4, 0.0)
             except wcdrive.WcdriveNeutralError:
                 # A host stall past the watchdog (125 ms here, at speed 4, on a loaded
                 # machine) stops the board, which then wants neutral: recover as a
-                # program would.
+                # program would, and drive 1.5 s again, so that the window compared
+                # below is a steady drive, not the stop and the new start.
+                recoveries += 1
+                assert recoveries <= 3, "the host kept stalling past the watchdog"
                 chair.stop()
                 chair.wait_for_neutral()
+                start = time.monotonic()
             time.sleep(0.02)
     by_topic: dict[str, list] = defaultdict(list)
     with AnyReader([path]) as reader:
