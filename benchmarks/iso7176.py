@@ -167,7 +167,7 @@ def stop_scenario(grade: Grade, direction: str, speed: float, stop: str, parked_
     segments = (Segment("cmdvel", (speed, 0.0), drive_s(speed)), Segment(kind, (), parked_s + ALLOWANCE_S))
     return Scenario(f"iso7176_3_{grade.label}_{direction}_{speed:g}_{kind}", "ISO 7176-3-style stop",
                     segments, settle_s=0.0, chair={"parking_brake": True} if brake else {},
-                    terrain=grade.terrain(direction))
+                    board_params={"brake_fitted": 1.0} if brake else {}, terrain=grade.terrain(direction))
 
 
 def figures(result: SimResult, parked_s: float, wall_s: float) -> Figures:

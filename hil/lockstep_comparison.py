@@ -146,19 +146,19 @@ def compare(recording: Recording) -> Report:
                                for offset in offsets[(side, k)]):
                         mismatches.append(Mismatch(i, ticks, f"{what} {side}",
                                                    "decoder disagrees", str(value)))
-            # The inhibit inputs the tick read: what the trace put on the pins between the
-            # tick's entry and its exit.
-            inhibit = int(ev.after["inhibitTick"])
+            # The input pins the tick read (the inhibit inputs, the brake's status): what
+            # the trace put on the pins between the tick's entry and its exit.
+            inputs = int(ev.after["inhibitTick"]) | int(ev.after["brakeStatusTick"]) << 2
             read = (active_bits(inhibits, ev.cycle / F_CPU), active_bits(inhibits, exit_cycle / F_CPU))
-            if inhibit not in read:
-                mismatches.append(Mismatch(i, ticks, "inhibitTick", "the trace's pins disagree",
-                                           str(inhibit)))
+            if inputs not in read:
+                mismatches.append(Mismatch(i, ticks, "inhibitTick, brakeStatusTick",
+                                           "the trace's pins disagree", str(inputs)))
             # freeRam is measured by loop() just before the call: the state at entry.
             before = events[i - 1].after if i > 0 else recording.initial
             tx += fw.tick(ev.arg, latched["encTickL"], latched["encTickR"], latched["illTickL"],
                           latched["illTickR"], free_ram=int(before["freeRam"]),
                           storm_l=latched["stormTickL"], storm_r=latched["stormTickR"],
-                          rx_lost=int(ev.after["rxLostTick"]), inhibit=inhibit)
+                          rx_lost=int(ev.after["rxLostTick"]), inputs=inputs)
         # The EEPROM-ready interrupts that came before the state was read: their writes
         # touch nothing the event does, so their order within it does not matter.
         while w < len(writes) and writes[w] < ev.after_cycle:

@@ -22,7 +22,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from wcdrive.boards.simavr.mega_pins import INHIBIT_PINS
+from wcdrive.boards.simavr.mega_pins import INPUT_PINS
 from wcdrive.boards.simavr.virtual_mega import F_CPU, RxLoss, VirtualMega
 from wcdrive.firmware.state import FLOAT_FIELDS, INPUT_FIELDS, INT_FIELDS
 from wcdrive.hil.traces import Trace
@@ -188,7 +188,7 @@ def record(trace: Trace, elf: str | Path | None = None) -> Recording:
         for side, train in trace.encoders.items():
             mega.encoder_edges(side, train)
         for t, number, active in trace.inhibits:
-            mega.set_pin(INHIBIT_PINS[number], 0 if active else 1, at=round(t * F_CPU))
+            mega.set_pin(INPUT_PINS[number], 0 if active else 1, at=round(t * F_CPU))
         recorder = Recorder(mega)
         for t, cause in sorted(trace.resets):
             recorder.run_until(round(t * F_CPU))

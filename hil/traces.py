@@ -13,7 +13,9 @@ turns the TLM lines on and from then on refuses unframed lines, but for stops an
 estop), get/set of every parameter in and out of range (and, in a quarter of the traces,
 ``feedback_form`` 1 from the start: the feedback lines' ros2_control tail), estop and reset;
 the inhibit inputs pulled low and let go (a third of the traces: glitches under the
-debounce, and inputs held 0.1 to 1.5 s); bursts of
+debounce, and inputs held 0.1 to 1.5 s); ``brake_fitted`` 1 from the start (a third of the
+traces: the brake engaged at rest, released under the hold), and in half of those the
+brake driver's status pulled low (coil faults); bursts of
 20 to 150 commands back to back (the output budget is spent), floods of long ``set:``
 frames at top speed (``flood``: loop() falls behind, received bytes are lost and
 accounted for) and encoder storms of 60,000 to 500,000 edges/s (the storm guard, the
@@ -52,6 +54,13 @@ INHIBIT_EVERY = 3
 #: comes (chosen by the CRC of the writes, not drawn: every seed draws what it drew before).
 NEUTRAL_FIRST_EVERY = 4
 NEUTRAL_LEAD_S = 0.12
+#: The parameters ``param_command`` draws from: those before ``brake_fitted``, so that a
+#: seed draws what it drew before it came (``brake_fitted`` is set, out of range and in,
+#: at the start of the traces that fit the brake).
+DRAWN_PARAMS = tuple(p for p in PARAMS if p.name != "brake_fitted")
+#: One trace in this many sets ``brake_fitted`` 1 first; half of those pull the brake
+#: driver's status low now and then (``brake_status_changes``).
+BRAKE_FITTED_EVERY = 3
 
 __all__ = ["FIRST_COMMAND_S", "MAX_TRACE_EDGE_RATE", "Draw", "HypothesisDraw", "RandomDraw", "Trace",
            "generate_trace"]
@@ -154,7 +163,7 @@ def malformed_command(draw: Draw) -> bytes:
 
 def param_command(draw: Draw) -> bytes:
     """``get:``/``set:`` of any parameter: in range, out of range, malformed, unknown."""
-    p = draw.choice(PARAMS)
+    p = draw.choice(DRAWN_PARAMS)
     name = p.name if draw.boolean(0.9) else draw.choice(["kp", "kp_x", "", "KP_L", p.name + "_"])
     if draw.boolean(0.25):
         return f"get:{name}".encode()
@@ -394,7 +403,28 @@ def generate_trace(draw: Draw, duration: float) -> Trace:
     crc = zlib.crc32(b"".join(data for _, data in serial))
     if getattr(draw, "inhibits", True) and trace.profile is None and crc % INHIBIT_EVERY == 2:
         trace.inhibits = inhibit_changes(np.random.default_rng(crc), duration)
+    # A fitted brake, from the same CRC (a third of the traces, not a profile's: the hold's
+    # rules want their duties), and its coil's status in half of those.
+    if (getattr(draw, "brakes", True) and trace.profile is None
+            and (crc // INHIBIT_EVERY) % BRAKE_FITTED_EVERY == 1):
+        trace.serial.insert(0, (FIRST_COMMAND_S, b"set:brake_fitted=2\nset:brake_fitted=1\n"))
+        if (crc >> 8) % 2:
+            trace.inhibits = sorted(trace.inhibits + brake_status_changes(np.random.default_rng(crc + 1),
+                                                                          duration))
     return trace
+
+
+def brake_status_changes(rng: np.random.Generator, duration: float) -> list[tuple[float, int, bool]]:
+    """One or two pulls of the brake driver's status low (input 3 of a trace), each let go
+    after 0.01 to 1.5 s: a glitch under BRAKE_STATUS_TICKS, or a coil fault."""
+    changes: list[tuple[float, int, bool]] = []
+    for _ in range(int(rng.integers(1, 3))):
+        start = float(rng.uniform(0.05, max(0.06, duration - 0.1)))
+        held = float(rng.choice([rng.uniform(0.01, 0.06), rng.uniform(0.1, 1.5)]))
+        changes.append((round(start, 4), 3, True))
+        if start + held < duration:
+            changes.append((round(start + held, 4), 3, False))
+    return sorted(changes)
 
 
 def inhibit_changes(rng: np.random.Generator, duration: float) -> list[tuple[float, int, bool]]:

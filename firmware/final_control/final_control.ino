@@ -249,7 +249,21 @@ bool holding = false;                      // parked, the hold drives a wheel (b
 int32_t holdRefL = 0, holdRefR = 0;
 int32_t holdStepL = 0, holdStepR = 0;
 bool holdRollaway = false;                 // EVT:ROLLAWAY sent for this hold, or it began braking hardest
-volatile bool brakeReleased = false;       // WC_PIN_BRAKE HIGH: only while the PID drives the motors (volatile: kept for the harness)
+volatile bool brakeReleased = false;       // WC_PIN_BRAKE HIGH (volatile: kept for the harness)
+// The parking brake with brake_fitted 1 (docs/safety.md, "The parking brake"): engaged
+// WC_BRAKE_ACTIVE_TICKS after the chair parks (at once on a fault), the motors then
+// unpowered; released only for a motion asked for, the hold driving first. Without a
+// brake (brake_fitted 0) WC_PIN_BRAKE is LOW whenever the PID does not drive.
+#define BRAKE_ENGAGED 0     // the pin LOW, the brake holds: parked, the motors unpowered
+#define BRAKE_PRELOAD 1     // a motion asked for: the hold drives, the pin still LOW
+#define BRAKE_RELEASING 2   // the pin HIGH, the hold on, until the brake has let go
+#define BRAKE_RELEASED 3    // the PID drives; parked, the hold brakes WC_BRAKE_ACTIVE_TICKS
+#define BRAKE_ENGAGING 4    // the pin LOW, the hold (or the PID) on, until the brake holds
+uint8_t brakeFitted = WC_BRAKE_FITTED;      // runtime parameter brake_fitted
+uint8_t brakePhase = BRAKE_ENGAGED;         // as from reset: the pin an input, pulled down
+uint8_t brakeTicks = 0;                     // ticks in this phase (BRAKE_RELEASED: parked)
+uint8_t brakeStatusTick = 0;                // 1: WC_PIN_BRAKE_STATUS read LOW this tick
+uint8_t brakeStatusTicks = 0;               // ticks in a row it has, the brake fitted
 uint8_t overspeedTicksL = 0, overspeedTicksR = 0;   // ticks in a row overspeeding (overspeeding)
 float overspeedFromL = 0.0f, overspeedFromR = 0.0f; // the speed the PID ran on before that run began
 bool limitLatched = false;                 // the chair's limit halted it: motion refused (ERR:limit) until a stop
@@ -293,6 +307,9 @@ uint8_t inhibitPending = 0;                 // events to send: bit 0/1 input 1 o
 #define FAULT_DRIVER 0x40
 #define FAULT_MOTOR_L 0x80
 #define FAULT_MOTOR_R 0x100
+#define FAULT_BRAKE_OPEN 0x200
+#define FAULT_BRAKE_SHORT 0x400
+#define FAULTS_BRAKE (FAULT_BRAKE_OPEN | FAULT_BRAKE_SHORT)
 // The faults after which a wheel's encoder is no longer trusted: its own, and the driver's.
 #define FAULTS_UNTRUSTED_L (FAULT_STALL_L | FAULT_REVERSED_L | FAULT_IMPLAUSIBLE_L | FAULT_MOTOR_L | FAULT_DRIVER)
 #define FAULTS_UNTRUSTED_R (FAULT_STALL_R | FAULT_REVERSED_R | FAULT_IMPLAUSIBLE_R | FAULT_MOTOR_R | FAULT_DRIVER)
@@ -496,10 +513,12 @@ static const char F_IMPLAUSIBLE_R[] PROGMEM = "ENC_IMPLAUSIBLE_R";
 static const char F_DRIVER[] PROGMEM = "DRIVER_DEAD";
 static const char F_MOTOR_L[] PROGMEM = "MOTOR_L";
 static const char F_MOTOR_R[] PROGMEM = "MOTOR_R";
-#define FAULT_COUNT 9
+static const char F_BRAKE_OPEN[] PROGMEM = "BRAKE_OPEN";
+static const char F_BRAKE_SHORT[] PROGMEM = "BRAKE_SHORT";
+#define FAULT_COUNT 11
 static const char* const FAULT_NAMES[FAULT_COUNT] = {
   F_STALL_L, F_STALL_R, F_REVERSED_L, F_REVERSED_R, F_IMPLAUSIBLE_L, F_IMPLAUSIBLE_R, F_DRIVER,
-  F_MOTOR_L, F_MOTOR_R,
+  F_MOTOR_L, F_MOTOR_R, F_BRAKE_OPEN, F_BRAKE_SHORT,
 };
 
 // One EVT:FAULT,<name> line per fault bit set.
@@ -677,6 +696,72 @@ static float inhibitShare() {
   if ((engaged & 1) && WC_INHIBIT_1_SPEED < share) share = WC_INHIBIT_1_SPEED;
   if ((engaged & 2) && WC_INHIBIT_2_SPEED < share) share = WC_INHIBIT_2_SPEED;
   return share;
+}
+
+// A brake coil fault (brake_fitted 1): the brake driver's status LOW for
+// WC_BRAKE_STATUS_TICKS ticks in a row. The switch flags an open load while off (the
+// brake engaged) and an overload while on (released), so the pin says which.
+static uint16_t brakeCoilFault() {
+  if (!brakeFitted || !brakeStatusTick) {
+    brakeStatusTicks = 0;
+    return 0;
+  }
+  if (++brakeStatusTicks < WC_BRAKE_STATUS_TICKS) return 0;
+  brakeStatusTicks = 0;
+  return brakeReleased ? FAULT_BRAKE_SHORT : FAULT_BRAKE_OPEN;
+}
+
+// The parking brake's phase for this tick (brake_fitted 1), given whether the chair
+// parks; sets brakeReleased, the pin's level. Parked WC_BRAKE_ACTIVE_TICKS, or at once on
+// a fault, the pin goes LOW; WC_BRAKE_ENGAGE_TICKS later the brake holds. A motion asked
+// for (not parked, no fault) first drives the hold WC_BRAKE_PRELOAD_TICKS, then sets the
+// pin HIGH and waits WC_BRAKE_RELEASE_TICKS. Returns whether the chair stays parked: as
+// asked, or under the hold while the brake lets go.
+static bool brakeStep(bool park) {
+  bool drive = !park && faultFlags == 0;
+  switch (brakePhase) {
+    case BRAKE_RELEASED:
+      if (faultFlags != 0 || (park && ++brakeTicks >= WC_BRAKE_ACTIVE_TICKS)) {
+        brakePhase = BRAKE_ENGAGING;
+        brakeTicks = 0;
+      } else if (!park) {
+        brakeTicks = 0;
+      }
+      break;
+    case BRAKE_ENGAGING:
+      if (drive) {   // the hold (or the PID) still drives: let go at once
+        brakePhase = BRAKE_RELEASING;
+        brakeTicks = 0;
+      } else if (++brakeTicks >= WC_BRAKE_ENGAGE_TICKS) {
+        brakePhase = BRAKE_ENGAGED;
+      }
+      break;
+    case BRAKE_ENGAGED:
+      if (drive) {
+        brakePhase = BRAKE_PRELOAD;
+        brakeTicks = 0;
+      }
+      break;
+    case BRAKE_PRELOAD:
+      if (!drive) {
+        brakePhase = BRAKE_ENGAGED;
+      } else if (++brakeTicks >= WC_BRAKE_PRELOAD_TICKS) {
+        brakePhase = BRAKE_RELEASING;
+        brakeTicks = 0;
+      }
+      break;
+    default:   // BRAKE_RELEASING
+      if (faultFlags != 0) {
+        brakePhase = BRAKE_ENGAGING;
+        brakeTicks = 0;
+      } else if (!drive || ++brakeTicks >= WC_BRAKE_RELEASE_TICKS) {
+        brakePhase = BRAKE_RELEASED;
+        brakeTicks = 0;
+      }
+      break;
+  }
+  brakeReleased = brakePhase == BRAKE_RELEASING || brakePhase == BRAKE_RELEASED;
+  return park || (drive && brakePhase != BRAKE_RELEASED);
 }
 
 // What one wheel's encoder showed over the interval that just ended, driven at
@@ -997,10 +1082,10 @@ static void sendTelemetry(uint32_t now) {
                   (ppmLost ? 8 : 0) | (parked ? 16 : 0) | (uint8_t)(pivotPhase << 5) |
                   (faultFlags != 0 ? 128 : 0);
   // state: bit 0 waiting for neutral (motion refused), 1 the neutral fault, 2 driving
-  // inhibited, 3 the speed capped by an inhibit input
+  // inhibited, 3 the speed capped by an inhibit input, 4 a fitted brake applied
   uint8_t engaged = inhibitEngaged();
   uint8_t state = (needNeutral ? 1 : 0) | (neutralFault ? 2 : 0) | ((engaged & INHIBIT_STOP_MASK) ? 4 : 0) |
-                  ((engaged & (uint8_t)~INHIBIT_STOP_MASK) ? 8 : 0);
+                  ((engaged & (uint8_t)~INHIBIT_STOP_MASK) ? 8 : 0) | (brakeFitted && !brakeReleased ? 16 : 0);
   const uint32_t fields[] = {
     now, rxCount, lastSeq, pwmL, pwmR, dirL, dirR, illTickL, illTickR, flags, rejectedCount,
     crcRejected, freeRam, faultFlags, rxLostTick, lateTicks, state,
@@ -1055,6 +1140,7 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
     rxLostTick = rxLost;
   }
   inhibitTick = (digitalRead(WC_PIN_INHIBIT_1) == LOW ? 1 : 0) | (digitalRead(WC_PIN_INHIBIT_2) == LOW ? 2 : 0);
+  brakeStatusTick = digitalRead(WC_PIN_BRAKE_STATUS) == LOW ? 1 : 0;
   encTickL = countL + stepsL;
   encTickR = countR + stepsR;
   uint32_t illNowL = illL + illStepsL;
@@ -1137,6 +1223,7 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
       faults = wheelFaults(checkL, FAULT_STALL_L, FAULT_REVERSED_L, FAULT_IMPLAUSIBLE_L, FAULT_MOTOR_L) |
                wheelFaults(checkR, FAULT_STALL_R, FAULT_REVERSED_R, FAULT_IMPLAUSIBLE_R, FAULT_MOTOR_R);
     }
+    if (faults == 0) faults = brakeCoilFault();
     if (faults != 0) {
       faultFlags = faults;
       emergencyHalt();
@@ -1221,6 +1308,9 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
       goalR *= k;
     }
   }
+  if (brakeFitted && brakePhase != BRAKE_RELEASED) {
+    goalL = goalR = 0.0f;   // the brake not yet let go: the setpoints wait at zero
+  }
   setpointL = rampToward(setpointL, goalL, maxChange);
   setpointR = rampToward(setpointR, goalR, maxChange);
   // Stopped (target and setpoint zero, no pivot under way), an integral that drives a
@@ -1255,9 +1345,11 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
   bool braked = (!trustedL || fabs(filtVelL) < WC_BRAKE_DONE_SPEED) &&
                 (!trustedR || fabs(filtVelR) < WC_BRAKE_DONE_SPEED);
   // Once the hold is on, the chair stays parked while at rest, moving or not: the hold
-  // (below) keeps it where it stopped.
-  if ((!trustedL && !trustedR) || halt ||
-      (atRest && (holding || braked))) {
+  // (below) keeps it where it stopped. With a brake, the chair stays parked until the
+  // brake has let go (brakeStep).
+  bool park = (!trustedL && !trustedR) || halt || (atRest && (holding || braked));
+  if (brakeFitted) park = brakeStep(park);
+  if (park) {
     parked = true;
     integralL = integralR = 0.0f;
     prevMeasL = filtVelL;
@@ -1300,6 +1392,11 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
     }
     // A wheel whose encoder is not trusted mirrors the healthy wheel's hold, open loop
     // (the same duty against the same motion): on a grade both carry half the chair.
+    // While the brake holds, the motors are unpowered; they hold again after a rollaway
+    // (the brake slips) or a coil fault (it may not hold).
+    if (brakeFitted && brakePhase == BRAKE_ENGAGED && !holdRollaway && (faultFlags & FAULTS_BRAKE) == 0) {
+      errL = errR = 0;
+    }
     holdMotor(WC_PIN_PWM_L, WC_PIN_DIR_L, heldL ? errL : -errR, HIGH, pwmL, dirL);
     holdMotor(WC_PIN_PWM_R, WC_PIN_DIR_R, heldR ? errR : -errL, LOW, pwmR, dirR);
     holding = true;
@@ -1308,8 +1405,9 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
     setMotor(WC_PIN_PWM_R, WC_PIN_DIR_R, outputR, pwmR, dirR);
     holding = false;
   }
-  // The parking brake holds whenever the PID does not drive the motors, and from a fault on.
-  brakeReleased = !parked && faultFlags == 0;
+  // Without a brake fitted, the pin is LOW whenever the PID does not drive the motors,
+  // and from a fault on (brakeStep sets it with one).
+  if (!brakeFitted) brakeReleased = !parked && faultFlags == 0;
   digitalWrite(WC_PIN_BRAKE, brakeReleased ? HIGH : LOW);
 
   bool slow = fabs(filtVelL) < WC_PIVOT_START_SPEED && fabs(filtVelR) < WC_PIVOT_START_SPEED;
@@ -1392,11 +1490,12 @@ static const char* const REASONS[] = {
 };
 
 // Runtime parameters: name, variable, range. The first PARAM_FLOATS are floats;
-// watchdog_ms and feedback_form (the last two) are integers.
-#define PARAM_COUNT 11
+// watchdog_ms, feedback_form and brake_fitted (the last three) are integers.
+#define PARAM_COUNT 12
 #define PARAM_FLOATS 9
 #define PARAM_WATCHDOG 9
 #define PARAM_FEEDBACK_FORM 10
+#define PARAM_BRAKE_FITTED 11
 static const char P_KP_L[] PROGMEM = "kp_l";
 static const char P_KI_L[] PROGMEM = "ki_l";
 static const char P_KD_L[] PROGMEM = "kd_l";
@@ -1408,9 +1507,10 @@ static const char P_MAX_ACCEL[] PROGMEM = "max_accel";
 static const char P_ESTOP_DECEL[] PROGMEM = "estop_decel";
 static const char P_WATCHDOG[] PROGMEM = "watchdog_ms";
 static const char P_FEEDBACK_FORM[] PROGMEM = "feedback_form";
+static const char P_BRAKE_FITTED[] PROGMEM = "brake_fitted";
 static const char* const PARAM_NAMES[PARAM_COUNT] = {
   P_KP_L, P_KI_L, P_KD_L, P_KP_R, P_KI_R, P_KD_R, P_MAX_WHEEL, P_MAX_ACCEL, P_ESTOP_DECEL,
-  P_WATCHDOG, P_FEEDBACK_FORM,
+  P_WATCHDOG, P_FEEDBACK_FORM, P_BRAKE_FITTED,
 };
 static float* const PARAM_VARS[PARAM_FLOATS] = {
   &kpL, &kiL, &kdL, &kpR, &kiR, &kdR, &maxWheel, &maxAccel, &estopDecel,
@@ -1447,6 +1547,8 @@ static void answer(ParseResult r, int32_t seq, uint8_t data) {
       line.println(watchdogMs);
     } else if (replyParam == PARAM_FEEDBACK_FORM) {
       line.println(feedbackForm);
+    } else if (replyParam == PARAM_BRAKE_FITTED) {
+      line.println(brakeFitted);
     } else {
       line.println(*PARAM_VARS[replyParam], 4);
     }
@@ -1738,6 +1840,14 @@ static ParseResult parseSet(uint8_t& data) {
     if (form < 0) return ERR_NUMBER;
     if (form > WC_FEEDBACK_FORM_MAX) return ERR_RANGE;
     feedbackForm = (uint8_t)form;
+  } else if (i == PARAM_BRAKE_FITTED) {
+    int32_t fitted = parseDigits(eq + 1, 4);
+    if (fitted < 0) return ERR_NUMBER;
+    if (fitted > WC_BRAKE_FITTED_MAX) return ERR_RANGE;
+    brakeFitted = (uint8_t)fitted;
+    // the brake's phase from its pin: released, or engaging (it may not hold yet)
+    brakePhase = brakeReleased ? BRAKE_RELEASED : BRAKE_ENGAGING;
+    brakeTicks = 0;
   } else {
     float v;
     ParseResult r = parseNumber(eq + 1, false, v);
@@ -1753,12 +1863,14 @@ static ParseResult parseSet(uint8_t& data) {
 // ---------------------------------------------------------------------------
 // Parameters in EEPROM (protocol/PROTOCOL.md, "Parameters in EEPROM"). The block at
 // WC_EEPROM_PARAMS_ADDR: the layout version (WC_EEPROM_LAYOUT), the 9 float parameters in
-// table order (binary32, little-endian), watchdog_ms (uint16), feedback_form (uint8), then
-// the CRC-16/XMODEM of those 40 bytes (uint16, little-endian): 42 bytes.
+// table order (binary32, little-endian), watchdog_ms (uint16), feedback_form (uint8),
+// brake_fitted (uint8), then the CRC-16/XMODEM of those 41 bytes (uint16, little-endian):
+// 43 bytes.
 // ---------------------------------------------------------------------------
 #define EE_WATCHDOG_AT (1 + 4 * PARAM_FLOATS)
 #define EE_FORM_AT (EE_WATCHDOG_AT + 2)
-#define EE_DATA_BYTES (EE_FORM_AT + 1)
+#define EE_FITTED_AT (EE_FORM_AT + 1)
+#define EE_DATA_BYTES (EE_FITTED_AT + 1)
 #define EE_BLOCK_BYTES (EE_DATA_BYTES + 2)
 static uint8_t eeBlock[EE_BLOCK_BYTES];   // what save writes
 uint8_t eeNext = EE_BLOCK_BYTES;          // the next byte of eeBlock to compare and write
@@ -1815,6 +1927,7 @@ static ParseResult saveParams() {
   for (uint8_t i = 0; i < PARAM_FLOATS; i++) memcpy(eeBlock + 1 + 4 * i, PARAM_VARS[i], 4);
   memcpy(eeBlock + EE_WATCHDOG_AT, &watchdogMs, 2);
   eeBlock[EE_FORM_AT] = feedbackForm;
+  eeBlock[EE_FITTED_AT] = brakeFitted;
   uint16_t crc = eeCrc(eeBlock);
   memcpy(eeBlock + EE_DATA_BYTES, &crc, 2);
   eeNext = 0;
@@ -1832,6 +1945,7 @@ static ParseResult restoreDefaults() {
   estopDecel = WC_EMERGENCY_DECEL;
   watchdogMs = WC_WATCHDOG_MS;
   feedbackForm = WC_FEEDBACK_FORM;
+  brakeFitted = WC_BRAKE_FITTED;
   return PARSE_OK;
 }
 
@@ -1855,7 +1969,8 @@ static void loadParams() {
     why = F("version");
   } else if (crc != eeCrc(b)) {
     why = F("crc");
-  } else if (ms < WC_WATCHDOG_MIN_MS || ms > WC_WATCHDOG_MAX_MS || b[EE_FORM_AT] > WC_FEEDBACK_FORM_MAX) {
+  } else if (ms < WC_WATCHDOG_MIN_MS || ms > WC_WATCHDOG_MAX_MS || b[EE_FORM_AT] > WC_FEEDBACK_FORM_MAX ||
+             b[EE_FITTED_AT] > WC_BRAKE_FITTED_MAX) {
     why = F("range");
   } else {
     for (uint8_t i = 0; i < PARAM_FLOATS; i++) {
@@ -1868,6 +1983,7 @@ static void loadParams() {
     for (uint8_t i = 0; i < PARAM_FLOATS; i++) memcpy(PARAM_VARS[i], b + 1 + 4 * i, 4);
     watchdogMs = ms;
     feedbackForm = b[EE_FORM_AT];
+    brakeFitted = b[EE_FITTED_AT];   // at boot: the brake engaged from reset (BRAKE_ENGAGED)
     sendEvent(F("PARAMS_LOADED"));
   } else {
     line.print(F("EVT:PARAMS_DEFAULT,"));
@@ -2070,6 +2186,7 @@ void setup() {
   setMotor(WC_PIN_PWM_R, WC_PIN_DIR_R, 0.0f, pwmR, dirR);
   pinMode(WC_PIN_INHIBIT_1, INPUT_PULLUP);
   pinMode(WC_PIN_INHIBIT_2, INPUT_PULLUP);
+  pinMode(WC_PIN_BRAKE_STATUS, INPUT_PULLUP);
   pinMode(WC_PIN_ENC_L_A, INPUT);
   pinMode(WC_PIN_ENC_L_B, INPUT);
   pinMode(WC_PIN_ENC_R_A, INPUT);

@@ -87,6 +87,7 @@
 #define WC_PIN_INHIBIT_1 24        // PA2, inhibit input 1 (the charger): INPUT_PULLUP, active LOW (a contact to ground)
 #define WC_PIN_INHIBIT_2 25        // PA3, inhibit input 2 (the seat raised): INPUT_PULLUP, active LOW
 #define WC_PIN_BRAKE 22            // PA0, the parking brake: HIGH releases it; LOW, or an input (at reset: the driver's pull-down), engages it
+#define WC_PIN_BRAKE_STATUS 23     // PA1, the brake driver's status output (a smart power switch's open-drain diagnostic): INPUT_PULLUP; LOW is a coil fault, an open load while the brake is engaged (the switch off) or an overload while it is released (on)
 
 // ---- Fault detection (EVT:FAULT; docs/safety.md) ---------------------------
 #define WC_FAULT_STALL_PWM 26      // duty (10 %) at or above which a turning wheel must show encoder counts (one that stood: FAULT_STALL_PWM_STANDING)
@@ -116,6 +117,14 @@
 #define WC_HW_WATCHDOG 3           // AVR watchdog period (avr/wdt.h WDTO_120MS): a loop() pass that hangs longer resets the board
 #define WC_BRAKE_DONE_SPEED 0.3f   // rad/s: an emergency stop keeps braking until both wheels are slower
 
+// ---- The parking brake, with brake_fitted 1 (docs/safety.md, "The parking brake") ---
+#define WC_BRAKE_FITTED 0          // default of brake_fitted: 0, no brake (PIN_BRAKE still follows the PID: LOW whenever parked or faulted); 1, the firmware engages it at rest and unpowers the motors, releases it under the hold, and watches its coil
+#define WC_BRAKE_ACTIVE_TICKS 1    // control ticks parked, the hold braking, before the brake engages: 1, at the first parked tick (the active braking is the ramp that parks the chair below BRAKE_DONE_SPEED; each tick more lets the hold roll the chair back a few mm on a grade before the brake takes it: 5.4 mm with 2 on a 1:12 climb, 10.9 mm with 6)
+#define WC_BRAKE_ENGAGE_TICKS 2    // control ticks from PIN_BRAKE LOW to the motors unpowered while parked (the brake's engage time; 100 ms against the plant's 50 ms)
+#define WC_BRAKE_PRELOAD_TICKS 1   // control ticks the hold drives, the brake still engaged, before PIN_BRAKE goes HIGH: the hold's current is up before the brake lets go
+#define WC_BRAKE_RELEASE_TICKS 2   // control ticks from PIN_BRAKE HIGH to driving, the hold on meanwhile (the brake's release time; 100 ms against the plant's 50 ms)
+#define WC_BRAKE_STATUS_TICKS 2    // control ticks in a row PIN_BRAKE_STATUS must read LOW, PIN_BRAKE unchanged since the tick before, before a coil fault latches (EVT:FAULT,BRAKE_OPEN with the brake engaged, BRAKE_SHORT released)
+
 // ---- Hill hold and rollaway (parked without a fault; protocol/PROTOCOL.md) ---
 #define WC_HOLD_DEADBAND_COUNTS 10 // encoder counts (1 mm of travel) a held wheel may be off the count it stopped at before the hold drives it back
 #define WC_HOLD_GAIN 1             // hold duty per count of error beyond HOLD_DEADBAND_COUNTS
@@ -137,7 +146,7 @@
 // ---- Parameters in EEPROM (save / defaults; protocol/PROTOCOL.md) ----------
 #define WC_EEPROM_SIZE 4096        // bytes of the ATmega2560's EEPROM, erased to 0xFF
 #define WC_EEPROM_PARAMS_ADDR 0    // EEPROM address of the parameter block
-#define WC_EEPROM_LAYOUT 2         // the block's first byte: its layout version (a blank EEPROM holds 0xFF; 1 was the block before feedback_form)
+#define WC_EEPROM_LAYOUT 3         // the block's first byte: its layout version (a blank EEPROM holds 0xFF; 1 was the block before feedback_form, 2 before brake_fitted)
 
 // ---- Ranges of the runtime parameters (get:/set:; the defaults are the constants above) ---
 #define WC_GAIN_P_MIN 1.0f         // kp_l, kp_r in [GAIN_P_MIN, GAIN_P_MAX] (tests/firmware/test_gain_safety.py: pure integral control oscillates)
@@ -154,5 +163,6 @@
 #define WC_WATCHDOG_MAX_MS 1000    // docs/safety.md: the stopping distance grows with it
 #define WC_FEEDBACK_FORM 0         // default of feedback_form: 0, the feedback line ENC:<l>,<r>,VEL:<l>,<r>,MODE:<m> alone
 #define WC_FEEDBACK_FORM_MAX 1     // feedback_form in [0, FEEDBACK_FORM_MAX]; 1 appends ,r[pn]<|vel r|>,l[pn]<|vel l|> to each unframed feedback line (ros2_control hardware interfaces)
+#define WC_BRAKE_FITTED_MAX 1      // brake_fitted in [0, BRAKE_FITTED_MAX]
 
 #endif

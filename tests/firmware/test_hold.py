@@ -7,7 +7,8 @@ and rollaways) and by tests/sim/test_hill_hold.py."""
 from __future__ import annotations
 
 from wcdrive.firmware import constants as C
-from wcdrive.firmware.control import FAULT_DRIVER, FAULT_STALL_L, control_tick, hold_duty
+from wcdrive.firmware.control import FAULT_DRIVER, FAULT_STALL_L, control_tick
+from wcdrive.firmware.motors import hold_duty
 from wcdrive.firmware.state import FirmwareState
 
 

@@ -273,7 +273,7 @@ PYTHON_ONLY = {"emergencyStop", "faultFlags", "lastTravel", "holdRollaway", "lim
                "haltIntegralR", "haltSetpointL", "haltSetpointR", "needNeutral", "neutralSeen",
                "neutralTicks", "notNeutralSent", "notNeutralPending", "notNeutralTicks", "neutralFault",
                "inhibitTick", "inhibitStable", "inhibitCountL", "inhibitCountR", "inhibitLatched",
-               "inhibitPending", "inhibitOn"}
+               "inhibitPending", "inhibitOn", "brakePhase", "brakeTicks", "brakeStatusTicks"}
 _FIRMWARE = Path(tick_fast.__file__).resolve().parent
 
 
@@ -314,7 +314,8 @@ def c_tick_writes(text: str) -> set[str]:
 
 
 def _sources() -> tuple[dict[str, str], str]:
-    py = {m: (_FIRMWARE / f"{m}.py").read_text() for m in ("control", "motion", "output", "inhibit")}
+    modules = ("control", "motion", "output", "inhibit", "brake", "motors")
+    py = {m: (_FIRMWARE / f"{m}.py").read_text() for m in modules}
     return py, (_FIRMWARE / "csrc" / "tick_fast.c").read_text()
 
 

@@ -255,3 +255,48 @@ def test_the_kernel_brakes_as_the_reference_does(friction: float, torque: float,
     assert fast.pose == pytest.approx(ref.pose, abs=1e-12)
     assert (fast.left.angle, fast.right.angle) == pytest.approx((ref.left.angle, ref.right.angle), abs=1e-12)
     assert (fast.left.speed, fast.right.speed) == pytest.approx((ref.left.speed, ref.right.speed), abs=1e-9)
+
+
+@BACKENDS
+@pytest.mark.parametrize("coil", ["open", "short"])
+def test_a_faulty_coil_cannot_release_the_brake(use_kernel: bool, coil: str) -> None:
+    """Motors dead, facing down 4 degrees, the pin driven high with the coil open or
+    shorted: the spring keeps the brake engaged, so the chair stays put; released
+    first and the coil failing then, the brake drops after its engage delay (50 ms)
+    and stops the chair. Whole again, the pin high releases it."""
+    plant = Plant(BRAKED, terrain=Terrain(4.0, 0.0), use_kernel=use_kernel)
+    _roll_freely(plant)
+    plant.set_brake_coil(coil)
+    plant.set_brake(True)
+    plant.advance(1000)
+    assert plant.brake_engaged and plant.left.angle == 0.0
+    plant.set_brake_coil(None)
+    plant.advance(51)
+    assert not plant.brake_engaged
+    plant.advance(500)
+    assert plant.axle_velocity()[0] > 0.1
+    plant.set_brake_coil(coil)
+    plant.advance(49)
+    assert not plant.brake_engaged
+    plant.advance(1)
+    assert plant.brake_engaged
+
+
+@pytest.mark.parametrize(("coil", "pin_high", "low"), [
+    (None, False, False), (None, True, False),
+    ("open", False, True), ("open", True, False),       # an open load is flagged while off
+    ("short", False, False), ("short", True, True),     # an overload while on
+])
+def test_the_drivers_status_flags_an_open_coil_off_and_a_short_on(coil: str | None, pin_high: bool,
+                                                                   low: bool) -> None:
+    """The brake driver's status (a smart switch's diagnostic) against the coil and the
+    pin; a chair without a brake is an open load on the driver."""
+    plant = Plant(BRAKED)
+    plant.set_brake_coil(coil)
+    plant.set_brake(pin_high)
+    assert plant.brake_status_low is low
+    bare = Plant()
+    bare.set_brake(pin_high)
+    assert bare.brake_status_low is (not pin_high)
+    with pytest.raises(ValueError, match="brake coil fault"):
+        plant.set_brake_coil("melted")

@@ -107,7 +107,7 @@ def test_board_params_are_sent_first_and_checked(tmp_path: Path) -> None:
 def test_every_bundled_fault_kind_has_a_scenario() -> None:
     kinds = {f.kind for name in FAULT_SCENARIOS for f in scenario.load(name).faults}
     assert kinds == {"encoder_cut", "encoder_reversed", "encoder_noise", "wheel_locked", "motor_dead",
-                     "reset", "link_cut"}
+                     "brake_open", "brake_short", "reset", "link_cut"}
     for name in FAULT_SCENARIOS:
         assert name == "fault_silence" or scenario.load(name).faults
 

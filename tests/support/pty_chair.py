@@ -9,14 +9,16 @@ from contextlib import contextmanager
 import wcdrive
 from wcdrive.boards.sim_board import SimulatedBoard
 from wcdrive.host.wheelchair import Wheelchair
+from wcdrive.plant import ChairParams
 from wcdrive.transports.pty_bridge import PtyBridge
 
 
 @contextmanager
-def chair_on_a_pty(speed: float = 1.0) -> Iterator[tuple[SimulatedBoard, Wheelchair]]:
-    """(the board, the chair ``wcdrive.connect`` opened on its pty, which resets the
-    board as DTR does); both closed at the end."""
-    board = SimulatedBoard(speed=speed)
+def chair_on_a_pty(speed: float = 1.0, params: ChairParams | None = None
+                   ) -> Iterator[tuple[SimulatedBoard, Wheelchair]]:
+    """(the board, of a chair with ``params``, and the chair ``wcdrive.connect`` opened on
+    its pty, which resets the board as DTR does); both closed at the end."""
+    board = SimulatedBoard(params, speed=speed)
     bridge = PtyBridge(board.start(), on_open=board.dtr).start()
     try:
         chair = wcdrive.connect(bridge.device)

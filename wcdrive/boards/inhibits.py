@@ -31,7 +31,8 @@ def input_number(name: str | int) -> int:
 
 @dataclass(frozen=True)
 class InhibitChange:
-    """From ``at`` s on, inhibit input ``number`` (1 or 2) is ``active`` (pulled LOW) or not."""
+    """From ``at`` s on, inhibit input ``number`` (1 or 2; 3, the brake driver's status, in the
+    lock-step traces) is ``active`` (pulled LOW) or not."""
 
     at: float
     number: int

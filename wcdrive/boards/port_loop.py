@@ -375,7 +375,7 @@ class PortLoop:
         dl, dr = left.decoder, right.decoder
         out = fw.tick(millis, left.count(true_l), right.count(true_r), dl.illegal, dr.illegal, None,
                       int(dl.storm), int(dr.storm),
-                      inhibit=self._inhibits_at(overflow))
+                      inputs=self._inhibits_at(overflow) | (4 if self.plant.brake_status_low else 0))
         s = fw.state
         self.plant.set_drive(s.pwmL, s.dirL, s.pwmR, s.dirR)
         self.plant.set_brake(bool(s.brakeReleased))

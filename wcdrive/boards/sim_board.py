@@ -85,6 +85,13 @@ class SimulatedBoard(ThreadedBoard):
         with self._lock:
             self.loop.set_inhibit(input_number(name), active)
 
+    def set_brake_coil(self, fault: str | None) -> None:
+        """The parking brake's coil from now on: None (whole), ``"open"`` or ``"short"``
+        (``Plant.set_brake_coil``): the brake stays engaged and its driver's status pin
+        flags it, as a real coil failing does."""
+        with self._lock:
+            self.plant.set_brake_coil(fault)
+
     def _dtr_reset(self) -> None:
         self.loop.reset()
 

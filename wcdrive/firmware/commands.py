@@ -20,6 +20,7 @@ from wcdrive.avr.avrlibc import strtod
 from wcdrive.avr.f32 import add, constrain, div, from_int, mul, sub
 from wcdrive.errors import WcdriveError
 from wcdrive.firmware import constants as C
+from wcdrive.firmware.brake import set_brake_fitted
 from wcdrive.firmware.eeprom import restore_defaults, save_params
 from wcdrive.firmware.inhibit import drive_inhibited
 from wcdrive.firmware.motion import accept_command, emergency_halt, require_neutral
@@ -291,7 +292,10 @@ def parse_set(s: FirmwareState, body: bytes) -> tuple[str | None, int]:
             return "number", 0
         if ms < p.low or ms > p.high:
             return "range", 0
-        setattr(s, p.field, ms)
+        if p.field == "brakeFitted":
+            set_brake_fitted(s, ms)
+        else:
+            setattr(s, p.field, ms)
         return None, i
     try:
         value = parse_number(text, 0, False)

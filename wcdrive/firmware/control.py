@@ -4,10 +4,12 @@ and feedback."""
 
 from __future__ import annotations
 
-from wcdrive.avr.f32 import add, div, from_int, mul, neg, sub, to_int_trunc
+from wcdrive.avr.f32 import add, div, from_int, mul, neg, sub
 from wcdrive.firmware import constants as C
+from wcdrive.firmware.brake import BRAKE_RELEASED, brake_coil_fault, brake_step
 from wcdrive.firmware.inhibit import capped_goals, send_inhibit_event, update_inhibits
 from wcdrive.firmware.motion import PIVOT_NONE, emergency_halt, pivot_step, require_neutral
+from wcdrive.firmware.motors import i32, motors
 from wcdrive.firmware.output import (
     feedback_line,
     refill_credit,
@@ -49,12 +51,6 @@ def ramp_toward(current: float, target: float, max_change: float) -> float:
     if abs(diff) <= max_change:
         return target
     return add(current, max_change if diff > 0.0 else neg(max_change))
-
-
-def set_motor(output: float) -> tuple[int, int]:
-    """``setMotor``: ``(pwm duty, dir level)`` for a PID output."""
-    direction = C.HIGH if output >= 0.0 else C.LOW
-    return to_int_trunc(mul(abs(output), C.PWM_SCALE)) & 0xFF, direction
 
 
 WHEEL_OK, WHEEL_SUSPECT, WHEEL_STALLED, WHEEL_REVERSED, WHEEL_IMPLAUSIBLE, WHEEL_NO_EFFECT = range(6)
@@ -372,6 +368,8 @@ def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_
         faults = (
             wheel_faults(check_l, FAULT_STALL_L, FAULT_REVERSED_L, FAULT_IMPLAUSIBLE_L, FAULT_MOTOR_L)
             | wheel_faults(check_r, FAULT_STALL_R, FAULT_REVERSED_R, FAULT_IMPLAUSIBLE_R, FAULT_MOTOR_R))
+    if not faults:
+        faults = brake_coil_fault(s)
     if faults:
         s.faultFlags = faults
         emergency_halt(s)
@@ -400,86 +398,6 @@ def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_
     return check_l, check_r, halt, hardest
 
 
-def _i32(x: int) -> int:
-    return (x + 2**31) % 2**32 - 2**31
-
-
-def hold_error(count: int, delta: int, ref: int, step: int) -> tuple[int, int, int]:
-    """``holdError``: ``(count error, reference, step)``. The reference follows a wheel
-    that still slows (a step of the same sign as the last and no larger), then stays, and
-    is never more than ROLLAWAY_COUNTS + 1 behind the wheel (pushed farther, the chair is
-    braked, not driven back)."""
-    if step != 0:
-        slowing = delta != 0 and (delta > 0) == (step > 0) and (delta <= step if delta > 0 else delta >= step)
-        if slowing:
-            ref, step = count, delta
-        else:
-            step = 0
-    error = _i32(count - ref)
-    most = C.ROLLAWAY_COUNTS + 1
-    if abs(error) > most:
-        error = most if error > 0 else -most
-        ref = _i32(count - error)
-    return error, ref, step
-
-
-def hold_duty(error: int, rollaway: int) -> int:
-    """``holdDuty``: HOLD_GAIN per count of ``error`` beyond HOLD_DEADBAND_COUNTS, at most
-    HOLD_PWM_MAX; after a rollaway (``holdRollaway``), HOLD_PWM_MAX beyond the deadband."""
-    size = abs(error)
-    if size <= C.HOLD_DEADBAND_COUNTS:
-        return 0
-    over = size - C.HOLD_DEADBAND_COUNTS
-    if rollaway or over >= C.HOLD_PWM_MAX // C.HOLD_GAIN:
-        return C.HOLD_PWM_MAX
-    return over * C.HOLD_GAIN
-
-
-def hold_motor(error: int, ahead_dir: int, rollaway: int) -> tuple[int, int]:
-    """``holdMotor``: ``(duty, DIR)`` of a held wheel; ``ahead_dir`` turns it back when its
-    count ran ahead of the reference. At duty 0, DIR HIGH (``set_motor(0.0)``)."""
-    duty = hold_duty(error, rollaway)
-    if duty == 0:
-        return 0, C.HIGH
-    if error > 0:
-        return duty, ahead_dir
-    return duty, C.LOW if ahead_dir == C.HIGH else C.HIGH
-
-
-def _motors(s: FirmwareState, delta_l: int, delta_r: int, hardest: bool, trusted_l: bool, trusted_r: bool,
-            out: bytearray) -> None:
-    """Both motors' duty and DIR: parked, the hold's for each wheel whose encoder is
-    trusted (both without a fault; after one, the healthy wheel, and the faulty one
-    mirrors it, open loop: the same duty against the same motion; ``holding``;
-    ``EVT:ROLLAWAY`` once per hold when a held wheel is pushed ROLLAWAY_COUNTS off its
-    reference, and from then on HOLD_PWM_MAX beyond the deadband), else ``set_motor``
-    of the outputs."""
-    held_l = bool(s.parked) and trusted_l
-    held_r = bool(s.parked) and trusted_r
-    if not (held_l or held_r):
-        s.pwmL, s.dirL = set_motor(s.outputL)
-        s.pwmR, s.dirR = set_motor(s.outputR)
-        s.holding = 0
-        return
-    if not s.holding:
-        s.holdRefL, s.holdRefR = s.encTickL, s.encTickR
-        s.holdStepL, s.holdStepR = delta_l, delta_r
-        s.holdRollaway = 0
-    if hardest:
-        s.holdRollaway = 1
-    err_l = err_r = 0
-    if held_l:
-        err_l, s.holdRefL, s.holdStepL = hold_error(s.encTickL, delta_l, s.holdRefL, s.holdStepL)
-    if held_r:
-        err_r, s.holdRefR, s.holdStepR = hold_error(s.encTickR, delta_r, s.holdRefR, s.holdStepR)
-    if (abs(err_l) > C.ROLLAWAY_COUNTS or abs(err_r) > C.ROLLAWAY_COUNTS) and not s.holdRollaway:
-        s.holdRollaway = 1
-        send(s, send_event("ROLLAWAY"), out)
-    s.pwmL, s.dirL = hold_motor(err_l if held_l else -err_r, C.HIGH, s.holdRollaway)
-    s.pwmR, s.dirR = hold_motor(err_r if held_r else -err_l, C.LOW, s.holdRollaway)
-    s.holding = 1
-
-
 def _confirm_neutral(s: FirmwareState, out: bytearray) -> None:
     """The wait for neutral, at most one event a tick and none beside ``WATCHDOG`` (the
     output budget's worst tick): the refusal (``EVT:NOT_NEUTRAL``); the neutral command
@@ -504,11 +422,12 @@ def _confirm_neutral(s: FirmwareState, out: bytearray) -> None:
 
 def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: bytearray,
                  illegal_l: int = 0, illegal_r: int = 0, storm_l: int = 0, storm_r: int = 0,
-                 rx_lost: int = 0, inhibit: int = 0) -> None:
+                 rx_lost: int = 0, inputs: int = 0) -> None:
     """``controlTick(now)`` with what it latches atomically from the interrupts: the
     encoder counts, the illegal-transition counts, the storm flags and the RX
-    interrupt's count of lost bytes (``rxLost``); and the inhibit inputs it reads
-    (``inhibit``: bit 0 input 1, bit 1 input 2, 1 active)."""
+    interrupt's count of lost bytes (``rxLost``); and the input pins it reads
+    (``inputs``: bit 0 inhibit input 1, bit 1 input 2, 1 active; bit 2 the brake
+    driver's status LOW)."""
     last_tick = s.lastControlTime if s.lastTickTime is None else s.lastTickTime
     elapsed = (now - last_tick) & 0xFFFFFFFF            # since the last tick ran
     dt = div(from_int(elapsed), 1000.0)
@@ -523,15 +442,16 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
     refill_credit(s, elapsed)
     s.tickCount = (s.tickCount + 1) & 0xFFFFFFFF
 
-    s.encTickL, s.encTickR = _i32(count_l), _i32(count_r)
+    s.encTickL, s.encTickR = i32(count_l), i32(count_r)
     ill_l = (illegal_l - s.illTickL) & 0xFFFFFFFF
     ill_r = (illegal_r - s.illTickR) & 0xFFFFFFFF
     s.illTickL, s.illTickR = illegal_l & 0xFFFFFFFF, illegal_r & 0xFFFFFFFF
     s.stormTickL, s.stormTickR = int(bool(storm_l)), int(bool(storm_r))
     s.rxLostTick = rx_lost & 0xFFFFFFFF
-    s.inhibitTick = inhibit & 3
-    delta_l = _i32(s.encTickL - s.prevEncL)
-    delta_r = _i32(s.encTickR - s.prevEncR)
+    s.inhibitTick = inputs & 3
+    s.brakeStatusTick = (inputs >> 2) & 1
+    delta_l = i32(s.encTickL - s.prevEncL)
+    delta_r = i32(s.encTickR - s.prevEncR)
     s.prevEncL, s.prevEncR = s.encTickL, s.encTickR
 
     per_second = div(C.TWO_PI, dt)
@@ -562,6 +482,8 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
 
     max_change = mul(s.estopDecel if s.emergencyStop else s.maxAccel, dt)
     goal_l, goal_r = capped_goals(s)
+    if s.brakeFitted and s.brakePhase != BRAKE_RELEASED:
+        goal_l = goal_r = 0.0           # the brake not yet let go: the setpoints wait at zero
     s.setpointL = ramp_toward(s.setpointL, goal_l, max_change)
     s.setpointR = ramp_toward(s.setpointR, goal_r, max_change)
     # Stopped (target and setpoint zero, no pivot under way), an integral that drives a
@@ -587,8 +509,12 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
     braked = ((not trusted_l or abs(s.filtVelL) < C.BRAKE_DONE_SPEED)
               and (not trusted_r or abs(s.filtVelR) < C.BRAKE_DONE_SPEED))
     # Once the hold is on, the chair stays parked while at rest: the hold keeps it there.
-    # A fault that leaves no encoder trusted parks at once, at duty 0.
-    if (not trusted_l and not trusted_r) or halt or (at_rest and (s.holding or braked)):
+    # A fault that leaves no encoder trusted parks at once, at duty 0. With a brake, the
+    # chair stays parked until the brake has let go.
+    park = (not trusted_l and not trusted_r) or halt or (at_rest and (s.holding or braked))
+    if s.brakeFitted:
+        park = brake_step(s, bool(park))
+    if park:
         s.parked = 1
         s.integralL = s.integralR = 0.0
         s.prevMeasL = s.filtVelL
@@ -610,9 +536,10 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
             s.outputL = 0.0
         if not trusted_r:
             s.outputR = 0.0
-    _motors(s, delta_l, delta_r, hardest, trusted_l, trusted_r, out)
-    # the brake holds unless the PID drives, and from a fault on
-    s.brakeReleased = 0 if s.parked or s.faultFlags else 1
+    motors(s, delta_l, delta_r, hardest, trusted_l, trusted_r, out)
+    # without a brake fitted, the pin is LOW unless the PID drives, and from a fault on
+    if not s.brakeFitted:
+        s.brakeReleased = 0 if s.parked or s.faultFlags else 1
 
     pivot_step(s)
 

@@ -4,8 +4,9 @@ EEPROM-ready interrupt (``eepromReady``) of final_control.ino.
 The EEPROM is ``FirmwareState.eeprom`` (``EEPROM_SIZE`` bytes, erased to 0xFF). The
 parameter block at ``EEPROM_PARAMS_ADDR`` (protocol/PROTOCOL.md, "Parameters in
 EEPROM"): the layout version, the 9 float parameters in table order (binary32,
-little-endian), ``watchdog_ms`` (uint16), ``feedback_form`` (uint8), and the
-CRC-16/XMODEM of those 40 bytes (uint16, little-endian), 42 bytes in all.
+little-endian), ``watchdog_ms`` (uint16), ``feedback_form`` and ``brake_fitted``
+(uint8 each), and the CRC-16/XMODEM of those 41 bytes (uint16, little-endian), 43 bytes
+in all.
 
 ``save`` snapshots the block into ``eeBlock`` and writes its first byte that differs
 from the EEPROM; each EEPROM-ready interrupt (3.4 ms later on the chip) writes the next
@@ -29,9 +30,11 @@ DATA_BYTES = BLOCK_BYTES - 2
 _FLOATS = tuple(p for p in PARAMS if not p.integer)
 _WATCHDOG = next(p for p in PARAMS if p.field == "watchdogMs")
 _FORM = next(p for p in PARAMS if p.field == "feedbackForm")
-#: Where ``watchdog_ms`` and ``feedback_form`` sit in the block.
+_FITTED = next(p for p in PARAMS if p.field == "brakeFitted")
+#: Where ``watchdog_ms``, ``feedback_form`` and ``brake_fitted`` sit in the block.
 _WATCHDOG_AT = 1 + 4 * len(_FLOATS)
 _FORM_AT = _WATCHDOG_AT + 2
+_FITTED_AT = _FORM_AT + 1
 #: The parameters' defaults (the globals' initial values).
 _DEFAULT_VALUES: dict[str, float | int] = {p.field: getattr(FirmwareState(), p.field) for p in PARAMS}
 
@@ -44,7 +47,8 @@ def ee_crc(block: bytes | bytearray) -> int:
 def pack(s: FirmwareState) -> bytes:
     """The block that ``save`` writes for the parameters in force."""
     data = bytes([C.EEPROM_LAYOUT]) + b"".join(struct.pack("<f", getattr(s, p.field)) for p in _FLOATS)
-    data += struct.pack("<HB", getattr(s, _WATCHDOG.field), getattr(s, _FORM.field))
+    data += struct.pack("<HBB", getattr(s, _WATCHDOG.field), getattr(s, _FORM.field),
+                        getattr(s, _FITTED.field))
     return data + struct.pack("<H", ee_crc(data))
 
 
@@ -162,7 +166,8 @@ def check(block: bytes) -> str | None:
     if struct.unpack_from("<H", block, DATA_BYTES)[0] != ee_crc(block):
         return "crc"
     ms = struct.unpack_from("<H", block, _WATCHDOG_AT)[0]
-    if ms < _WATCHDOG.low or ms > _WATCHDOG.high or block[_FORM_AT] > _FORM.high:
+    if (ms < _WATCHDOG.low or ms > _WATCHDOG.high or block[_FORM_AT] > _FORM.high
+            or block[_FITTED_AT] > _FITTED.high):
         return "range"
     for i, p in enumerate(_FLOATS):
         v = struct.unpack_from("<f", block, 1 + 4 * i)[0]
@@ -184,4 +189,5 @@ def load_params(s: FirmwareState, out: bytearray) -> None:
         setattr(s, p.field, struct.unpack_from("<f", block, 1 + 4 * i)[0])
     setattr(s, _WATCHDOG.field, struct.unpack_from("<H", block, _WATCHDOG_AT)[0])
     setattr(s, _FORM.field, block[_FORM_AT])
+    setattr(s, _FITTED.field, block[_FITTED_AT])    # at boot: the brake engaged from reset
     send(s, send_event("PARAMS_LOADED"), out)

@@ -15,9 +15,9 @@ from wcdrive.firmware.constants import HIGH, MODE_CMDVEL
 from wcdrive.firmware.params import PARAMS
 
 #: The EEPROM parameter block (``EE_BLOCK_BYTES``): the layout version, the float
-#: parameters (4 bytes each), ``watchdog_ms`` (2 bytes), ``feedback_form`` (1 byte) and a
-#: CRC-16 (2 bytes).
-EE_BLOCK_BYTES = 1 + 4 * sum(1 for p in PARAMS if not p.integer) + 2 + 1 + 2
+#: parameters (4 bytes each), ``watchdog_ms`` (2 bytes), ``feedback_form`` and
+#: ``brake_fitted`` (1 byte each) and a CRC-16 (2 bytes).
+EE_BLOCK_BYTES = 1 + 4 * sum(1 for p in PARAMS if not p.integer) + 2 + 1 + 1 + 2
 
 #: The controller floats compared bit for bit against the firmware's SRAM.
 FLOAT_FIELDS = (
@@ -34,15 +34,16 @@ INT_FIELDS = (
     "lastControlTime", "tickCount", "pivotPhase", "pivotTicksLeft", "cmdSinceTick", "watchdogArmed",
     "lastCmdTime", "emergencyStop", "ppmLost", "stillTicks", "parked", "rejectedCount",
     "errSuppressed", "errLinesThisTick", "cmdLen", "cmdCommas", "cmdDiscarding",
-    "illTickL", "illTickR", "watchdogMs", "feedbackForm", "estopLatched", "tlmEnabled", "linesFramed",
-    "lineCounter", "unframedLine", "lastSeq",
+    "illTickL", "illTickR", "watchdogMs", "feedbackForm", "brakeFitted", "estopLatched", "tlmEnabled",
+    "linesFramed", "lineCounter", "unframedLine", "lastSeq",
     "rxCount", "crcRejected", "stormTickL", "stormTickR", "faultFlags", "stallTicksL",
     "stallTicksR", "reverseTicksL", "reverseTicksR", "runawayTicksL", "runawayTicksR", "effortPwmL",
     "effortPwmR",
     "effortTicksL", "effortTicksR", "txDropped", "txRingFull", "txCredit", "rxGaps", "rxLostTick",
     "lastTickTime", "lateTicks",
     "eeNext", "eeBusy", "holding", "holdRefL", "holdRefR", "holdStepL", "holdStepR", "holdRollaway",
-    "brakeReleased", "overspeedTicksL", "overspeedTicksR", "limitLatched",
+    "brakeReleased", "brakePhase", "brakeTicks", "brakeStatusTick", "brakeStatusTicks", "overspeedTicksL",
+    "overspeedTicksR", "limitLatched",
     "needNeutral", "neutralSeen", "neutralTicks", "notNeutralSent", "notNeutralPending", "notNeutralTicks",
     "neutralFault", "inhibitTick", "inhibitStable", "inhibitCountL", "inhibitCountR", "inhibitLatched",
     "inhibitPending", "inhibitOn",
@@ -113,6 +114,7 @@ class FirmwareState:
     estopDecel: float = C.EMERGENCY_DECEL
     watchdogMs: int = C.WATCHDOG_MS
     feedbackForm: int = C.FEEDBACK_FORM
+    brakeFitted: int = C.BRAKE_FITTED
     lastTravel: float = 0.0
     pivotPhase: int = 0
     pivotTicksLeft: int = 0
@@ -135,8 +137,14 @@ class FirmwareState:
     holdStepL: int = 0
     holdStepR: int = 0
     holdRollaway: int = 0
-    #: The parking brake's pin (``WC_PIN_BRAKE``): HIGH, released, only while the PID drives.
+    #: The parking brake's pin (``WC_PIN_BRAKE``): HIGH, released. With ``brakeFitted``,
+    #: its phase (``wcdrive.firmware.brake``), the ticks in it, the brake driver's status
+    #: read LOW this tick (1) and the ticks in a row it has.
     brakeReleased: int = 0
+    brakePhase: int = 0
+    brakeTicks: int = 0
+    brakeStatusTick: int = 0
+    brakeStatusTicks: int = 0
     overspeedTicksL: int = 0
     overspeedTicksR: int = 0
     #: ``|prevMeas|`` before the current run of overspeeding ticks began (``overspeedRun``).

@@ -22,8 +22,8 @@ from types import ModuleType
 
 from wcdrive._util import native
 from wcdrive.avr.arduino_print import _rounding
+from wcdrive.firmware import brake, control, motion
 from wcdrive.firmware import constants as C
-from wcdrive.firmware import control, motion
 from wcdrive.firmware.state import FirmwareState
 
 _SOURCE = Path(__file__).resolve().parent / "csrc" / "tick_fast.c"
@@ -49,7 +49,8 @@ def _constants() -> dict[str, float | int]:
     out.update({name: int(getattr(C, name)) for name in _INTS})
     out.update(ROUNDING_2=_rounding(2), PIVOT_NONE=motion.PIVOT_NONE,
                PIVOT_STOPPING=motion.PIVOT_STOPPING, PIVOT_ROTATING=motion.PIVOT_ROTATING,
-               FAULTS_UNTRUSTED_L=control.FAULTS_UNTRUSTED_L, FAULTS_UNTRUSTED_R=control.FAULTS_UNTRUSTED_R)
+               FAULTS_UNTRUSTED_L=control.FAULTS_UNTRUSTED_L, FAULTS_UNTRUSTED_R=control.FAULTS_UNTRUSTED_R,
+               BRAKE_RELEASED=brake.BRAKE_RELEASED)
     return out
 
 

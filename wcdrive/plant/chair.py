@@ -178,6 +178,8 @@ class Plant:
         self.left = WheelView(s, 0)
         self.right = WheelView(s, 1)
         self._motion_log: MotionLog | None = None
+        self._brake_pin_high = False
+        self._brake_coil: str | None = None
         self._buf_rates = np.empty(0)
         self._buf_angles = np.empty((0, 2))
         self._buf_at: tuple[int, int] = (0, 0)
@@ -214,10 +216,38 @@ class Plant:
     def set_brake(self, released: bool) -> None:
         """The level of the firmware's brake pin: true (driven high) releases the parking
         brake; false (low, or an input: the driver's pull-down) engages it. The brake
-        follows after its delay (module docstring). No effect without
-        ``ChairParams.parking_brake``."""
+        follows after its delay (module docstring); a faulty coil (``set_brake_coil``)
+        keeps it engaged. No effect without ``ChairParams.parking_brake``."""
+        self._brake_pin_high = bool(released)
+        self._apply_brake()
+
+    def set_brake_coil(self, fault: str | None) -> None:
+        """The brake coil's state: None, whole; ``"open"`` or ``"short"``: it cannot
+        release the brake (the spring holds it engaged, after the engage delay if it was
+        released) and the driver's status flags it (``brake_status_low``)."""
+        if fault not in (None, "open", "short"):
+            raise ValueError(f"brake coil fault must be None, 'open' or 'short', not {fault!r}")
+        self._brake_coil = fault
+        self._apply_brake()
+
+    @property
+    def brake_coil(self) -> str | None:
+        """The coil fault ``set_brake_coil`` set, or None."""
+        return self._brake_coil
+
+    @property
+    def brake_status_low(self) -> bool:
+        """The brake driver's status output (a smart power switch's open-drain
+        diagnostic, protocol/spec.toml ``PIN_BRAKE_STATUS``): LOW on an open load while
+        the pin is LOW (the switch off), on an overload while it is HIGH. A chair
+        without a brake has nothing on the driver's output: an open load."""
+        coil = self._brake_coil if self.s.has_brake else "open"
+        return (coil == "open" and not self._brake_pin_high) or (coil == "short" and self._brake_pin_high)
+
+    def _apply_brake(self) -> None:
+        """The brake's pin as the brake sees it: released only with a whole coil."""
         s = self.s
-        pin = 1 if released else 0
+        pin = 1 if self._brake_pin_high and self._brake_coil is None else 0
         if not s.has_brake or pin == s.brake_pin:
             return
         s.brake_pin = pin

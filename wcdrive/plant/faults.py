@@ -10,6 +10,9 @@ the kinds that have one and a rate for ``encoder_noise``:
   signal (a loose connector, EMI);
 * ``wheel_locked``: the wheel cannot turn (``Plant.set_wheel_locked``);
 * ``motor_dead``: the motor gives no torque, open circuit (``Plant.set_motor_dead``);
+* ``brake_open``, ``brake_short``: the parking brake's coil open or shorted
+  (``Plant.set_brake_coil``): the brake stays engaged whatever its pin, and its driver's
+  status output flags it (an open load while off, an overload while on);
 * ``reset``: the board resets at ``at`` (DTR, brown-out);
 * ``link_cut``: the host's bytes stop reaching the board from ``at``.
 
@@ -36,13 +39,15 @@ import numpy as np
 from wcdrive.plant.chair import Plant
 
 FAULT_KINDS = ("encoder_cut", "encoder_reversed", "encoder_noise", "wheel_locked", "motor_dead",
-               "reset", "link_cut")
+               "brake_open", "brake_short", "reset", "link_cut")
 #: Kinds that act on an encoder's wire (``EncoderWire``).
 ENCODER_KINDS = ("encoder_cut", "encoder_reversed", "encoder_noise")
+#: The brake coil's kinds (``Plant.set_brake_coil``: "open", "short").
+BRAKE_KINDS = ("brake_open", "brake_short")
 #: Kinds that act on the plant (``apply_plant_faults``).
-PLANT_KINDS = ("wheel_locked", "motor_dead")
+PLANT_KINDS = ("wheel_locked", "motor_dead", *BRAKE_KINDS)
 #: Kinds that take a ``side``.
-SIDED_KINDS = ENCODER_KINDS + PLANT_KINDS
+SIDED_KINDS = (*ENCODER_KINDS, "wheel_locked", "motor_dead")
 SIDES = ("left", "right")
 #: The highest ``rate_hz`` of ``encoder_noise`` (edges/s): one edge per 8 cycles at 16 MHz.
 MAX_NOISE_RATE_HZ = 2_000_000.0
@@ -107,18 +112,24 @@ class Fault:
 
 
 def apply_plant_faults(plant: Plant, faults: Iterable[Fault], tick: int, clock_hz: float) -> None:
-    """Sets the plant's locked wheels and dead motors to what ``faults`` make them at
-    ``tick`` of a ``clock_hz`` clock (integer ticks: no rounding decides whether a
-    fault at 2.0 s acts on the step that starts at 2.0 s)."""
+    """Sets the plant's locked wheels, dead motors and brake coil to what ``faults`` make
+    them at ``tick`` of a ``clock_hz`` clock (integer ticks: no rounding decides whether
+    a fault at 2.0 s acts on the step that starts at 2.0 s). Of two coil faults at once,
+    the later listed counts."""
     locked = {side: False for side in SIDES}
     dead = {side: False for side in SIDES}
+    coil: str | None = None
     for f in faults:
         if f.kind not in PLANT_KINDS:
             continue
         start, end = f.cycles(clock_hz)
         if start <= tick and (end is None or tick < end):
+            if f.kind in BRAKE_KINDS:
+                coil = f.kind.removeprefix("brake_")
             for side in f.sides():
                 (locked if f.kind == "wheel_locked" else dead)[side] = True
+    if plant.brake_coil != coil:
+        plant.set_brake_coil(coil)
     for side in SIDES:
         if plant.wheel_locked(side) != locked[side]:
             plant.set_wheel_locked(side, locked[side])

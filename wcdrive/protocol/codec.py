@@ -235,7 +235,8 @@ class Corrupt:
 #: The fault bits of ``TLM``'s last field and of ``EVT:FAULT,<name>``, bit 0 first
 #: (protocol/PROTOCOL.md, "Faults").
 FAULT_NAMES = ("ENC_STALL_L", "ENC_STALL_R", "ENC_REVERSED_L", "ENC_REVERSED_R",
-               "ENC_IMPLAUSIBLE_L", "ENC_IMPLAUSIBLE_R", "DRIVER_DEAD", "MOTOR_L", "MOTOR_R")
+               "ENC_IMPLAUSIBLE_L", "ENC_IMPLAUSIBLE_R", "DRIVER_DEAD", "MOTOR_L", "MOTOR_R",
+               "BRAKE_OPEN", "BRAKE_SHORT")
 
 
 def fault_names(faults: int) -> tuple[str, ...]:
@@ -269,8 +270,9 @@ class ExtendedTelemetry:
     late: int = 0
     #: Bit 0: the board waits for a neutral command (motion refused, ``ERR:neutral``);
     #: bit 1: the neutral fault (refused 5 s without one); bit 2: driving inhibited by
-    #: an inhibit input (``ERR:inhibit``); bit 3: the speed capped by one. Boards before
-    #: this field end at ``late`` (None).
+    #: an inhibit input (``ERR:inhibit``); bit 3: the speed capped by one; bit 4: a fitted
+    #: parking brake applied (``brake_fitted`` 1, its pin LOW). Boards before this field
+    #: end at ``late`` (None).
     state: int | None = None
 
     @property
@@ -294,6 +296,12 @@ class ExtendedTelemetry:
     def speed_capped(self) -> bool:
         """State bit 3: an inhibit input that caps the speed is engaged (the seat raised)."""
         return bool(self.state and self.state & 8)
+
+    @property
+    def brake_applied(self) -> bool:
+        """State bit 4: the parking brake the firmware owns (``brake_fitted`` 1) is
+        applied, its pin LOW: the chair parked on it, or stopping after a fault."""
+        return bool(self.state and self.state & 16)
 
     @property
     def fault_latched(self) -> bool:

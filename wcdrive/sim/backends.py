@@ -226,7 +226,9 @@ class SimavrBackend:
                 encoders[side] = EdgeTrain(np.concatenate([p.times for p in parts]),
                                            np.concatenate([p.states for p in parts]), 0, 0)
         trace = Trace(duration=end_cycle / F_CPU, serial=[(c / F_CPU, d) for c, d in sorted(runs + piloted)],
-                      encoders=encoders, inhibits=[(c.at, c.number, c.active) for c in rig.inhibits])
+                      encoders=encoders,
+                      inhibits=sorted([(c.at, c.number, c.active) for c in rig.inhibits]
+                                      + pins.status_changes))
         report = compare(recorder.recording(trace))
         mega.close()
         return BackendRun(end_cycle, Lockstep(len(report.mismatches), report.events))

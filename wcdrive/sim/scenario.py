@@ -18,7 +18,8 @@
     [[fault]]                # optional, any number (wcdrive.plant.faults)
     at = 2.0                 # s from the start
     kind = "encoder_cut"     # encoder_cut | encoder_reversed | encoder_noise |
-                             #   wheel_locked | motor_dead | reset | link_cut
+                             #   wheel_locked | motor_dead | brake_open | brake_short |
+                             #   reset | link_cut
     side = "left"            # left | right | both (encoder, wheel and motor kinds)
     duration = 3.0           # optional: to the end of the scenario
     rate_hz = 200000         # encoder_noise: edges per second on channel A

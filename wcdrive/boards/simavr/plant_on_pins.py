@@ -22,6 +22,7 @@ import numpy as np
 
 from wcdrive.avr.timer0 import F_CPU
 from wcdrive.boards.port_loop import advance
+from wcdrive.boards.simavr.mega_pins import BRAKE_STATUS_PIN
 from wcdrive.boards.simavr.virtual_mega import VirtualMega
 from wcdrive.plant import Gyro, Plant
 from wcdrive.plant.encoders import EdgeTrain, edges_from_trajectory
@@ -48,6 +49,9 @@ class PlantOnPins:
         self._wires = {side: w for side, w in wires.items() if w.faulty}
         self._plant_faults = any(f.kind in PLANT_KINDS for f in self.faults)
         self._resets = sorted(f.cycles(F_CPU)[0] for f in self.faults if f.kind == "reset")
+        #: The brake driver's status as the plant set it on its pin: (s, 3, LOW), input 3
+        #: of a lock-step trace (``wcdrive.boards.simavr.mega_pins.INPUT_PINS``).
+        self.status_changes: list[tuple[float, int, bool]] = []
 
     def step(self, t0: float, t1: float, run_until: Callable[[int], None] | None = None,
              reset: Callable[[], object] | None = None) -> dict[str, EdgeTrain]:
@@ -82,4 +86,8 @@ class PlantOnPins:
         self.plant.set_drive(self.mega.pwm("left"), self.mega.direction("left"),
                              self.mega.pwm("right"), self.mega.direction("right"))
         self.plant.set_brake(bool(self.mega.brake_released()))
+        status = 0 if self.plant.brake_status_low else 1
+        if self.mega.pin_level(BRAKE_STATUS_PIN) != status:
+            self.mega.set_pin(BRAKE_STATUS_PIN, status)
+            self.status_changes.append((self.mega.cycle / F_CPU, 3, not status))
         return trains

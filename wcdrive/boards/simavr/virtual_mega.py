@@ -53,7 +53,7 @@ from wcdrive.boards.simavr.mega_pins import (
     BRAKE_PIN,
     DIR_PINS,
     ENCODER_PINS,
-    INHIBIT_PINS,
+    INPUT_PINS,
     MEGA_PORT_BIT,
     RELAY_PIN,
     MegaPins,
@@ -117,7 +117,7 @@ class VirtualMega(MegaPins):
         for side in ENCODER_PINS:
             for pin in ENCODER_PINS[side]:
                 self.set_pin(pin, 1, at=0)
-        for pin in INHIBIT_PINS.values():
+        for pin in INPUT_PINS.values():
             self.set_pin(pin, 1, at=0)
         if vcd is not None:
             pins = "".join(f"{p}{b}:{n};" for n, (p, b) in self._named_pins().items())
@@ -246,6 +246,10 @@ class VirtualMega(MegaPins):
         self.write("timer0_millis", millis & 0xFFFFFFFF)
 
     # ---- stimulus ----------------------------------------------------------------
+    def pin_level(self, pin: tuple[str, int]) -> int:
+        """The level last driven on an input pin (``set_pin``; 1 for one never driven)."""
+        return self._pin_level.get(pin, 1)
+
     def set_pin(self, pin: tuple[str, int], level: int, at: int | None = None) -> None:
         """Drives an input pin (port letter, bit) to ``level`` at cycle ``at`` (default: now)."""
         port, bit = pin

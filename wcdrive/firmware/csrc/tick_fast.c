@@ -20,6 +20,9 @@
  *     watchdog stop or a PPM loss, a few ticks at most while a host is well behaved);
  *   - a tick with an inhibit input read active, engaged, debouncing or with its event
  *     still to send;
+ *   - with a brake fitted (brakeFitted), a tick that parks, finds the brake other than
+ *     released and settled (its phase, wcdrive.firmware.brake) or reads its driver's
+ *     status LOW;
  *   - a mode that MODE_NAMES does not name.
  * Each binary32 operation is one IEEE double operation rounded once to binary32, as
  * f32.py (and f32_fast.c) computes the ordinary case. The whole tick is computed into
@@ -95,7 +98,8 @@ static double f_from_int(int64_t n) { return rnd((double)n); }   /* |n| < 2**53 
     X(holding) X(holdRefL) X(holdRefR) X(holdStepL) X(holdStepR) \
     X(brakeReleased) X(overspeedTicksL) X(overspeedTicksR) X(overspeedFromL) X(overspeedFromR) \
     X(needNeutral) X(neutralFault) \
-    X(inhibitTick) X(inhibitStable) X(inhibitCountL) X(inhibitCountR) X(inhibitLatched) X(inhibitPending) X(inhibitOn)
+    X(inhibitTick) X(inhibitStable) X(inhibitCountL) X(inhibitCountR) X(inhibitLatched) X(inhibitPending) X(inhibitOn) \
+    X(brakeFitted) X(brakePhase) X(brakeTicks) X(brakeStatusTick) X(brakeStatusTicks)
 
 #define ENUM(name) F_##name,
 enum { FIELDS(ENUM) N_FIELDS };
@@ -160,7 +164,7 @@ static struct {
         stall_ticks_turning,
         reverse_ticks, runaway_pwm, runaway_ticks, effort_pwm, effort_ticks, illegal_per_tick, still_ticks, pivot_ticks,
         hold_deadband, overspeed_pwm, overspeed_ticks,
-        high, low, pivot_none, pivot_stopping, pivot_rotating, untrusted_l, untrusted_r;
+        high, low, pivot_none, pivot_stopping, pivot_rotating, untrusted_l, untrusted_r, brake_released;
 } K;
 static PyObject *mode_names;      /* dict: mode -> bytes */
 static int bound;
@@ -448,9 +452,14 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
     }
     if (I(needNeutral))
         Py_RETURN_NONE;             /* waiting for neutral (after a boot, a reset, a stop): the Python tick */
-    if (inhibit || I(inhibitTick) || I(inhibitStable) || I(inhibitCountL) || I(inhibitCountR)
+    if ((inhibit & 3) || I(inhibitTick) || I(inhibitStable) || I(inhibitCountL) || I(inhibitCountR)
         || I(inhibitLatched) || I(inhibitPending) || I(inhibitOn))
         Py_RETURN_NONE;             /* an inhibit input read, engaged or settling: the Python tick */
+    int brake_status = (int)((inhibit >> 2) & 1);
+    if (I(brakeFitted) && (brake_status || I(brakePhase) != K.brake_released || I(brakeTicks)
+                           || I(brakeStatusTicks)))
+        Py_RETURN_NONE;             /* a fitted brake not released and settled, or its status LOW */
+    SETI(brakeStatusTick, brake_status);
     PyObject *mode_name = PyDict_GetItemWithError(mode_names, *slot(s, F_mode));
     if (mode_name == NULL) {
         if (PyErr_Occurred())
@@ -574,7 +583,7 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
      * follows its wheel, a duty or a rollaway go to the Python tick. */
     int held_l = park && trusted_l, held_r = park && trusted_r;
     int hold = held_l || held_r;
-    if (hold != (I(holding) != 0))
+    if (hold != (I(holding) != 0) || (I(brakeFitted) && park))
         Py_RETURN_NONE;
     if (held_l) {
         if (I(holdStepL) != 0 || llabs(i32(I(encTickL) - I(holdRefL))) > K.hold_deadband)
@@ -668,7 +677,8 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
         int64_t tlm[17] = { now & M32, I(rxCount), I(lastSeq), I(pwmL), I(pwmR), I(dirL), I(dirR),
                             I(illTickL), I(illTickR), flags, I(rejectedCount), I(crcRejected),
                             I(freeRam), I(faultFlags), I(rxLostTick), I(lateTicks),
-                            (I(needNeutral) ? 1 : 0) | (I(neutralFault) ? 2 : 0) };
+                            (I(needNeutral) ? 1 : 0) | (I(neutralFault) ? 2 : 0)
+                            | (I(brakeFitted) && !I(brakeReleased) ? 16 : 0) };
         Buf t = { .n = 0 };
         puts_(&t, "TLM:");
         for (int k = 0; k < 17; k++) {
@@ -800,7 +810,8 @@ static PyObject *bind(PyObject *self, PyObject *args) {
           && const_int(consts, "PIVOT_STOPPING", &k.pivot_stopping)
           && const_int(consts, "PIVOT_ROTATING", &k.pivot_rotating)
           && const_int(consts, "FAULTS_UNTRUSTED_L", &k.untrusted_l)
-          && const_int(consts, "FAULTS_UNTRUSTED_R", &k.untrusted_r)))
+          && const_int(consts, "FAULTS_UNTRUSTED_R", &k.untrusted_r)
+          && const_int(consts, "BRAKE_RELEASED", &k.brake_released)))
         return NULL;
     if (k.tx_credit_per_ms <= 0) {
         PyErr_SetString(PyExc_ValueError, "_bind: TX_CREDIT_PER_MS must be positive");

@@ -1,0 +1,174 @@
+"""The parking brake the firmware owns (``brake_fitted`` 1; docs/safety.md, "The parking
+brake"): engaged at rest with the motors then unpowered, released under the hold, its
+coil watched through the brake driver's status pin.
+
+Every trace runs on the compiled firmware in simavr, its status pin driven by the trace
+(input 3), and is replayed on the port in lock step (0 mismatches, the tick's pin reads
+checked against the trace), so each behaviour holds on both. The wheels stand still
+(no encoder edges) unless a test says otherwise. tests/sim/test_brake_plant.py watches
+the chair.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tests.support.recordings import board_lines, recorded, tick_states
+from wcdrive.firmware import constants as C
+from wcdrive.firmware.brake import (
+    BRAKE_ENGAGED,
+    BRAKE_ENGAGING,
+    BRAKE_PRELOAD,
+    BRAKE_RELEASED,
+    BRAKE_RELEASING,
+    FAULT_BRAKE_OPEN,
+    FAULT_BRAKE_SHORT,
+)
+from wcdrive.firmware.eeprom import block_image
+from wcdrive.hil.lockstep import Recording
+from wcdrive.hil.traces import Trace
+from wcdrive.plant.encoders import edges_from_trajectory
+
+pytestmark = pytest.mark.simavr
+
+NEUTRAL = b"x:0.000,t:0.000,\n"
+SLOW = b"rp01.00,lp01.00,\n"            # 1 rad/s each
+FITTED = b"set:brake_fitted=1\n"
+COUNTS_PER_RAD = 10000 / (2 * np.pi)
+
+
+def _every(command: bytes, t0: float, t1: float, period: float = 0.1) -> list[tuple[float, bytes]]:
+    return [(round(float(t), 4), command) for t in np.arange(t0, t1, period)]
+
+
+def _run(serial: list[tuple[float, bytes]], duration: float, status: list[tuple[float, int, bool]] = (),
+         turning_from: float | None = None, turning_until: float = np.inf,
+         eeprom: bytes | None = None) -> Recording:
+    """The trace: ``serial``, the brake driver's status changes (input 3), the wheels
+    still, or from ``turning_from`` s to ``turning_until`` s at 1 rad/s (the left
+    counting backwards)."""
+    encoders = {}
+    if turning_from is not None:
+        t = np.linspace(0.0, duration, 4000)
+        angle = np.clip(t, turning_from, turning_until) - turning_from
+        encoders = {side: edges_from_trajectory(t, 0.5 + (-1 if side == "left" else 1) * angle
+                                                * COUNTS_PER_RAD)
+                    for side in ("left", "right")}
+    return recorded(Trace(duration=duration, serial=sorted(serial, key=lambda w: w[0]),
+                          inhibits=list(status), encoders=encoders, eeprom=eeprom))
+
+
+def _phases(ticks: list[tuple[float, dict]]) -> list[tuple[int, int, int]]:
+    """(brakePhase, brakeReleased, parked) of each tick."""
+    return [(a["brakePhase"], a["brakeReleased"], a["parked"]) for _, a in ticks]
+
+
+def test_without_a_brake_fitted_the_pin_follows_the_pid_as_before() -> None:
+    """brake_fitted 0 (the default): the pin is HIGH exactly while the chair is not
+    parked, the phase never moves, and the parked chair's hold is what it was."""
+    rec = _run([(0.02, NEUTRAL), *_every(SLOW, 0.2, 0.9), (0.9, NEUTRAL)], 1.6, turning_from=0.25)
+    ticks = tick_states(rec)
+    assert all(a["brakeFitted"] == 0 and a["brakePhase"] == BRAKE_ENGAGED for _, a in ticks)
+    assert all(a["brakeReleased"] == (0 if a["parked"] or a["faultFlags"] else 1) for _, a in ticks)
+    assert any(a["brakeReleased"] for _, a in ticks)
+
+
+def test_the_brake_engages_at_rest_and_then_unpowers_the_motors() -> None:
+    """Fitted while parked from boot, the brake engages (its pin was LOW from reset) and
+    after BRAKE_ENGAGE_TICKS the parked chair's motors are at duty 0, although the
+    wheels rolled 32 counts off the hold's reference into the brake (beyond its
+    deadband): the hold no longer drives against the brake."""
+    rec = _run([(0.02, FITTED), (0.03, NEUTRAL)], 0.6, turning_from=0.06, turning_until=0.08)
+    ticks = tick_states(rec)
+    fitted = next(k for k, (_, a) in enumerate(ticks) if a["brakeFitted"])
+    phases = [p for p, _, _ in _phases(ticks)[fitted:]]
+    assert phases[:C.BRAKE_ENGAGE_TICKS] == [BRAKE_ENGAGING] * (C.BRAKE_ENGAGE_TICKS - 1) + [BRAKE_ENGAGED]
+    engaged = [a for _, a in ticks[fitted:] if a["brakePhase"] == BRAKE_ENGAGED]
+    assert len(engaged) >= 5
+    assert all(abs(a["encTickR"] - a["holdRefR"]) > C.HOLD_DEADBAND_COUNTS for a in engaged)
+    assert all(a["pwmL"] == 0 and a["pwmR"] == 0 and a["parked"] and not a["brakeReleased"] for a in engaged)
+
+
+def test_a_motion_command_preloads_the_hold_then_releases_then_ramps() -> None:
+    """Parked on the engaged brake, a motion command: one tick of the hold with the pin
+    still LOW (BRAKE_PRELOAD), then the pin HIGH for BRAKE_RELEASE_TICKS with the chair
+    still parked and the setpoints at zero, and only then the setpoints ramp. Stopped
+    again, the pin goes LOW at the first parked tick and the motors are unpowered
+    BRAKE_ENGAGE_TICKS later."""
+    serial = [(0.02, FITTED), (0.03, NEUTRAL), *_every(SLOW, 0.5, 1.2), (1.2, NEUTRAL)]
+    rec = _run(serial, 2.2, turning_from=0.75, turning_until=1.4)
+    ticks = tick_states(rec)
+    asked = next(k for k, (_, a) in enumerate(ticks) if a["targetL"] != 0.0)
+    seq = _phases(ticks)[asked:asked + 1 + C.BRAKE_PRELOAD_TICKS + C.BRAKE_RELEASE_TICKS]
+    assert seq[0] == (BRAKE_PRELOAD, 0, 1)
+    assert seq[C.BRAKE_PRELOAD_TICKS:C.BRAKE_PRELOAD_TICKS + C.BRAKE_RELEASE_TICKS - 1] == \
+        [(BRAKE_RELEASING, 1, 1)] * (C.BRAKE_RELEASE_TICKS - 1)
+    assert seq[-1] == (BRAKE_RELEASED, 1, 0)
+    waiting = [a for _, a in ticks[asked:asked + C.BRAKE_PRELOAD_TICKS + C.BRAKE_RELEASE_TICKS]]
+    assert all(a["setpointL"] == 0.0 and a["setpointR"] == 0.0 for a in waiting)
+    assert ticks[asked + C.BRAKE_PRELOAD_TICKS + C.BRAKE_RELEASE_TICKS + 1][1]["setpointR"] > 0.0
+    # stopped: engaged at the first parked tick, unpowered after the engage time
+    parked = next(k for k, (t, a) in enumerate(ticks) if t > 1.2 and a["parked"])
+    assert ticks[parked][1]["brakePhase"] == BRAKE_ENGAGING and not ticks[parked][1]["brakeReleased"]
+    settled = ticks[parked + C.BRAKE_ENGAGE_TICKS][1]
+    assert settled["brakePhase"] == BRAKE_ENGAGED
+    assert all(a["pwmL"] == 0 and a["pwmR"] == 0 for _, a in ticks[parked + C.BRAKE_ENGAGE_TICKS:])
+    assert all(a["faultFlags"] == 0 for _, a in ticks)
+
+
+def test_an_open_coil_latches_with_the_brake_engaged_and_a_glitch_does_not() -> None:
+    """The status LOW for one tick (a glitch) does nothing; LOW for BRAKE_STATUS_TICKS
+    ticks with the brake engaged is ``EVT:FAULT,BRAKE_OPEN``; motion is refused, the
+    motors are powered again (the brake may not hold), and ``reset`` with the coil still
+    open latches it again."""
+    serial = [(0.02, FITTED), (0.03, NEUTRAL), (1.0, SLOW), (1.3, b"reset\n"), (1.35, NEUTRAL)]
+    status = [(0.3, 3, True), (0.33, 3, False), (0.6, 3, True)]
+    rec = _run(serial, 1.8, status=status)
+    ticks = tick_states(rec)
+    assert all(a["faultFlags"] == 0 for t, a in ticks if t < 0.6)
+    first = next(t for t, a in ticks if a["faultFlags"])
+    assert 0.6 + 0.05 * (C.BRAKE_STATUS_TICKS - 1) <= first <= 0.6 + 0.05 * C.BRAKE_STATUS_TICKS + 0.001
+    assert all(a["faultFlags"] == FAULT_BRAKE_OPEN for t, a in ticks if first <= t < 1.3)
+    assert board_lines(rec, b"EVT:FAULT,").count(b"EVT:FAULT,BRAKE_OPEN") == 2
+    assert any(line.startswith(b"ERR:fault") for line in board_lines(rec, b"ERR:"))
+    assert all(not a["brakeReleased"] for _, a in ticks)
+
+
+def test_a_shorted_coil_latches_with_the_brake_released_and_the_chair_stops() -> None:
+    """Driving (the pin HIGH), the status LOW for BRAKE_STATUS_TICKS ticks is
+    ``EVT:FAULT,BRAKE_SHORT``: the pin goes LOW at once and the chair stops along the
+    emergency ramp, its wheels still trusted."""
+    serial = [(0.02, FITTED), (0.03, NEUTRAL), *_every(SLOW, 0.3, 1.6)]
+    rec = _run(serial, 1.8, status=[(1.0, 3, True)], turning_from=0.5)
+    ticks = tick_states(rec)
+    first = next(t for t, a in ticks if a["faultFlags"])
+    assert first <= 1.0 + 0.05 * C.BRAKE_STATUS_TICKS + 0.001
+    at = next(a for t, a in ticks if t == first)
+    assert at["faultFlags"] == FAULT_BRAKE_SHORT and not at["brakeReleased"] and at["emergencyStop"]
+    assert board_lines(rec, b"EVT:FAULT,") == [b"EVT:FAULT,BRAKE_SHORT"]
+
+
+def test_the_status_is_ignored_without_a_brake_fitted() -> None:
+    """A board with no brake (brake_fitted 0) reads its status pin but never faults on it."""
+    rec = _run([(0.02, NEUTRAL), *_every(SLOW, 0.3, 1.0)], 1.2, status=[(0.1, 3, True)], turning_from=0.4)
+    ticks = tick_states(rec)
+    assert any(a["brakeStatusTick"] for _, a in ticks)
+    assert all(a["faultFlags"] == 0 for _, a in ticks)
+
+
+def test_brake_fitted_is_saved_and_loaded_and_out_of_range_refused() -> None:
+    """``set:brake_fitted=2`` is ``ERR:range``; 1 is saved in the block (layout 3) and a
+    board that boots from it has the brake fitted, engaged from reset (the motors at
+    duty 0 once parked); a layout-2 block boots on the defaults."""
+    rec = _run([(0.02, b"set:brake_fitted=2\n"), (0.05, b"get:brake_fitted\n")], 0.2)
+    assert b"ERR:range" in rec.tx and b"PAR:brake_fitted,0" in rec.tx
+    saved = block_image({"brakeFitted": 1})
+    rec = _run([(0.03, NEUTRAL)], 0.5, eeprom=saved)
+    assert b"EVT:PARAMS_LOADED" in rec.tx
+    ticks = tick_states(rec)
+    assert all(a["brakeFitted"] == 1 and a["brakePhase"] == BRAKE_ENGAGED and a["pwmL"] == 0
+               for _, a in ticks)
+    rec = _run([], 0.1, eeprom=block_image({"brakeFitted": 1}, layout=2))
+    assert b"EVT:PARAMS_DEFAULT,version" in rec.tx
+    assert all(a["brakeFitted"] == 0 for _, a in tick_states(rec))
