@@ -17,7 +17,8 @@ the chair is below 0.01 m/s, the drift (the axle midpoint's largest distance fro
 it came to rest) over the ``--parked`` seconds after that, and the largest speed after the
 stop; and the board's events over the run. A chair that never comes to rest has its
 travel after the stop instead of a drift. With a parking brake (``[chair]
-parking_brake``) every row is run again and gets the same columns; while ``ChairParams``
+parking_brake``, owned by the firmware: ``brake_fitted`` 1) every row is run again and
+gets the same columns; while ``ChairParams``
 has no such field, a line says so and the brake columns are left out.
 
 The 7176-6-style table has a line per grade: the top speed (the largest forward speed

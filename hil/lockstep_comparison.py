@@ -148,7 +148,8 @@ def compare(recording: Recording) -> Report:
                                                    "decoder disagrees", str(value)))
             # The input pins the tick read (the inhibit inputs, the brake's status): what
             # the trace put on the pins between the tick's entry and its exit.
-            inputs = int(ev.after["inhibitTick"]) | int(ev.after["brakeStatusTick"]) << 2
+            read_bits = int(ev.after["inhibitTick"])
+            inputs = (read_bits & 3) | int(ev.after["brakeStatusTick"]) << 2 | (read_bits & 4) << 1
             read = (active_bits(inhibits, ev.cycle / F_CPU), active_bits(inhibits, exit_cycle / F_CPU))
             if inputs not in read:
                 mismatches.append(Mismatch(i, ticks, "inhibitTick, brakeStatusTick",

@@ -13,7 +13,8 @@ turns the TLM lines on and from then on refuses unframed lines, but for stops an
 estop), get/set of every parameter in and out of range (and, in a quarter of the traces,
 ``feedback_form`` 1 from the start: the feedback lines' ros2_control tail), estop and reset;
 the inhibit inputs pulled low and let go (a third of the traces: glitches under the
-debounce, and inputs held 0.1 to 1.5 s); ``brake_fitted`` 1 from the start (a third of the
+debounce, and inputs held 0.1 to 1.5 s; in half of those the brake's manual release too,
+push mode); ``brake_fitted`` 1 from the start (a third of the
 traces: the brake engaged at rest, released under the hold), and in half of those the
 brake driver's status pulled low (coil faults); bursts of
 20 to 150 commands back to back (the output budget is spent), floods of long ``set:``
@@ -403,27 +404,29 @@ def generate_trace(draw: Draw, duration: float) -> Trace:
     crc = zlib.crc32(b"".join(data for _, data in serial))
     if getattr(draw, "inhibits", True) and trace.profile is None and crc % INHIBIT_EVERY == 2:
         trace.inhibits = inhibit_changes(np.random.default_rng(crc), duration)
+        if (crc >> 9) % 2:              # and the brake's manual release (push mode) in half
+            trace.inhibits = sorted(trace.inhibits + pin_pulls(np.random.default_rng(crc + 2), duration, 4))
     # A fitted brake, from the same CRC (a third of the traces, not a profile's: the hold's
     # rules want their duties), and its coil's status in half of those.
     if (getattr(draw, "brakes", True) and trace.profile is None
             and (crc // INHIBIT_EVERY) % BRAKE_FITTED_EVERY == 1):
         trace.serial.insert(0, (FIRST_COMMAND_S, b"set:brake_fitted=2\nset:brake_fitted=1\n"))
         if (crc >> 8) % 2:
-            trace.inhibits = sorted(trace.inhibits + brake_status_changes(np.random.default_rng(crc + 1),
-                                                                          duration))
+            trace.inhibits = sorted(trace.inhibits + pin_pulls(np.random.default_rng(crc + 1), duration, 3))
     return trace
 
 
-def brake_status_changes(rng: np.random.Generator, duration: float) -> list[tuple[float, int, bool]]:
-    """One or two pulls of the brake driver's status low (input 3 of a trace), each let go
-    after 0.01 to 1.5 s: a glitch under BRAKE_STATUS_TICKS, or a coil fault."""
+def pin_pulls(rng: np.random.Generator, duration: float, number: int) -> list[tuple[float, int, bool]]:
+    """One or two pulls of input ``number`` low (3: the brake driver's status, a glitch
+    under BRAKE_STATUS_TICKS or a coil fault; 4: the brake's manual release, push mode),
+    each let go after 0.01 to 1.5 s."""
     changes: list[tuple[float, int, bool]] = []
     for _ in range(int(rng.integers(1, 3))):
         start = float(rng.uniform(0.05, max(0.06, duration - 0.1)))
         held = float(rng.choice([rng.uniform(0.01, 0.06), rng.uniform(0.1, 1.5)]))
-        changes.append((round(start, 4), 3, True))
+        changes.append((round(start, 4), number, True))
         if start + held < duration:
-            changes.append((round(start + held, 4), 3, False))
+            changes.append((round(start + held, 4), number, False))
     return sorted(changes)
 
 

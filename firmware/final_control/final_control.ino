@@ -287,15 +287,19 @@ bool neutralFault = false;                  // EVT:DEFLECTED: refused for WC_NEU
 // an input of speed 0 stops the chair along the normal ramp and refuses motion
 // (ERR:inhibit); any other caps the wheels at its share of max_wheel. A latching input
 // stays engaged until released and a reset. Released, motion needs neutral first.
-// Bit 0 is input 1, bit 1 input 2.
-#define INHIBIT_STOP_MASK ((WC_INHIBIT_1_SPEED == 0.0f ? 1 : 0) | (WC_INHIBIT_2_SPEED == 0.0f ? 2 : 0))
+// Bit 0 is input 1, bit 1 input 2, bit 2 the brake's manual release (push mode): read as
+// a third input that inhibits driving and never latches; parked in push mode, the motors
+// freewheel (pushMotor) instead of holding.
+#define INHIBIT_PUSH 4
+#define INHIBIT_STOP_MASK ((WC_INHIBIT_1_SPEED == 0.0f ? 1 : 0) | (WC_INHIBIT_2_SPEED == 0.0f ? 2 : 0) | INHIBIT_PUSH)
 #define INHIBIT_LATCH_MASK ((WC_INHIBIT_1_LATCH ? 1 : 0) | (WC_INHIBIT_2_LATCH ? 2 : 0))
 uint8_t inhibitTick = 0;                    // the inputs as the tick read them (1: active, pin LOW)
 uint8_t inhibitStable = 0;                  // ...debounced
 uint8_t inhibitCountL = 0, inhibitCountR = 0;   // ticks input 1 / 2 has read other than inhibitStable
+uint8_t inhibitCountP = 0;                  // ...and the manual release
 uint8_t inhibitLatched = 0;                 // latching inputs engaged, until released and a reset
 uint8_t inhibitOn = 0;                      // the inputs engaged as of the last tick
-uint8_t inhibitPending = 0;                 // events to send: bit 0/1 input 1 on/off, bit 2/3 input 2
+uint8_t inhibitPending = 0;                 // events to send: bit 0/1 input 1 on/off, bit 2/3 input 2, 4/5 push
 
 // Faults (EVT:FAULT,<name>; docs/safety.md): latched until "reset", motion refused, motors off.
 #define FAULT_STALL_L 0x01
@@ -609,6 +613,23 @@ static uint8_t holdDuty(int32_t error) {
 // aheadDir being the DIR level that turns the wheel back when its count has run ahead
 // (LOW on the right, whose counts rise forward; HIGH on the mirrored left). At duty 0,
 // DIR HIGH: what setMotor() writes for an output of 0.
+// Push mode (the brake released by hand): a wheel whose encoder is trusted, slower than
+// WC_PUSH_SPEED, at the duty its back-EMF takes the way it turns (no current: no torque,
+// the chair pushed as if freewheeling); faster, or not trusted, at duty 0 (the motor
+// shorted: it brakes the wheel).
+static void pushMotor(uint8_t pwmPin, uint8_t dirPin, bool trusted, float vel, uint8_t& pwm, uint8_t& dir) {
+  float speed = fabs(vel);
+  if (!trusted || speed > WC_PUSH_SPEED) {
+    pwm = 0;
+    dir = HIGH;
+  } else {
+    pwm = (uint8_t)(int)(speed * WC_FAULT_EFFORT_EMF);
+    dir = vel >= 0.0f ? HIGH : LOW;
+  }
+  digitalWrite(dirPin, dir);
+  analogWrite(pwmPin, pwm);
+}
+
 static void holdMotor(uint8_t pwmPin, uint8_t dirPin, int32_t error, uint8_t aheadDir,
                       uint8_t& pwm, uint8_t& dir) {
   pwm = holdDuty(error);
@@ -675,6 +696,7 @@ static void updateInhibits() {
   uint8_t before = inhibitOn;   // a reset may have ended a latch since
   debounceInhibit(1, inhibitCountL);
   debounceInhibit(2, inhibitCountR);
+  debounceInhibit(INHIBIT_PUSH, inhibitCountP);
   inhibitLatched |= inhibitStable & INHIBIT_LATCH_MASK;
   uint8_t after = inhibitEngaged();
   inhibitOn = after;
@@ -686,7 +708,8 @@ static void updateInhibits() {
     lastTravel = 0.0f;
   }
   if (off) requireNeutral();
-  inhibitPending |= (on & 1) | (off & 1) << 1 | (on & 2) << 1 | (off & 2) << 2;
+  inhibitPending |= (on & 1) | (off & 1) << 1 | (on & 2) << 1 | (off & 2) << 2 |
+                    (on & INHIBIT_PUSH) << 2 | (off & INHIBIT_PUSH) << 3;
 }
 
 // The top wheel speed the engaged inputs allow, as a share of max_wheel (1: no cap).
@@ -1082,10 +1105,12 @@ static void sendTelemetry(uint32_t now) {
                   (ppmLost ? 8 : 0) | (parked ? 16 : 0) | (uint8_t)(pivotPhase << 5) |
                   (faultFlags != 0 ? 128 : 0);
   // state: bit 0 waiting for neutral (motion refused), 1 the neutral fault, 2 driving
-  // inhibited, 3 the speed capped by an inhibit input, 4 a fitted brake applied
+  // inhibited, 3 the speed capped by an inhibit input, 4 a fitted brake applied, 5 push
+  // mode (the brake released by hand)
   uint8_t engaged = inhibitEngaged();
   uint8_t state = (needNeutral ? 1 : 0) | (neutralFault ? 2 : 0) | ((engaged & INHIBIT_STOP_MASK) ? 4 : 0) |
-                  ((engaged & (uint8_t)~INHIBIT_STOP_MASK) ? 8 : 0) | (brakeFitted && !brakeReleased ? 16 : 0);
+                  ((engaged & (uint8_t)~INHIBIT_STOP_MASK) ? 8 : 0) | (brakeFitted && !brakeReleased ? 16 : 0) |
+                  ((engaged & INHIBIT_PUSH) ? 32 : 0);
   const uint32_t fields[] = {
     now, rxCount, lastSeq, pwmL, pwmR, dirL, dirR, illTickL, illTickR, flags, rejectedCount,
     crcRejected, freeRam, faultFlags, rxLostTick, lateTicks, state,
@@ -1139,7 +1164,8 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
     stormTickR = stormR != 0;
     rxLostTick = rxLost;
   }
-  inhibitTick = (digitalRead(WC_PIN_INHIBIT_1) == LOW ? 1 : 0) | (digitalRead(WC_PIN_INHIBIT_2) == LOW ? 2 : 0);
+  inhibitTick = (digitalRead(WC_PIN_INHIBIT_1) == LOW ? 1 : 0) | (digitalRead(WC_PIN_INHIBIT_2) == LOW ? 2 : 0) |
+                (digitalRead(WC_PIN_PUSH) == LOW ? INHIBIT_PUSH : 0);
   brakeStatusTick = digitalRead(WC_PIN_BRAKE_STATUS) == LOW ? 1 : 0;
   encTickL = countL + stepsL;
   encTickR = countR + stepsR;
@@ -1272,7 +1298,9 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
     if (bit == 1) sendEvent(F("INHIBIT,1,1"));
     else if (bit == 2) sendEvent(F("INHIBIT,1,0"));
     else if (bit == 4) sendEvent(F("INHIBIT,2,1"));
-    else sendEvent(F("INHIBIT,2,0"));
+    else if (bit == 8) sendEvent(F("INHIBIT,2,0"));
+    else if (bit == 16) sendEvent(F("PUSH,1"));
+    else sendEvent(F("PUSH,0"));
   } else if (needNeutral) {
     // The wait for neutral, at most one event a tick (none beside WATCHDOG: the output
     // budget's worst tick): the refusal (EVT:NOT_NEUTRAL); the neutral command stood
@@ -1347,7 +1375,10 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
   // Once the hold is on, the chair stays parked while at rest, moving or not: the hold
   // (below) keeps it where it stopped. With a brake, the chair stays parked until the
   // brake has let go (brakeStep).
-  bool park = (!trustedL && !trustedR) || halt || (atRest && (holding || braked));
+  // In push mode the chair stays parked at rest however fast it is pushed (the PID would
+  // brake it; the motors freewheel instead).
+  bool pushing = (inhibitStable & INHIBIT_PUSH) != 0;
+  bool park = (!trustedL && !trustedR) || halt || (atRest && (holding || braked || pushing));
   if (brakeFitted) park = brakeStep(park);
   if (park) {
     parked = true;
@@ -1371,9 +1402,13 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
   }
   // Parked, the hold drives each wheel whose encoder is trusted, and a faulty wheel
   // mirrors the healthy one's hold, open loop.
-  bool heldL = parked && trustedL;
-  bool heldR = parked && trustedR;
-  if (heldL || heldR) {
+  bool heldL = parked && trustedL && !pushing;
+  bool heldR = parked && trustedR && !pushing;
+  if (parked && pushing) {
+    pushMotor(WC_PIN_PWM_L, WC_PIN_DIR_L, trustedL, filtVelL, pwmL, dirL);
+    pushMotor(WC_PIN_PWM_R, WC_PIN_DIR_R, trustedR, filtVelR, pwmR, dirR);
+    holding = false;
+  } else if (heldL || heldR) {
     if (!holding) {   // the hold starts: from this tick's counts, following a wheel still moving
       holdRefL = encTickL;
       holdRefR = encTickR;
@@ -2187,6 +2222,7 @@ void setup() {
   pinMode(WC_PIN_INHIBIT_1, INPUT_PULLUP);
   pinMode(WC_PIN_INHIBIT_2, INPUT_PULLUP);
   pinMode(WC_PIN_BRAKE_STATUS, INPUT_PULLUP);
+  pinMode(WC_PIN_PUSH, INPUT_PULLUP);
   pinMode(WC_PIN_ENC_L_A, INPUT);
   pinMode(WC_PIN_ENC_L_B, INPUT);
   pinMode(WC_PIN_ENC_R_A, INPUT);

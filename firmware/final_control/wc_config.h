@@ -87,6 +87,7 @@
 #define WC_PIN_INHIBIT_1 24        // PA2, inhibit input 1 (the charger): INPUT_PULLUP, active LOW (a contact to ground)
 #define WC_PIN_INHIBIT_2 25        // PA3, inhibit input 2 (the seat raised): INPUT_PULLUP, active LOW
 #define WC_PIN_BRAKE 22            // PA0, the parking brake: HIGH releases it; LOW, or an input (at reset: the driver's pull-down), engages it
+#define WC_PIN_PUSH 26             // PA4, the parking brake's manual-release lever switch (push mode): INPUT_PULLUP, active LOW (the lever pulled, the brake released by hand)
 #define WC_PIN_BRAKE_STATUS 23     // PA1, the brake driver's status output (a smart power switch's open-drain diagnostic): INPUT_PULLUP; LOW is a coil fault, an open load while the brake is engaged (the switch off) or an overload while it is released (on)
 
 // ---- Fault detection (EVT:FAULT; docs/safety.md) ---------------------------
@@ -123,6 +124,7 @@
 #define WC_BRAKE_ENGAGE_TICKS 2    // control ticks from PIN_BRAKE LOW to the motors unpowered while parked (the brake's engage time; 100 ms against the plant's 50 ms)
 #define WC_BRAKE_PRELOAD_TICKS 1   // control ticks the hold drives, the brake still engaged, before PIN_BRAKE goes HIGH: the hold's current is up before the brake lets go
 #define WC_BRAKE_RELEASE_TICKS 2   // control ticks from PIN_BRAKE HIGH to driving, the hold on meanwhile (the brake's release time; 100 ms against the plant's 50 ms)
+#define WC_PUSH_SPEED 4.0f         // rad/s (0.61 m/s): in push mode the motors freewheel (each at the duty its back-EMF takes, FAULT_EFFORT_EMF a rad/s: no current) while both wheels are slower; a wheel pushed faster is at duty 0, its motor shorted, braking it
 #define WC_BRAKE_STATUS_TICKS 2    // control ticks in a row PIN_BRAKE_STATUS must read LOW, PIN_BRAKE unchanged since the tick before, before a coil fault latches (EVT:FAULT,BRAKE_OPEN with the brake engaged, BRAKE_SHORT released)
 
 // ---- Hill hold and rollaway (parked without a fault; protocol/PROTOCOL.md) ---

@@ -172,3 +172,44 @@ def test_brake_fitted_is_saved_and_loaded_and_out_of_range_refused() -> None:
     rec = _run([], 0.1, eeprom=block_image({"brakeFitted": 1}, layout=2))
     assert b"EVT:PARAMS_DEFAULT,version" in rec.tx
     assert all(a["brakeFitted"] == 0 for _, a in tick_states(rec))
+
+
+def _profile(points: list[tuple[float, float]], duration: float) -> dict:
+    """Both wheels at the piecewise-linear speeds ``points`` (s, rad/s) from rest (the
+    left counting backwards)."""
+    t = np.linspace(0.0, duration, 8000)
+    speed = np.interp(t, [p[0] for p in points], [p[1] for p in points])
+    angle = np.concatenate([[0.0], np.cumsum((speed[1:] + speed[:-1]) / 2 * np.diff(t))])
+    return {side: edges_from_trajectory(t, 0.5 + (-1 if side == "left" else 1) * angle * COUNTS_PER_RAD)
+            for side in ("left", "right")}
+
+
+def test_push_mode_refuses_driving_freewheels_the_motors_and_brakes_above_the_push_speed() -> None:
+    """The brake's manual-release lever pulled (input 4) at 0.3 s: after the debounce
+    ``EVT:PUSH,1``, motion refused (``ERR:inhibit``), no hold. Pushed at 2 rad/s each
+    wheel is at the duty its back-EMF takes (FAULT_EFFORT_EMF a rad/s of its filtered
+    speed, truncated), DIR forward: no current, freewheeling; pushed past PUSH_SPEED, at
+    duty 0 (shorted, braking). Let go at 1.6 s: ``EVT:PUSH,0`` and motion waits for
+    neutral (``ERR:neutral``); no fault throughout."""
+    serial = [(0.02, NEUTRAL), (0.6, SLOW), (1.7, SLOW)]
+    speeds = [(0.0, 0.0), (0.4, 0.0), (0.6, 2.0), (1.0, 2.0), (1.2, 6.0), (1.4, 6.0), (1.5, 0.0), (2.0, 0.0)]
+    rec = recorded(Trace(duration=2.0, serial=serial, inhibits=[(0.3, 4, True), (1.6, 4, False)],
+                         encoders=_profile(speeds, 2.0)))
+    ticks = tick_states(rec)
+    pushing = [(t, a) for t, a in ticks if a["inhibitStable"] & C.INHIBIT_PUSH]
+    assert 0.3 + 0.05 <= pushing[0][0] <= 0.3 + 0.05 * C.INHIBIT_DEBOUNCE_TICKS + 0.001
+    assert all(a["parked"] and not a["holding"] and a["targetL"] == 0.0 for _, a in pushing)
+    slow = [a for t, a in pushing if 0.75 <= t <= 1.0]
+    fast = [a for t, a in pushing if 1.25 <= t <= 1.4]
+    assert slow and fast
+    for a in slow:
+        for side in ("L", "R"):
+            v = a[f"filtVel{side}"]
+            assert a[f"pwm{side}"] == int(np.float32(abs(v)) * np.float32(C.FAULT_EFFORT_EMF)) > 20
+            assert a[f"dir{side}"] == C.HIGH
+    assert all(a["filtVelL"] > C.PUSH_SPEED and a["pwmL"] == a["pwmR"] == 0 for a in fast)
+    assert board_lines(rec, b"EVT:PUSH") == [b"EVT:PUSH,1", b"EVT:PUSH,0"]
+    assert board_lines(rec, b"ERR:") == [b"ERR:inhibit", b"ERR:neutral"]
+    after = [a for t, a in ticks if t > 1.75]
+    assert after and all(a["needNeutral"] and a["targetL"] == 0.0 for a in after)
+    assert all(a["faultFlags"] == 0 for _, a in ticks)

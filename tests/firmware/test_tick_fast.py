@@ -273,7 +273,8 @@ PYTHON_ONLY = {"emergencyStop", "faultFlags", "lastTravel", "holdRollaway", "lim
                "haltIntegralR", "haltSetpointL", "haltSetpointR", "needNeutral", "neutralSeen",
                "neutralTicks", "notNeutralSent", "notNeutralPending", "notNeutralTicks", "neutralFault",
                "inhibitTick", "inhibitStable", "inhibitCountL", "inhibitCountR", "inhibitLatched",
-               "inhibitPending", "inhibitOn", "brakePhase", "brakeTicks", "brakeStatusTicks"}
+               "inhibitPending", "inhibitOn", "inhibitCountP", "brakePhase", "brakeTicks",
+               "brakeStatusTicks"}
 _FIRMWARE = Path(tick_fast.__file__).resolve().parent
 
 

@@ -300,3 +300,26 @@ def test_the_drivers_status_flags_an_open_coil_off_and_a_short_on(coil: str | No
     assert bare.brake_status_low is (not pin_high)
     with pytest.raises(ValueError, match="brake coil fault"):
         plant.set_brake_coil("melted")
+
+
+@BACKENDS
+def test_the_manual_release_lever_releases_the_brake_whatever_its_pin_and_coil(use_kernel: bool) -> None:
+    """Motors dead, facing down 4 degrees, the pin LOW and the coil open: the lever
+    pulled releases the brake after its release delay and the chair rolls as one without
+    a brake; back, the brake engages after its engage delay and stops it."""
+    plant = Plant(BRAKED, terrain=Terrain(4.0, 0.0), use_kernel=use_kernel)
+    _roll_freely(plant)
+    plant.set_brake_coil("open")
+    plant.set_brake_lever(True)
+    assert plant.brake_lever
+    plant.advance(49)
+    assert plant.brake_engaged
+    plant.advance(1)
+    assert not plant.brake_engaged
+    plant.advance(1000)
+    assert plant.axle_velocity()[0] > 0.1
+    plant.set_brake_lever(False)
+    plant.advance(50)
+    assert plant.brake_engaged
+    plant.advance(2000)
+    assert abs(plant.axle_velocity()[0]) < 1e-4          # the tyres' deflection settling

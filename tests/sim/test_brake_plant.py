@@ -117,3 +117,21 @@ def test_a_board_told_of_a_brake_the_chair_lacks_sees_an_open_coil() -> None:
     along = _travel(r, 0.0)
     assert np.abs(along).max() < 0.015
     assert np.ptp(along[-40:]) < 1e-3
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_pushed_by_hand_down_a_grade_the_motors_freewheel_then_brake(backend: str) -> None:
+    """Parked facing down 1:12 with the brake (``ramp_push_mode_1in12_brake``), its lever
+    pulled at 1 s: the chair rolls off, freewheeling (it passes 0.4 m/s within 1.2 s),
+    is held by the shorted motors near PUSH_SPEED (0.61 m/s at the rim; never over
+    0.8 m/s), with no alarm; the lever back at 6 s, the brake stops it within 0.3 s and it
+    stands."""
+    r = bundled("ramp_push_mode_1in12_brake", backend)
+    assert not alarms(r)
+    t, pose = r.board.tick_time, r.truth.pose
+    speed = np.r_[0.0, np.hypot(*np.diff(pose[:, :2], axis=0).T) / np.diff(t)]
+    assert speed[(t > 2.2) & (t < 6.0)].max() < 0.8
+    assert speed[(t > 1.0) & (t < 2.2)].max() > 0.4
+    assert speed[(t > 0.2) & (t < 1.0)].max() < 1e-3
+    stood = t > 6.3
+    assert np.hypot(*(pose[stood, :2] - pose[stood][0, :2]).T).max() < 1e-3

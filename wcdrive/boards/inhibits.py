@@ -14,19 +14,23 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import dataclass
 
-__all__ = ["INPUTS", "InhibitChange", "active_bits", "input_number"]
+__all__ = ["INPUTS", "LEVER_INPUT", "InhibitChange", "active_bits", "input_number"]
 
-#: The inhibit inputs by name.
-INPUTS = {"charger": 1, "seat": 2}
+#: The inhibit inputs by name; "push" is the parking brake's manual-release lever, which
+#: the board reads as a third inhibit input (push mode) and which releases the brake.
+INPUTS = {"charger": 1, "seat": 2, "push": 4}
+#: The lever's number: a change of it moves the plant's lever (``Plant.set_brake_lever``),
+#: whose switch the board reads.
+LEVER_INPUT = 4
 
 
 def input_number(name: str | int) -> int:
-    """1 or 2, from an input's name (``INPUTS``) or number; ``ValueError`` otherwise."""
+    """1, 2 or 4, from an input's name (``INPUTS``) or number; ``ValueError`` otherwise."""
     if isinstance(name, int) and not isinstance(name, bool) and name in INPUTS.values():
         return name
     if isinstance(name, str) and name in INPUTS:
         return INPUTS[name]
-    raise ValueError(f"no inhibit input {name!r}: {', '.join(INPUTS)} (or 1, 2)")
+    raise ValueError(f"no inhibit input {name!r}: {', '.join(INPUTS)} (or 1, 2, 4)")
 
 
 @dataclass(frozen=True)

@@ -55,7 +55,7 @@ from wcdrive.avr.timer0 import (
     storm_window,
 )
 from wcdrive.avr.uart import UART_BYTE_CYCLES
-from wcdrive.boards.inhibits import InhibitChange, input_number
+from wcdrive.boards.inhibits import LEVER_INPUT, InhibitChange, input_number
 from wcdrive.firmware.eeprom import ReadyInterrupt
 from wcdrive.firmware.final_control import Firmware
 from wcdrive.firmware.quadrature import QuadratureDecoder
@@ -199,7 +199,9 @@ class PortLoop:
         self.output: list[tuple[int, bytes]] = [(0, self.fw.boot_output())]
         self.faults = tuple(faults)
         #: The inhibit inputs active now (bit 0 input 1, bit 1 input 2), and their
-        #: changes still to come, by time (``set_inhibit`` adds to them).
+        #: changes still to come, by time (``set_inhibit`` adds to them); a change of
+        #: input 4, the brake's manual release, moves the plant's lever, which the board
+        #: reads (``Plant.brake_lever``).
         self.inhibit_bits = 0
         self._inhibits_due = sorted(inhibits, key=lambda c: c.at)
         self._scale = plant.p.counts_per_rev / (2.0 * math.pi)
@@ -220,8 +222,9 @@ class PortLoop:
         self._wire_free = start + len(data) * UART_BYTE_CYCLES
 
     def set_inhibit(self, number: int, active: bool, at: int | None = None) -> None:
-        """Inhibit input ``number`` (1 the charger, 2 the seat) active (its pin LOW) or
-        released from cycle ``at`` (default: now) on."""
+        """Inhibit input ``number`` (1 the charger, 2 the seat; 4 the brake's manual
+        release, pulled on the plant) active (its pin LOW) or released from cycle ``at``
+        (default: now) on."""
         when = self.cycle if at is None else at
         bisect.insort(self._inhibits_due, InhibitChange(when / F_CPU, input_number(number), active),
                       key=lambda c: c.at)
@@ -362,8 +365,19 @@ class PortLoop:
         """``inhibit_bits`` once the changes due by ``cycle`` are made."""
         due = self._inhibits_due
         while due and due[0].at <= cycle / F_CPU:
-            self.inhibit_bits = due.pop(0).applied_to(self.inhibit_bits)
+            change = due.pop(0)
+            if change.number == LEVER_INPUT:
+                self.plant.set_brake_lever(change.active)
+            else:
+                self.inhibit_bits = change.applied_to(self.inhibit_bits)
         return self.inhibit_bits
+
+    def _inputs_at(self, cycle: int) -> int:
+        """The tick's input pins at ``cycle`` (``control_tick``'s ``inputs``): the
+        inhibit inputs, the brake driver's status and its manual release, from the plant."""
+        bits = self._inhibits_at(cycle)
+        plant = self.plant
+        return bits | (4 if plant.brake_status_low else 0) | (8 if plant.brake_lever else 0)
 
     def _tick(self, fw: Firmware, overflow: int, millis: int,
               on_tick: Callable[[float], None] | None) -> None:
@@ -375,7 +389,7 @@ class PortLoop:
         dl, dr = left.decoder, right.decoder
         out = fw.tick(millis, left.count(true_l), right.count(true_r), dl.illegal, dr.illegal, None,
                       int(dl.storm), int(dr.storm),
-                      inputs=self._inhibits_at(overflow) | (4 if self.plant.brake_status_low else 0))
+                      inputs=self._inputs_at(overflow))
         s = fw.state
         self.plant.set_drive(s.pwmL, s.dirL, s.pwmR, s.dirR)
         self.plant.set_brake(bool(s.brakeReleased))

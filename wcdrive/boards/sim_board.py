@@ -81,7 +81,8 @@ class SimulatedBoard(ThreadedBoard):
     def set_inhibit(self, name: str | int, active: bool = True) -> None:
         """Pulls inhibit input ``name`` ("charger" or "seat", or 1, 2: ``wcdrive.boards.inhibits``)
         low (``active``) or lets it go, from now on: what a charger plugged in or a seat
-        switch does to the board's pin."""
+        switch does to the board's pin. "push" (4) pulls the parking brake's
+        manual-release lever on the plant, whose switch the board reads (push mode)."""
         with self._lock:
             self.loop.set_inhibit(input_number(name), active)
 

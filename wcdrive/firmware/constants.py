@@ -35,8 +35,11 @@ INHIBIT_1_SPEED = f32(real("INHIBIT_1_SPEED"))
 INHIBIT_2_SPEED = f32(real("INHIBIT_2_SPEED"))
 INHIBIT_1_LATCH = integer("INHIBIT_1_LATCH")
 INHIBIT_2_LATCH = integer("INHIBIT_2_LATCH")
-#: The inputs that inhibit driving (speed 0) and those that latch (bit 0 input 1, bit 1 input 2).
-INHIBIT_STOP_MASK = (1 if INHIBIT_1_SPEED == 0.0 else 0) | (2 if INHIBIT_2_SPEED == 0.0 else 0)
+#: The brake's manual release (push mode), read as a third inhibit input (its bit).
+INHIBIT_PUSH = 4
+#: The inputs that inhibit driving (speed 0; push mode always) and those that latch (bit 0
+#: input 1, bit 1 input 2).
+INHIBIT_STOP_MASK = (1 if INHIBIT_1_SPEED == 0.0 else 0) | (2 if INHIBIT_2_SPEED == 0.0 else 0) | INHIBIT_PUSH
 INHIBIT_LATCH_MASK = (1 if INHIBIT_1_LATCH else 0) | (2 if INHIBIT_2_LATCH else 0)
 
 # Geometry and encoders (seed section 1.4.2)
@@ -93,6 +96,7 @@ PIN_DIR_R = integer("PIN_DIR_R")
 PIN_RELAY = integer("PIN_RELAY")
 PIN_BRAKE = integer("PIN_BRAKE")
 PIN_BRAKE_STATUS = integer("PIN_BRAKE_STATUS")
+PIN_PUSH = integer("PIN_PUSH")
 PIN_INHIBIT_1 = integer("PIN_INHIBIT_1")
 PIN_INHIBIT_2 = integer("PIN_INHIBIT_2")
 
@@ -131,6 +135,7 @@ BRAKE_ENGAGE_TICKS = integer("BRAKE_ENGAGE_TICKS")
 BRAKE_PRELOAD_TICKS = integer("BRAKE_PRELOAD_TICKS")
 BRAKE_RELEASE_TICKS = integer("BRAKE_RELEASE_TICKS")
 BRAKE_STATUS_TICKS = integer("BRAKE_STATUS_TICKS")
+PUSH_SPEED = f32(real("PUSH_SPEED"))
 HOLD_DEADBAND_COUNTS = integer("HOLD_DEADBAND_COUNTS")
 HOLD_GAIN = integer("HOLD_GAIN")
 HOLD_PWM_MAX = integer("HOLD_PWM_MAX")

@@ -427,7 +427,7 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
     encoder counts, the illegal-transition counts, the storm flags and the RX
     interrupt's count of lost bytes (``rxLost``); and the input pins it reads
     (``inputs``: bit 0 inhibit input 1, bit 1 input 2, 1 active; bit 2 the brake
-    driver's status LOW)."""
+    driver's status LOW; bit 3 the brake's manual release pulled, push mode)."""
     last_tick = s.lastControlTime if s.lastTickTime is None else s.lastTickTime
     elapsed = (now - last_tick) & 0xFFFFFFFF            # since the last tick ran
     dt = div(from_int(elapsed), 1000.0)
@@ -448,7 +448,7 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
     s.illTickL, s.illTickR = illegal_l & 0xFFFFFFFF, illegal_r & 0xFFFFFFFF
     s.stormTickL, s.stormTickR = int(bool(storm_l)), int(bool(storm_r))
     s.rxLostTick = rx_lost & 0xFFFFFFFF
-    s.inhibitTick = inputs & 3
+    s.inhibitTick = (inputs & 3) | ((inputs >> 3) & 1) << 2
     s.brakeStatusTick = (inputs >> 2) & 1
     delta_l = i32(s.encTickL - s.prevEncL)
     delta_r = i32(s.encTickR - s.prevEncR)
@@ -511,7 +511,10 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
     # Once the hold is on, the chair stays parked while at rest: the hold keeps it there.
     # A fault that leaves no encoder trusted parks at once, at duty 0. With a brake, the
     # chair stays parked until the brake has let go.
-    park = (not trusted_l and not trusted_r) or halt or (at_rest and (s.holding or braked))
+    # In push mode the chair stays parked at rest however fast it is pushed: the motors
+    # freewheel (``motors``) rather than the PID braking it.
+    pushing = bool(s.inhibitStable & C.INHIBIT_PUSH)
+    park = (not trusted_l and not trusted_r) or halt or (at_rest and (s.holding or braked or pushing))
     if s.brakeFitted:
         park = brake_step(s, bool(park))
     if park:

@@ -23,7 +23,7 @@ from wcdrive.firmware.state import FirmwareState
 __all__ = ["capped_goals", "drive_inhibited", "inhibit_engaged", "send_inhibit_event", "update_inhibits"]
 
 #: The events by their pending bit.
-_EVENTS = {1: "INHIBIT,1,1", 2: "INHIBIT,1,0", 4: "INHIBIT,2,1", 8: "INHIBIT,2,0"}
+_EVENTS = {1: "INHIBIT,1,1", 2: "INHIBIT,1,0", 4: "INHIBIT,2,1", 8: "INHIBIT,2,0", 16: "PUSH,1", 32: "PUSH,0"}
 
 
 def inhibit_engaged(s: FirmwareState) -> int:
@@ -56,10 +56,11 @@ def update_inhibits(s: FirmwareState) -> None:
     before = s.inhibitOn                # a reset may have ended a latch since
     s.inhibitCountL = debounce_inhibit(s, 1, s.inhibitCountL)
     s.inhibitCountR = debounce_inhibit(s, 2, s.inhibitCountR)
+    s.inhibitCountP = debounce_inhibit(s, C.INHIBIT_PUSH, s.inhibitCountP)
     s.inhibitLatched |= s.inhibitStable & C.INHIBIT_LATCH_MASK
     after = inhibit_engaged(s)
     s.inhibitOn = after
-    on, off = after & ~before & 3, before & ~after & 3
+    on, off = after & ~before & 7, before & ~after & 7
     if on & C.INHIBIT_STOP_MASK or off:
         s.targetL = s.targetR = 0.0
         s.pivotPhase = PIVOT_NONE
@@ -67,7 +68,8 @@ def update_inhibits(s: FirmwareState) -> None:
         s.lastTravel = 0.0
     if off:
         require_neutral(s)
-    s.inhibitPending |= (on & 1) | (off & 1) << 1 | (on & 2) << 1 | (off & 2) << 2
+    s.inhibitPending |= ((on & 1) | (off & 1) << 1 | (on & 2) << 1 | (off & 2) << 2
+                         | (on & C.INHIBIT_PUSH) << 2 | (off & C.INHIBIT_PUSH) << 3)
 
 
 def send_inhibit_event(s: FirmwareState, out: bytearray) -> None:

@@ -12,7 +12,7 @@ from wcdrive.firmware.brake import brake_holds
 from wcdrive.firmware.output import send, send_event
 from wcdrive.firmware.state import FirmwareState
 
-__all__ = ["hold_duty", "hold_error", "hold_motor", "i32", "motors", "set_motor"]
+__all__ = ["hold_duty", "hold_error", "hold_motor", "i32", "motors", "push_motor", "set_motor"]
 
 
 def set_motor(output: float) -> tuple[int, int]:
@@ -68,14 +68,30 @@ def hold_motor(error: int, ahead_dir: int, rollaway: int) -> tuple[int, int]:
     return duty, C.LOW if ahead_dir == C.HIGH else C.HIGH
 
 
+def push_motor(trusted: bool, vel: float) -> tuple[int, int]:
+    """``pushMotor``: ``(duty, DIR)`` of a wheel in push mode (the brake released by
+    hand): trusted and slower than PUSH_SPEED, the duty its back-EMF takes the way it
+    turns (no current, no torque: freewheeling); faster, or not trusted, duty 0 (the
+    motor shorted, braking it)."""
+    speed = abs(vel)
+    if not trusted or speed > C.PUSH_SPEED:
+        return 0, C.HIGH
+    return to_int_trunc(mul(speed, C.FAULT_EFFORT_EMF)) & 0xFF, C.HIGH if vel >= 0.0 else C.LOW
+
+
 def motors(s: FirmwareState, delta_l: int, delta_r: int, hardest: bool, trusted_l: bool, trusted_r: bool,
             out: bytearray) -> None:
     """Both motors' duty and DIR: parked, the hold's for each wheel whose encoder is
     trusted (both without a fault; after one, the healthy wheel, and the faulty one
     mirrors it, open loop: the same duty against the same motion; ``holding``;
     ``EVT:ROLLAWAY`` once per hold when a held wheel is pushed ROLLAWAY_COUNTS off its
-    reference, and from then on HOLD_PWM_MAX beyond the deadband), else ``set_motor``
-    of the outputs."""
+    reference, and from then on HOLD_PWM_MAX beyond the deadband); parked in push mode,
+    ``push_motor`` of each (no hold); else ``set_motor`` of the outputs."""
+    if s.parked and s.inhibitStable & C.INHIBIT_PUSH:
+        s.pwmL, s.dirL = push_motor(trusted_l, s.filtVelL)
+        s.pwmR, s.dirR = push_motor(trusted_r, s.filtVelR)
+        s.holding = 0
+        return
     held_l = bool(s.parked) and trusted_l
     held_r = bool(s.parked) and trusted_r
     if not (held_l or held_r):

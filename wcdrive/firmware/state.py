@@ -45,7 +45,8 @@ INT_FIELDS = (
     "brakeReleased", "brakePhase", "brakeTicks", "brakeStatusTick", "brakeStatusTicks", "overspeedTicksL",
     "overspeedTicksR", "limitLatched",
     "needNeutral", "neutralSeen", "neutralTicks", "notNeutralSent", "notNeutralPending", "notNeutralTicks",
-    "neutralFault", "inhibitTick", "inhibitStable", "inhibitCountL", "inhibitCountR", "inhibitLatched",
+    "neutralFault", "inhibitTick", "inhibitStable", "inhibitCountL", "inhibitCountR", "inhibitCountP",
+    "inhibitLatched",
     "inhibitPending", "inhibitOn",
 )
 
@@ -168,6 +169,7 @@ class FirmwareState:
     inhibitStable: int = 0
     inhibitCountL: int = 0
     inhibitCountR: int = 0
+    inhibitCountP: int = 0
     inhibitLatched: int = 0
     inhibitOn: int = 0
     inhibitPending: int = 0

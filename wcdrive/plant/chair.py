@@ -180,6 +180,7 @@ class Plant:
         self._motion_log: MotionLog | None = None
         self._brake_pin_high = False
         self._brake_coil: str | None = None
+        self._brake_lever = False
         self._buf_rates = np.empty(0)
         self._buf_angles = np.empty((0, 2))
         self._buf_at: tuple[int, int] = (0, 0)
@@ -244,10 +245,23 @@ class Plant:
         coil = self._brake_coil if self.s.has_brake else "open"
         return (coil == "open" and not self._brake_pin_high) or (coil == "short" and self._brake_pin_high)
 
+    def set_brake_lever(self, pulled: bool) -> None:
+        """The brake's manual-release lever: pulled, the brake is released by hand
+        whatever its pin and coil (after the release delay; back, it engages after the
+        engage delay unless the pin holds it off), and the lever's switch tells the
+        board (``brake_lever``: push mode)."""
+        self._brake_lever = bool(pulled)
+        self._apply_brake()
+
+    @property
+    def brake_lever(self) -> bool:
+        """Whether the brake's manual-release lever is pulled (``set_brake_lever``)."""
+        return self._brake_lever
+
     def _apply_brake(self) -> None:
-        """The brake's pin as the brake sees it: released only with a whole coil."""
+        """The brake's pin as the brake sees it: released by a whole coil, or by hand."""
         s = self.s
-        pin = 1 if self._brake_pin_high and self._brake_coil is None else 0
+        pin = 1 if (self._brake_pin_high and self._brake_coil is None) or self._brake_lever else 0
         if not s.has_brake or pin == s.brake_pin:
             return
         s.brake_pin = pin

@@ -271,8 +271,8 @@ class ExtendedTelemetry:
     #: Bit 0: the board waits for a neutral command (motion refused, ``ERR:neutral``);
     #: bit 1: the neutral fault (refused 5 s without one); bit 2: driving inhibited by
     #: an inhibit input (``ERR:inhibit``); bit 3: the speed capped by one; bit 4: a fitted
-    #: parking brake applied (``brake_fitted`` 1, its pin LOW). Boards before this field
-    #: end at ``late`` (None).
+    #: parking brake applied (``brake_fitted`` 1, its pin LOW); bit 5: push mode (the
+    #: brake released by hand). Boards before this field end at ``late`` (None).
     state: int | None = None
 
     @property
@@ -302,6 +302,12 @@ class ExtendedTelemetry:
         """State bit 4: the parking brake the firmware owns (``brake_fitted`` 1) is
         applied, its pin LOW: the chair parked on it, or stopping after a fault."""
         return bool(self.state and self.state & 16)
+
+    @property
+    def push_mode(self) -> bool:
+        """State bit 5: the brake's manual-release lever is pulled (push mode): motion is
+        refused (``ERR:inhibit``, bit 2 set too) and the motors freewheel."""
+        return bool(self.state and self.state & 32)
 
     @property
     def fault_latched(self) -> bool:

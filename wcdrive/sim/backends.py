@@ -22,7 +22,7 @@ from typing import Protocol
 
 import numpy as np
 
-from wcdrive.boards.inhibits import InhibitChange
+from wcdrive.boards.inhibits import LEVER_INPUT, InhibitChange
 from wcdrive.boards.port_loop import F_CPU, PortLoop
 from wcdrive.boards.simavr.mega_pins import INHIBIT_PINS
 from wcdrive.boards.simavr.plant_on_pins import PlantOnPins
@@ -169,9 +169,11 @@ class SimavrBackend:
         step_cycles = round(dt * F_CPU)
         mega = VirtualMega(self.elf)
         recorder = Recorder(mega)
-        pins = PlantOnPins(mega, plant, rig.gyro, faults=rig.faults)
+        levers = [(c.cycle(F_CPU), c.active) for c in rig.inhibits if c.number == LEVER_INPUT]
+        pins = PlantOnPins(mega, plant, rig.gyro, faults=rig.faults, levers=levers)
         for change in rig.inhibits:       # active LOW: the pin pulled to ground
-            mega.set_pin(INHIBIT_PINS[change.number], 0 if change.active else 1, at=change.cycle(F_CPU))
+            if change.number != LEVER_INPUT:    # the lever's switch: the plant's (PlantOnPins)
+                mega.set_pin(INHIBIT_PINS[change.number], 0 if change.active else 1, at=change.cycle(F_CPU))
         trains: dict[str, list[EdgeTrain]] = {"left": [], "right": []}
         tx_seen = 0
         n_events_logged = 0
@@ -227,8 +229,8 @@ class SimavrBackend:
                                            np.concatenate([p.states for p in parts]), 0, 0)
         trace = Trace(duration=end_cycle / F_CPU, serial=[(c / F_CPU, d) for c, d in sorted(runs + piloted)],
                       encoders=encoders,
-                      inhibits=sorted([(c.at, c.number, c.active) for c in rig.inhibits]
-                                      + pins.status_changes))
+                      inhibits=sorted([(c.at, c.number, c.active) for c in rig.inhibits
+                                       if c.number != LEVER_INPUT] + pins.status_changes))
         report = compare(recorder.recording(trace))
         mega.close()
         return BackendRun(end_cycle, Lockstep(len(report.mismatches), report.events))

@@ -25,7 +25,8 @@
     rate_hz = 200000         # encoder_noise: edges per second on channel A
     [[input]]                # optional, any number (wcdrive.sim.scenario_inputs)
     at = 3.0                 # s from the start
-    input = "charger"        # the inhibit input: "charger" (1) or "seat" (2)
+    input = "charger"        # the inhibit input: "charger" (1), "seat" (2), or "push" (4:
+                             #   the brake's manual-release lever, pulled on the plant)
     active = true            # pulled LOW, or released (false); each starts released
 
 The floor is level unless a ``[world]`` table tilts it (``wcdrive.plant.terrain``):

@@ -50,7 +50,8 @@ VARIABLE_FORMATS = {
           "limitLatched", "feedbackForm", "needNeutral", "neutralSeen", "neutralTicks", "notNeutralSent",
           "notNeutralPending", "notNeutralTicks", "neutralFault", "inhibitTick", "inhibitStable",
           "inhibitCountL", "inhibitCountR", "inhibitLatched", "inhibitPending",
-          "inhibitOn", "brakeFitted", "brakePhase", "brakeTicks", "brakeStatusTick", "brakeStatusTicks"),
+          "inhibitOn", "inhibitCountP",
+          "brakeFitted", "brakePhase", "brakeTicks", "brakeStatusTick", "brakeStatusTicks"),
 }
 _FORMAT_OF = {name: fmt for fmt, names in VARIABLE_FORMATS.items() for name in names}
 

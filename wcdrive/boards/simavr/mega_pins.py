@@ -19,7 +19,7 @@ from wcdrive.protocol.spec import integer
 #: bit), for the pins the spec assigns.
 MEGA_PORT_BIT = {2: ("E", 4), 3: ("E", 5), 7: ("H", 4), 8: ("H", 5), 9: ("H", 6), 10: ("B", 4),
                  11: ("B", 5), 18: ("D", 3), 19: ("D", 2), 22: ("A", 0), 23: ("A", 1), 24: ("A", 2),
-                 25: ("A", 3)}
+                 25: ("A", 3), 26: ("A", 4)}
 
 
 def _pin(name: str) -> tuple[str, int]:
@@ -36,9 +36,12 @@ BRAKE_PIN = _pin("PIN_BRAKE")
 INHIBIT_PINS = {1: _pin("PIN_INHIBIT_1"), 2: _pin("PIN_INHIBIT_2")}
 #: The brake driver's status output: pulled up (HIGH), LOW on a coil fault.
 BRAKE_STATUS_PIN = _pin("PIN_BRAKE_STATUS")
+#: The brake's manual-release lever switch (push mode): pulled up (HIGH), LOW when pulled.
+PUSH_PIN = _pin("PIN_PUSH")
 #: The input pins the control tick reads, by their bit of its ``inputs`` plus one (the
-#: numbers of a trace's input changes): the inhibit inputs 1 and 2, the brake's status 3.
-INPUT_PINS = {**INHIBIT_PINS, 3: BRAKE_STATUS_PIN}
+#: numbers of a trace's input changes): the inhibit inputs 1 and 2, the brake's status 3,
+#: its manual release 4.
+INPUT_PINS = {**INHIBIT_PINS, 3: BRAKE_STATUS_PIN, 4: PUSH_PIN}
 # PWM: pin 9 = OC2B on PH6, pin 10 = OC2A on PB4 (Timer2, phase-correct).
 _TCCR2A, _OCR2A, _OCR2B = 0xB0, 0xB3, 0xB4
 _PWM = {"left": (_OCR2B, 1 << 5, _pin("PIN_PWM_L")), "right": (_OCR2A, 1 << 7, _pin("PIN_PWM_R"))}

@@ -22,7 +22,7 @@ import numpy as np
 
 from wcdrive.avr.timer0 import F_CPU
 from wcdrive.boards.port_loop import advance
-from wcdrive.boards.simavr.mega_pins import BRAKE_STATUS_PIN
+from wcdrive.boards.simavr.mega_pins import BRAKE_STATUS_PIN, PUSH_PIN
 from wcdrive.boards.simavr.virtual_mega import VirtualMega
 from wcdrive.plant import Gyro, Plant
 from wcdrive.plant.encoders import EdgeTrain, edges_from_trajectory
@@ -38,7 +38,7 @@ class PlantOnPins:
     ``faults`` are injected as the module docstring says."""
 
     def __init__(self, mega: VirtualMega, plant: Plant, gyro: Gyro | None = None,
-                 faults: Sequence[Fault] = ()) -> None:
+                 faults: Sequence[Fault] = (), levers: Sequence[tuple[int, bool]] = ()) -> None:
         self.mega = mega
         self.plant = plant
         self.gyro = gyro
@@ -49,8 +49,12 @@ class PlantOnPins:
         self._wires = {side: w for side, w in wires.items() if w.faulty}
         self._plant_faults = any(f.kind in PLANT_KINDS for f in self.faults)
         self._resets = sorted(f.cycles(F_CPU)[0] for f in self.faults if f.kind == "reset")
-        #: The brake driver's status as the plant set it on its pin: (s, 3, LOW), input 3
-        #: of a lock-step trace (``wcdrive.boards.simavr.mega_pins.INPUT_PINS``).
+        #: The brake's manual-release lever: (cycle, pulled), applied to the plant at the
+        #: step that starts at or after it.
+        self._levers = sorted(levers)
+        #: The pins the plant drives as it set them: the brake driver's status (s, 3, LOW)
+        #: and the lever's switch (s, 4, LOW), inputs 3 and 4 of a lock-step trace
+        #: (``wcdrive.boards.simavr.mega_pins.INPUT_PINS``).
         self.status_changes: list[tuple[float, int, bool]] = []
 
     def step(self, t0: float, t1: float, run_until: Callable[[int], None] | None = None,
@@ -62,6 +66,8 @@ class PlantOnPins:
         c0, c1 = round(t0 * F_CPU), round(t1 * F_CPU)
         if self._plant_faults:
             apply_plant_faults(self.plant, self.faults, c0, F_CPU)
+        while self._levers and self._levers[0][0] <= c0:
+            self.plant.set_brake_lever(self._levers.pop(0)[1])
         angles = advance(self.plant, self.gyro, 1, t1 - t0)
         assert angles is not None
         new = {"left": -angles[0, 0] * self._scale + 0.5, "right": angles[0, 1] * self._scale + 0.5}
@@ -86,8 +92,9 @@ class PlantOnPins:
         self.plant.set_drive(self.mega.pwm("left"), self.mega.direction("left"),
                              self.mega.pwm("right"), self.mega.direction("right"))
         self.plant.set_brake(bool(self.mega.brake_released()))
-        status = 0 if self.plant.brake_status_low else 1
-        if self.mega.pin_level(BRAKE_STATUS_PIN) != status:
-            self.mega.set_pin(BRAKE_STATUS_PIN, status)
-            self.status_changes.append((self.mega.cycle / F_CPU, 3, not status))
+        for number, pin, low in ((3, BRAKE_STATUS_PIN, self.plant.brake_status_low),
+                                 (4, PUSH_PIN, self.plant.brake_lever)):
+            if self.mega.pin_level(pin) != (0 if low else 1):
+                self.mega.set_pin(pin, 0 if low else 1)
+                self.status_changes.append((self.mega.cycle / F_CPU, number, low))
         return trains

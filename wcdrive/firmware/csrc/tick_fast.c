@@ -18,8 +18,8 @@
  *     events and halt);
  *   - a tick while the board waits for neutral (needNeutral: after a boot, a reset, a
  *     watchdog stop or a PPM loss, a few ticks at most while a host is well behaved);
- *   - a tick with an inhibit input read active, engaged, debouncing or with its event
- *     still to send;
+ *   - a tick with an inhibit input (the brake's manual release too) read active,
+ *     engaged, debouncing or with its event still to send;
  *   - with a brake fitted (brakeFitted), a tick that parks, finds the brake other than
  *     released and settled (its phase, wcdrive.firmware.brake) or reads its driver's
  *     status LOW;
@@ -98,7 +98,7 @@ static double f_from_int(int64_t n) { return rnd((double)n); }   /* |n| < 2**53 
     X(holding) X(holdRefL) X(holdRefR) X(holdStepL) X(holdStepR) \
     X(brakeReleased) X(overspeedTicksL) X(overspeedTicksR) X(overspeedFromL) X(overspeedFromR) \
     X(needNeutral) X(neutralFault) \
-    X(inhibitTick) X(inhibitStable) X(inhibitCountL) X(inhibitCountR) X(inhibitLatched) X(inhibitPending) X(inhibitOn) \
+    X(inhibitTick) X(inhibitStable) X(inhibitCountL) X(inhibitCountR) X(inhibitLatched) X(inhibitPending) X(inhibitOn) X(inhibitCountP) \
     X(brakeFitted) X(brakePhase) X(brakeTicks) X(brakeStatusTick) X(brakeStatusTicks)
 
 #define ENUM(name) F_##name,
@@ -452,7 +452,8 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
     }
     if (I(needNeutral))
         Py_RETURN_NONE;             /* waiting for neutral (after a boot, a reset, a stop): the Python tick */
-    if ((inhibit & 3) || I(inhibitTick) || I(inhibitStable) || I(inhibitCountL) || I(inhibitCountR)
+    if ((inhibit & 0xB) || I(inhibitTick) || I(inhibitStable) || I(inhibitCountL) || I(inhibitCountR)
+        || I(inhibitCountP)
         || I(inhibitLatched) || I(inhibitPending) || I(inhibitOn))
         Py_RETURN_NONE;             /* an inhibit input read, engaged or settling: the Python tick */
     int brake_status = (int)((inhibit >> 2) & 1);
