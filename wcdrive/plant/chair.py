@@ -80,7 +80,16 @@ the brake as it was. Engaged, it is Coulomb friction on the wheel, up to
 tyre's, the motor's at stall, the wheel's own momentum) is within ``brake_torque``, else
 it turns against ``brake_torque``, so a moving wheel is slowed by it. It sums with the
 motor's torque, and so with a shorted motor's back-EMF braking at duty 0 (``-k2 w``,
-nothing at rest: the brake is what holds).
+nothing at rest: the brake is what holds). A faulty coil (``set_brake_coil``) cannot
+release it; its manual-release lever (``set_brake_lever``) releases it whatever the pin;
+the brake driver's status (``brake_status_low``) flags an open coil while off and a short
+while on.
+
+The motors' windings heat (``winding_temps``): each one thermal mass
+(``winding_heat_capacity``) heated by its copper loss ``I^2 R`` each step and cooled
+through ``winding_thermal_resistance`` to ``ambient_temp`` (figures assumed:
+``tests/plant/test_motor_heat.py`` holds both paths to the first-order result worked out
+by hand). Nothing reads it back yet: the motor's resistance does not rise with it.
 
 Faults (``set_wheel_locked``, ``set_motor_dead``; scheduled by ``wcdrive.plant.faults``):
 a locked wheel does not turn at all, its tyre holds or slides on the floor within ``mu N``; a
@@ -268,6 +277,12 @@ class Plant:
         s.brake_wait = self.p.brake_release_delay if pin else self.p.brake_engage_delay
         if s.brake_wait <= BRAKE_SLACK:
             s.brake_engaged = 1 - pin
+
+    @property
+    def winding_temps(self) -> tuple[float, float]:
+        """deg C: each motor's winding (left, right), from its copper loss
+        (``ChairParams.winding_thermal_resistance`` and ``winding_heat_capacity``)."""
+        return self.s.temp[0], self.s.temp[1]
 
     @property
     def brake_engaged(self) -> bool:

@@ -60,6 +60,8 @@ class ChairStruct(ctypes.Structure):
     _fields_ += [(n, _D) for n in ("k_long", "k_lat", "inv_k_long", "inv_k_lat")]
     _fields_ += [(n, _D * 2) for n in ("defl", "defl_lat")]
     _fields_ += [(n, _D) for n in ("brake_torque", "brake_wait")]
+    _fields_ += [(n, _D) for n in ("th_res", "th_cap", "t_amb")]
+    _fields_ += [("temp", _D * 2)]
     _fields_ += [(n, ctypes.c_int32) for n in ("has_brake", "brake_pin", "brake_engaged")]
 
 

@@ -65,6 +65,8 @@ def set_parameters(s: ChairStruct, p: ChairParams, heading: float) -> None:
     s.has_brake = 1 if p.parking_brake else 0
     s.brake_engaged = s.has_brake                 # the pin an input, pulled down
     s.brake_torque = p.brake_torque
+    s.th_res, s.th_cap, s.t_amb = p.winding_thermal_resistance, p.winding_heat_capacity, p.ambient_temp
+    s.temp[0] = s.temp[1] = p.ambient_temp
     s.caster_heading[0] = heading + p.caster_initial_offsets[0]
     s.caster_heading[1] = heading + p.caster_initial_offsets[1]
 
@@ -268,6 +270,17 @@ def step(s: ChairStruct, body: pymunk.Body, space: pymunk.Space, dt: float) -> N
         s.brake_wait -= dt
         if s.brake_wait <= BRAKE_SLACK:
             s.brake_engaged = 1 - s.brake_pin
+    heat(s, dt)
+
+
+def heat(s: ChairStruct, dt: float) -> None:
+    """Each motor's winding a step of ``dt`` on: one thermal mass (``th_cap``) heated by
+    its copper loss ``I^2 R`` and cooled through ``th_res`` to ambient (explicit Euler;
+    its time constant, 900 s by default, dwarfs the step). No model with ``th_cap`` 0."""
+    if s.th_cap > 0.0:
+        for i in range(2):
+            loss = s.current[i] * s.current[i] * s.res
+            s.temp[i] += dt * (loss - (s.temp[i] - s.t_amb) / s.th_res) / s.th_cap
 
 
 def clamp(v: float, lo: float, hi: float) -> float:

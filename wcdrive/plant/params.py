@@ -92,6 +92,17 @@ class ChairParams:
     rotor_inertia: float = 1.5e-4      # kg m^2, reflected through gear_ratio**2
     viscous_friction: float = 0.02     # N m s/rad at the wheel
 
+    # --- the motors' windings (assumed: no datasheet figures were to hand) ---
+    # Each winding one thermal mass, heated by its copper loss I^2 R (armature_resistance)
+    # and cooled to ambient through a thermal resistance: at the 13 A current limit
+    # (50.7 W) it settles 127 K above ambient, past a class B (130 deg C) rating from
+    # 20 deg C, with a time constant of R C = 900 s. Small 24 V gear motors of a few
+    # hundred watts run 1.5 to 3 K/W and 10 to 30 minutes.
+    winding_thermal_resistance: float = 2.5   # K/W, winding to ambient
+    winding_heat_capacity: float = 360.0      # J/K (0: no thermal model)
+    ambient_temp: float = 20.0                # deg C
+    winding_temp_rating: float = 130.0        # deg C: insulation class B
+
     # --- gyro: Bosch BMI085 figures from the seed ---
     gyro_rate_hz: float = 400.0
     gyro_noise_dps: float = 0.014      # deg/s rms

@@ -71,6 +71,11 @@ typedef struct {
     /* the parking brake (Plant.set_brake): its torque, what is left of its delay, whether
      * the chair has one, the pin (1 high: release) and the brake's state */
     double brake_torque, brake_wait;
+    /* the motors' windings as one thermal mass each (force_model.heat): thermal
+     * resistance to ambient (K/W), heat capacity (J/K; 0: no model), ambient (deg C), and
+     * each winding's temperature */
+    double th_res, th_cap, t_amb;
+    double temp[2];
     int32_t has_brake, brake_pin, brake_engaged;
 } chair_t;
 
@@ -298,6 +303,10 @@ static void step(chair_t *c, int lone, double dt) {
         if (c->brake_wait <= BRAKE_SLACK)
             c->brake_engaged = 1 - c->brake_pin;
     }
+    if (c->th_cap > 0.0)
+        for (int i = 0; i < 2; i++)
+            c->temp[i] += dt * (c->current[i] * c->current[i] * c->res - (c->temp[i] - c->t_amb) / c->th_res)
+                          / c->th_cap;
 }
 
 /* n steps; after each, the wheel angles (left, right) and the yaw rate are stored
@@ -418,6 +427,7 @@ static const wc_field chair_fields[] = {
     F(k_long), F(k_lat), F(inv_k_long), F(inv_k_lat),
     A(defl), A(defl_lat),
     F(brake_torque), F(brake_wait),
+    F(th_res), F(th_cap), F(t_amb), A(temp),
     F(has_brake), F(brake_pin), F(brake_engaged),
 };
 #undef F
