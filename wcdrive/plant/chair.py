@@ -91,6 +91,11 @@ through ``winding_thermal_resistance`` to ``ambient_temp`` (figures assumed:
 ``tests/plant/test_motor_heat.py`` holds both paths to the first-order result worked out
 by hand). Nothing reads it back yet: the motor's resistance does not rise with it.
 
+The battery (``battery_capacity_ah``; 0 by default: an ideal supply): the motors see
+their duty times its terminal voltage, the open-circuit voltage of its state of charge
+less its internal resistance times the driver's input current of the last step, and the
+charge drawn runs it down (``battery``; ``tests/plant/test_battery.py``).
+
 Faults (``set_wheel_locked``, ``set_motor_dead``; scheduled by ``wcdrive.plant.faults``):
 a locked wheel does not turn at all, its tyre holds or slides on the floor within ``mu N``; a
 dead motor is an open circuit: no torque, no current, no back-EMF braking, the wheel
@@ -219,9 +224,16 @@ class Plant:
     # ---- inputs ------------------------------------------------------------------
     def set_drive(self, pwm_left: int, dir_left: int, pwm_right: int, dir_right: int) -> None:
         """The driver inputs as the firmware writes them: duty 0..255, DIR HIGH = forward."""
+        s = self.s
+        s.duty[0] = pwm_left / 255.0 * (1.0 if dir_left else -1.0)
+        s.duty[1] = pwm_right / 255.0 * (1.0 if dir_right else -1.0)
+        if s.bat_cap > 0.0:                 # the battery's terminal voltage (force_model.battery)
+            s.volts[0] = s.bat_v * s.duty[0]
+            s.volts[1] = s.bat_v * s.duty[1]
+            return
         v = (self.p.battery_voltage or self.p.supply_voltage) / 255.0
-        self.s.volts[0] = v * pwm_left * (1.0 if dir_left else -1.0)
-        self.s.volts[1] = v * pwm_right * (1.0 if dir_right else -1.0)
+        s.volts[0] = v * pwm_left * (1.0 if dir_left else -1.0)
+        s.volts[1] = v * pwm_right * (1.0 if dir_right else -1.0)
 
     def set_brake(self, released: bool) -> None:
         """The level of the firmware's brake pin: true (driven high) releases the parking
@@ -277,6 +289,15 @@ class Plant:
         s.brake_wait = self.p.brake_release_delay if pin else self.p.brake_engage_delay
         if s.brake_wait <= BRAKE_SLACK:
             s.brake_engaged = 1 - pin
+
+    @property
+    def battery(self) -> tuple[float, float]:
+        """(V, state of charge 0..1): the battery's terminal voltage over the last step
+        and its charge (``ChairParams.battery_capacity_ah``; without a battery model the
+        supply's voltage and 1)."""
+        if self.s.bat_cap <= 0.0:
+            return (self.p.battery_voltage or self.p.supply_voltage), 1.0
+        return self.s.bat_v, self.s.soc
 
     @property
     def winding_temps(self) -> tuple[float, float]:

@@ -62,6 +62,8 @@ class ChairStruct(ctypes.Structure):
     _fields_ += [(n, _D) for n in ("brake_torque", "brake_wait")]
     _fields_ += [(n, _D) for n in ("th_res", "th_cap", "t_amb")]
     _fields_ += [("temp", _D * 2)]
+    _fields_ += [(n, _D) for n in ("bat_e0", "bat_e1", "bat_r", "bat_cap", "soc", "bat_v")]
+    _fields_ += [("duty", _D * 2)]
     _fields_ += [(n, ctypes.c_int32) for n in ("has_brake", "brake_pin", "brake_engaged")]
 
 

@@ -67,6 +67,10 @@ def set_parameters(s: ChairStruct, p: ChairParams, heading: float) -> None:
     s.brake_torque = p.brake_torque
     s.th_res, s.th_cap, s.t_amb = p.winding_thermal_resistance, p.winding_heat_capacity, p.ambient_temp
     s.temp[0] = s.temp[1] = p.ambient_temp
+    s.bat_e0, s.bat_e1, s.bat_r = p.battery_empty_voltage, p.battery_full_voltage, p.battery_resistance
+    s.bat_cap = p.battery_capacity_ah * 3600.0
+    s.soc = p.battery_charge
+    s.bat_v = s.bat_e0 + (s.bat_e1 - s.bat_e0) * s.soc
     s.caster_heading[0] = heading + p.caster_initial_offsets[0]
     s.caster_heading[1] = heading + p.caster_initial_offsets[1]
 
@@ -201,6 +205,7 @@ def stand_still(s: ChairStruct, i: int, force: float, ground: float, fmax: float
 def step(s: ChairStruct, body: pymunk.Body, space: pymunk.Space, dt: float) -> None:
     """One step of ``dt``: the forces on ``body`` from the state in ``s``, pymunk's step
     of ``space``, the time and the parking brake's delay."""
+    battery(s, dt)
     b = body
     vx, vy = b.velocity
     th = b.angle
@@ -271,6 +276,22 @@ def step(s: ChairStruct, body: pymunk.Body, space: pymunk.Space, dt: float) -> N
         if s.brake_wait <= BRAKE_SLACK:
             s.brake_engaged = 1 - s.brake_pin
     heat(s, dt)
+
+
+def battery(s: ChairStruct, dt: float) -> None:
+    """The battery a step of ``dt`` on, before the forces: its terminal voltage
+    ``bat_v`` (the open-circuit voltage, linear in the state of charge between
+    ``bat_e0`` and ``bat_e1``, less ``bat_r`` times the driver's input current of the last
+    step, each motor's current times its duty), the motors' volts (``duty`` times it) and
+    the charge drawn over the step (regenerative braking gives some back). No model with
+    ``bat_cap`` 0: the volts stay as ``set_drive`` set them."""
+    if s.bat_cap <= 0.0:
+        return
+    drawn = s.duty[0] * s.current[0] + s.duty[1] * s.current[1]
+    s.bat_v = s.bat_e0 + (s.bat_e1 - s.bat_e0) * s.soc - s.bat_r * drawn
+    s.volts[0] = s.duty[0] * s.bat_v
+    s.volts[1] = s.duty[1] * s.bat_v
+    s.soc = clamp(s.soc - drawn * dt / s.bat_cap, 0.0, 1.0)
 
 
 def heat(s: ChairStruct, dt: float) -> None:

@@ -92,6 +92,19 @@ class ChairParams:
     rotor_inertia: float = 1.5e-4      # kg m^2, reflected through gear_ratio**2
     viscous_friction: float = 0.02     # N m s/rad at the wheel
 
+    # --- the battery (assumed figures of two 12 V 50 Ah AGM blocks in series) ---
+    # With battery_capacity_ah 0 (the default) the driver sees an ideal supply,
+    # battery_voltage or supply_voltage. Otherwise the motors see duty x the terminal
+    # voltage: the open-circuit voltage, linear in the state of charge from
+    # battery_empty_voltage to battery_full_voltage (an AGM block rests at about 11.8 V
+    # empty and 12.8 V full), less battery_resistance times the driver's input current
+    # (each motor's current times its duty); the charge drawn runs the state down.
+    battery_capacity_ah: float = 0.0
+    battery_charge: float = 1.0               # state of charge at the start, 0..1
+    battery_empty_voltage: float = 23.6       # V open-circuit at 0 %
+    battery_full_voltage: float = 25.6        # V open-circuit at 100 %
+    battery_resistance: float = 0.05          # ohm: both blocks, their links and the fuse
+
     # --- the motors' windings (assumed: no datasheet figures were to hand) ---
     # Each winding one thermal mass, heated by its copper loss I^2 R (armature_resistance)
     # and cooled to ambient through a thermal resistance: at the 13 A current limit

@@ -76,6 +76,11 @@ typedef struct {
      * each winding's temperature */
     double th_res, th_cap, t_amb;
     double temp[2];
+    /* the battery (force_model.battery): its open-circuit voltage empty and full, internal
+     * resistance, charge in coulombs (0: no model, the motors see volts as set), state of
+     * charge (0..1), terminal voltage over the last step, and each motor's signed duty */
+    double bat_e0, bat_e1, bat_r, bat_cap, soc, bat_v;
+    double duty[2];
     int32_t has_brake, brake_pin, brake_engaged;
 } chair_t;
 
@@ -229,7 +234,21 @@ static void grade(chair_t *c, double x, double y, double cs, double sn, double *
     *gy = pull * c->down_s;
 }
 
+/* The battery a step on (force_model.battery): the terminal voltage from the state of
+ * charge and the driver's input current of the last step, the motors' volts from it,
+ * then the charge it draws over the step. */
+static void battery(chair_t *c, double dt) {
+    if (c->bat_cap <= 0.0)
+        return;
+    double drawn = c->duty[0] * c->current[0] + c->duty[1] * c->current[1];
+    c->bat_v = c->bat_e0 + (c->bat_e1 - c->bat_e0) * c->soc - c->bat_r * drawn;
+    c->volts[0] = c->duty[0] * c->bat_v;
+    c->volts[1] = c->duty[1] * c->bat_v;
+    c->soc = clampd(c->soc - drawn * dt / c->bat_cap, 0.0, 1.0);
+}
+
 static void step(chair_t *c, int lone, double dt) {
+    battery(c, dt);
     vec_t v = ((get_vec_fn)c->get_velocity)(c->body);
     double th = ((get_f_fn)c->get_angle)(c->body);
     double w = ((get_f_fn)c->get_angular_velocity)(c->body);
@@ -428,6 +447,7 @@ static const wc_field chair_fields[] = {
     A(defl), A(defl_lat),
     F(brake_torque), F(brake_wait),
     F(th_res), F(th_cap), F(t_amb), A(temp),
+    F(bat_e0), F(bat_e1), F(bat_r), F(bat_cap), F(soc), F(bat_v), A(duty),
     F(has_brake), F(brake_pin), F(brake_engaged),
 };
 #undef F
