@@ -93,7 +93,7 @@ class BoardState:
         elif msg.fault is not None:
             _log.error("%s: the board latched a fault: %s", self.name, msg.fault)
             self.faults_announced.append(msg.fault)
-        elif msg.name in ("WATCHDOG", "PPM_LOST", "NOT_NEUTRAL", "INHIBIT,1,0", "INHIBIT,2,0"):
+        elif msg.name in ("WATCHDOG", "PPM_LOST", "NOT_NEUTRAL", "INHIBIT,1,0", "INHIBIT,2,0", "PUSH,0"):
             _log.warning("%s: %s: the board may need a neutral command before it drives again", self.name,
                          msg.name)
             self.awaiting_neutral = True

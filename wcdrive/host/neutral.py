@@ -51,6 +51,9 @@ def refuse_unready_motion(board: BoardState, command: bytes, name: str, current:
     if not current or is_neutral(command):
         return
     status = board.status
+    if status is not None and status.push_mode:
+        raise WcdriveInhibitError(f"{name} has its brake released by hand (push mode) and refuses "
+                                  "motion until the lever is back")
     if status is not None and status.drive_inhibited:
         raise WcdriveInhibitError(f"{name} has an inhibit input engaged (the charger?) and refuses "
                                   "motion until it is released (a latching one: then reset_estop())")
