@@ -721,6 +721,20 @@ static float inhibitShare() {
   return share;
 }
 
+// A setpoint no farther its way than the wheel's measured speed, and never past zero: a
+// PID that runs on it can only brake the wheel.
+static float brakingSetpoint(float setpoint, float measured) {
+  if (setpoint > 0.0f) return measured <= 0.0f ? 0.0f : (measured < setpoint ? measured : setpoint);
+  if (setpoint < 0.0f) return measured >= 0.0f ? 0.0f : (measured > setpoint ? measured : setpoint);
+  return setpoint;
+}
+
+// An output that brakes the wheel (against its speed over the last tick), else 0: the
+// derivative of a wheel the brake stops at once would kick it forward.
+static float brakingOutput(float output, float measured) {
+  return (output > 0.0f && measured < 0.0f) || (output < 0.0f && measured > 0.0f) ? output : 0.0f;
+}
+
 // A brake coil fault (brake_fitted 1): the brake driver's status LOW for
 // WC_BRAKE_STATUS_TICKS ticks in a row. The switch flags an open load while off (the
 // brake engaged) and an overload while on (released), so the pin says which.
@@ -738,10 +752,12 @@ static uint16_t brakeCoilFault() {
 // parks; sets brakeReleased, the pin's level. Parked WC_BRAKE_ACTIVE_TICKS, or at once on
 // a fault, the pin goes LOW; WC_BRAKE_ENGAGE_TICKS later the brake holds. A motion asked
 // for (not parked, no fault) first drives the hold WC_BRAKE_PRELOAD_TICKS, then sets the
-// pin HIGH and waits WC_BRAKE_RELEASE_TICKS. Returns whether the chair stays parked: as
-// asked, or under the hold while the brake lets go.
+// pin HIGH and waits WC_BRAKE_RELEASE_TICKS. A change of the pin starts the coil's
+// status count again (its two reads must see one level). Returns whether the chair stays
+// parked: as asked, or under the hold while the brake lets go.
 static bool brakeStep(bool park) {
   bool drive = !park && faultFlags == 0;
+  bool was = brakeReleased;
   switch (brakePhase) {
     case BRAKE_RELEASED:
       if (faultFlags != 0 || (park && ++brakeTicks >= WC_BRAKE_ACTIVE_TICKS)) {
@@ -784,6 +800,7 @@ static bool brakeStep(bool park) {
       break;
   }
   brakeReleased = brakePhase == BRAKE_RELEASING || brakePhase == BRAKE_RELEASED;
+  if (brakeReleased != was) brakeStatusTicks = 0;
   return park || (drive && brakePhase != BRAKE_RELEASED);
 }
 
@@ -1341,6 +1358,12 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
   }
   setpointL = rampToward(setpointL, goalL, maxChange);
   setpointR = rampToward(setpointR, goalR, maxChange);
+  if (brakeFitted && faultFlags != 0) {
+    // the brake applied at the fault stops the wheels faster than the emergency ramp: the
+    // PID may brake them with it, never drive them against it
+    setpointL = brakingSetpoint(setpointL, filtVelL);
+    setpointR = brakingSetpoint(setpointR, filtVelR);
+  }
   // Stopped (target and setpoint zero, no pivot under way), an integral that drives a
   // wheel the way it still turns is dropped: it held the chair up a grade and would carry
   // it on past the stop.
@@ -1399,6 +1422,10 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
     // turns (the healthy one's output would drive it on in a turn).
     if (!trustedL) outputL = 0.0f;
     if (!trustedR) outputR = 0.0f;
+    if (brakeFitted && faultFlags != 0) {   // with the brake applied: braking only
+      outputL = brakingOutput(outputL, rawVelL);
+      outputR = brakingOutput(outputR, rawVelR);
+    }
   }
   // Parked, the hold drives each wheel whose encoder is trusted, and a faulty wheel
   // mirrors the healthy one's hold, open loop.
@@ -1883,6 +1910,7 @@ static ParseResult parseSet(uint8_t& data) {
     // the brake's phase from its pin: released, or engaging (it may not hold yet)
     brakePhase = brakeReleased ? BRAKE_RELEASED : BRAKE_ENGAGING;
     brakeTicks = 0;
+    brakeStatusTicks = 0;
   } else {
     float v;
     ParseResult r = parseNumber(eq + 1, false, v);
@@ -1980,7 +2008,7 @@ static ParseResult restoreDefaults() {
   estopDecel = WC_EMERGENCY_DECEL;
   watchdogMs = WC_WATCHDOG_MS;
   feedbackForm = WC_FEEDBACK_FORM;
-  brakeFitted = WC_BRAKE_FITTED;
+  // brake_fitted stays: it says what the chair has, not how it is tuned
   return PARSE_OK;
 }
 

@@ -125,7 +125,7 @@
 #define WC_BRAKE_PRELOAD_TICKS 1   // control ticks the hold drives, the brake still engaged, before PIN_BRAKE goes HIGH: the hold's current is up before the brake lets go
 #define WC_BRAKE_RELEASE_TICKS 2   // control ticks from PIN_BRAKE HIGH to driving, the hold on meanwhile (the brake's release time; 100 ms against the plant's 50 ms)
 #define WC_PUSH_SPEED 4.0f         // rad/s (0.61 m/s): in push mode the motors freewheel (each at the duty its back-EMF takes, FAULT_EFFORT_EMF a rad/s: no current) while both wheels are slower; a wheel pushed faster is at duty 0, its motor shorted, braking it
-#define WC_BRAKE_STATUS_TICKS 2    // control ticks in a row PIN_BRAKE_STATUS must read LOW, PIN_BRAKE unchanged since the tick before, before a coil fault latches (EVT:FAULT,BRAKE_OPEN with the brake engaged, BRAKE_SHORT released)
+#define WC_BRAKE_STATUS_TICKS 2    // control ticks in a row PIN_BRAKE_STATUS must read LOW, PIN_BRAKE at one level throughout (a change starts the count again), before a coil fault latches (EVT:FAULT,BRAKE_OPEN with the brake engaged, BRAKE_SHORT released)
 
 // ---- Hill hold and rollaway (parked without a fault; protocol/PROTOCOL.md) ---
 #define WC_HOLD_DEADBAND_COUNTS 10 // encoder counts (1 mm of travel) a held wheel may be off the count it stopped at before the hold drives it back

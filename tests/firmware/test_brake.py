@@ -11,6 +11,8 @@ the chair.
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 
@@ -44,14 +46,14 @@ def _every(command: bytes, t0: float, t1: float, period: float = 0.1) -> list[tu
 
 def _run(serial: list[tuple[float, bytes]], duration: float, status: list[tuple[float, int, bool]] = (),
          turning_from: float | None = None, turning_until: float = np.inf,
-         eeprom: bytes | None = None) -> Recording:
+         eeprom: bytes | None = None, speed: float = 1.0) -> Recording:
     """The trace: ``serial``, the brake driver's status changes (input 3), the wheels
-    still, or from ``turning_from`` s to ``turning_until`` s at 1 rad/s (the left
+    still, or from ``turning_from`` s to ``turning_until`` s at ``speed`` rad/s (the left
     counting backwards)."""
     encoders = {}
     if turning_from is not None:
         t = np.linspace(0.0, duration, 4000)
-        angle = np.clip(t, turning_from, turning_until) - turning_from
+        angle = (np.clip(t, turning_from, turning_until) - turning_from) * speed
         encoders = {side: edges_from_trajectory(t, 0.5 + (-1 if side == "left" else 1) * angle
                                                 * COUNTS_PER_RAD)
                     for side in ("left", "right")}
@@ -120,12 +122,15 @@ def test_a_motion_command_preloads_the_hold_then_releases_then_ramps() -> None:
 def test_an_open_coil_latches_with_the_brake_engaged_and_a_glitch_does_not() -> None:
     """The status LOW for one tick (a glitch) does nothing; LOW for BRAKE_STATUS_TICKS
     ticks with the brake engaged is ``EVT:FAULT,BRAKE_OPEN``; motion is refused, the
-    motors are powered again (the brake may not hold), and ``reset`` with the coil still
-    open latches it again."""
+    motors are powered again (the brake may not hold: the wheels pushed 80 counts on
+    are held), and ``reset`` with the coil still open latches it again."""
     serial = [(0.02, FITTED), (0.03, NEUTRAL), (1.0, SLOW), (1.3, b"reset\n"), (1.35, NEUTRAL)]
     status = [(0.3, 3, True), (0.33, 3, False), (0.6, 3, True)]
-    rec = _run(serial, 1.8, status=status)
+    rec = _run(serial, 1.8, status=status, turning_from=0.9, turning_until=0.95)
     ticks = tick_states(rec)
+    held = [a for t, a in ticks if 1.0 < t < 1.3]
+    assert held and all(a["holding"] and a["brakePhase"] == BRAKE_ENGAGED for a in held)
+    assert all(a["pwmL"] > 0 and a["pwmR"] > 0 for a in held)
     assert all(a["faultFlags"] == 0 for t, a in ticks if t < 0.6)
     first = next(t for t, a in ticks if a["faultFlags"])
     assert 0.6 + 0.05 * (C.BRAKE_STATUS_TICKS - 1) <= first <= 0.6 + 0.05 * C.BRAKE_STATUS_TICKS + 0.001
@@ -136,17 +141,52 @@ def test_an_open_coil_latches_with_the_brake_engaged_and_a_glitch_does_not() -> 
 
 
 def test_a_shorted_coil_latches_with_the_brake_released_and_the_chair_stops() -> None:
-    """Driving (the pin HIGH), the status LOW for BRAKE_STATUS_TICKS ticks is
-    ``EVT:FAULT,BRAKE_SHORT``: the pin goes LOW at once and the chair stops along the
-    emergency ramp, its wheels still trusted."""
-    serial = [(0.02, FITTED), (0.03, NEUTRAL), *_every(SLOW, 0.3, 1.6)]
-    rec = _run(serial, 1.8, status=[(1.0, 3, True)], turning_from=0.5)
+    """Driving at 4 rad/s (the pin HIGH), the status LOW for BRAKE_STATUS_TICKS ticks is
+    ``EVT:FAULT,BRAKE_SHORT``: the pin goes LOW at once and the brake stops the wheels
+    at once (faster than the emergency ramp, 0.75 rad/s a tick). From the fault on the
+    PID only brakes (no duty forward while the wheels turn forward or stand: its
+    setpoints held no farther than their speeds; without that rule it drove them forward
+    against the brake while the ramp ran down), then the chair parks, its wheels still
+    trusted."""
+    serial = [(0.02, FITTED), (0.03, NEUTRAL), *_every(b"rp04.00,lp04.00,\n", 0.3, 1.6)]
+    rec = _run(serial, 1.8, status=[(1.0, 3, True)], turning_from=0.4, turning_until=1.1, speed=4.0)
     ticks = tick_states(rec)
     first = next(t for t, a in ticks if a["faultFlags"])
     assert first <= 1.0 + 0.05 * C.BRAKE_STATUS_TICKS + 0.001
     at = next(a for t, a in ticks if t == first)
     assert at["faultFlags"] == FAULT_BRAKE_SHORT and not at["brakeReleased"] and at["emergencyStop"]
     assert board_lines(rec, b"EVT:FAULT,") == [b"EVT:FAULT,BRAKE_SHORT"]
+    after = [a for t, a in ticks if t >= first]
+    assert all((a["pwmL"] == 0 or a["dirL"] == C.LOW) and (a["pwmR"] == 0 or a["dirR"] == C.LOW)
+               for a in after)
+    assert after[-1]["parked"] and after[-1]["setpointL"] == after[-1]["setpointR"] == 0.0
+
+
+def test_the_status_counts_at_one_level_of_the_pin() -> None:
+    """Two LOW reads of the status either side of the pin going HIGH (one in the hold's
+    preload, the brake engaged; one as it lets go) are no coil fault: a change of the pin
+    starts the count again (an open-load flag and a switching transient are not a
+    short)."""
+    serial = [(0.02, FITTED), (0.03, NEUTRAL), *_every(SLOW, 0.5, 1.2)]
+    rec = _run(serial, 1.4, status=[(0.58, 3, True), (0.67, 3, False)], turning_from=0.7)
+    ticks = tick_states(rec)
+    # each read against the pin as the tick before left it
+    reads = [(a["brakeStatusTick"], before["brakeReleased"])
+             for (_, before), (t, a) in itertools.pairwise(ticks) if 0.55 < t < 0.7]
+    assert (1, 0) in reads and (1, 1) in reads
+    assert all(a["faultFlags"] == 0 for _, a in ticks)
+
+
+def test_a_status_count_left_from_a_brake_unfitted_is_not_carried_over() -> None:
+    """One LOW read with the brake fitted, ``brake_fitted`` 0, then 1 again and one more
+    LOW read: no fault (the count starts again with the parameter), on the firmware and
+    the port's C tick alike (the lock step holds them to each other)."""
+    serial = [(0.02, FITTED), (0.03, NEUTRAL), (0.33, b"set:brake_fitted=0\n"), (0.5, FITTED)]
+    status = [(0.28, 3, True), (0.32, 3, False), (0.58, 3, True), (0.62, 3, False)]
+    rec = _run(serial, 0.9, status=status)
+    ticks = tick_states(rec)
+    assert sum(a["brakeStatusTick"] for _, a in ticks) == 2
+    assert all(a["faultFlags"] == 0 for _, a in ticks)
 
 
 def test_the_status_is_ignored_without_a_brake_fitted() -> None:
@@ -160,15 +200,18 @@ def test_the_status_is_ignored_without_a_brake_fitted() -> None:
 def test_brake_fitted_is_saved_and_loaded_and_out_of_range_refused() -> None:
     """``set:brake_fitted=2`` is ``ERR:range``; 1 is saved in the block (layout 3) and a
     board that boots from it has the brake fitted, engaged from reset (the motors at
-    duty 0 once parked); a layout-2 block boots on the defaults."""
+    duty 0, the wheels rolled 32 counts into it); ``defaults`` leaves it fitted; a
+    layout-2 block boots on the defaults."""
     rec = _run([(0.02, b"set:brake_fitted=2\n"), (0.05, b"get:brake_fitted\n")], 0.2)
     assert b"ERR:range" in rec.tx and b"PAR:brake_fitted,0" in rec.tx
     saved = block_image({"brakeFitted": 1})
-    rec = _run([(0.03, NEUTRAL)], 0.5, eeprom=saved)
+    rec = _run([(0.03, NEUTRAL), (0.3, b"defaults\n")], 0.5, eeprom=saved, turning_from=0.06,
+               turning_until=0.08)
     assert b"EVT:PARAMS_LOADED" in rec.tx
     ticks = tick_states(rec)
-    assert all(a["brakeFitted"] == 1 and a["brakePhase"] == BRAKE_ENGAGED and a["pwmL"] == 0
+    assert all(a["brakeFitted"] == 1 and a["brakePhase"] == BRAKE_ENGAGED and a["pwmL"] == a["pwmR"] == 0
                for _, a in ticks)
+    assert abs(ticks[-1][1]["encTickR"] - ticks[-1][1]["holdRefR"]) > C.HOLD_DEADBAND_COUNTS
     rec = _run([], 0.1, eeprom=block_image({"brakeFitted": 1}, layout=2))
     assert b"EVT:PARAMS_DEFAULT,version" in rec.tx
     assert all(a["brakeFitted"] == 0 for _, a in tick_states(rec))
@@ -184,16 +227,19 @@ def _profile(points: list[tuple[float, float]], duration: float) -> dict:
             for side in ("left", "right")}
 
 
-def test_push_mode_refuses_driving_freewheels_the_motors_and_brakes_above_the_push_speed() -> None:
+@pytest.mark.parametrize("fitted", [False, True], ids=["no-brake", "brake-fitted"])
+def test_push_mode_refuses_driving_freewheels_the_motors_and_brakes_above_the_push_speed(
+        fitted: bool) -> None:
     """The brake's manual-release lever pulled (input 4) at 0.3 s: after the debounce
     ``EVT:PUSH,1``, motion refused (``ERR:inhibit``), no hold. Pushed at 2 rad/s each
     wheel is at the duty its back-EMF takes (FAULT_EFFORT_EMF a rad/s of its filtered
     speed, truncated), DIR forward: no current, freewheeling; pushed past PUSH_SPEED, at
     duty 0 (shorted, braking). Let go at 1.6 s: ``EVT:PUSH,0`` and motion waits for
-    neutral (``ERR:neutral``); no fault throughout."""
-    serial = [(0.02, NEUTRAL), (0.6, SLOW), (1.7, SLOW)]
+    neutral (``ERR:neutral``); no fault throughout. With or without a brake fitted (its
+    phase does not unpower the freewheeling motors)."""
+    serial = [(0.02, NEUTRAL), (0.6, SLOW), (1.7, SLOW)] + ([(0.01, FITTED)] if fitted else [])
     speeds = [(0.0, 0.0), (0.4, 0.0), (0.6, 2.0), (1.0, 2.0), (1.2, 6.0), (1.4, 6.0), (1.5, 0.0), (2.0, 0.0)]
-    rec = recorded(Trace(duration=2.0, serial=serial, inhibits=[(0.3, 4, True), (1.6, 4, False)],
+    rec = recorded(Trace(duration=2.0, serial=sorted(serial), inhibits=[(0.3, 4, True), (1.6, 4, False)],
                          encoders=_profile(speeds, 2.0)))
     ticks = tick_states(rec)
     pushing = [(t, a) for t, a in ticks if a["inhibitStable"] & C.INHIBIT_PUSH]

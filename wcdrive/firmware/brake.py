@@ -14,8 +14,14 @@ With ``brake_fitted`` 1 the brake has a phase (``brakePhase``):
 * ``BRAKE_RELEASING``: the pin HIGH, the hold on, for BRAKE_RELEASE_TICKS; then the
   PID drives, the setpoints ramping from zero.
 
-A fault sets the pin LOW at once. The brake driver's status pin (a smart switch's
-open-drain diagnostic) read LOW for BRAKE_STATUS_TICKS ticks in a row is a coil fault:
+A fault sets the pin LOW at once, and from then on each setpoint is held no farther its
+way than its wheel's measured speed (``braking_setpoint``) and each output must brake
+(``braking_output``: nothing that drives a wheel the way it turned over the last tick,
+or a wheel that stood): the brake stops the wheels faster than the emergency ramp would,
+and the PID may brake with it, never drive against it (its derivative would kick a wheel
+the brake stops at once). The brake driver's status pin (a smart switch's open-drain
+diagnostic) read LOW for BRAKE_STATUS_TICKS ticks in a row, the pin at one level (a
+change of the pin starts the count again), is a coil fault:
 ``BRAKE_OPEN`` with the pin LOW (the switch flags an open load while off),
 ``BRAKE_SHORT`` with it HIGH (an overload while on). Without a brake the pin follows the
 PID as it always did (``brakeReleased`` set by the tick).
@@ -38,6 +44,8 @@ __all__ = [
     "brake_coil_fault",
     "brake_holds",
     "brake_step",
+    "braking_output",
+    "braking_setpoint",
     "set_brake_fitted",
 ]
 
@@ -63,6 +71,7 @@ def brake_step(s: FirmwareState, park: bool) -> bool:
     ``brakeReleased``; returns whether the chair stays parked (as asked, or under the
     hold while the brake lets go)."""
     drive = not park and not s.faultFlags
+    was = s.brakeReleased
     phase = s.brakePhase
     if phase == BRAKE_RELEASED:
         if s.faultFlags:
@@ -99,6 +108,8 @@ def brake_step(s: FirmwareState, park: bool) -> bool:
         if s.brakeTicks >= C.BRAKE_RELEASE_TICKS:
             s.brakePhase, s.brakeTicks = BRAKE_RELEASED, 0
     s.brakeReleased = 1 if s.brakePhase in (BRAKE_RELEASING, BRAKE_RELEASED) else 0
+    if s.brakeReleased != was:          # the coil's status counted again at the new level
+        s.brakeStatusTicks = 0
     return park or (drive and s.brakePhase != BRAKE_RELEASED)
 
 
@@ -115,3 +126,22 @@ def set_brake_fitted(s: FirmwareState, fitted: int) -> None:
     s.brakeFitted = fitted
     s.brakePhase = BRAKE_RELEASED if s.brakeReleased else BRAKE_ENGAGING
     s.brakeTicks = 0
+    s.brakeStatusTicks = 0
+
+
+def braking_output(output: float, measured: float) -> float:
+    """``brakingOutput``: ``output`` when it brakes the wheel (against ``measured``, its
+    speed over the last tick), else 0: the derivative of a wheel the brake stops at once
+    would kick it forward."""
+    return output if (output > 0.0 and measured < 0.0) or (output < 0.0 and measured > 0.0) else 0.0
+
+
+def braking_setpoint(setpoint: float, measured: float) -> float:
+    """``brakingSetpoint``: ``setpoint`` no farther its way than ``measured``, and never
+    past zero: a PID that runs on it can only brake the wheel (after a fault, with the
+    brake applied)."""
+    if setpoint > 0.0:
+        return 0.0 if measured <= 0.0 else (measured if measured < setpoint else setpoint)
+    if setpoint < 0.0:
+        return 0.0 if measured >= 0.0 else (measured if measured > setpoint else setpoint)
+    return setpoint

@@ -6,7 +6,13 @@ from __future__ import annotations
 
 from wcdrive.avr.f32 import add, div, from_int, mul, neg, sub
 from wcdrive.firmware import constants as C
-from wcdrive.firmware.brake import BRAKE_RELEASED, brake_coil_fault, brake_step
+from wcdrive.firmware.brake import (
+    BRAKE_RELEASED,
+    brake_coil_fault,
+    brake_step,
+    braking_output,
+    braking_setpoint,
+)
 from wcdrive.firmware.inhibit import capped_goals, send_inhibit_event, update_inhibits
 from wcdrive.firmware.motion import PIVOT_NONE, emergency_halt, pivot_step, require_neutral
 from wcdrive.firmware.motors import i32, motors
@@ -486,6 +492,10 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
         goal_l = goal_r = 0.0           # the brake not yet let go: the setpoints wait at zero
     s.setpointL = ramp_toward(s.setpointL, goal_l, max_change)
     s.setpointR = ramp_toward(s.setpointR, goal_r, max_change)
+    if s.brakeFitted and s.faultFlags:
+        # the brake applied at the fault: the PID may brake the wheels with it, never drive
+        s.setpointL = braking_setpoint(s.setpointL, s.filtVelL)
+        s.setpointR = braking_setpoint(s.setpointR, s.filtVelR)
     # Stopped (target and setpoint zero, no pivot under way), an integral that drives a
     # wheel the way it still turns is dropped: it held the chair up a grade and would carry
     # it on past the stop.
@@ -539,6 +549,9 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
             s.outputL = 0.0
         if not trusted_r:
             s.outputR = 0.0
+        if s.brakeFitted and s.faultFlags:      # with the brake applied: braking only
+            s.outputL = braking_output(s.outputL, s.rawVelL)
+            s.outputR = braking_output(s.outputR, s.rawVelR)
     motors(s, delta_l, delta_r, hardest, trusted_l, trusted_r, out)
     # without a brake fitted, the pin is LOW unless the PID drives, and from a fault on
     if not s.brakeFitted:

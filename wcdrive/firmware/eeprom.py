@@ -151,9 +151,11 @@ def save_params(s: FirmwareState) -> str | None:
 
 
 def restore_defaults(s: FirmwareState) -> None:
-    """``restoreDefaults``: ``defaults`` (the EEPROM is not written)."""
+    """``restoreDefaults``: ``defaults`` (the EEPROM is not written): every parameter but
+    ``brake_fitted``, which says what the chair has, not how it is tuned."""
     for p in PARAMS:
-        setattr(s, p.field, _DEFAULT_VALUES[p.field])
+        if p.field != _FITTED.field:
+            setattr(s, p.field, _DEFAULT_VALUES[p.field])
 
 
 def check(block: bytes) -> str | None:

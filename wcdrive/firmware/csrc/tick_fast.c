@@ -457,8 +457,8 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
         || I(inhibitLatched) || I(inhibitPending) || I(inhibitOn))
         Py_RETURN_NONE;             /* an inhibit input read, engaged or settling: the Python tick */
     int brake_status = (int)((inhibit >> 2) & 1);
-    if (I(brakeFitted) && (brake_status || I(brakePhase) != K.brake_released || I(brakeTicks)
-                           || I(brakeStatusTicks)))
+    if (I(brakeStatusTicks) || (I(brakeFitted) && (brake_status || I(brakePhase) != K.brake_released
+                                                   || I(brakeTicks))))
         Py_RETURN_NONE;             /* a fitted brake not released and settled, or its status LOW */
     SETI(brakeStatusTick, brake_status);
     PyObject *mode_name = PyDict_GetItemWithError(mode_names, *slot(s, F_mode));
