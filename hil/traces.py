@@ -29,6 +29,7 @@ one (``wcdrive.hil.profiles``).
 from __future__ import annotations
 
 import zlib
+from collections.abc import Callable
 
 import numpy as np
 
@@ -60,7 +61,7 @@ NEUTRAL_LEAD_S = 0.12
 #: at the start of the traces that fit the brake).
 DRAWN_PARAMS = tuple(p for p in PARAMS if p.name != "brake_fitted")
 #: One trace in this many sets ``brake_fitted`` 1 first; half of those pull the brake
-#: driver's status low now and then (``brake_status_changes``).
+#: driver's status low now and then (``pin_pulls``).
 BRAKE_FITTED_EVERY = 3
 
 __all__ = ["FIRST_COMMAND_S", "MAX_TRACE_EDGE_RATE", "Draw", "HypothesisDraw", "RandomDraw", "Trace",
@@ -420,8 +421,17 @@ def pin_pulls(rng: np.random.Generator, duration: float, number: int) -> list[tu
     """One or two pulls of input ``number`` low (3: the brake driver's status, a glitch
     under BRAKE_STATUS_TICKS or a coil fault; 4: the brake's manual release, push mode),
     each let go after 0.01 to 1.5 s."""
+    return _pulls(rng, duration, lambda: number)
+
+
+def _pulls(rng: np.random.Generator, duration: float, which: Callable[[], int]
+           ) -> list[tuple[float, int, bool]]:
+    """One or two pulls low of the input ``which()`` names (asked first for each, so the
+    draws come in the order they always did), each let go after 0.01 to 1.5 s (a glitch,
+    or a pull held) unless the trace ends first; sorted by time."""
     changes: list[tuple[float, int, bool]] = []
     for _ in range(int(rng.integers(1, 3))):
+        number = which()
         start = float(rng.uniform(0.05, max(0.06, duration - 0.1)))
         held = float(rng.choice([rng.uniform(0.01, 0.06), rng.uniform(0.1, 1.5)]))
         changes.append((round(start, 4), number, True))
@@ -434,15 +444,7 @@ def inhibit_changes(rng: np.random.Generator, duration: float) -> list[tuple[flo
     """One to four changes of the inhibit inputs over ``duration`` s, (s, input, active):
     an input pulled low, let go after 0.01 to 1.5 s (a glitch under the debounce, or a
     charger plugged and pulled); both inputs at once at times."""
-    changes: list[tuple[float, int, bool]] = []
-    for _ in range(int(rng.integers(1, 3))):
-        number = int(rng.integers(1, 3))
-        start = float(rng.uniform(0.05, max(0.06, duration - 0.1)))
-        held = float(rng.choice([rng.uniform(0.01, 0.06), rng.uniform(0.1, 1.5)]))
-        changes.append((round(start, 4), number, True))
-        if start + held < duration:
-            changes.append((round(start + held, 4), number, False))
-    return sorted(changes)
+    return _pulls(rng, duration, lambda: int(rng.integers(1, 3)))
 
 
 def flood(draw: Draw, serial: list[tuple[float, bytes]], duration: float

@@ -14,7 +14,7 @@ from collections.abc import Iterator
 import pytest
 
 import wcdrive
-from tests.support.pty_chair import chair_on_a_pty
+from tests.support.pty_chair import chair_on_a_pty, until
 from wcdrive.boards.sim_board import SimulatedBoard
 from wcdrive.host.wheelchair import Wheelchair
 from wcdrive.plant import ChairParams
@@ -26,15 +26,6 @@ def rig() -> Iterator[tuple[SimulatedBoard, Wheelchair]]:
         yield pair
 
 
-def _until(what, timeout: float = 3.0) -> bool:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if what():
-            return True
-        time.sleep(0.02)
-    return False
-
-
 def _applied(chair: Wheelchair) -> bool:
     status = chair.status
     return status is not None and status.brake_applied
@@ -44,7 +35,7 @@ def test_the_brake_is_applied_at_rest_released_to_drive_and_its_open_coil_stops_
         rig: tuple[SimulatedBoard, Wheelchair]) -> None:
     board, chair = rig
     assert chair.set_param("brake_fitted", 1) == 1
-    assert _until(lambda: _applied(chair))
+    assert until(lambda: _applied(chair))
     assert board.plant.brake_engaged
     released = False
     end = time.monotonic() + 1.0
@@ -54,10 +45,10 @@ def test_the_brake_is_applied_at_rest_released_to_drive_and_its_open_coil_stops_
         time.sleep(0.05)
     assert released and board.pose()[0] > 0.05
     chair.stop()
-    assert _until(lambda: _applied(chair), 5.0)
+    assert until(lambda: _applied(chair), 5.0)
     parked = board.pose()[0]
     board.set_brake_coil("open")
-    assert _until(lambda: chair.faults == ("BRAKE_OPEN",))
+    assert until(lambda: chair.faults == ("BRAKE_OPEN",))
     assert "FAULT,BRAKE_OPEN" in chair.events
     with pytest.raises(wcdrive.WcdriveFaultError):
         chair.set_velocity(0.4, 0.0)
@@ -73,12 +64,12 @@ def test_push_mode_refuses_motion_naming_it_and_asks_for_neutral_after(
     board, chair = rig
     chair.wait_for_neutral()
     board.set_inhibit("push")
-    assert _until(lambda: chair.status is not None and chair.status.push_mode)
+    assert until(lambda: chair.status is not None and chair.status.push_mode)
     with pytest.raises(wcdrive.WcdriveInhibitError, match="push mode"):
         chair.set_velocity(0.4, 0.0)
     board.set_inhibit("push", False)
-    assert _until(lambda: "PUSH,0" in chair.events)
-    assert _until(lambda: chair.status is not None and not chair.status.push_mode)
+    assert until(lambda: "PUSH,0" in chair.events)
+    assert until(lambda: chair.status is not None and not chair.status.push_mode)
     chair.wait_for_neutral()
     start = board.pose()[0]
     end = time.monotonic() + 1.0

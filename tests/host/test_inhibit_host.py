@@ -13,7 +13,7 @@ from collections.abc import Iterator
 import pytest
 
 import wcdrive
-from tests.support.pty_chair import chair_on_a_pty
+from tests.support.pty_chair import chair_on_a_pty, until
 from wcdrive.boards.sim_board import SimulatedBoard
 from wcdrive.host.wheelchair import Wheelchair
 
@@ -22,15 +22,6 @@ from wcdrive.host.wheelchair import Wheelchair
 def rig() -> Iterator[tuple[SimulatedBoard, Wheelchair]]:
     with chair_on_a_pty(speed=2.0) as pair:
         yield pair
-
-
-def _until(what, timeout: float = 3.0) -> bool:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if what():
-            return True
-        time.sleep(0.02)
-    return False
 
 
 def _speed(board: SimulatedBoard) -> float:
@@ -54,7 +45,7 @@ def test_the_charger_stops_the_chair_and_motion_raises_until_released_and_reset(
     with pytest.raises(wcdrive.WcdriveInhibitError):
         _drive(chair, 1.0)                            # raises once the TLM line says so
     assert chair.inhibited and "INHIBIT,1,1" in chair.events
-    assert _until(lambda: _speed(board) < 0.01, 5.0)
+    assert until(lambda: _speed(board) < 0.01, 5.0)
     parked = board.pose()[0]
     board.set_inhibit("charger", False)               # unplugged: still latched
     time.sleep(0.5)
@@ -63,7 +54,7 @@ def test_the_charger_stops_the_chair_and_motion_raises_until_released_and_reset(
         chair.set_velocity(0.5, 0.0)
     assert abs(board.pose()[0] - parked) < 0.01
     chair.reset_estop()                               # ends the latch, waits for neutral
-    assert _until(lambda: not chair.inhibited)
+    assert until(lambda: not chair.inhibited)
     _drive(chair, 0.8)
     assert board.pose()[0] > parked + 0.05
 
@@ -71,7 +62,7 @@ def test_the_charger_stops_the_chair_and_motion_raises_until_released_and_reset(
 def test_the_seat_caps_the_speed_without_refusing(rig: tuple[SimulatedBoard, Wheelchair]) -> None:
     board, chair = rig
     board.set_inhibit("seat")
-    assert _until(lambda: chair.status is not None and chair.status.speed_capped)
+    assert until(lambda: chair.status is not None and chair.status.speed_capped)
     assert not chair.inhibited
     _drive(chair, 2.5, speed=2.0)
     cap = 0.3 * 17.59 * 0.1524                        # INHIBIT_2_SPEED of max_wheel, in m/s

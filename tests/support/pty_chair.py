@@ -1,9 +1,10 @@
 """A simulated board behind a pty, opened as a program opens a real chair: the host
-tests' rig."""
+tests' rig, and ``until``, their wait on what the chair reports."""
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+import time
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
 import wcdrive
@@ -28,3 +29,13 @@ def chair_on_a_pty(speed: float = 1.0, params: ChairParams | None = None
     finally:
         bridge.close()
         board.close()
+
+
+def until(what: Callable[[], bool], timeout: float = 3.0) -> bool:
+    """Whether ``what()`` came true within ``timeout`` s (asked every 20 ms)."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if what():
+            return True
+        time.sleep(0.02)
+    return False

@@ -55,7 +55,7 @@ class PlantOnPins:
         #: The pins the plant drives as it set them: the brake driver's status (s, 3, LOW)
         #: and the lever's switch (s, 4, LOW), inputs 3 and 4 of a lock-step trace
         #: (``wcdrive.boards.simavr.mega_pins.INPUT_PINS``).
-        self.status_changes: list[tuple[float, int, bool]] = []
+        self.input_changes: list[tuple[float, int, bool]] = []
 
     def step(self, t0: float, t1: float, run_until: Callable[[int], None] | None = None,
              reset: Callable[[], object] | None = None) -> dict[str, EdgeTrain]:
@@ -96,5 +96,5 @@ class PlantOnPins:
                                  (4, PUSH_PIN, self.plant.brake_lever)):
             if self.mega.pin_level(pin) != (0 if low else 1):
                 self.mega.set_pin(pin, 0 if low else 1)
-                self.status_changes.append((self.mega.cycle / F_CPU, number, low))
+                self.input_changes.append((self.mega.cycle / F_CPU, number, low))
         return trains
