@@ -10,7 +10,8 @@ motor, and, at the end, the whole TX byte stream. The only inputs the port takes
 from the run are what the firmware's loop reads: the bytes, ``millis()`` at each
 tick, the encoder and illegal-transition counts the tick latched (themselves checked
 against the Python quadrature decoder run over the trace's edges) and the free RAM
-loop() measured before the tick. The bytes' delivery and the tick's liveness are
+loop() measured before the tick, and the globals the harness set at a tick's entry
+(``Trace.pokes``). The bytes' delivery and the tick's liveness are
 checked too (``wcdrive.hil.lockstep_liveness``).
 
 A run may reset the board (``VirtualMega.reset``, or its watchdog): at each reset the
@@ -36,7 +37,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from wcdrive.avr.f32 import bits
+from wcdrive.avr.f32 import bits, f32
 from wcdrive.boards.inhibits import InhibitChange, active_bits
 from wcdrive.boards.simavr.virtual_mega import F_CPU
 from wcdrive.firmware.final_control import Firmware, reset_cause_name
@@ -156,6 +157,8 @@ def compare(recording: Recording) -> Report:
                                            "the trace's pins disagree", str(inputs)))
             # freeRam is measured by loop() just before the call: the state at entry.
             before = events[i - 1].after if i > 0 else recording.initial
+            for name, value in ev.poke.items():     # what the harness set at the entry
+                setattr(fw.state, name, f32(value) if name in FLOAT_FIELDS else int(value))
             tx += fw.tick(ev.arg, latched["encTickL"], latched["encTickR"], latched["illTickL"],
                           latched["illTickR"], free_ram=int(before["freeRam"]),
                           storm_l=latched["stormTickL"], storm_r=latched["stormTickR"],

@@ -7,7 +7,8 @@ call. Each stop gives one firmware event (``Event``: the byte, the tick's ``mill
 or the count of bytes lost before the next) and the controller state the previous event
 left, read from SRAM by symbol, with PWM and DIR from the I/O registers and the
 EEPROM's contents. A reset (``Recorder.reset``) is logged with its MCUSR and the new
-boot's state after ``setup()``.
+boot's state after ``setup()``. A trace's pokes (``Trace.pokes``) are written to SRAM at
+the entry of the tick they fall before, and logged with its event.
 
 The state an event leaves is read where the run next stops (the next event's entry, or
 the end of a stretch of the run); so the last event is closed by running the Mega on
@@ -50,6 +51,8 @@ class Event:
     #: The EEPROM's contents it left, and the cycle at which ``after`` was read.
     eeprom: bytes = b""
     after_cycle: int = 0
+    #: Globals the harness set at this tick's entry (``Trace.pokes``), before it ran.
+    poke: dict[str, float | int] = field(default_factory=dict)
 
 
 @dataclass
@@ -86,8 +89,11 @@ class Recorder:
     ``run_until(cycle)`` stops at each ``processByte``/``controlTick`` entry, reads the
     controller globals, PWM and DIR, and goes on."""
 
-    def __init__(self, mega: VirtualMega) -> None:
+    def __init__(self, mega: VirtualMega,
+                 pokes: list[tuple[float, dict[str, float | int]]] | None = None) -> None:
         self.mega = mega
+        #: (cycle, globals) to set at the entry of the first tick from that cycle on.
+        self._pokes = sorted(((round(t * F_CPU), values) for t, values in pokes or ()), key=lambda p: p[0])
         self.events: list[Event] = []
         self.initial: dict[str, float | int] | None = None
         self.resets: list[tuple[int, int, dict[str, float | int]]] = []
@@ -152,6 +158,10 @@ class Recorder:
             kind = {"processByte": "byte", "controlTick": "tick"}.get(hit.function, "gap")
             arg = hit.arg if kind == "tick" else (hit.arg >> 16) & 0xFF   # the byte; rxGap's lost
             self.events.append(Event(kind, arg, hit.cycle))
+            while kind == "tick" and self._pokes and self._pokes[0][0] <= hit.cycle:
+                for name, value in self._pokes.pop(0)[1].items():
+                    mega.write(name, value)     # at the entry: the tick reads what was set
+                    self.events[-1].poke[name] = mega.read(name)
         self._close_last(at_event=False)
 
     def recording(self, trace: Trace) -> Recording:
@@ -189,7 +199,7 @@ def record(trace: Trace, elf: str | Path | None = None) -> Recording:
             mega.encoder_edges(side, train)
         for t, number, active in trace.inhibits:
             mega.set_pin(INPUT_PINS[number], 0 if active else 1, at=round(t * F_CPU))
-        recorder = Recorder(mega)
+        recorder = Recorder(mega, trace.pokes)
         for t, cause in sorted(trace.resets):
             recorder.run_until(round(t * F_CPU))
             recorder.reset(cause)

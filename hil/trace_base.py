@@ -117,6 +117,10 @@ class Trace:
     profile_start: float = 0.0
     #: The inhibit inputs' changes: (s, input 1 or 2, active); each starts released.
     inhibits: list[tuple[float, int, bool]] = field(default_factory=list)
+    #: Globals set at the entry of the first control tick from t s on, alike on the board
+    #: and the port: (s, {name: value}). States a trace of a few seconds cannot reach
+    #: otherwise (a motor hot from a long climb).
+    pokes: list[tuple[float, dict[str, float | int]]] = field(default_factory=list)
 
     def describe(self) -> str:
         """The trace as text for a failure report, one serial write a line."""
@@ -133,5 +137,6 @@ class Trace:
         lines += [f"  storm on {side} from {a:.4f}s to {b:.4f}s" for side, a, b in self.storms]
         lines += [f"  inhibit {n} {'active' if on else 'released'} at t={t:.4f}s"
                   for t, n, on in self.inhibits]
+        lines += [f"  set {values} at the first tick from t={t:.4f}s" for t, values in self.pokes]
         return "\n".join(lines)
 

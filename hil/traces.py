@@ -16,7 +16,9 @@ the inhibit inputs pulled low and let go (a third of the traces: glitches under 
 debounce, and inputs held 0.1 to 1.5 s; in half of those the brake's manual release too,
 push mode); ``brake_fitted`` 1 from the start (a third of the
 traces: the brake engaged at rest, released under the hold), and in half of those the
-brake driver's status pulled low (coil faults); bursts of
+brake driver's status pulled low (coil faults); a motor hot from a long climb (a quarter:
+the windings' estimates set below, at and past the thermal rollback, and at the
+cut-off, ``Trace.pokes``); bursts of
 20 to 150 commands back to back (the output budget is spent), floods of long ``set:``
 frames at top speed (``flood``: loop() falls behind, received bytes are lost and
 accounted for) and encoder storms of 60,000 to 500,000 edges/s (the storm guard, the
@@ -63,6 +65,8 @@ DRAWN_PARAMS = tuple(p for p in PARAMS if p.name != "brake_fitted")
 #: One trace in this many sets ``brake_fitted`` 1 first; half of those pull the brake
 #: driver's status low now and then (``pin_pulls``).
 BRAKE_FITTED_EVERY = 3
+#: One trace in this many sets the windings' estimates hot at some point (``hot_windings``).
+HOT_EVERY = 4
 
 __all__ = ["FIRST_COMMAND_S", "MAX_TRACE_EDGE_RATE", "Draw", "HypothesisDraw", "RandomDraw", "Trace",
            "generate_trace"]
@@ -414,7 +418,27 @@ def generate_trace(draw: Draw, duration: float) -> Trace:
         trace.serial.insert(0, (FIRST_COMMAND_S, b"set:brake_fitted=2\nset:brake_fitted=1\n"))
         if (crc >> 8) % 2:
             trace.inhibits = sorted(trace.inhibits + pin_pulls(np.random.default_rng(crc + 1), duration, 3))
+    # A hot motor, from the same CRC (a quarter of the traces; not a profile's, whose rule
+    # a rollback or a cut-off would cut short).
+    if getattr(draw, "heats", True) and trace.profile is None and (crc >> 11) % HOT_EVERY == 1:
+        trace.pokes = hot_windings(np.random.default_rng(crc + 3), duration)
     return trace
+
+
+def hot_windings(rng: np.random.Generator, duration: float) -> list[tuple[float, dict[str, float | int]]]:
+    """The windings' estimates set once, at a time in the trace's first 80 %: each
+    below the rollback, at its start (within 5 K either side), within it, or at the
+    cut-off; the rollback flag on or off (on with both cool: its end comes next)."""
+    edges = ((25.0, 105.0), (105.0, 115.0), (115.0, 124.0), (124.0, 130.0))
+
+    def temp() -> float:
+        lo, hi = edges[int(rng.integers(0, len(edges)))]
+        return round(float(rng.uniform(lo, hi)), 3)
+
+    at = round(float(rng.uniform(0.1, 0.8 * duration)), 4)
+    hot: dict[str, float | int] = {"windingTempL": temp(), "windingTempR": temp(),
+                                   "thermalRollback": int(rng.integers(0, 2))}
+    return [(at, hot)]
 
 
 def pin_pulls(rng: np.random.Generator, duration: float, number: int) -> list[tuple[float, int, bool]]:

@@ -301,6 +301,13 @@ uint8_t inhibitLatched = 0;                 // latching inputs engaged, until re
 uint8_t inhibitOn = 0;                      // the inputs engaged as of the last tick
 uint8_t inhibitPending = 0;                 // events to send: bit 0/1 input 1 on/off, bit 2/3 input 2, 4/5 push
 
+// The motors' heat, estimated (no sensor): each winding's temperature, deg C, from its
+// copper loss (windingLoss); above WC_THERMAL_ROLLBACK_TEMP the current limit and the top
+// speed roll back (docs/safety.md, "Motor heat").
+float windingTempL = WC_THERMAL_AMBIENT, windingTempR = WC_THERMAL_AMBIENT;
+uint8_t thermalRollback = 0;                // the rollback on (EVT:THERMAL,1 sent or pending)
+uint8_t thermalPending = 0;                 // events to send: bit 0 THERMAL,1, bit 1 THERMAL,0
+
 // Faults (EVT:FAULT,<name>; docs/safety.md): latched until "reset", motion refused, motors off.
 #define FAULT_STALL_L 0x01
 #define FAULT_STALL_R 0x02
@@ -314,6 +321,8 @@ uint8_t inhibitPending = 0;                 // events to send: bit 0/1 input 1 o
 #define FAULT_BRAKE_OPEN 0x200
 #define FAULT_BRAKE_SHORT 0x400
 #define FAULTS_BRAKE (FAULT_BRAKE_OPEN | FAULT_BRAKE_SHORT)
+#define FAULT_OVERHEAT_L 0x800
+#define FAULT_OVERHEAT_R 0x1000
 // The faults after which a wheel's encoder is no longer trusted: its own, and the driver's.
 #define FAULTS_UNTRUSTED_L (FAULT_STALL_L | FAULT_REVERSED_L | FAULT_IMPLAUSIBLE_L | FAULT_MOTOR_L | FAULT_DRIVER)
 #define FAULTS_UNTRUSTED_R (FAULT_STALL_R | FAULT_REVERSED_R | FAULT_IMPLAUSIBLE_R | FAULT_MOTOR_R | FAULT_DRIVER)
@@ -341,7 +350,7 @@ uint32_t crcRejected = 0;                   // framed lines with a bad or missin
 uint32_t errSuppressed = 0;                 // replies not sent (rate limit)
 uint32_t txDropped = 0;                     // lines not sent: over the output budget (txCredit)
 uint32_t txRingFull = 0;                    // lines not sent: no room in the TX ring (never, if the budget holds)
-uint16_t txCredit = WC_TX_CREDIT_MAX;       // bytes the board may still queue (the output budget)
+uint16_t txCredit = WC_TX_CREDIT_BOOT;      // bytes the board may still queue (the output budget)
 uint8_t errLinesThisTick = 0;
 
 // ---------------------------------------------------------------------------
@@ -519,10 +528,12 @@ static const char F_MOTOR_L[] PROGMEM = "MOTOR_L";
 static const char F_MOTOR_R[] PROGMEM = "MOTOR_R";
 static const char F_BRAKE_OPEN[] PROGMEM = "BRAKE_OPEN";
 static const char F_BRAKE_SHORT[] PROGMEM = "BRAKE_SHORT";
-#define FAULT_COUNT 11
+static const char F_OVERHEAT_L[] PROGMEM = "OVERHEAT_L";
+static const char F_OVERHEAT_R[] PROGMEM = "OVERHEAT_R";
+#define FAULT_COUNT 13
 static const char* const FAULT_NAMES[FAULT_COUNT] = {
   F_STALL_L, F_STALL_R, F_REVERSED_L, F_REVERSED_R, F_IMPLAUSIBLE_L, F_IMPLAUSIBLE_R, F_DRIVER,
-  F_MOTOR_L, F_MOTOR_R, F_BRAKE_OPEN, F_BRAKE_SHORT,
+  F_MOTOR_L, F_MOTOR_R, F_BRAKE_OPEN, F_BRAKE_SHORT, F_OVERHEAT_L, F_OVERHEAT_R,
 };
 
 // One EVT:FAULT,<name> line per fault bit set.
@@ -539,15 +550,17 @@ static void sendFaultEvents(uint16_t faults) {
 // ---------------------------------------------------------------------------
 // Control law
 // ---------------------------------------------------------------------------
+// The PID's output within lo..hi (+-WC_PID_OUT_MAX, or a motor's rolled-back current
+// limit: pidBounds), the integral back-calculated to whichever bound binds.
 static float computePID(float setpoint, float measurement, float& integral, float& prevMeas,
-                        float kp, float ki, float kd, float dt) {
+                        float kp, float ki, float kd, float dt, float lo, float hi) {
   float error = setpoint - measurement;
   integral += error * dt;
   float limit = WC_PID_OUT_MAX / ki;
   integral = constrain(integral, -limit, limit);
   float derivative = -(measurement - prevMeas) / dt;   // on measurement: no setpoint kick
   float output = kp * error + ki * integral + kd * derivative;
-  float clamped = constrain(output, -WC_PID_OUT_MAX, WC_PID_OUT_MAX);
+  float clamped = constrain(output, lo, hi);
   if (output != clamped) {
     integral = (clamped - kp * error - kd * derivative) / ki;   // back-calculation
     // Never past zero: a P term beyond the clamp on its own would wind the integral
@@ -556,6 +569,87 @@ static float computePID(float setpoint, float measurement, float& integral, floa
   }
   prevMeas = measurement;
   return clamped;
+}
+
+// ---------------------------------------------------------------------------
+// The motors' heat (docs/safety.md, "Motor heat")
+// ---------------------------------------------------------------------------
+// Watts of copper loss of a motor driven at pwm one way (dir HIGH: the way vel counts
+// positive) while its wheel turns at vel: the effort (the duty less what the back-EMF
+// takes, WC_THERMAL_EMF a rad/s, within the driver's current limit) squared,
+// WC_THERMAL_LOSS a duty squared.
+// The board measures no current: this is what it commands, less what it measures.
+static float windingLoss(uint8_t pwm, uint8_t dir, float vel) {
+  float duty = dir == HIGH ? (float)pwm : -(float)pwm;
+  float effort = duty - WC_THERMAL_EMF * vel;
+  if (effort > WC_FAULT_EFFORT_MAX) {
+    effort = WC_FAULT_EFFORT_MAX;
+  } else if (effort < -WC_FAULT_EFFORT_MAX) {
+    effort = -WC_FAULT_EFFORT_MAX;
+  }
+  return effort * effort * WC_THERMAL_LOSS;
+}
+
+// A winding's estimate dt seconds on, loss watts in: one thermal mass cooled through
+// WC_THERMAL_RESISTANCE toward WC_THERMAL_AMBIENT.
+static float windingStep(float temp, float loss, float dt) {
+  float cool = (temp - WC_THERMAL_AMBIENT) / WC_THERMAL_RESISTANCE;
+  return temp + dt * (loss - cool) / WC_THERMAL_CAPACITY;
+}
+
+// Both estimates a tick on, from the duty that drove the interval that ended and the
+// speed at its end; the rollback's start and end, their events pending.
+static void updateThermal(float dt) {
+  windingTempL = windingStep(windingTempL, windingLoss(pwmL, dirL, filtVelL), dt);
+  windingTempR = windingStep(windingTempR, windingLoss(pwmR, dirR, filtVelR), dt);
+  float hot = windingTempL > windingTempR ? windingTempL : windingTempR;
+  if (!thermalRollback && hot > WC_THERMAL_ROLLBACK_TEMP) {
+    thermalRollback = 1;
+    thermalPending |= 1;
+  } else if (thermalRollback && hot < WC_THERMAL_ROLLBACK_TEMP - WC_THERMAL_HYSTERESIS) {
+    thermalRollback = 0;
+    thermalPending |= 2;
+  }
+}
+
+// How far the rollback has gone at temp: 0 up to WC_THERMAL_ROLLBACK_TEMP, 1 from
+// WC_THERMAL_CUTOFF_TEMP, linear between.
+static float rollbackOf(float temp) {
+  if (temp <= WC_THERMAL_ROLLBACK_TEMP) return 0.0f;
+  float k = (temp - WC_THERMAL_ROLLBACK_TEMP) / (WC_THERMAL_CUTOFF_TEMP - WC_THERMAL_ROLLBACK_TEMP);
+  return k >= 1.0f ? 1.0f : k;
+}
+
+// The top wheel speed the hotter winding allows, as a share of max_wheel (1: no cap).
+static float thermalShare() {
+  float hot = windingTempL > windingTempR ? windingTempL : windingTempR;
+  return 1.0f - rollbackOf(hot) * (1.0f - WC_THERMAL_SHARE_MIN);
+}
+
+// The PID output's bounds for a motor whose winding is at temp, its wheel at vel: past
+// the rollback's start an output that drives (the way the wheel turns, or from a
+// standstill) asks no more effort than the rolled-back current limit; braking is free.
+static void pidBounds(float temp, float vel, float& lo, float& hi) {
+  lo = -WC_PID_OUT_MAX;
+  hi = WC_PID_OUT_MAX;
+  float k = rollbackOf(temp);
+  if (k == 0.0f) return;
+  float cap = WC_FAULT_EFFORT_MAX - k * (WC_FAULT_EFFORT_MAX - WC_THERMAL_EFFORT_MIN);
+  float emf = WC_THERMAL_EMF * vel;
+  if (vel >= 0.0f) {
+    hi = (emf + cap) / WC_PWM_SCALE;
+    if (hi > WC_PID_OUT_MAX) hi = WC_PID_OUT_MAX;
+  }
+  if (vel <= 0.0f) {
+    lo = (emf - cap) / WC_PWM_SCALE;
+    if (lo < -WC_PID_OUT_MAX) lo = -WC_PID_OUT_MAX;
+  }
+}
+
+// The windings at WC_THERMAL_CUTOFF_TEMP or more: their faults.
+static uint16_t thermalFault() {
+  return (windingTempL >= WC_THERMAL_CUTOFF_TEMP ? FAULT_OVERHEAT_L : 0) |
+         (windingTempR >= WC_THERMAL_CUTOFF_TEMP ? FAULT_OVERHEAT_R : 0);
 }
 
 static float rampToward(float current, float target, float maxChange) {
@@ -1123,11 +1217,11 @@ static void sendTelemetry(uint32_t now) {
                   (faultFlags != 0 ? 128 : 0);
   // state: bit 0 waiting for neutral (motion refused), 1 the neutral fault, 2 driving
   // inhibited, 3 the speed capped by an inhibit input, 4 a fitted brake applied, 5 push
-  // mode (the brake released by hand)
+  // mode (the brake released by hand), 6 the thermal rollback
   uint8_t engaged = inhibitEngaged();
   uint8_t state = (needNeutral ? 1 : 0) | (neutralFault ? 2 : 0) | ((engaged & INHIBIT_STOP_MASK) ? 4 : 0) |
                   ((engaged & (uint8_t)~INHIBIT_STOP_MASK) ? 8 : 0) | (brakeFitted && !brakeReleased ? 16 : 0) |
-                  ((engaged & INHIBIT_PUSH) ? 32 : 0);
+                  ((engaged & INHIBIT_PUSH) ? 32 : 0) | (thermalRollback ? 64 : 0);
   const uint32_t fields[] = {
     now, rxCount, lastSeq, pwmL, pwmR, dirL, dirR, illTickL, illTickR, flags, rejectedCount,
     crcRejected, freeRam, faultFlags, rxLostTick, lateTicks, state,
@@ -1203,6 +1297,7 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
   filtVelL = WC_ALPHA * rawVelL + (1.0f - WC_ALPHA) * filtVelL;
   filtVelR = WC_ALPHA * rawVelR + (1.0f - WC_ALPHA) * filtVelR;
 
+  updateThermal(dt);
   // Faults: checked until one latches. A new one stops the chair (motors off below).
   // The chair's limits are not faults: they park it (halt) under the hold, braking hardest
   // (hardest) on an overspeed.
@@ -1267,6 +1362,7 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
                wheelFaults(checkR, FAULT_STALL_R, FAULT_REVERSED_R, FAULT_IMPLAUSIBLE_R, FAULT_MOTOR_R);
     }
     if (faults == 0) faults = brakeCoilFault();
+    if (faults == 0) faults = thermalFault();
     if (faults != 0) {
       faultFlags = faults;
       emergencyHalt();
@@ -1318,6 +1414,15 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
     else if (bit == 8) sendEvent(F("INHIBIT,2,0"));
     else if (bit == 16) sendEvent(F("PUSH,1"));
     else sendEvent(F("PUSH,0"));
+  } else if (thermalPending) {
+    // ...and so is the thermal rollback's, on first
+    if (thermalPending & 1) {
+      thermalPending &= 2;
+      sendEvent(F("THERMAL,1"));
+    } else {
+      thermalPending = 0;
+      sendEvent(F("THERMAL,0"));
+    }
   } else if (needNeutral) {
     // The wait for neutral, at most one event a tick (none beside WATCHDOG: the output
     // budget's worst tick): the refusal (EVT:NOT_NEUTRAL); the neutral command stood
@@ -1344,7 +1449,9 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
   float maxChange = (emergencyStop ? estopDecel : maxAccel) * dt;
   float goalL = targetL, goalR = targetR;
   float share = inhibitShare();
-  if (share < 1.0f) {   // an inhibit's cap: the faster wheel at its share, the curvature kept
+  float hotShare = thermalShare();
+  if (hotShare < share) share = hotShare;
+  if (share < 1.0f) {   // an inhibit's or the rollback's cap: the faster wheel at its share, the curvature kept
     float cap = maxWheel * share;
     float peak = fabs(goalL) > fabs(goalR) ? fabs(goalL) : fabs(goalR);
     if (peak > cap) {
@@ -1412,11 +1519,15 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
   } else {
     parked = false;
     // A suspect wheel keeps its output: no count is no reason to push harder.
+    // Past the thermal rollback's start, each within its motor's rolled-back current limit.
+    float lo, hi;
     if (trustedL && checkL != WHEEL_SUSPECT) {
-      outputL = computePID(setpointL, filtVelL, integralL, prevMeasL, kpL, kiL, kdL, dt);
+      pidBounds(windingTempL, filtVelL, lo, hi);
+      outputL = computePID(setpointL, filtVelL, integralL, prevMeasL, kpL, kiL, kdL, dt, lo, hi);
     }
     if (trustedR && checkR != WHEEL_SUSPECT) {
-      outputR = computePID(setpointR, filtVelR, integralR, prevMeasR, kpR, kiR, kdR, dt);
+      pidBounds(windingTempR, filtVelR, lo, hi);
+      outputR = computePID(setpointR, filtVelR, integralR, prevMeasR, kpR, kiR, kdR, dt, lo, hi);
     }
     // After a fault, the faulty wheel at duty 0: the driver brakes it whichever way it
     // turns (the healthy one's output would drive it on in a turn).
@@ -2275,8 +2386,11 @@ void setup() {
   line.print(F("BOOT:final_control,"));
   line.println(resetCauseName(resetCause));
   line.send();
-  // The budget starts after the BOOT line: WC_TX_CREDIT_MAX leaves the ring room for it.
-  txCredit = WC_TX_CREDIT_MAX;
+  // The budget starts after the BOOT line: WC_TX_CREDIT_BOOT leaves the ring room for it.
+  // The ring's bytes and the credit never add up to more than they do now (sends move
+  // credit into the ring, and the UART drains faster than the refill) or than
+  // WC_TX_CREDIT_MAX once the ring is empty: so the ring never holds more than 511.
+  txCredit = WC_TX_CREDIT_BOOT;
   loadParams();                 // and its EVT line, within the budget
   wdt_enable(WC_HW_WATCHDOG);   // a loop() pass that hangs resets the board
   lastControlTime = lastTickTime = millis();

@@ -15,9 +15,10 @@
 #define WC_SEQ_MAX 65535UL         // largest sequence number of a v3 frame
 #define WC_NUMBER_MAX_DIGITS 24    // most digits of a number before its exponent (leading zeros count): ERR:number past it
 #define WC_NUMBER_MAX_EXP_DIGITS 2 // most digits of a number's exponent: ERR:range past it
-#define WC_TX_CREDIT_MAX 480       // output budget: bytes the board may queue at once (its TX ring holds 511; 31 are kept for the BOOT line)
+#define WC_TX_CREDIT_MAX 500       // output budget: bytes the board may queue at once (one period's refill; the UART drains more than the refill, so the ring holds at most the budget, or the BOOT line and TX_CREDIT_BOOT)
+#define WC_TX_CREDIT_BOOT 480      // output budget: the credit setup() starts with, after the BOOT line (the TX ring holds 511: 31 are kept for the BOOT line, which may still be in it)
 #define WC_TX_CREDIT_PER_MS 10     // output budget: bytes added per millisecond between control ticks (the UART sends 10.7 a ms)
-#define WC_TX_LINE_MAX 136         // bytes of the longest line the board sends, its v4 suffix and line end included (LineBuffer's buffer)
+#define WC_TX_LINE_MAX 144         // bytes of the longest line the board sends, its v4 suffix and line end included (LineBuffer's buffer)
 #define WC_LINE_COUNTER_WRAP 256   // a v4 board line's counter (#NN) counts the framed lines sent, modulo this
 
 // ---- Timing ----------------------------------------------------------------
@@ -126,6 +127,18 @@
 #define WC_BRAKE_RELEASE_TICKS 2   // control ticks from PIN_BRAKE HIGH to driving, the hold on meanwhile (the brake's release time; 100 ms against the plant's 50 ms)
 #define WC_PUSH_SPEED 4.0f         // rad/s (0.61 m/s): in push mode the motors freewheel (each at the duty its back-EMF takes, FAULT_EFFORT_EMF a rad/s: no current) while both wheels are slower; a wheel pushed faster is at duty 0, its motor shorted, braking it
 #define WC_BRAKE_STATUS_TICKS 2    // control ticks in a row PIN_BRAKE_STATUS must read LOW, PIN_BRAKE at one level throughout (a change starts the count again), before a coil fault latches (EVT:FAULT,BRAKE_OPEN with the brake engaged, BRAKE_SHORT released)
+
+// ---- The motors' heat, estimated (docs/safety.md, "Motor heat") ------------
+#define WC_THERMAL_AMBIENT 25.0f   // deg C: each winding's estimate at reset, and what it cools toward (the board measures no temperature: a warm room assumed; in hotter air the winding runs hotter than the estimate by the difference, and a reset forgets a hot motor)
+#define WC_THERMAL_RESISTANCE 2.5f // K/W, winding to ambient (the motor's figure; assumed, as the plant's)
+#define WC_THERMAL_CAPACITY 360.0f // J/K, the winding's thermal mass (assumed, as the plant's: a time constant of 900 s)
+#define WC_THERMAL_EMF 14.0f       // duty per rad/s of wheel speed that the motor's back-EMF takes, for the heat estimate: the motor's own constant (Ke G x 255 / 24 V; the plant's, 14.0), not FAULT_EFFORT_EMF's rounded 14.5, which reads a cruising motor's current 16 % low
+#define WC_THERMAL_LOSS 0.029527f  // W of copper loss per duty squared of effort (duty less THERMAL_EMF a rad/s, within FAULT_EFFORT_MAX): (24 V / 255)^2 / 0.3 ohm; the board measures no current, so it estimates it from what it commands and what the encoders measure
+#define WC_THERMAL_ROLLBACK_TEMP 110.0f // deg C (estimated): above it the rollback lowers each motor's current limit (the driving effort the PID may ask, from FAULT_EFFORT_MAX toward THERMAL_EFFORT_MIN) and the top speed (toward THERMAL_SHARE_MIN of max_wheel), linearly to THERMAL_CUTOFF_TEMP; EVT:THERMAL,1
+#define WC_THERMAL_HYSTERESIS 5.0f // K: the rollback's end (EVT:THERMAL,0) waits until both estimates are this far below THERMAL_ROLLBACK_TEMP
+#define WC_THERMAL_CUTOFF_TEMP 125.0f // deg C (estimated): EVT:FAULT,OVERHEAT_L/R; the rollback is full here. In a 20 to 30 deg C room the winding is then at 120 to 130 deg C, within its class B rating (130)
+#define WC_THERMAL_EFFORT_MIN 25.0f // duty: the driving effort at full rollback (7.8 A); braking is never limited. The estimate settles near 115.6 deg C where the limit it sets holds it, short of the cut-off
+#define WC_THERMAL_SHARE_MIN 0.5f  // of max_wheel: the top speed at full rollback, the curvature kept
 
 // ---- Hill hold and rollaway (parked without a fault; protocol/PROTOCOL.md) ---
 #define WC_HOLD_DEADBAND_COUNTS 10 // encoder counts (1 mm of travel) a held wheel may be off the count it stopped at before the hold drives it back

@@ -146,7 +146,7 @@ def test_a_trace_that_ends_early_is_a_stall(storm: Recording) -> None:
 def test_the_budget_refills_per_millisecond_and_caps() -> None:
     fw = Firmware()
     # setup()'s parameters line (EVT:PARAMS_...) is the budget's first: the BOOT line is not.
-    assert fw.state.txCredit == C.TX_CREDIT_MAX - len(fw.boot_output().partition(b"\r\n")[2])
+    assert fw.state.txCredit == C.TX_CREDIT_BOOT - len(fw.boot_output().partition(b"\r\n")[2])
     fw.state.txCredit = 10
     assert fw.feed(frame(b"hello", 1)) == b"ACK:1\r\n"       # HELLO (38 bytes) does not fit
     assert fw.state.txCredit == 3 and fw.state.txDropped == 1
@@ -158,6 +158,11 @@ def test_the_budget_refills_per_millisecond_and_caps() -> None:
     assert fw.state.txCredit == C.TX_CREDIT_MAX - len(out)
 
 
+#: The widest fault field: the faults that can latch together are one group's (the
+#: wheels' and the driver's, else the brake's, else the windings'), at most 4 digits.
+WIDEST_FAULTS = 0x1800
+
+
 def test_the_worst_tick_fits_the_refill() -> None:
     """The published budget (protocol/PROTOCOL.md, "Output budget"): the longest tick a
     host can cause, every field at its widest and every line framed (v4), is no more
@@ -166,7 +171,7 @@ def test_the_worst_tick_fits_the_refill() -> None:
     s = FirmwareState(encTickL=-2**31, encTickR=-2**31, rawVelL=-1e30, rawVelR=-1e30,
                       tlmEnabled=1, linesFramed=1, rxCount=2**32 - 1, lastSeq=65535, pwmL=255,
                       pwmR=255, illTickL=2**32 - 1, illTickR=2**32 - 1, rejectedCount=2**32 - 1,
-                      crcRejected=2**32 - 1, freeRam=65535, faultFlags=511, rxLostTick=2**32 - 1,
+                      crcRejected=2**32 - 1, freeRam=65535, faultFlags=WIDEST_FAULTS, rxLostTick=2**32 - 1,
                       lateTicks=2**32 - 1, pivotPhase=2, estopLatched=1, emergencyStop=1, parked=1,
                       watchdogArmed=1)
     from wcdrive.firmware.output import (
@@ -185,7 +190,9 @@ def test_the_worst_tick_fits_the_refill() -> None:
         send(FirmwareState(linesFramed=1, lineCounter=255), line, out)
         return len(out)
 
-    s.neutralFault = 1                 # the state at its widest
+    # the state at its widest: every bit (both inhibit inputs, push mode, a brake, hot)
+    s.neutralFault, s.inhibitStable, s.brakeFitted, s.thermalRollback = 1, 7, 1, 1
+    assert send_telemetry(s, 0).endswith(b",127\r\n")
     # the tick's own event: WATCHDOG, or (never beside it) one of the wait for neutral's
     tick_event = max((send_event(e) for e in ("WATCHDOG", "NOT_NEUTRAL", "NEUTRAL", "DEFLECTED")),
                      key=sent)

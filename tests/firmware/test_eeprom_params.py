@@ -156,7 +156,7 @@ def test_the_port_alone() -> None:
     """The port's save, its writes one interrupt at a time, and the boot it gives."""
     fw = Firmware()
     assert fw.boot_output().endswith(b"EVT:PARAMS_DEFAULT,blank\r\n")
-    assert fw.state.txCredit == C.TX_CREDIT_MAX - len(b"EVT:PARAMS_DEFAULT,blank\r\n")
+    assert fw.state.txCredit == C.TX_CREDIT_BOOT - len(b"EVT:PARAMS_DEFAULT,blank\r\n")
     fw.feed(b"set:kp_l=3.5\nsave\n")
     assert fw.state.eeprom[0] == C.EEPROM_LAYOUT and fw.state.eeNext == 1 and fw.state.eeBusy
     for _ in range(BLOCK_BYTES):       # one interrupt per further byte, one to finish

@@ -274,7 +274,7 @@ PYTHON_ONLY = {"emergencyStop", "faultFlags", "lastTravel", "holdRollaway", "lim
                "neutralTicks", "notNeutralSent", "notNeutralPending", "notNeutralTicks", "neutralFault",
                "inhibitTick", "inhibitStable", "inhibitCountL", "inhibitCountR", "inhibitLatched",
                "inhibitPending", "inhibitOn", "inhibitCountP", "brakePhase", "brakeTicks",
-               "brakeStatusTicks"}
+               "brakeStatusTicks", "thermalRollback", "thermalPending"}
 _FIRMWARE = Path(tick_fast.__file__).resolve().parent
 
 
@@ -315,7 +315,7 @@ def c_tick_writes(text: str) -> set[str]:
 
 
 def _sources() -> tuple[dict[str, str], str]:
-    modules = ("control", "motion", "output", "inhibit", "brake", "motors")
+    modules = ("control", "motion", "output", "inhibit", "brake", "motors", "thermal")
     py = {m: (_FIRMWARE / f"{m}.py").read_text() for m in modules}
     return py, (_FIRMWARE / "csrc" / "tick_fast.c").read_text()
 

@@ -25,13 +25,21 @@ from wcdrive.firmware.output import (
     send_telemetry,
 )
 from wcdrive.firmware.state import FirmwareState
+from wcdrive.firmware.thermal import (
+    pid_bounds,
+    send_thermal_event,
+    thermal_fault,
+    update_thermal,
+)
 
 _OUT_MAX = C.PID_OUT_MAX
 
 
 def compute_pid(setpoint: float, measurement: float, integral: float, prev_meas: float,
-                kp: float, ki: float, kd: float, dt: float) -> tuple[float, float]:
-    """``computePID``: returns ``(clamped output, new integral)``."""
+                kp: float, ki: float, kd: float, dt: float, lo: float = -_OUT_MAX,
+                hi: float = _OUT_MAX) -> tuple[float, float]:
+    """``computePID``: returns ``(output clamped to lo..hi, new integral)``; the
+    integral is back-calculated to whichever bound binds."""
     error = sub(setpoint, measurement)
     integral = add(integral, mul(error, dt))
     limit = div(_OUT_MAX, ki)
@@ -41,7 +49,7 @@ def compute_pid(setpoint: float, measurement: float, integral: float, prev_meas:
     p_term = mul(kp, error)
     d_term = mul(kd, derivative)
     output = add(add(p_term, mul(ki, integral)), d_term)
-    clamped = -_OUT_MAX if output < -_OUT_MAX else (_OUT_MAX if output > _OUT_MAX else output)
+    clamped = lo if output < lo else (hi if output > hi else output)
     if output != clamped:
         integral = div(sub(sub(clamped, p_term), d_term), ki)
         # never past zero: a P term beyond the clamp on its own would wind the integral
@@ -376,6 +384,8 @@ def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_
             | wheel_faults(check_r, FAULT_STALL_R, FAULT_REVERSED_R, FAULT_IMPLAUSIBLE_R, FAULT_MOTOR_R))
     if not faults:
         faults = brake_coil_fault(s)
+    if not faults:
+        faults = thermal_fault(s)
     if faults:
         s.faultFlags = faults
         emergency_halt(s)
@@ -466,6 +476,7 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
     s.filtVelL = add(mul(C.ALPHA, s.rawVelL), mul(C.ONE_MINUS_ALPHA, s.filtVelL))
     s.filtVelR = add(mul(C.ALPHA, s.rawVelR), mul(C.ONE_MINUS_ALPHA, s.filtVelR))
 
+    update_thermal(s, dt)
     check_l, check_r, halt, hardest = _check_faults(s, delta_l, delta_r, ill_l, ill_r, out)
 
     update_inhibits(s)
@@ -483,6 +494,8 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
         send(s, send_event("WATCHDOG"), out)
     elif s.inhibitPending:              # one a tick, in the wait for neutral's slot
         send_inhibit_event(s, out)
+    elif s.thermalPending:              # ...and so is the rollback's
+        send_thermal_event(s, out)
     elif s.needNeutral:
         _confirm_neutral(s, out)
 
@@ -536,13 +549,16 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
     else:
         s.parked = 0
         # A suspect wheel keeps its output: no count is no reason to push harder.
+        # beyond the thermal rollback, each within its motor's rolled-back current limit
         if trusted_l and check_l != WHEEL_SUSPECT:
+            lo, hi = pid_bounds(s.windingTempL, s.filtVelL)
             s.outputL, s.integralL = compute_pid(s.setpointL, s.filtVelL, s.integralL, s.prevMeasL,
-                                                 s.kpL, s.kiL, s.kdL, dt)
+                                                 s.kpL, s.kiL, s.kdL, dt, lo, hi)
             s.prevMeasL = s.filtVelL
         if trusted_r and check_r != WHEEL_SUSPECT:
+            lo, hi = pid_bounds(s.windingTempR, s.filtVelR)
             s.outputR, s.integralR = compute_pid(s.setpointR, s.filtVelR, s.integralR, s.prevMeasR,
-                                                 s.kpR, s.kiR, s.kdR, dt)
+                                                 s.kpR, s.kiR, s.kdR, dt, lo, hi)
             s.prevMeasR = s.filtVelR
         # after a fault the faulty wheel at duty 0: the driver brakes it whichever way it turns
         if not trusted_l:

@@ -19,6 +19,7 @@ from wcdrive.firmware import constants as C
 from wcdrive.firmware.motion import PIVOT_NONE, require_neutral
 from wcdrive.firmware.output import send, send_event
 from wcdrive.firmware.state import FirmwareState
+from wcdrive.firmware.thermal import thermal_share
 
 __all__ = ["capped_goals", "drive_inhibited", "inhibit_engaged", "send_inhibit_event", "update_inhibits"]
 
@@ -92,9 +93,13 @@ def inhibit_share(s: FirmwareState) -> float:
 
 def capped_goals(s: FirmwareState) -> tuple[float, float]:
     """What the setpoints ramp toward: the targets, the faster wheel capped at the
-    engaged inputs' share of ``max_wheel`` with the curvature kept."""
+    engaged inputs' share of ``max_wheel``, or the thermal rollback's if lower, with the
+    curvature kept."""
     goal_l, goal_r = s.targetL, s.targetR
     share = inhibit_share(s)
+    hot = thermal_share(s)
+    if hot < share:
+        share = hot
     if share < 1.0:
         cap = mul(s.maxWheel, share)
         peak = abs(goal_l) if abs(goal_l) > abs(goal_r) else abs(goal_r)

@@ -103,7 +103,8 @@ def send_telemetry(s: FirmwareState, now: int) -> bytes:
     engaged = s.inhibitStable | s.inhibitLatched
     state = ((1 if s.needNeutral else 0) | (2 if s.neutralFault else 0)
              | (4 if engaged & C.INHIBIT_STOP_MASK else 0) | (8 if engaged & ~C.INHIBIT_STOP_MASK & 7 else 0)
-             | (16 if s.brakeFitted and not s.brakeReleased else 0) | (32 if engaged & C.INHIBIT_PUSH else 0))
+             | (16 if s.brakeFitted and not s.brakeReleased else 0) | (32 if engaged & C.INHIBIT_PUSH else 0)
+             | (64 if s.thermalRollback else 0))
     # Every field is unsigned and in range, so %d prints what Print::print prints.
     return b"TLM:%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d\r\n" % (
         now, s.rxCount, s.lastSeq, s.pwmL, s.pwmR, s.dirL, s.dirR, s.illTickL, s.illTickR,

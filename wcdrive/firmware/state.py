@@ -25,7 +25,7 @@ FLOAT_FIELDS = (
     "filtVelR", "integralL", "integralR", "prevMeasL", "prevMeasR", "outputL", "outputR",
     "lastTravel", "pendingL", "pendingR", "haltIntegralL", "haltIntegralR", "haltSetpointL",
     "haltSetpointR", "effortSpeedL", "effortSpeedR", "effortSetpointL",
-    "effortSetpointR", "overspeedFromL", "overspeedFromR",
+    "effortSetpointR", "overspeedFromL", "overspeedFromR", "windingTempL", "windingTempR",
     "kpL", "kiL", "kdL", "kpR", "kiR", "kdR", "maxWheel", "maxAccel", "estopDecel",
 )
 #: Integer and flag globals compared exactly.
@@ -47,7 +47,7 @@ INT_FIELDS = (
     "needNeutral", "neutralSeen", "neutralTicks", "notNeutralSent", "notNeutralPending", "notNeutralTicks",
     "neutralFault", "inhibitTick", "inhibitStable", "inhibitCountL", "inhibitCountR", "inhibitCountP",
     "inhibitLatched",
-    "inhibitPending", "inhibitOn",
+    "inhibitPending", "inhibitOn", "thermalRollback", "thermalPending",
 )
 
 #: Globals the tick takes as inputs rather than computes (loop() measures them).
@@ -151,6 +151,13 @@ class FirmwareState:
     #: ``|prevMeas|`` before the current run of overspeeding ticks began (``overspeedRun``).
     overspeedFromL: float = 0.0
     overspeedFromR: float = 0.0
+    #: Each winding's estimated temperature (deg C; ``wcdrive.firmware.thermal``), the
+    #: rollback on (``EVT:THERMAL,1`` sent or pending) and its events to send (bit 0 on,
+    #: bit 1 off).
+    windingTempL: float = C.THERMAL_AMBIENT
+    windingTempR: float = C.THERMAL_AMBIENT
+    thermalRollback: int = 0
+    thermalPending: int = 0
     #: Halted at the chair's limit (``EVT:OVERSPEED``, ``EVT:STALLED_ON_GRADE``): motion
     #: refused with ``ERR:limit`` until a stop.
     limitLatched: int = 0
@@ -200,7 +207,7 @@ class FirmwareState:
     errLinesThisTick: int = 0
     #: The output budget (``LineBuffer::send``): bytes that may still be queued, and the
     #: lines dropped for want of it; ``txRingFull`` counts the sketch's second guard.
-    txCredit: int = C.TX_CREDIT_MAX
+    txCredit: int = C.TX_CREDIT_BOOT
     txDropped: int = 0
     txRingFull: int = 0
     #: Losses ``loop()`` met in the received bytes (the sum of ``rxGap``'s), and the RX interrupt's

@@ -236,7 +236,7 @@ class Corrupt:
 #: (protocol/PROTOCOL.md, "Faults").
 FAULT_NAMES = ("ENC_STALL_L", "ENC_STALL_R", "ENC_REVERSED_L", "ENC_REVERSED_R",
                "ENC_IMPLAUSIBLE_L", "ENC_IMPLAUSIBLE_R", "DRIVER_DEAD", "MOTOR_L", "MOTOR_R",
-               "BRAKE_OPEN", "BRAKE_SHORT")
+               "BRAKE_OPEN", "BRAKE_SHORT", "OVERHEAT_L", "OVERHEAT_R")
 
 
 def fault_names(faults: int) -> tuple[str, ...]:
@@ -308,6 +308,12 @@ class ExtendedTelemetry:
         """State bit 5: the brake's manual-release lever is pulled (push mode): motion is
         refused (``ERR:inhibit``, bit 2 set too) and the motors freewheel."""
         return bool(self.state and self.state & 32)
+
+    @property
+    def thermal_rollback(self) -> bool:
+        """State bit 6: a motor's estimated winding temperature is past the rollback's
+        start: its current limit and the top speed are lowered (``EVT:THERMAL,1``)."""
+        return bool(self.state and self.state & 64)
 
     @property
     def fault_latched(self) -> bool:

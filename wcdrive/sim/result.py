@@ -57,6 +57,8 @@ class GroundTruth:
     step_speed: np.ndarray = field(default_factory=lambda: _empty(0))
     step_contact_speed: np.ndarray = field(default_factory=lambda: _empty(0, 2))
     step_volts: np.ndarray = field(default_factory=lambda: _empty(0, 2))
+    #: Each motor's winding temperature at each tick (left, right; deg C).
+    winding_temp: np.ndarray = field(default_factory=lambda: _empty(0, 2))
 
 
 @dataclass
@@ -327,7 +329,9 @@ class SimResult:
         odometry with its errors, the tracking error, the caster totals, the
         port-vs-firmware differences, the line counts, the board's events (``events``:
         ``[s, line]`` for every ``EVT:`` line), the fault figures (``fault_metrics``), the
-        floor and the stop figures (``stop_metrics``).
+        floor and the stop figures (``stop_metrics``); ``winding_temp_max_c``, the hotter
+        motor winding's highest temperature (deg C; None without a tick); ``distance_m``,
+        the length of the chair's true path (m, tick to tick).
 
         The floor: ``slope_deg`` and ``downhill_heading_deg`` (the ``[world]`` table's
         uniform grade and the heading it falls toward, degrees), ``ramps`` (its bands,
@@ -365,6 +369,9 @@ class SimResult:
         out["caster_scrub_time_s"] = truth.caster_scrub_time
         out["caster_swivel_work_j"] = truth.caster_swivel_work
         out["caster_side_impulse_ns"] = truth.caster_side_impulse
+        temps = truth.winding_temp
+        out["winding_temp_max_c"] = float(temps.max()) if temps.size else None
+        out["distance_m"] = float(np.hypot(*np.diff(truth.pose[:, :2], axis=0).T).sum())
         out["firmware_differences"] = self.firmware_differences
         out.update({f"lines_{k}": v for k, v in link.line_counts.items()})
         out["events"] = [[t, line] for t, line in link.events]

@@ -60,7 +60,8 @@ def assemble_result(scenario: Scenario, params: ChairParams, rig: Rig, ran: Back
                         plant.caster_scrub_time, plant.caster_swivel_work, plant.caster_side_impulse,
                         step_time=motion[:, 0],
                         step_speed=contact.max(axis=1) if contact.size else np.zeros(0),
-                        step_contact_speed=contact, step_volts=motion[:, 4:6])
+                        step_contact_speed=contact, step_volts=motion[:, 4:6],
+                        winding_temp=cols["winding_temp"])
     board = BoardLog(cols["tick_time"], cols["setpoint"], cols["measured"], cols["pwm"], cols["counts"],
                      cols["tick_cycles"])
     odometry = Odometry(cols["odom_wheel"], cols["odom_velocity"], cols["odom_gyro"],

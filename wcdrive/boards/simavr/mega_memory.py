@@ -30,7 +30,7 @@ VARIABLE_FORMATS = {
           "lastTravel", "pendingL", "pendingR", "kpL", "kiL", "kdL", "kpR", "kiR", "kdR",
           "maxWheel", "maxAccel", "estopDecel", "effortSpeedL", "effortSpeedR", "effortSetpointL",
           "effortSetpointR", "overspeedFromL", "overspeedFromR", "haltIntegralL", "haltIntegralR",
-          "haltSetpointL", "haltSetpointR"),
+          "haltSetpointL", "haltSetpointR", "windingTempL", "windingTempR"),
     "i": ("encoderValueL", "encoderValueR", "encTickL", "encTickR", "prevEncL", "prevEncR", "holdRefL",
           "holdRefR", "holdStepL", "holdStepR"),
     "I": ("illegalL", "illegalR", "lastControlTime", "tickCount", "lastCmdTime", "rejectedCount",
@@ -51,7 +51,8 @@ VARIABLE_FORMATS = {
           "notNeutralPending", "notNeutralTicks", "neutralFault", "inhibitTick", "inhibitStable",
           "inhibitCountL", "inhibitCountR", "inhibitLatched", "inhibitPending",
           "inhibitOn", "inhibitCountP",
-          "brakeFitted", "brakePhase", "brakeTicks", "brakeStatusTick", "brakeStatusTicks"),
+          "brakeFitted", "brakePhase", "brakeTicks", "brakeStatusTick", "brakeStatusTicks",
+          "thermalRollback", "thermalPending"),
 }
 _FORMAT_OF = {name: fmt for fmt, names in VARIABLE_FORMATS.items() for name in names}
 

@@ -99,7 +99,8 @@ static double f_from_int(int64_t n) { return rnd((double)n); }   /* |n| < 2**53 
     X(brakeReleased) X(overspeedTicksL) X(overspeedTicksR) X(overspeedFromL) X(overspeedFromR) \
     X(needNeutral) X(neutralFault) \
     X(inhibitTick) X(inhibitStable) X(inhibitCountL) X(inhibitCountR) X(inhibitLatched) X(inhibitPending) X(inhibitOn) X(inhibitCountP) \
-    X(brakeFitted) X(brakePhase) X(brakeTicks) X(brakeStatusTick) X(brakeStatusTicks)
+    X(brakeFitted) X(brakePhase) X(brakeTicks) X(brakeStatusTick) X(brakeStatusTicks) \
+    X(windingTempL) X(windingTempR) X(thermalRollback) X(thermalPending)
 
 #define ENUM(name) F_##name,
 enum { FIELDS(ENUM) N_FIELDS };
@@ -159,7 +160,8 @@ static struct {
         brake_done_speed, standing_speed, reverse_speed, reverse_approach, runaway_gain, effort_shortfall_motor, effort_lead, effort_overrun,
         overspeed_margin, overspeed_gain,
         pivot_start_speed,
-        pivot_speed, rounding2;
+        pivot_speed, rounding2, thermal_emf, effort_max, thermal_ambient, thermal_resistance,
+        thermal_capacity, thermal_loss, thermal_rollback_temp;
     int64_t control_period_ms, tx_credit_max, tx_credit_per_ms, stall_pwm, stall_pwm_standing, stall_ticks,
         stall_ticks_turning,
         reverse_ticks, runaway_pwm, runaway_ticks, effort_pwm, effort_ticks, illegal_per_tick, still_ticks, pivot_ticks,
@@ -330,6 +332,22 @@ static int check_wheel(int64_t delta, int64_t illegal, int64_t storm, int64_t pw
     return (stalled || against) ? WHEEL_SUSPECT : WHEEL_OK;
 }
 
+/* winding_loss, winding_step: wcdrive.firmware.thermal */
+static double winding_loss(int64_t pwm, int64_t dir, double vel) {
+    double duty = dir == K.high ? (double)pwm : -(double)pwm;
+    double effort = f_sub(duty, f_mul(K.thermal_emf, vel));
+    if (effort > K.effort_max)
+        effort = K.effort_max;
+    else if (effort < -K.effort_max)
+        effort = -K.effort_max;
+    return f_mul(f_mul(effort, effort), K.thermal_loss);
+}
+
+static double winding_step(double temp, double loss, double dt) {
+    double cool = f_div(f_sub(temp, K.thermal_ambient), K.thermal_resistance);
+    return f_add(temp, f_div(f_mul(dt, f_sub(loss, cool)), K.thermal_capacity));
+}
+
 static double ramp_toward(double current, double target, double max_change) {
     double diff = f_sub(target, current);
     if (fabs(diff) <= max_change)
@@ -410,7 +428,7 @@ static const int float_fields[] = {
     F_effortSpeedR, F_effortSetpointR, F_setpointL, F_setpointR, F_targetL, F_targetR,
     F_prevMeasL, F_prevMeasR, F_estopDecel, F_maxAccel, F_integralL, F_integralR, F_outputL,
     F_outputR, F_kpL, F_kiL, F_kdL, F_kpR, F_kiR, F_kdR, F_pendingL, F_pendingR,
-    F_overspeedFromL, F_overspeedFromR,
+    F_overspeedFromL, F_overspeedFromR, F_windingTempL, F_windingTempR,
 };
 
 static unsigned char field_is_float[N_FIELDS];     /* set by _bind from float_fields */
@@ -460,6 +478,8 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
     if (I(brakeStatusTicks) || (I(brakeFitted) && (brake_status || I(brakePhase) != K.brake_released
                                                    || I(brakeTicks))))
         Py_RETURN_NONE;             /* a fitted brake not released and settled, or its status LOW */
+    if (I(thermalRollback) || I(thermalPending))
+        Py_RETURN_NONE;             /* the thermal rollback on, or its event to send */
     SETI(brakeStatusTick, brake_status);
     PyObject *mode_name = PyDict_GetItemWithError(mode_names, *slot(s, F_mode));
     if (mode_name == NULL) {
@@ -508,6 +528,12 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
     SETF(rawVelR, f_mul(f_div(f_from_int(delta_r), K.cpr), per_second));
     SETF(filtVelL, f_add(f_mul(K.alpha, D(rawVelL)), f_mul(K.one_minus_alpha, D(filtVelL))));
     SETF(filtVelR, f_add(f_mul(K.alpha, D(rawVelR)), f_mul(K.one_minus_alpha, D(filtVelR))));
+
+    /* update_thermal: a winding past the rollback's start goes to the Python tick */
+    SETF(windingTempL, winding_step(D(windingTempL), winding_loss(I(pwmL), I(dirL), D(filtVelL)), dt));
+    SETF(windingTempR, winding_step(D(windingTempR), winding_loss(I(pwmR), I(dirR), D(filtVelR)), dt));
+    if (D(windingTempL) > K.thermal_rollback_temp || D(windingTempR) > K.thermal_rollback_temp)
+        Py_RETURN_NONE;
 
     /* _check_faults: a fault that latches goes to the Python tick */
     int check_l = WHEEL_OK, check_r = WHEEL_OK;
@@ -786,6 +812,13 @@ static PyObject *bind(PyObject *self, PyObject *args) {
           && const_double(consts, "PIVOT_START_SPEED", &k.pivot_start_speed)
           && const_double(consts, "PIVOT_SPEED", &k.pivot_speed)
           && const_double(consts, "ROUNDING_2", &k.rounding2)
+          && const_double(consts, "THERMAL_EMF", &k.thermal_emf)
+          && const_double(consts, "FAULT_EFFORT_MAX", &k.effort_max)
+          && const_double(consts, "THERMAL_AMBIENT", &k.thermal_ambient)
+          && const_double(consts, "THERMAL_RESISTANCE", &k.thermal_resistance)
+          && const_double(consts, "THERMAL_CAPACITY", &k.thermal_capacity)
+          && const_double(consts, "THERMAL_LOSS", &k.thermal_loss)
+          && const_double(consts, "THERMAL_ROLLBACK_TEMP", &k.thermal_rollback_temp)
           && const_int(consts, "CONTROL_PERIOD_MS", &k.control_period_ms)
           && const_int(consts, "TX_CREDIT_MAX", &k.tx_credit_max)
           && const_int(consts, "TX_CREDIT_PER_MS", &k.tx_credit_per_ms)
