@@ -2387,9 +2387,10 @@ void setup() {
   line.println(resetCauseName(resetCause));
   line.send();
   // The budget starts after the BOOT line: WC_TX_CREDIT_BOOT leaves the ring room for it.
-  // The ring's bytes and the credit never add up to more than they do now (sends move
-  // credit into the ring, and the UART drains faster than the refill) or than
-  // WC_TX_CREDIT_MAX once the ring is empty: so the ring never holds more than 511.
+  // Sends move credit into the ring and the UART drains it faster than the credit
+  // refills, so the ring's bytes and the credit add up to no more than now, or than
+  // WC_TX_CREDIT_MAX once the ring is empty, and the 2 ms by which millis() may run
+  // ahead of the UART between two ticks: the ring never holds more than 511.
   txCredit = WC_TX_CREDIT_BOOT;
   loadParams();                 // and its EVT line, within the budget
   wdt_enable(WC_HW_WATCHDOG);   // a loop() pass that hangs resets the board

@@ -86,7 +86,7 @@ SMALL = {"pwmL": (0, 255), "pwmR": (0, 255), "dirL": (0, 1), "dirR": (0, 1), "mo
          "notNeutralTicks": (0, 120), "neutralFault": (0, 1), "inhibitStable": (0, 3),
          "inhibitLatched": (0, 3), "inhibitCountL": (0, 2), "inhibitCountR": (0, 2),
          "inhibitPending": (0, 15),
-         "inhibitOn": (0, 3)}
+         "inhibitOn": (0, 3), "thermalRollback": (0, 1), "thermalPending": (0, 3)}
 
 
 @st.composite
@@ -98,6 +98,11 @@ def states(draw) -> tuple[FirmwareState, int, tuple[int, ...]]:
     for name, (lo, hi) in SMALL.items():
         if draw(st.booleans()):
             setattr(s, name, draw(st.integers(lo, hi)))
+    # the windings near the rollback's start too (110 deg C): the C tick's estimate and
+    # its decline there
+    for name in ("windingTempL", "windingTempR"):
+        if draw(st.booleans()):
+            setattr(s, name, draw(st.floats(100.0, 130.0, width=32)))
     # Waiting for neutral (a boot's default) the C tick declines: mostly a board that drives.
     s.needNeutral = draw(st.sampled_from((0, 0, 0, 1)))
     s.lastControlTime = draw(u32)
