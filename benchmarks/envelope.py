@@ -9,7 +9,8 @@ the same drives on every machine): uniform grades and cross-slopes, ramp bands u
 down with their level-to-ramp and ramp-to-level transitions (stopping beyond the band
 or on it), every grade up to the rated grade of the drawn occupant (40 to 150 kg),
 speeds up to the full-speed command (2.68 m/s), turns up to 1 rad/s, host rates 4 to
-100 Hz, the default gains or one set drawn over the accepted ranges. Each is a
+100 Hz, the default gains or one set drawn over the accepted ranges, one chair in
+three with a parking brake the firmware owns (counted apart: "with a brake"). Each is a
 scenario TOML run by ``wcdrive.tools.sweep`` on Dask (``run_dask``; ``--serial``: in
 this process), one task a drive.
 
@@ -133,7 +134,7 @@ def alarms(runs: Sequence[Case], rows: Sequence[dict[str, Any]], group: str) -> 
         if c.group != group:
             continue
         verdict = ev.judge(_events(row))
-        for key in (c.drive.case, "all"):
+        for key in (c.drive.case, *(("with a brake",) if c.drive.brake else ()), "all"):
             s = out.setdefault(key, {"drives": 0, "fault": 0, "kinds": {}, "limit": 0, "limit_90": 0,
                                      "errors": 0})
             s["drives"] += 1

@@ -15,8 +15,14 @@ from typing import Any
 
 import pytest
 
+from wcdrive.ros2.dds.config import MAX_DOMAIN_ID
+
 PEER = Path(__file__).with_name("dds_peer.py")
-_DOMAINS = itertools.count(100 + (os.getpid() % 40) * 3)
+#: Each process counts from its own start, wrapping within 100 to 232 (MAX_DOMAIN_ID): a
+#: worker that ran many bridges once counted on to 233 and past, whose ports Cyclone DDS
+#: cannot open (7400 + 250 x domain passes 65535).
+_DOMAINS = (100 + (start + k) % (MAX_DOMAIN_ID - 99) for start in [(os.getpid() % 40) * 3]
+            for k in itertools.count())
 
 
 class IdleRobot:
@@ -32,7 +38,7 @@ class IdleRobot:
 
 
 def fresh_domain() -> int:
-    """A ROS domain id for one bridge, unlikely to be another test run's (100 to 222)."""
+    """A ROS domain id for one bridge, unlikely to be another test run's (100 to 232)."""
     return next(_DOMAINS)
 
 

@@ -106,8 +106,13 @@ def test_the_drives_cover_the_envelope_and_beyond(tmp_path: Path) -> None:
     assert max(d.speed for d in drives) == ev.MAX_LINEAR
     assert {d.host_rate_hz for d in drives} == set(ev.HOST_RATES)
     assert any(d.gains is None for d in drives) and any(d.gains is not None for d in drives)
-    for i, d in enumerate(drives[:8]):
+    assert 0.2 < sum(d.brake for d in drives) / len(drives) < 0.45
+    braked = [d for d in drives if d.brake and d.gains is not None][:2]
+    for i, d in enumerate(drives[:8] + braked):
         path = tmp_path / f"drive{i}.toml"
         path.write_text(d.with_fault("motor_dead", 1.0, "left").toml())
         sc = scenario.load(str(path))
         assert sc.params().occupant_mass == d.occupant and len(sc.faults) == 1
+        assert sc.params().parking_brake == d.brake
+        assert sc.board_params.get("brake_fitted", 0) == (1 if d.brake else 0)
+        assert (sc.board_params.get("kp_l") is not None) == (d.gains is not None)

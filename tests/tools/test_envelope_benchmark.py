@@ -1,6 +1,6 @@
 """``benchmarks/envelope.py --quick`` as a user runs it: the figures come out, the sweep
-runs every drive, a healthy chair latches no fault inside the envelope nor on a kerb
-cut, and every encoder, wheel and link fault injected is found (the dead motor, the
+runs every drive, a healthy chair (with a parking brake or without) latches no fault
+inside the envelope nor on a kerb cut, and every encoder, wheel and link fault injected is found (the dead motor, the
 slow one, is held only to being found at all)."""
 
 from __future__ import annotations
@@ -21,6 +21,8 @@ def test_the_quick_envelope_has_no_false_fault_and_finds_the_faults() -> None:
     healthy, beyond = figures["healthy"]["all"], figures["beyond"]["all"]
     assert healthy["drives"] >= 60 and healthy["fault"] == 0, healthy
     assert healthy["limit_90"] == 0, healthy                  # no limit event within 90 % of rated
+    braked = figures["healthy"]["with a brake"]               # a third of the chairs
+    assert braked["drives"] >= 10 and braked["fault"] == 0, braked
     # kerb cuts beyond the rated grade: limit events, and at most the known rollback past
     # what the hold carries (ENC_REVERSED after STALLED_ON_GRADE: docs/safety.md, "Not safe
     # yet"; the xfail in tests/sim/test_envelope_property.py)

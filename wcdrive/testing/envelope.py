@@ -22,7 +22,8 @@ full-speed command ``MAX_LINEAR``), then a turn ``[speed / 2, turn]`` (turn up t
 phase against the board's 50 ms ticks, which decides some knife-edge verdicts); the
 gains are the defaults or one set (kp, ki, kd) drawn over the accepted ranges
 (``protocol/spec.toml``'s ``GAIN_*``) for both wheels alike (wheels tuned far apart
-are a known open problem, docs/safety.md).
+are a known open problem, docs/safety.md). One chair in ``BRAKE_EVERY`` has a parking
+brake the firmware owns (``[chair] parking_brake``, ``[params] brake_fitted = 1``).
 
 Beyond the envelope (``BEYOND``): ``kerb_up``, ``kerb_down``, a 1:8 kerb cut
 (``KERB_DEG``, 1.2 m long), steeper than any occupant's rated grade. There the board may
@@ -51,6 +52,8 @@ BEYOND = ("kerb_up", "kerb_down")
 LIMITS = ("EVT:STALLED_ON_GRADE", "EVT:OVERSPEED", "EVT:ROLLAWAY")
 #: The fault kinds injected into the drives (``wcdrive.plant.faults``).
 FAULT_KINDS = ("motor_dead", "encoder_cut", "encoder_reversed", "wheel_locked", "link_cut")
+#: One drive in this many has a parking brake the firmware owns (drawn last of all).
+BRAKE_EVERY = 3
 #: m/s: the full-speed command (CMDVEL's range).
 MAX_LINEAR = spec.real("MAX_LINEAR")
 #: rad/s: the sharpest turn drawn.
@@ -93,6 +96,8 @@ class Drive:
     fault_side: str | None = None
     #: s: the host's bytes this much later: its phase against the board's 50 ms ticks.
     host_offset_s: float = 0.0
+    #: A parking brake the firmware owns (``brake_fitted`` 1).
+    brake: bool = False
 
     @property
     def inside(self) -> bool:
@@ -120,11 +125,14 @@ class Drive:
                  f'description = "{self.describe()}"',
                  f"host_rate_hz = {self.host_rate_hz:g}", "settle_s = 0.5",
                  f"host_offset_s = {self.host_offset_s:g}", "",
-                 "[chair]", f"occupant_mass = {self.occupant:g}", ""]
+                 "[chair]", f"occupant_mass = {self.occupant:g}"]
+        lines += ["parking_brake = true", ""] if self.brake else [""]
+        params = ["brake_fitted = 1"] if self.brake else []
         if self.gains is not None:
             kp, ki, kd = self.gains
-            lines += ["[params]"] + [f"{k}_{s} = {v:g}" for s in "lr" for k, v in
-                                      (("kp", kp), ("ki", ki), ("kd", kd))] + [""]
+            params += [f"{k}_{s} = {v:g}" for s in "lr" for k, v in (("kp", kp), ("ki", ki), ("kd", kd))]
+        if params:
+            lines += ["[params]", *params, ""]
         lines += ["[world]"]
         if self.case in ("uniform", "cross"):
             lines += [f"slope_deg = {self.grade_deg:g}", f"downhill_heading_deg = {self.heading_deg:g}"]
@@ -150,7 +158,7 @@ class Drive:
             f"{self.grade_deg:.2f} deg band of {self.band_m:g} m ({100 * self.grade_fraction:.0f} % of rated)"
         text = (f"{self.case}: {self.occupant:g} kg, {where}, {self.speed:g} m/s for {self.drive_s:g} s, "
                 f"turn {self.turn:g} rad/s, host {self.host_rate_hz:g} Hz "
-                f"+{1000 * self.host_offset_s:g} ms, {gains}")
+                f"+{1000 * self.host_offset_s:g} ms, {gains}" + (", a brake" if self.brake else ""))
         if self.fault_kind is not None:
             side = f" {self.fault_side}" if self.fault_side else ""
             text += f"; {self.fault_kind}{side} at {self.fault_at:g} s"
@@ -199,9 +207,11 @@ def drive(draw: Draw, cases: tuple[str, ...] = INSIDE) -> Drive:
     gains = _gains(draw)
     # drawn last, so that a seed's other choices stay what they were before the phase
     offset = round(draw.real(0.0, 0.05), 4)
+    # and the brake after it, for the same reason
+    brake = draw.boolean(1 / BRAKE_EVERY)
     return Drive(case=case, occupant=occupant, grade_deg=grade, rated_deg=rated, heading_deg=heading,
                  speed=speed, turn=turn, drive_s=drive_s, turn_s=2.0, host_rate_hz=rate,
-                 gains=gains, band_m=band, host_offset_s=offset)
+                 gains=gains, band_m=band, host_offset_s=offset, brake=brake)
 
 
 def faulty(draw: Draw, base: Drive, kind: str) -> Drive:

@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from wcdrive.protocol.codec import ExtendedTelemetry
 from wcdrive.ros2 import bridge
 from wcdrive.ros2.bridge import BASE_FRAME as BASE_FRAME
 from wcdrive.ros2.bridge import ODOM_FRAME as ODOM_FRAME
@@ -105,6 +106,21 @@ def status(name: str, level: int, message: str, hardware_id: str, values: dict[s
     """``diagnostic_msgs/msg/DiagnosticStatus``."""
     return {"level": level, "name": name, "message": message, "hardware_id": hardware_id,
             "values": [{"key": k, "value": str(v)} for k, v in values.items()]}
+
+
+def motor_heat(tlm: ExtendedTelemetry, hardware_id: str) -> dict[str, Any]:
+    """``wcdrive: motor heat``, from the board's TLM: WARN while its thermal rollback
+    lowers the current and speed limits (TLM ``state`` bit 6), ERROR once a winding's
+    cut-off fault (``OVERHEAT_L``/``_R``) is latched, else OK."""
+    cut = [name for name in tlm.fault_names if name.startswith("OVERHEAT")]
+    if cut:
+        level, message = ERROR, "cut off: " + ", ".join(cut)
+    elif tlm.thermal_rollback:
+        level, message = WARN, "thermal rollback: current and speed limits lowered"
+    else:
+        level, message = OK, "ok"
+    return status("wcdrive: motor heat", level, message, hardware_id,
+                  {"thermal_rollback": tlm.thermal_rollback, "cut_off": ",".join(cut)})
 
 
 def diagnostics(t: float, statuses: list[dict[str, Any]]) -> dict[str, Any]:

@@ -55,6 +55,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 from wcdrive.errors import WcdriveError
 from wcdrive.host.robot import Robot
 from wcdrive.host.telemetry import Telemetry
+from wcdrive.protocol.codec import ExtendedTelemetry
 from wcdrive.ros2.bridge import laser_scan, tf_static
 from wcdrive.ros2.dds import messages, qos
 from wcdrive.ros2.dds.cmdvel import CmdVelGate
@@ -513,6 +514,8 @@ class ChairNode:
         if dataclasses.is_dataclass(tlm) and not isinstance(tlm, type):
             statuses.append(messages.status("wcdrive: TLM", messages.OK, "the board's last TLM line",
                                             hardware, dataclasses.asdict(tlm)))
+        if isinstance(tlm, ExtendedTelemetry):
+            statuses.append(messages.motor_heat(tlm, hardware))
         try:
             self._pub["/diagnostics"].publish(messages.diagnostics(self.now(), statuses))
         except Exception as exc:
