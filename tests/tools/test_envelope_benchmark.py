@@ -1,7 +1,7 @@
 """``benchmarks/envelope.py --quick`` as a user runs it: the figures come out, the sweep
 runs every drive, a healthy chair (with a parking brake or without) latches no fault
-inside the envelope nor on a kerb cut, and every encoder, wheel and link fault injected is found (the dead motor, the
-slow one, is held only to being found at all)."""
+inside the envelope nor on a kerb cut, and every encoder, wheel and link fault injected
+is found (the dead motor, the slow one, is held only to being found at all)."""
 
 from __future__ import annotations
 
