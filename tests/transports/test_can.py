@@ -121,8 +121,8 @@ enc_lines = st.builds(lambda a, b, vl, vr, m: b"ENC:%d,%d,VEL:%s,%s,MODE:%s" % (
                       st.sampled_from([b"WHEEL", b"CMDVEL", b"PPM"]))
 tlm_fields = st.tuples(u32, u32, st.integers(0, 65535), st.integers(0, 255), st.integers(0, 255),
                        st.integers(0, 1), st.integers(0, 1), u32, u32, st.integers(0, 255), u32, u32,
-                       st.integers(0, 8191), st.integers(0, 511), st.integers(0, 65535),
-                       st.integers(0, 65535), st.integers(0, 15))
+                       st.integers(0, 8191), st.integers(0, 0x1FFF), st.integers(0, 65535),
+                       st.integers(0, 65535), st.integers(0, 127))
 tlm_lines = tlm_fields.map(lambda v: b"TLM:" + b",".join(b"%d" % x for x in v))
 reasons = st.sampled_from([r.encode() for r in cc.REASONS[1:]])
 reply_lines = st.one_of(
@@ -157,6 +157,8 @@ def test_board_lines_survive_the_bus_byte_for_byte(line) -> None:
         assert (e["faults"], e["needs_neutral"], e["deflected"], e["drive_inhibited"], e["speed_capped"]) == (
             message.faults, message.needs_neutral, message.neutral_fault, message.drive_inhibited,
             message.speed_capped)
+        assert (e["brake_applied"], e["push_mode"], e["thermal_rollback"]) == (
+            message.brake_applied, message.push_mode, message.thermal_rollback)
 
 
 def test_a_status_without_its_last_frame_makes_no_line() -> None:
