@@ -58,6 +58,18 @@ def test_the_estimate_follows_the_windings_up_a_long_climb() -> None:
     assert np.all(np.abs(est - plant) <= 0.08 * plant + 0.2), np.abs(est - plant).max()
 
 
+def test_in_hotter_air_the_winding_runs_hotter_than_the_estimate_by_the_difference() -> None:
+    """The same climb in a 35 deg C room (``[chair] ambient_temp``): the board cannot
+    know it, so at the end its estimate (from 25 deg C) is 10 K under the winding, less
+    the 5 % it reads low (0.6 K here): between 10 and 11.5 K under."""
+    sc = scenario.load("ramp_climb_100m_150kg_1in20")
+    sc = dataclasses.replace(sc, chair={**sc.chair, "ambient_temp": 35.0}, expect=None)
+    r = runner.run(sc, backend="port")
+    winding = r.truth.winding_temp[-1]
+    estimate = _estimate(r)[-1] + C.THERMAL_AMBIENT
+    assert np.all((winding - estimate >= 10.0) & (winding - estimate <= 11.5)), winding - estimate
+
+
 def test_the_hold_heats_as_the_estimate_says() -> None:
     """Parked 120 s on 1:12 facing downhill, no brake: the hold carries the chair with
     its motors, each winding rises a few kelvin, and the estimate (the duty at a
