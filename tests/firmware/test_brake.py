@@ -16,7 +16,7 @@ import itertools
 import numpy as np
 import pytest
 
-from tests.support.recordings import board_lines, recorded, tick_states
+from tests.support.recordings import COUNTS_PER_RAD, board_lines, every, recorded, tick_states
 from wcdrive.firmware import constants as C
 from wcdrive.firmware.brake import (
     BRAKE_ENGAGED,
@@ -37,11 +37,6 @@ pytestmark = pytest.mark.simavr
 NEUTRAL = b"x:0.000,t:0.000,\n"
 SLOW = b"rp01.00,lp01.00,\n"            # 1 rad/s each
 FITTED = b"set:brake_fitted=1\n"
-COUNTS_PER_RAD = 10000 / (2 * np.pi)
-
-
-def _every(command: bytes, t0: float, t1: float, period: float = 0.1) -> list[tuple[float, bytes]]:
-    return [(round(float(t), 4), command) for t in np.arange(t0, t1, period)]
 
 
 def _run(serial: list[tuple[float, bytes]], duration: float, status: list[tuple[float, int, bool]] = (),
@@ -69,7 +64,7 @@ def _phases(ticks: list[tuple[float, dict]]) -> list[tuple[int, int, int]]:
 def test_without_a_brake_fitted_the_pin_follows_the_pid_as_before() -> None:
     """brake_fitted 0 (the default): the pin is HIGH exactly while the chair is not
     parked, the phase never moves, and the parked chair's hold is what it was."""
-    rec = _run([(0.02, NEUTRAL), *_every(SLOW, 0.2, 0.9), (0.9, NEUTRAL)], 1.6, turning_from=0.25)
+    rec = _run([(0.02, NEUTRAL), *every(SLOW, 0.2, 0.9), (0.9, NEUTRAL)], 1.6, turning_from=0.25)
     ticks = tick_states(rec)
     assert all(a["brakeFitted"] == 0 and a["brakePhase"] == BRAKE_ENGAGED for _, a in ticks)
     assert all(a["brakeReleased"] == (0 if a["parked"] or a["faultFlags"] else 1) for _, a in ticks)
@@ -98,7 +93,7 @@ def test_a_motion_command_preloads_the_hold_then_releases_then_ramps() -> None:
     still parked and the setpoints at zero, and only then the setpoints ramp. Stopped
     again, the pin goes LOW at the first parked tick and the motors are unpowered
     BRAKE_ENGAGE_TICKS later."""
-    serial = [(0.02, FITTED), (0.03, NEUTRAL), *_every(SLOW, 0.5, 1.2), (1.2, NEUTRAL)]
+    serial = [(0.02, FITTED), (0.03, NEUTRAL), *every(SLOW, 0.5, 1.2), (1.2, NEUTRAL)]
     rec = _run(serial, 2.2, turning_from=0.75, turning_until=1.4)
     ticks = tick_states(rec)
     asked = next(k for k, (_, a) in enumerate(ticks) if a["targetL"] != 0.0)
@@ -148,7 +143,7 @@ def test_a_shorted_coil_latches_with_the_brake_released_and_the_chair_stops() ->
     setpoints held no farther than their speeds; without that rule it drove them forward
     against the brake while the ramp ran down), then the chair parks, its wheels still
     trusted."""
-    serial = [(0.02, FITTED), (0.03, NEUTRAL), *_every(b"rp04.00,lp04.00,\n", 0.3, 1.6)]
+    serial = [(0.02, FITTED), (0.03, NEUTRAL), *every(b"rp04.00,lp04.00,\n", 0.3, 1.6)]
     rec = _run(serial, 1.8, status=[(1.0, 3, True)], turning_from=0.4, turning_until=1.1, speed=4.0)
     ticks = tick_states(rec)
     first = next(t for t, a in ticks if a["faultFlags"])
@@ -167,7 +162,7 @@ def test_the_status_counts_at_one_level_of_the_pin() -> None:
     preload, the brake engaged; one as it lets go) are no coil fault: a change of the pin
     starts the count again (an open-load flag and a switching transient are not a
     short)."""
-    serial = [(0.02, FITTED), (0.03, NEUTRAL), *_every(SLOW, 0.5, 1.2)]
+    serial = [(0.02, FITTED), (0.03, NEUTRAL), *every(SLOW, 0.5, 1.2)]
     rec = _run(serial, 1.4, status=[(0.58, 3, True), (0.67, 3, False)], turning_from=0.7)
     ticks = tick_states(rec)
     # each read against the pin as the tick before left it
@@ -191,7 +186,7 @@ def test_a_status_count_left_from_a_brake_unfitted_is_not_carried_over() -> None
 
 def test_the_status_is_ignored_without_a_brake_fitted() -> None:
     """A board with no brake (brake_fitted 0) reads its status pin but never faults on it."""
-    rec = _run([(0.02, NEUTRAL), *_every(SLOW, 0.3, 1.0)], 1.2, status=[(0.1, 3, True)], turning_from=0.4)
+    rec = _run([(0.02, NEUTRAL), *every(SLOW, 0.3, 1.0)], 1.2, status=[(0.1, 3, True)], turning_from=0.4)
     ticks = tick_states(rec)
     assert any(a["brakeStatusTick"] for _, a in ticks)
     assert all(a["faultFlags"] == 0 for _, a in ticks)

@@ -13,34 +13,20 @@ tests/sim/test_inhibit_plant.py watches the chair.
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 
-from tests.support.recordings import board_lines, recorded, tick_states
+from tests.support.recordings import board_lines, every, recorded, tick_states, turning
 from wcdrive.avr.f32 import f32, mul
 from wcdrive.firmware import constants as C
 from wcdrive.hil.lockstep import Recording
 from wcdrive.hil.traces import Trace
-from wcdrive.plant.encoders import EdgeTrain, edges_from_trajectory
 from wcdrive.protocol.codec import frame
 
 pytestmark = pytest.mark.simavr
 
-COUNTS_PER_RAD = 10000 / (2 * np.pi)
 NEUTRAL = b"x:0.000,t:0.000,\n"
 FORWARD = b"rp03.00,lp03.00,\n"          # 3 rad/s each, under max_wheel
 FAST = b"rp08.00,lp08.00,\n"             # 8 rad/s: above the seat input's cap
-
-
-def _turning(until: float, mirrored: bool, speed: float) -> EdgeTrain:
-    """A wheel at rest until 0.3 s, then at ``speed`` rad/s (the left one counts backwards)."""
-    t = np.linspace(0.0, until, 4000)
-    angle = np.where(t < 0.3, 0.0, (t - 0.3) * speed)
-    return edges_from_trajectory(t, 0.5 + (-1 if mirrored else 1) * angle * COUNTS_PER_RAD)
-
-
-def _every(command: bytes, t0: float, t1: float, period: float = 0.1) -> list[tuple[float, bytes]]:
-    return [(round(float(t), 4), command) for t in np.arange(t0, t1, period)]
 
 
 def _framed(serial: list[tuple[float, bytes]]) -> list[tuple[float, bytes]]:
@@ -53,7 +39,7 @@ def _framed(serial: list[tuple[float, bytes]]) -> list[tuple[float, bytes]]:
 def _run(serial: list[tuple[float, bytes]], inhibits: list[tuple[float, int, bool]],
          duration: float, speed: float = 3.0) -> Recording:
     return recorded(Trace(duration=duration, serial=_framed(serial), inhibits=inhibits,
-                          encoders={side: _turning(duration, side == "left", speed)
+                          encoders={side: turning(duration, side == "left", speed)
                                     for side in ("left", "right")}))
 
 
@@ -67,8 +53,8 @@ def test_the_charger_input_stops_the_chair_along_the_normal_ramp_and_latches() -
     motion is refused (``NAK:<seq>,inhibit``) while it is in and after it is out, until a
     ``reset`` (it latches); then a neutral command, and the chair drives again. The
     TLM state says so (bit 2)."""
-    serial = [(0.02, NEUTRAL), *_every(FORWARD, 0.2, 1.5),
-              (1.8, b"reset\n"), (1.9, NEUTRAL), *_every(FORWARD, 2.1, 2.6)]
+    serial = [(0.02, NEUTRAL), *every(FORWARD, 0.2, 1.5),
+              (1.8, b"reset\n"), (1.9, NEUTRAL), *every(FORWARD, 2.1, 2.6)]
     rec = _run(serial, [(0.6, 1, True), (1.2, 1, False)], 2.7)
     ticks = tick_states(rec)
     engaged = _first(ticks, lambda a: a["inhibitStable"] & 1)
@@ -95,8 +81,8 @@ def test_the_seat_input_caps_the_wheels_and_asks_for_neutral_when_released() -> 
     the setpoints settle at INHIBIT_2_SPEED of max_wheel (5.28 rad/s), the targets as
     commanded; lowered at 1.4 s, the chair stops along the normal ramp, and each
     motion command is refused (``NAK:<seq>,neutral``) until a neutral command. TLM bit 3."""
-    serial = [(0.02, NEUTRAL), *_every(FAST, 0.2, 1.6),
-              (1.75, NEUTRAL), *_every(FAST, 1.9, 2.8)]
+    serial = [(0.02, NEUTRAL), *every(FAST, 0.2, 1.6),
+              (1.75, NEUTRAL), *every(FAST, 1.9, 2.8)]
     rec = _run(serial, [(0.6, 2, True), (1.4, 2, False)], 2.9, speed=5.2)
     ticks = tick_states(rec)
     cap = float(mul(f32(C.MAX_WHEEL_SPEED), C.INHIBIT_2_SPEED))
@@ -113,7 +99,7 @@ def test_the_seat_input_caps_the_wheels_and_asks_for_neutral_when_released() -> 
 
 def test_a_glitch_shorter_than_the_debounce_does_nothing() -> None:
     """The charger input pulled low for less than a tick, twice: no event, no stop."""
-    serial = [(0.02, NEUTRAL), *_every(FORWARD, 0.2, 1.2)]
+    serial = [(0.02, NEUTRAL), *every(FORWARD, 0.2, 1.2)]
     rec = _run(serial, [(0.61, 1, True), (0.64, 1, False), (0.81, 1, True), (0.84, 1, False)], 1.3)
     assert board_lines(rec, b"EVT:INHIBIT") == []
     assert all(after["targetR"] == 3.0 for t, after in tick_states(rec) if 0.4 < t < 1.2)

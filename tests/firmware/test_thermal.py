@@ -14,20 +14,17 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 import pytest
 
-from tests.support.recordings import board_lines, recorded, tick_states
+from tests.support.recordings import board_lines, every, recorded, tick_states, turning
 from wcdrive.avr.f32 import f32
 from wcdrive.firmware import constants as C
 from wcdrive.firmware.motors import set_motor
 from wcdrive.firmware.thermal import pid_bounds, rollback_of, winding_loss, winding_step
 from wcdrive.hil.lockstep import Recording
 from wcdrive.hil.traces import Trace
-from wcdrive.plant.encoders import EdgeTrain, edges_from_trajectory
 from wcdrive.protocol.codec import ExtendedTelemetry, frame, parse_line
 
-COUNTS_PER_RAD = 10000 / (2 * np.pi)
 #: W: the loss at the driver's current limit, worked by hand: 41 duty of effort is
 #: 41 / 255 x 24 V / 0.3 ohm = 12.86 A, and 12.86^2 x 0.3 ohm = 49.6 W.
 LIMIT_LOSS = 41.0**2 * (24.0 / 255.0) ** 2 / 0.3
@@ -105,20 +102,13 @@ def test_a_stalled_motor_at_its_rolled_back_limit_settles_short_of_the_cutoff() 
 
 
 # ---- on both backends ------------------------------------------------------------------
-def _turning(until: float, mirrored: bool, speed: float) -> EdgeTrain:
-    t = np.linspace(0.0, until, 4000)
-    angle = np.where(t < 0.3, 0.0, (t - 0.3) * speed)
-    return edges_from_trajectory(t, 0.5 + (-1 if mirrored else 1) * angle * COUNTS_PER_RAD)
-
-
 def _drive(command: bytes, duration: float, pokes: list[tuple[float, dict]], speed: float = 3.0) -> Recording:
     """``hello:4``, a neutral command, then ``command`` every 0.1 s, framed, while the
     wheels turn at ``speed`` rad/s (short of the command: the PID asks for more)."""
-    writes = [(0.02, b"x:0.000,t:0.000")]
-    writes += [(round(float(t), 4), command) for t in np.arange(0.2, duration - 0.1, 0.1)]
+    writes = [(0.02, b"x:0.000,t:0.000"), *every(command, 0.2, duration - 0.1)]
     serial = [(0.01, b"hello:4\n")] + [(t, frame(cmd, k + 1)) for k, (t, cmd) in enumerate(writes)]
     return recorded(Trace(duration=duration, serial=serial, pokes=pokes,
-                          encoders={side: _turning(duration, side == "left", speed)
+                          encoders={side: turning(duration, side == "left", speed)
                                     for side in ("left", "right")}))
 
 

@@ -1,11 +1,16 @@
 """Lock-step recordings for the firmware tests: a trace run on the compiled firmware in
 simavr and replayed on the port with no mismatch (``recorded``), its control ticks
-(``tick_states``) and the board's lines (``board_lines``, unframed)."""
+(``tick_states``) and the board's lines (``board_lines``, unframed); and the pieces the
+traces are made of: a command repeated (``every``), a wheel turning steadily
+(``turning``)."""
 
 from __future__ import annotations
 
+import numpy as np
+
 from wcdrive.hil.lockstep import Recording, compare, record
 from wcdrive.hil.traces import Trace
+from wcdrive.plant.encoders import EdgeTrain, edges_from_trajectory
 from wcdrive.protocol.codec import board_unframe
 
 
@@ -31,3 +36,19 @@ def board_lines(recording: Recording, prefix: bytes) -> list[bytes]:
         if text.startswith(prefix):
             out.append(text)
     return out
+
+
+#: Encoder counts per radian of wheel (``CPR``, 10,000 a turn).
+COUNTS_PER_RAD = 10000 / (2 * np.pi)
+
+
+def every(command: bytes, t0: float, t1: float, period: float = 0.1) -> list[tuple[float, bytes]]:
+    """``command`` written every ``period`` s from ``t0`` to before ``t1``."""
+    return [(round(float(t), 4), command) for t in np.arange(t0, t1, period)]
+
+
+def turning(until: float, mirrored: bool, speed: float) -> EdgeTrain:
+    """A wheel at rest until 0.3 s, then at ``speed`` rad/s (the left one counts backwards)."""
+    t = np.linspace(0.0, until, 4000)
+    angle = np.where(t < 0.3, 0.0, (t - 0.3) * speed)
+    return edges_from_trajectory(t, 0.5 + (-1 if mirrored else 1) * angle * COUNTS_PER_RAD)
