@@ -10,8 +10,9 @@ motor, and, at the end, the whole TX byte stream. The only inputs the port takes
 from the run are what the firmware's loop reads: the bytes, ``millis()`` at each
 tick, the encoder and illegal-transition counts the tick latched (themselves checked
 against the Python quadrature decoder run over the trace's edges) and the free RAM
-loop() measured before the tick, and the globals the harness set at a tick's entry
-(``Trace.pokes``). The bytes' delivery and the tick's liveness are
+loop() measured before the tick, the supply sense's ADC count it latched (checked
+against the trace's millivolts at A0, ``Trace.supply``), and the globals the harness
+set at a tick's entry (``Trace.pokes``). The bytes' delivery and the tick's liveness are
 checked too (``wcdrive.hil.lockstep_liveness``).
 
 A run may reset the board (``VirtualMega.reset``, or its watchdog): at each reset the
@@ -40,6 +41,7 @@ import numpy as np
 from wcdrive.avr.f32 import bits, f32
 from wcdrive.boards.inhibits import InhibitChange, active_bits
 from wcdrive.boards.simavr.virtual_mega import F_CPU
+from wcdrive.boards.supply_sense import NOMINAL_MV, adc_counts
 from wcdrive.firmware.final_control import Firmware, reset_cause_name
 from wcdrive.firmware.quadrature import ILLEGAL, QUAD_TABLE
 from wcdrive.firmware.state import FLOAT_FIELDS, INT_FIELDS, FirmwareState
@@ -97,6 +99,7 @@ def compare(recording: Recording) -> Report:
     boots = [bytearray(fw.boot_output())]           # the port's TX, boot by boot
     decoded = {side: _decoded_counts(recording.trace, side) for side in ("left", "right")}
     inhibits = [InhibitChange(t, number, active) for t, number, active in recording.trace.inhibits]
+    supply = _supply_timeline(recording.trace)
     # What the decoder had counted when the firmware's counts started from 0 (at
     # setup(), somewhere between a reset and the first event after it): the candidates.
     offsets: dict[tuple[str, int], set[int]] = {(side, k): {0} for side in ("left", "right") for k in (0, 1)}
@@ -155,6 +158,12 @@ def compare(recording: Recording) -> Report:
             if inputs not in read:
                 mismatches.append(Mismatch(i, ticks, "inhibitTick, brakeStatusTick",
                                            "the trace's pins disagree", str(inputs)))
+            # The supply count the tick latched: simavr converts A0's millivolts when the
+            # tick reads ADCL, somewhere between its entry and its exit.
+            supply_count = int(ev.after["supplyTick"])
+            if supply_count not in _supply_counts(supply, ev.cycle, exit_cycle):
+                mismatches.append(Mismatch(i, ticks, "supplyTick", "the trace's supply disagrees",
+                                           str(supply_count)))
             # freeRam is measured by loop() just before the call: the state at entry.
             before = events[i - 1].after if i > 0 else recording.initial
             for name, value in ev.poke.items():     # what the harness set at the entry
@@ -162,7 +171,7 @@ def compare(recording: Recording) -> Report:
             tx += fw.tick(ev.arg, latched["encTickL"], latched["encTickR"], latched["illTickL"],
                           latched["illTickR"], free_ram=int(before["freeRam"]),
                           storm_l=latched["stormTickL"], storm_r=latched["stormTickR"],
-                          rx_lost=int(ev.after["rxLostTick"]), inputs=inputs)
+                          rx_lost=int(ev.after["rxLostTick"]), inputs=inputs, supply=supply_count)
         # The EEPROM-ready interrupts that came before the state was read: their writes
         # touch nothing the event does, so their order within it does not matter.
         while w < len(writes) and writes[w] < ev.after_cycle:
@@ -237,6 +246,25 @@ def _ticks_before_storm(events: list[Event]) -> set[tuple[int, str]]:
                 out.add((previous[0], side))
             last[side] = (i, storm)
     return out
+
+
+def _supply_timeline(trace: Trace) -> tuple[np.ndarray, np.ndarray]:
+    """The trace's supply as (cycle, mV) arrays from power-on: ``NOMINAL_MV`` at cycle 0
+    (where the board starts), then each change at its cycle, in time order (a change is
+    made after those before it at the same cycle)."""
+    changes = sorted(((round(t * F_CPU), int(mv)) for t, mv in trace.supply), key=lambda c: c[0])
+    cycles = np.array([0] + [c for c, _ in changes], dtype=np.int64)
+    mvs = np.array([NOMINAL_MV] + [mv for _, mv in changes], dtype=np.int64)
+    return cycles, mvs
+
+
+def _supply_counts(timeline: tuple[np.ndarray, np.ndarray], start: int, stop: int) -> set[int]:
+    """The ADC counts a read of A0 at some cycle in [start, stop] may give: the mV in
+    force at ``start`` (the tick's entry) and every mV set until ``stop`` (its exit)."""
+    cycles, mvs = timeline
+    lo = int(np.searchsorted(cycles, start, "right")) - 1
+    hi = int(np.searchsorted(cycles, stop, "right"))
+    return {adc_counts(int(mv)) for mv in mvs[max(lo, 0):hi]}
 
 
 def _count_possible(decoded: tuple[np.ndarray, np.ndarray], count: int, start: int,

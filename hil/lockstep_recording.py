@@ -25,6 +25,7 @@ from pathlib import Path
 
 from wcdrive.boards.simavr.mega_pins import INPUT_PINS
 from wcdrive.boards.simavr.virtual_mega import F_CPU, RxLoss, VirtualMega
+from wcdrive.boards.supply_sense import SUPPLY_CHANNEL
 from wcdrive.firmware.state import FLOAT_FIELDS, INPUT_FIELDS, INT_FIELDS
 from wcdrive.hil.traces import Trace
 
@@ -199,6 +200,8 @@ def record(trace: Trace, elf: str | Path | None = None) -> Recording:
             mega.encoder_edges(side, train)
         for t, number, active in trace.inhibits:
             mega.set_pin(INPUT_PINS[number], 0 if active else 1, at=round(t * F_CPU))
+        for t, mv in trace.supply:
+            mega.set_analog(SUPPLY_CHANNEL, mv, at=round(t * F_CPU))
         recorder = Recorder(mega, trace.pokes)
         for t, cause in sorted(trace.resets):
             recorder.run_until(round(t * F_CPU))

@@ -12,6 +12,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol, TypeVar
 
+from wcdrive.firmware.constants import SUPPLY_DIVIDER
 from wcdrive.plant.encoders import EdgeTrain
 
 T = TypeVar("T")
@@ -121,6 +122,9 @@ class Trace:
     #: and the port: (s, {name: value}). States a trace of a few seconds cannot reach
     #: otherwise (a motor hot from a long climb).
     pokes: list[tuple[float, dict[str, float | int]]] = field(default_factory=list)
+    #: The supply sense's changes: (s, mV at A0, ``wcdrive.boards.supply_sense``); the
+    #: board starts at a 24 V battery's ``NOMINAL_MV``.
+    supply: list[tuple[float, int]] = field(default_factory=list)
 
     def describe(self) -> str:
         """The trace as text for a failure report, one serial write a line."""
@@ -138,5 +142,7 @@ class Trace:
         lines += [f"  inhibit {n} {'active' if on else 'released'} at t={t:.4f}s"
                   for t, n, on in self.inhibits]
         lines += [f"  set {values} at the first tick from t={t:.4f}s" for t, values in self.pokes]
+        lines += [f"  supply {mv} mV at A0 ({mv * float(SUPPLY_DIVIDER) / 1000:.2f} V) from t={t:.4f}s"
+                  for t, mv in self.supply]
         return "\n".join(lines)
 

@@ -18,7 +18,9 @@ push mode); ``brake_fitted`` 1 from the start (a third of the
 traces: the brake engaged at rest, released under the hold), and in half of those the
 brake driver's status pulled low (coil faults); a motor hot from a long climb (a quarter:
 the windings' estimates set below, at and past the thermal rollback, and at the
-cut-off, ``Trace.pokes``); bursts of
+cut-off, ``Trace.pokes``); the battery's voltage at the supply sense changed a few
+times (a third: from a cut wire's 0 V to 29 V, mostly across the low-battery and
+cut-off thresholds, ``Trace.supply``); bursts of
 20 to 150 commands back to back (the output budget is spent), floods of long ``set:``
 frames at top speed (``flood``: loop() falls behind, received bytes are lost and
 accounted for) and encoder storms of 60,000 to 500,000 edges/s (the storm guard, the
@@ -35,6 +37,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from wcdrive.boards.supply_sense import pin_millivolts
 from wcdrive.firmware.params import PARAMS
 from wcdrive.hil.profiles import PROFILE_P, motion_profile
 from wcdrive.hil.trace_base import (  # Draw, RandomDraw, HypothesisDraw, Trace: callers import them here
@@ -67,6 +70,11 @@ DRAWN_PARAMS = tuple(p for p in PARAMS if p.name != "brake_fitted")
 BRAKE_FITTED_EVERY = 3
 #: One trace in this many sets the windings' estimates hot at some point (``hot_windings``).
 HOT_EVERY = 4
+#: One trace in this many changes the battery's voltage at the supply sense (``supply_changes``).
+SUPPLY_EVERY = 3
+#: The least time between two supply changes (s): more than a tick takes, so that a tick
+#: reads the voltage before a change or after it.
+SUPPLY_SPACING_S = 0.03
 
 __all__ = ["FIRST_COMMAND_S", "MAX_TRACE_EDGE_RATE", "Draw", "HypothesisDraw", "RandomDraw", "Trace",
            "generate_trace"]
@@ -422,7 +430,30 @@ def generate_trace(draw: Draw, duration: float) -> Trace:
     # a rollback or a cut-off would cut short).
     if getattr(draw, "heats", True) and trace.profile is None and (crc >> 11) % HOT_EVERY == 1:
         trace.pokes = hot_windings(np.random.default_rng(crc + 3), duration)
+    # The battery's voltage, from the same CRC (a third of the traces; not a profile's,
+    # whose rule the low-battery rollback or the under-voltage fault would cut short).
+    if getattr(draw, "supplies", True) and trace.profile is None and (crc >> 13) % SUPPLY_EVERY == 1:
+        trace.supply = supply_changes(np.random.default_rng(crc + 4), duration)
     return trace
+
+
+def supply_changes(rng: np.random.Generator, duration: float) -> list[tuple[float, int]]:
+    """One to four changes of the battery's voltage over ``duration`` s, as (s, mV at A0,
+    ``pin_millivolts``), in time order and at least ``SUPPLY_SPACING_S`` apart: seven in
+    ten between 20 and 24.5 V (the filtered supply crosses ``BATTERY_CUTOFF_V``,
+    ``BATTERY_LOW_V`` and ``BATTERY_LOW_END`` there, held long enough), the rest
+    anywhere from a cut wire's 0 V to a charging battery's 29 V."""
+    changes: list[tuple[float, int]] = []
+    for _ in range(int(rng.integers(1, 5))):
+        at = round(float(rng.uniform(0.05, max(0.06, duration - 0.05))), 4)
+        volts = float(rng.uniform(20.0, 24.5) if rng.random() < 0.7 else rng.uniform(0.0, 29.0))
+        changes.append((at, pin_millivolts(volts)))
+    changes.sort()
+    spaced = changes[:1]
+    for at, mv in changes[1:]:
+        if at - spaced[-1][0] >= SUPPLY_SPACING_S:
+            spaced.append((at, mv))
+    return spaced
 
 
 def hot_windings(rng: np.random.Generator, duration: float) -> list[tuple[float, dict[str, float | int]]]:

@@ -308,6 +308,14 @@ float windingTempL = WC_THERMAL_AMBIENT, windingTempR = WC_THERMAL_AMBIENT;
 uint8_t thermalRollback = 0;                // the rollback on (EVT:THERMAL,1 sent or pending)
 uint8_t thermalPending = 0;                 // events to send: bit 0 THERMAL,1, bit 1 THERMAL,0
 
+// The supply, measured at WC_PIN_SUPPLY (A0) through a divider: the ADC count the tick
+// read, the battery voltage filtered (0 until the first tick), the low-battery rollback
+// (docs/safety.md, "The battery").
+uint16_t supplyTick = 0;
+float supplyVolts = 0.0f;
+uint8_t batteryLow = 0;                     // the rollback on (EVT:BATTERY,1 sent or pending)
+uint8_t batteryPending = 0;                 // events to send: bit 0 BATTERY,1, bit 1 BATTERY,0
+
 // Faults (EVT:FAULT,<name>; docs/safety.md): latched until "reset", motion refused, motors off.
 #define FAULT_STALL_L 0x01
 #define FAULT_STALL_R 0x02
@@ -323,6 +331,7 @@ uint8_t thermalPending = 0;                 // events to send: bit 0 THERMAL,1, 
 #define FAULTS_BRAKE (FAULT_BRAKE_OPEN | FAULT_BRAKE_SHORT)
 #define FAULT_OVERHEAT_L 0x800
 #define FAULT_OVERHEAT_R 0x1000
+#define FAULT_UNDERVOLT 0x2000
 // The faults after which a wheel's encoder is no longer trusted: its own, and the driver's.
 #define FAULTS_UNTRUSTED_L (FAULT_STALL_L | FAULT_REVERSED_L | FAULT_IMPLAUSIBLE_L | FAULT_MOTOR_L | FAULT_DRIVER)
 #define FAULTS_UNTRUSTED_R (FAULT_STALL_R | FAULT_REVERSED_R | FAULT_IMPLAUSIBLE_R | FAULT_MOTOR_R | FAULT_DRIVER)
@@ -530,10 +539,11 @@ static const char F_BRAKE_OPEN[] PROGMEM = "BRAKE_OPEN";
 static const char F_BRAKE_SHORT[] PROGMEM = "BRAKE_SHORT";
 static const char F_OVERHEAT_L[] PROGMEM = "OVERHEAT_L";
 static const char F_OVERHEAT_R[] PROGMEM = "OVERHEAT_R";
-#define FAULT_COUNT 13
+static const char F_UNDERVOLT[] PROGMEM = "UNDERVOLT";
+#define FAULT_COUNT 14
 static const char* const FAULT_NAMES[FAULT_COUNT] = {
   F_STALL_L, F_STALL_R, F_REVERSED_L, F_REVERSED_R, F_IMPLAUSIBLE_L, F_IMPLAUSIBLE_R, F_DRIVER,
-  F_MOTOR_L, F_MOTOR_R, F_BRAKE_OPEN, F_BRAKE_SHORT, F_OVERHEAT_L, F_OVERHEAT_R,
+  F_MOTOR_L, F_MOTOR_R, F_BRAKE_OPEN, F_BRAKE_SHORT, F_OVERHEAT_L, F_OVERHEAT_R, F_UNDERVOLT,
 };
 
 // One EVT:FAULT,<name> line per fault bit set.
@@ -650,6 +660,35 @@ static void pidBounds(float temp, float vel, float& lo, float& hi) {
 static uint16_t thermalFault() {
   return (windingTempL >= WC_THERMAL_CUTOFF_TEMP ? FAULT_OVERHEAT_L : 0) |
          (windingTempR >= WC_THERMAL_CUTOFF_TEMP ? FAULT_OVERHEAT_R : 0);
+}
+
+// The filtered supply a tick on, from supplyTick (the first reading stands as it is);
+// the low-battery rollback's start and end, their events pending.
+static void updateSupply() {
+  float volts = (float)supplyTick * WC_SUPPLY_VOLTS_PER_COUNT;
+  if (supplyVolts == 0.0f) supplyVolts = volts;
+  else supplyVolts = supplyVolts + WC_SUPPLY_FILTER * (volts - supplyVolts);
+  if (!batteryLow && supplyVolts < WC_BATTERY_LOW_V) {
+    batteryLow = 1;
+    batteryPending |= 1;
+  } else if (batteryLow && supplyVolts > WC_BATTERY_LOW_V + WC_BATTERY_HYSTERESIS) {
+    batteryLow = 0;
+    batteryPending |= 2;
+  }
+}
+
+// The top wheel speed the filtered supply allows, as a share of max_wheel: 1 from
+// WC_BATTERY_LOW_V up, WC_BATTERY_SHARE_MIN at WC_BATTERY_CUTOFF_V and below.
+static float batteryShare() {
+  if (supplyVolts >= WC_BATTERY_LOW_V) return 1.0f;
+  float k = (WC_BATTERY_LOW_V - supplyVolts) / (WC_BATTERY_LOW_V - WC_BATTERY_CUTOFF_V);
+  if (k > 1.0f) k = 1.0f;
+  return 1.0f - k * (1.0f - WC_BATTERY_SHARE_MIN);
+}
+
+// The filtered supply below WC_BATTERY_CUTOFF_V (a sense wire cut reads 0 V): its fault.
+static uint16_t batteryFault() {
+  return supplyVolts < WC_BATTERY_CUTOFF_V ? FAULT_UNDERVOLT : 0;
 }
 
 static float rampToward(float current, float target, float maxChange) {
@@ -1210,21 +1249,23 @@ static void printWheel(const __FlashStringHelper* label, float v) {
 }
 
 // TLM:<millis>,<rx bytes>,<seq>,<pwmL>,<pwmR>,<dirL>,<dirR>,<illegalL>,<illegalR>,
-//     <flags>,<rejected>,<crc rejected>,<free RAM>,<faults>   (protocol/PROTOCOL.md)
+//     <flags>,<rejected>,<crc rejected>,<free RAM>,<faults>,<rx lost>,<late>,<state>,
+//     <supply dV>   (protocol/PROTOCOL.md)
 static void sendTelemetry(uint32_t now) {
   uint8_t flags = (watchdogArmed ? 1 : 0) | (emergencyStop ? 2 : 0) | (estopLatched ? 4 : 0) |
                   (ppmLost ? 8 : 0) | (parked ? 16 : 0) | (uint8_t)(pivotPhase << 5) |
                   (faultFlags != 0 ? 128 : 0);
   // state: bit 0 waiting for neutral (motion refused), 1 the neutral fault, 2 driving
   // inhibited, 3 the speed capped by an inhibit input, 4 a fitted brake applied, 5 push
-  // mode (the brake released by hand), 6 the thermal rollback
+  // mode (the brake released by hand), 6 the thermal rollback, 7 the low-battery rollback
   uint8_t engaged = inhibitEngaged();
   uint8_t state = (needNeutral ? 1 : 0) | (neutralFault ? 2 : 0) | ((engaged & INHIBIT_STOP_MASK) ? 4 : 0) |
                   ((engaged & (uint8_t)~INHIBIT_STOP_MASK) ? 8 : 0) | (brakeFitted && !brakeReleased ? 16 : 0) |
-                  ((engaged & INHIBIT_PUSH) ? 32 : 0) | (thermalRollback ? 64 : 0);
+                  ((engaged & INHIBIT_PUSH) ? 32 : 0) | (thermalRollback ? 64 : 0) | (batteryLow ? 128 : 0);
   const uint32_t fields[] = {
     now, rxCount, lastSeq, pwmL, pwmR, dirL, dirR, illTickL, illTickR, flags, rejectedCount,
     crcRejected, freeRam, faultFlags, rxLostTick, lateTicks, state,
+    (uint32_t)(supplyVolts * 10.0f + 0.5f),   // the filtered supply, tenths of a volt
   };
   line.print(F("TLM:"));
   for (uint8_t i = 0; i < sizeof(fields) / sizeof(fields[0]); i++) {
@@ -1278,6 +1319,9 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
   inhibitTick = (digitalRead(WC_PIN_INHIBIT_1) == LOW ? 1 : 0) | (digitalRead(WC_PIN_INHIBIT_2) == LOW ? 2 : 0) |
                 (digitalRead(WC_PIN_PUSH) == LOW ? INHIBIT_PUSH : 0);
   brakeStatusTick = digitalRead(WC_PIN_BRAKE_STATUS) == LOW ? 1 : 0;
+  // The conversion the last tick started (long done: 104 us), then the next one.
+  supplyTick = ADC;
+  ADCSRA |= _BV(ADSC);
   encTickL = countL + stepsL;
   encTickR = countR + stepsR;
   uint32_t illNowL = illL + illStepsL;
@@ -1298,6 +1342,7 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
   filtVelR = WC_ALPHA * rawVelR + (1.0f - WC_ALPHA) * filtVelR;
 
   updateThermal(dt);
+  updateSupply();
   // Faults: checked until one latches. A new one stops the chair (motors off below).
   // The chair's limits are not faults: they park it (halt) under the hold, braking hardest
   // (hardest) on an overspeed.
@@ -1363,6 +1408,7 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
     }
     if (faults == 0) faults = brakeCoilFault();
     if (faults == 0) faults = thermalFault();
+    if (faults == 0) faults = batteryFault();
     if (faults != 0) {
       faultFlags = faults;
       emergencyHalt();
@@ -1423,6 +1469,15 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
       thermalPending = 0;
       sendEvent(F("THERMAL,0"));
     }
+  } else if (batteryPending) {
+    // ...and the low-battery rollback's
+    if (batteryPending & 1) {
+      batteryPending &= 2;
+      sendEvent(F("BATTERY,1"));
+    } else {
+      batteryPending = 0;
+      sendEvent(F("BATTERY,0"));
+    }
   } else if (needNeutral) {
     // The wait for neutral, at most one event a tick (none beside WATCHDOG: the output
     // budget's worst tick): the refusal (EVT:NOT_NEUTRAL); the neutral command stood
@@ -1451,7 +1506,9 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
   float share = inhibitShare();
   float hotShare = thermalShare();
   if (hotShare < share) share = hotShare;
-  if (share < 1.0f) {   // an inhibit's or the rollback's cap: the faster wheel at its share, the curvature kept
+  float lowShare = batteryShare();
+  if (lowShare < share) share = lowShare;
+  if (share < 1.0f) {   // an inhibit's or a rollback's cap: the faster wheel at its share, the curvature kept
     float cap = maxWheel * share;
     float peak = fabs(goalL) > fabs(goalR) ? fabs(goalL) : fabs(goalR);
     if (peak > cap) {
@@ -2366,6 +2423,13 @@ void setup() {
   pinMode(WC_PIN_ENC_L_B, INPUT);
   pinMode(WC_PIN_ENC_R_A, INPUT);
   pinMode(WC_PIN_ENC_R_B, INPUT);
+  // The supply sense: ADC0 (MUX5 clear) against AVcc, the ADC clock at 125 kHz, the pin's
+  // digital buffer off; the first conversion, which the first tick reads.
+  ADMUX = _BV(REFS0) | (WC_PIN_SUPPLY & 7);
+  ADCSRB &= (uint8_t)~_BV(MUX5);
+  DIDR0 = _BV(WC_PIN_SUPPLY);
+  ADCSRA = _BV(ADEN) | _BV(ADPS2) | _BV(ADPS1) | _BV(ADPS0);
+  ADCSRA |= _BV(ADSC);
 
   wcSerial.begin(WC_BAUD);
 

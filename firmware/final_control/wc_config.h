@@ -140,6 +140,16 @@
 #define WC_THERMAL_EFFORT_MIN 25.0f // duty: the driving effort at full rollback (7.8 A); braking is never limited. The estimate settles near 115.6 deg C where the limit it sets holds it, short of the cut-off
 #define WC_THERMAL_SHARE_MIN 0.5f  // of max_wheel: the top speed at full rollback, the curvature kept
 
+// ---- The supply, measured, and the low battery (docs/safety.md, "The battery") ---
+#define WC_PIN_SUPPLY 0            // analog input (A0, PF0, ADC0) of the supply sense: the battery through a SUPPLY_DIVIDER divider (100 kohm over 20 kohm), AVcc (5 V) the reference; one conversion a tick, started by the tick and read by the next
+#define WC_SUPPLY_DIVIDER 6.0f     // battery volts per volt at PIN_SUPPLY (30 V full scale: a 24 V lead-acid battery charges to 28.8 V)
+#define WC_SUPPLY_VOLTS_PER_COUNT 0.029296875f // battery volts per ADC count: 5 V x SUPPLY_DIVIDER / 1024 (the ATmega2560 datasheet's ADC = Vin x 1024 / Vref)
+#define WC_SUPPLY_FILTER 0.05f     // the measured supply's low-pass filter, per tick (a time constant of 1 s): the sag of a start or a kerb passes, a climb's stays
+#define WC_BATTERY_LOW_V 23.0f     // V (filtered, under load): below it the low-battery rollback lowers the top speed, linearly to BATTERY_SHARE_MIN of max_wheel at BATTERY_CUTOFF_V (71 % at 21 V); EVT:BATTERY,1. A full battery (25.6 V at rest, 24.3 V at both motors' current limit through its 0.05 ohm) never reaches it; an empty one (23.6 V at rest) does under a heavy load (assumed figures of two 12 V AGM blocks in series: the plant's)
+#define WC_BATTERY_HYSTERESIS 0.5f // V: the rollback's end (EVT:BATTERY,0) waits until the filtered supply is this far above BATTERY_LOW_V
+#define WC_BATTERY_CUTOFF_V 19.5f  // V (filtered): EVT:FAULT,UNDERVOLT, the chair stops along the fault ramp and parks (held, or braked with a brake fitted): a lead-acid battery's end of discharge under a heavy load (1.63 V a cell; assumed), below the 21 V of a low battery the chair must still drive on (tests/sim/test_grade_false_alarms.py); a supply sense that reads nothing (a cut wire, A0 at ground) faults too
+#define WC_BATTERY_SHARE_MIN 0.5f  // of max_wheel: the top speed at BATTERY_CUTOFF_V, the curvature kept
+
 // ---- Hill hold and rollaway (parked without a fault; protocol/PROTOCOL.md) ---
 #define WC_HOLD_DEADBAND_COUNTS 10 // encoder counts (1 mm of travel) a held wheel may be off the count it stopped at before the hold drives it back
 #define WC_HOLD_GAIN 1             // hold duty per count of error beyond HOLD_DEADBAND_COUNTS

@@ -159,7 +159,8 @@ def test_the_budget_refills_per_millisecond_and_caps() -> None:
 
 
 #: The widest fault field: the faults that can latch together are one group's (the
-#: wheels' and the driver's, else the brake's, else the windings'), at most 4 digits.
+#: wheels' and the driver's, else the brake's, else the windings', else the supply's), at
+#: most 4 digits.
 WIDEST_FAULTS = 0x1800
 
 
@@ -190,9 +191,11 @@ def test_the_worst_tick_fits_the_refill() -> None:
         send(FirmwareState(linesFramed=1, lineCounter=255), line, out)
         return len(out)
 
-    # the state at its widest: every bit (both inhibit inputs, push mode, a brake, hot)
-    s.neutralFault, s.inhibitStable, s.brakeFitted, s.thermalRollback = 1, 7, 1, 1
-    assert send_telemetry(s, 0).endswith(b",127\r\n")
+    # the state at its widest: every bit (both inhibit inputs, push mode, a brake, hot, a
+    # low battery), and the supply at the ADC's full scale (29.97 V: 300 tenths)
+    s.neutralFault, s.inhibitStable, s.brakeFitted, s.thermalRollback, s.batteryLow = 1, 7, 1, 1, 1
+    s.supplyVolts = 1023 * C.SUPPLY_VOLTS_PER_COUNT
+    assert send_telemetry(s, 0).endswith(b",255,300\r\n")
     # the tick's own event: WATCHDOG, or (never beside it) one of the wait for neutral's
     tick_event = max((send_event(e) for e in ("WATCHDOG", "NOT_NEUTRAL", "NEUTRAL", "DEFLECTED")),
                      key=sent)

@@ -86,7 +86,8 @@ SMALL = {"pwmL": (0, 255), "pwmR": (0, 255), "dirL": (0, 1), "dirR": (0, 1), "mo
          "notNeutralTicks": (0, 120), "neutralFault": (0, 1), "inhibitStable": (0, 3),
          "inhibitLatched": (0, 3), "inhibitCountL": (0, 2), "inhibitCountR": (0, 2),
          "inhibitPending": (0, 15),
-         "inhibitOn": (0, 3), "thermalRollback": (0, 1), "thermalPending": (0, 3)}
+         "inhibitOn": (0, 3), "thermalRollback": (0, 1), "thermalPending": (0, 3), "batteryLow": (0, 1),
+         "batteryPending": (0, 3)}
 
 
 @st.composite
@@ -103,6 +104,10 @@ def states(draw) -> tuple[FirmwareState, int, tuple[int, ...]]:
     for name in ("windingTempL", "windingTempR"):
         if draw(st.booleans()):
             setattr(s, name, draw(st.floats(100.0, 130.0, width=32)))
+    # the supply near the low-battery threshold (23 V), read anywhere in the ADC's range
+    if draw(st.booleans()):
+        s.supplyVolts = draw(st.floats(20.0, 26.0, width=32))
+    supply = draw(st.one_of(st.just(C.SUPPLY_NOMINAL_COUNTS), st.integers(700, 900), st.integers(0, 1023)))
     # Waiting for neutral (a boot's default) the C tick declines: mostly a board that drives.
     s.needNeutral = draw(st.sampled_from((0, 0, 0, 1)))
     s.lastControlTime = draw(u32)
@@ -118,7 +123,7 @@ def states(draw) -> tuple[FirmwareState, int, tuple[int, ...]]:
               (s.illTickL + draw(st.integers(0, 3))) & 0xFFFFFFFF,
               (s.illTickR + draw(st.integers(0, 3))) & 0xFFFFFFFF,
               draw(st.sampled_from((0, 0, 0, 1))), draw(st.sampled_from((0, 0, 0, 1))), draw(u32),
-              draw(st.sampled_from((0, 0, 0, 0, 0, 1, 2, 3))))
+              draw(st.sampled_from((0, 0, 0, 0, 0, 1, 2, 3))), supply)
     return s, now, inputs
 
 
@@ -126,9 +131,9 @@ def states(draw) -> tuple[FirmwareState, int, tuple[int, ...]]:
 @settings(max_examples=2000 if thorough() else 500)
 @given(states())
 @example((FirmwareState(lastControlTime=1000, targetL=2.0, targetR=2.0, needNeutral=0), 1050,
-          (0, 0, 0, 0, 0, 0, 0, 0)))
+          (0, 0, 0, 0, 0, 0, 0, 0, 819)))
 @example((FirmwareState(lastControlTime=1000, lastTickTime=1050, needNeutral=0), 1050,
-          (5, 5, 0, 0, 0, 0, 0, 0)))  # dt 0
+          (5, 5, 0, 0, 0, 0, 0, 0, 819)))  # dt 0
 def test_the_c_tick_agrees_with_the_python_tick(case) -> None:
     state, now, inputs = case
     agree(state, now, inputs)
@@ -151,7 +156,7 @@ def test_random_ordinary_ticks_take_the_c_path() -> None:
         now = (now + 50) & 0xFFFFFFFF
         left += int(rng.integers(-400, 400))
         right += int(rng.integers(-400, 400))
-        inputs = (left, right, 0, 0, 0, 0, 0, 0)
+        inputs = (left, right, 0, 0, 0, 0, 0, 0, C.SUPPLY_NOMINAL_COUNTS)
         taken += agree(s, now, inputs)
         python_tick(s, now, *inputs)            # the trajectory goes on in Python
         s.faultFlags = 0                        # (random counts would latch faults,
@@ -164,23 +169,23 @@ def test_a_fault_or_the_watchdog_goes_to_the_python_tick() -> None:
     """A tick that latches a fault or fires the watchdog is refused, the state as it was."""
     stalled = FirmwareState(lastControlTime=1000, setpointL=2.0, targetL=2.0, pwmL=200, dirL=C.HIGH,
                             stallTicksL=C.FAULT_STALL_TICKS - 1)
-    assert fast_tick(stalled.copy(), 1050, 0, 0, 0, 0, 0, 0, 0, 0) is None
-    assert b"EVT:FAULT" in python_tick(stalled.copy(), 1050, 0, 0, 0, 0, 0, 0, 0)
+    assert fast_tick(stalled.copy(), 1050, 0, 0, 0, 0, 0, 0, 0, 0, 819) is None
+    assert b"EVT:FAULT" in python_tick(stalled.copy(), 1050, 0, 0, 0, 0, 0, 0, 0, 0, 819)
     watched = FirmwareState(lastControlTime=1000, watchdogArmed=1, lastCmdTime=0, watchdogMs=500)
-    assert fast_tick(watched.copy(), 1050, 0, 0, 0, 0, 0, 0, 0, 0) is None
-    assert b"EVT:WATCHDOG" in python_tick(watched.copy(), 1050, 0, 0, 0, 0, 0, 0, 0)
+    assert fast_tick(watched.copy(), 1050, 0, 0, 0, 0, 0, 0, 0, 0, 819) is None
+    assert b"EVT:WATCHDOG" in python_tick(watched.copy(), 1050, 0, 0, 0, 0, 0, 0, 0, 0, 819)
 
 
 def test_an_unexpected_field_type_goes_to_the_python_tick() -> None:
     for name, value in (("targetL", 2), ("pwmL", 3.0), ("mode", True), ("tickCount", 2**70)):
         s = FirmwareState(lastControlTime=1000)
         setattr(s, name, value)
-        assert fast_tick(s, 1050, 0, 0, 0, 0, 0, 0, 0, 0) is None, name
+        assert fast_tick(s, 1050, 0, 0, 0, 0, 0, 0, 0, 0, 819) is None, name
 
     class Sub(FirmwareState):
         pass
 
-    assert fast_tick(Sub(lastControlTime=1000), 1050, 0, 0, 0, 0, 0, 0, 0, 0) is None
+    assert fast_tick(Sub(lastControlTime=1000), 1050, 0, 0, 0, 0, 0, 0, 0, 0, 819) is None
 
 
 def test_the_firmware_ticks_in_c() -> None:
@@ -279,7 +284,7 @@ PYTHON_ONLY = {"emergencyStop", "faultFlags", "lastTravel", "holdRollaway", "lim
                "neutralTicks", "notNeutralSent", "notNeutralPending", "notNeutralTicks", "neutralFault",
                "inhibitTick", "inhibitStable", "inhibitCountL", "inhibitCountR", "inhibitLatched",
                "inhibitPending", "inhibitOn", "inhibitCountP", "brakePhase", "brakeTicks",
-               "brakeStatusTicks", "thermalRollback", "thermalPending"}
+               "brakeStatusTicks", "thermalRollback", "thermalPending", "batteryLow", "batteryPending"}
 _FIRMWARE = Path(tick_fast.__file__).resolve().parent
 
 
@@ -320,7 +325,7 @@ def c_tick_writes(text: str) -> set[str]:
 
 
 def _sources() -> tuple[dict[str, str], str]:
-    modules = ("control", "motion", "output", "inhibit", "brake", "motors", "thermal")
+    modules = ("control", "motion", "output", "inhibit", "brake", "motors", "thermal", "battery")
     py = {m: (_FIRMWARE / f"{m}.py").read_text() for m in modules}
     return py, (_FIRMWARE / "csrc" / "tick_fast.c").read_text()
 

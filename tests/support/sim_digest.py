@@ -47,7 +47,7 @@ FIELDS = {
     "caster_swivel_work": "truth.caster_swivel_work", "caster_side_impulse": "truth.caster_side_impulse",
     "step_time": "truth.step_time", "step_speed": "truth.step_speed",
     "step_contact_speed": "truth.step_contact_speed", "step_volts": "truth.step_volts",
-    "winding_temp": "truth.winding_temp",
+    "winding_temp": "truth.winding_temp", "battery": "truth.battery",
     "odom_wheel": "odometry.wheel", "odom_velocity": "odometry.velocity", "odom_gyro": "odometry.gyro",
     "odom_ekf": "odometry.ekf", "odom_ekf_vel": "odometry.ekf_vel",
     "gyro_time": "odometry.gyro_time", "gyro_rate": "odometry.gyro_rate",

@@ -121,9 +121,12 @@ enc_lines = st.builds(lambda a, b, vl, vr, m: b"ENC:%d,%d,VEL:%s,%s,MODE:%s" % (
                       st.sampled_from([b"WHEEL", b"CMDVEL", b"PPM"]))
 tlm_fields = st.tuples(u32, u32, st.integers(0, 65535), st.integers(0, 255), st.integers(0, 255),
                        st.integers(0, 1), st.integers(0, 1), u32, u32, st.integers(0, 255), u32, u32,
-                       st.integers(0, 8191), st.integers(0, 0x1FFF), st.integers(0, 65535),
-                       st.integers(0, 65535), st.integers(0, 127))
-tlm_lines = tlm_fields.map(lambda v: b"TLM:" + b",".join(b"%d" % x for x in v))
+                       st.integers(0, 8191), st.integers(0, 0x3FFF), st.integers(0, 65535),
+                       st.integers(0, 65535), st.integers(0, 255))
+# the supply (tenths of a volt), the 18th field; None: a board before it
+supply_fields = st.one_of(st.none(), st.integers(0, 65535))
+tlm_lines = st.builds(lambda v, dv: b"TLM:" + b",".join(b"%d" % x for x in v + (() if dv is None else (dv,))),
+                      tlm_fields, supply_fields)
 reasons = st.sampled_from([r.encode() for r in cc.REASONS[1:]])
 reply_lines = st.one_of(
     st.builds(lambda s: b"ACK:%d" % s, st.integers(0, 65535)),
@@ -153,12 +156,15 @@ def test_board_lines_survive_the_bus_byte_for_byte(line) -> None:
         b = _decode(*frames[1])
         assert b["estop_latched"] == message.estop_latched and b["parked"] == message.parked
         assert b["pivot_phase"] == message.pivot_phase and b["free_ram"] == message.free_ram
-        e = _decode(*frames[4])
+        e = _decode(*frames[-1])
         assert (e["faults"], e["needs_neutral"], e["deflected"], e["drive_inhibited"], e["speed_capped"]) == (
             message.faults, message.needs_neutral, message.neutral_fault, message.drive_inhibited,
             message.speed_capped)
-        assert (e["brake_applied"], e["push_mode"], e["thermal_rollback"]) == (
-            message.brake_applied, message.push_mode, message.thermal_rollback)
+        assert (e["brake_applied"], e["push_mode"], e["thermal_rollback"], e["battery_low"]) == (
+            message.brake_applied, message.push_mode, message.thermal_rollback, message.battery_low)
+        if message.supply_dv is not None:
+            f = _decode(*next(fr for fr in frames if fr[0] == cc.STATUS_F))
+            assert f["supply"] == pytest.approx(message.supply_dv / 10.0)
 
 
 def test_a_status_without_its_last_frame_makes_no_line() -> None:

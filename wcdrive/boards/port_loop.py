@@ -31,6 +31,11 @@ from where the fault left it.
 Wheel and motor faults act on the plant from the physics step at which they start;
 ``reset`` faults call ``reset()`` at their cycle.
 
+The supply sense: each tick reads the ADC count of the battery's terminal voltage as
+the plant last computed it (``Plant.battery``), through the divider as the compiled
+firmware's board reads it (``wcdrive.boards.supply_sense``); ``set_supply`` puts a
+voltage of the caller's in its place.
+
 ``PortLoop`` is shared by ``wcdrive sim`` (whole scenarios) and the live simulated
 board behind ``wcsim://`` and the pty (small steps paced to the wall clock).
 """
@@ -56,6 +61,7 @@ from wcdrive.avr.timer0 import (
 )
 from wcdrive.avr.uart import UART_BYTE_CYCLES
 from wcdrive.boards.inhibits import LEVER_INPUT, InhibitChange, input_number
+from wcdrive.boards.supply_sense import SupplyOverrides, adc_counts, pin_millivolts, plant_millivolts
 from wcdrive.firmware.eeprom import ReadyInterrupt
 from wcdrive.firmware.final_control import Firmware
 from wcdrive.firmware.quadrature import QuadratureDecoder
@@ -204,6 +210,7 @@ class PortLoop:
         #: reads (``Plant.brake_lever``).
         self.inhibit_bits = 0
         self._inhibits_due = sorted(inhibits, key=lambda c: c.at)
+        self._supply = SupplyOverrides()
         self._scale = plant.p.counts_per_rev / (2.0 * math.pi)
         self._encoders = {side: _Encoder(side, self._wire(side)) for side in SIDES}
         self._left, self._right = self._encoders["left"], self._encoders["right"]
@@ -228,6 +235,19 @@ class PortLoop:
         when = self.cycle if at is None else at
         bisect.insort(self._inhibits_due, InhibitChange(when / F_CPU, input_number(number), active),
                       key=lambda c: c.at)
+
+    def set_supply(self, volts: float | None, at: int | None = None) -> None:
+        """The battery reads ``volts`` at the supply sense from cycle ``at`` (default:
+        now) on, in place of the plant's terminal voltage; None gives it back to the
+        plant."""
+        self._supply.set(self.cycle if at is None else at, volts)
+
+    def supply_counts(self, cycle: int) -> int:
+        """The ADC count the tick reads at ``cycle``: the supply ``set_supply`` set for
+        then, else the plant's terminal voltage now, as the compiled firmware's board
+        reads it (``adc_counts(pin_millivolts(volts))``). Asked in non-decreasing cycles."""
+        volts = self._supply.at(cycle)
+        return adc_counts(plant_millivolts(self.plant) if volts is None else pin_millivolts(volts))
 
     def take_output(self) -> list[tuple[int, bytes]]:
         """What the firmware sent since the last take, as (cycle, bytes)."""
@@ -389,7 +409,7 @@ class PortLoop:
         dl, dr = left.decoder, right.decoder
         out = fw.tick(millis, left.count(true_l), right.count(true_r), dl.illegal, dr.illegal, None,
                       int(dl.storm), int(dr.storm),
-                      inputs=self._inputs_at(overflow))
+                      inputs=self._inputs_at(overflow), supply=self.supply_counts(overflow))
         s = fw.state
         self.plant.set_drive(s.pwmL, s.dirL, s.pwmR, s.dirR)
         self.plant.set_brake(bool(s.brakeReleased))

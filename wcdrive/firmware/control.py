@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from wcdrive.avr.f32 import add, div, from_int, mul, neg, sub
 from wcdrive.firmware import constants as C
+from wcdrive.firmware.battery import battery_fault, send_battery_event, update_supply
 from wcdrive.firmware.brake import (
     BRAKE_RELEASED,
     brake_coil_fault,
@@ -386,6 +387,8 @@ def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_
         faults = brake_coil_fault(s)
     if not faults:
         faults = thermal_fault(s)
+    if not faults:
+        faults = battery_fault(s)
     if faults:
         s.faultFlags = faults
         emergency_halt(s)
@@ -438,12 +441,13 @@ def _confirm_neutral(s: FirmwareState, out: bytearray) -> None:
 
 def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: bytearray,
                  illegal_l: int = 0, illegal_r: int = 0, storm_l: int = 0, storm_r: int = 0,
-                 rx_lost: int = 0, inputs: int = 0) -> None:
+                 rx_lost: int = 0, inputs: int = 0, supply: int = C.SUPPLY_NOMINAL_COUNTS) -> None:
     """``controlTick(now)`` with what it latches atomically from the interrupts: the
     encoder counts, the illegal-transition counts, the storm flags and the RX
     interrupt's count of lost bytes (``rxLost``); and the input pins it reads
     (``inputs``: bit 0 inhibit input 1, bit 1 input 2, 1 active; bit 2 the brake
-    driver's status LOW; bit 3 the brake's manual release pulled, push mode)."""
+    driver's status LOW; bit 3 the brake's manual release pulled, push mode) and the ADC
+    count it reads at PIN_SUPPLY (``supply``)."""
     last_tick = s.lastControlTime if s.lastTickTime is None else s.lastTickTime
     elapsed = (now - last_tick) & 0xFFFFFFFF            # since the last tick ran
     dt = div(from_int(elapsed), 1000.0)
@@ -466,6 +470,7 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
     s.rxLostTick = rx_lost & 0xFFFFFFFF
     s.inhibitTick = (inputs & 3) | ((inputs >> 3) & 1) << 2
     s.brakeStatusTick = (inputs >> 2) & 1
+    s.supplyTick = supply & 0x3FF
     delta_l = i32(s.encTickL - s.prevEncL)
     delta_r = i32(s.encTickR - s.prevEncR)
     s.prevEncL, s.prevEncR = s.encTickL, s.encTickR
@@ -477,6 +482,7 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
     s.filtVelR = add(mul(C.ALPHA, s.rawVelR), mul(C.ONE_MINUS_ALPHA, s.filtVelR))
 
     update_thermal(s, dt)
+    update_supply(s)
     check_l, check_r, halt, hardest = _check_faults(s, delta_l, delta_r, ill_l, ill_r, out)
 
     update_inhibits(s)
@@ -494,8 +500,10 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
         send(s, send_event("WATCHDOG"), out)
     elif s.inhibitPending:              # one a tick, in the wait for neutral's slot
         send_inhibit_event(s, out)
-    elif s.thermalPending:              # ...and so is the rollback's
+    elif s.thermalPending:              # ...and so are the rollbacks'
         send_thermal_event(s, out)
+    elif s.batteryPending:
+        send_battery_event(s, out)
     elif s.needNeutral:
         _confirm_neutral(s, out)
 

@@ -18,6 +18,7 @@ RAM) is an argument here.
 
 from __future__ import annotations
 
+from wcdrive.firmware import constants as C
 from wcdrive.firmware.commands import process_bytes, rx_gap
 from wcdrive.firmware.constants import CONTROL_PERIOD_MS
 from wcdrive.firmware.control import control_tick
@@ -51,7 +52,7 @@ def boot_line(cause: str = "POWER_ON") -> bytes:
 #: What ``measureFreeRam()`` reports on the Mega build (bytes between the heap and the
 #: stack in loop()); the simulated board reports it too. tests/firmware/test_estop_and_reset.py checks
 #: it against the ELF running in simavr, so a firmware change that moves it fails there.
-FREE_RAM = 6585
+FREE_RAM = 6577
 
 
 class Firmware:
@@ -119,22 +120,23 @@ class Firmware:
 
     def tick(self, now: int, count_l: int, count_r: int, illegal_l: int = 0, illegal_r: int = 0,
              free_ram: int | None = None, storm_l: int = 0, storm_r: int = 0,
-             rx_lost: int = 0, inputs: int = 0) -> bytes:
+             rx_lost: int = 0, inputs: int = 0, supply: int = C.SUPPLY_NOMINAL_COUNTS) -> bytes:
         """``controlTick(now)``. What it latches from the interrupts (encoder counts,
         illegal transitions, storm flags, the RX interrupt's lost bytes) are inputs, and
         so is ``free_ram`` (what loop() measured before the tick; None: ``self.free_ram``,
         which starts at the figure of the Mega build, ``FREE_RAM``), and the input pins it
         reads (``inputs``: bit 0 inhibit input 1, bit 1 input 2, bit 2 the brake driver's
-        status; 1 active, the pin LOW)."""
+        status; 1 active, the pin LOW) and the supply (``supply``: the ADC count at
+        PIN_SUPPLY, 0 to 1023)."""
         self.state.freeRam = self.free_ram if free_ram is None else free_ram
         if _fast_tick is not None:          # the common case in C (``tick_fast``), or None
             sent = _fast_tick(self.state, now, count_l, count_r, illegal_l, illegal_r, storm_l, storm_r,
-                              rx_lost, inputs)
+                              rx_lost, inputs, supply)
             if sent is not None:
                 return sent
         out = bytearray()
         control_tick(self.state, now, count_l, count_r, out, illegal_l, illegal_r, storm_l, storm_r,
-                     rx_lost, inputs)
+                     rx_lost, inputs, supply)
         return bytes(out)
 
 

@@ -9,6 +9,7 @@ the same lines are dropped on both sides ("Output budget" in protocol/PROTOCOL.m
 from __future__ import annotations
 
 from wcdrive.avr.arduino_print import print_float, print_long, print_unsigned
+from wcdrive.avr.f32 import add, mul, to_u32
 from wcdrive.firmware import constants as C
 from wcdrive.firmware.constants import (
     ERR_LINES_PER_TICK,
@@ -104,12 +105,14 @@ def send_telemetry(s: FirmwareState, now: int) -> bytes:
     state = ((1 if s.needNeutral else 0) | (2 if s.neutralFault else 0)
              | (4 if engaged & C.INHIBIT_STOP_MASK else 0) | (8 if engaged & ~C.INHIBIT_STOP_MASK & 7 else 0)
              | (16 if s.brakeFitted and not s.brakeReleased else 0) | (32 if engaged & C.INHIBIT_PUSH else 0)
-             | (64 if s.thermalRollback else 0))
+             | (64 if s.thermalRollback else 0) | (128 if s.batteryLow else 0))
+    # the filtered supply in tenths of a volt, rounded (``supplyDecivolts``)
+    supply = to_u32(add(mul(s.supplyVolts, 10.0), 0.5))
     # Every field is unsigned and in range, so %d prints what Print::print prints.
-    return b"TLM:%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d\r\n" % (
+    return b"TLM:%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d\r\n" % (
         now, s.rxCount, s.lastSeq, s.pwmL, s.pwmR, s.dirL, s.dirR, s.illTickL, s.illTickR,
         flags, s.rejectedCount, s.crcRejected, s.freeRam, s.faultFlags, s.rxLostTick, s.lateTicks,
-        state)
+        state, supply)
 
 
 DATA_NONE, DATA_HELLO, DATA_PARAM = 0, 1, 2

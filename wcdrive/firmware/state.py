@@ -25,7 +25,7 @@ FLOAT_FIELDS = (
     "filtVelR", "integralL", "integralR", "prevMeasL", "prevMeasR", "outputL", "outputR",
     "lastTravel", "pendingL", "pendingR", "haltIntegralL", "haltIntegralR", "haltSetpointL",
     "haltSetpointR", "effortSpeedL", "effortSpeedR", "effortSetpointL",
-    "effortSetpointR", "overspeedFromL", "overspeedFromR", "windingTempL", "windingTempR",
+    "effortSetpointR", "overspeedFromL", "overspeedFromR", "windingTempL", "windingTempR", "supplyVolts",
     "kpL", "kiL", "kdL", "kpR", "kiR", "kdR", "maxWheel", "maxAccel", "estopDecel",
 )
 #: Integer and flag globals compared exactly.
@@ -47,7 +47,8 @@ INT_FIELDS = (
     "needNeutral", "neutralSeen", "neutralTicks", "notNeutralSent", "notNeutralPending", "notNeutralTicks",
     "neutralFault", "inhibitTick", "inhibitStable", "inhibitCountL", "inhibitCountR", "inhibitCountP",
     "inhibitLatched",
-    "inhibitPending", "inhibitOn", "thermalRollback", "thermalPending",
+    "inhibitPending", "inhibitOn", "thermalRollback", "thermalPending", "supplyTick", "batteryLow",
+    "batteryPending",
 )
 
 #: Globals the tick takes as inputs rather than computes (loop() measures them).
@@ -158,6 +159,14 @@ class FirmwareState:
     windingTempR: float = C.THERMAL_AMBIENT
     thermalRollback: int = 0
     thermalPending: int = 0
+    #: The supply (``wcdrive.firmware.battery``): the ADC count the tick read at
+    #: PIN_SUPPLY, the filtered battery voltage (V; 0 until the first tick), the
+    #: low-battery rollback on (``EVT:BATTERY,1`` sent or pending) and its events to send
+    #: (bit 0 on, bit 1 off).
+    supplyTick: int = 0
+    supplyVolts: float = 0.0
+    batteryLow: int = 0
+    batteryPending: int = 0
     #: Halted at the chair's limit (``EVT:OVERSPEED``, ``EVT:STALLED_ON_GRADE``): motion
     #: refused with ``ERR:limit`` until a stop.
     limitLatched: int = 0

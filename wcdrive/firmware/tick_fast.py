@@ -1,6 +1,7 @@
 """The control tick's common case in C (``csrc/tick_fast.c``), for speed.
 
-``tick(state, now, count_l, count_r, illegal_l, illegal_r, storm_l, storm_r, rx_lost)``
+``tick(state, now, count_l, count_r, illegal_l, illegal_r, storm_l, storm_r, rx_lost, inputs,
+supply)``
 returns the bytes ``control.control_tick`` would send, having changed ``state`` as it
 would, or None having changed nothing: then the Python tick, the reference, runs
 (``Firmware.tick`` does that). The C path declines everything but the common case: a
@@ -35,7 +36,8 @@ _FLOATS = ("ALPHA", "ONE_MINUS_ALPHA", "CPR", "TWO_PI", "PID_OUT_MAX", "PWM_SCAL
            "FAULT_EFFORT_SHORTFALL_MOTOR", "FAULT_EFFORT_LEAD",
            "FAULT_EFFORT_OVERRUN", "PIVOT_START_SPEED", "PIVOT_SPEED",
            "OVERSPEED_MARGIN", "OVERSPEED_GAIN", "THERMAL_EMF", "FAULT_EFFORT_MAX", "THERMAL_AMBIENT",
-           "THERMAL_RESISTANCE", "THERMAL_CAPACITY", "THERMAL_LOSS", "THERMAL_ROLLBACK_TEMP")
+           "THERMAL_RESISTANCE", "THERMAL_CAPACITY", "THERMAL_LOSS", "THERMAL_ROLLBACK_TEMP",
+           "SUPPLY_VOLTS_PER_COUNT", "SUPPLY_FILTER", "BATTERY_LOW_V")
 _INTS = ("CONTROL_PERIOD_MS", "TX_CREDIT_MAX", "TX_CREDIT_PER_MS", "FAULT_STALL_PWM",
          "FAULT_STALL_PWM_STANDING",
          "FAULT_STALL_TICKS",

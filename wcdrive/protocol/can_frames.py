@@ -54,9 +54,11 @@ STATUS_C = 0x314
 STATUS_D = 0x315
 REPLY = 0x316
 STATUS_E = 0x317
+STATUS_F = 0x318
 
 HOST_TO_CHAIR = (CMD_VEL, CMD_WHEELS, CONTROL, PARAM)
-CHAIR_TO_HOST = (FEEDBACK_ENC, FEEDBACK_VEL, STATUS_A, STATUS_B, STATUS_C, STATUS_D, REPLY, STATUS_E)
+CHAIR_TO_HOST = (FEEDBACK_ENC, FEEDBACK_VEL, STATUS_A, STATUS_B, STATUS_C, STATUS_D, REPLY, STATUS_E,
+                 STATUS_F)
 
 CONTROL_OPS = {1: b"hello", 2: b"estop", 3: b"reset", 4: b"save", 5: b"defaults", 6: b"hello:4"}
 PARAM_NAMES = tuple(PARAM_RANGES)
@@ -71,7 +73,7 @@ EVENTS = ("", "WATCHDOG", "PPM_LOST", "ESTOP", "FAULT,ENC_STALL_L", "FAULT,ENC_S
           "PARAMS_DEFAULT,range", "ROLLAWAY", "OVERSPEED", "STALLED_ON_GRADE", "NOT_NEUTRAL", "NEUTRAL",
           "DEFLECTED", "INHIBIT,1,1", "INHIBIT,1,0", "INHIBIT,2,1", "INHIBIT,2,0", "FAULT,BRAKE_OPEN",
           "FAULT,BRAKE_SHORT", "PUSH,1", "PUSH,0", "FAULT,OVERHEAT_L", "FAULT,OVERHEAT_R", "THERMAL,1",
-          "THERMAL,0")
+          "THERMAL,0", "FAULT,UNDERVOLT", "BATTERY,1", "BATTERY,0")
 #: BOOT reply codes: the reset cause (0: the line named none).
 BOOT_CAUSES = ("", "POWER_ON", "EXTERNAL", "BROWN_OUT", "WATCHDOG", "JTAG", "NONE")
 KIND_ACK, KIND_NAK, KIND_ERR, KIND_EVT, KIND_PAR, KIND_HELLO, KIND_BOOT = range(1, 8)
@@ -223,6 +225,7 @@ def message_to_frames(msg: Message) -> list[tuple[int, bytes]]:
                                        t.dir_left | t.dir_right << 1, t.flags, t.free_ram)),
                 (STATUS_C, struct.pack("<II", t.illegal_left, t.illegal_right)),
                 (STATUS_D, struct.pack("<II", t.rejected, t.crc_rejected)),
+                *([] if t.supply_dv is None else [(STATUS_F, struct.pack("<H6x", _sat16(t.supply_dv)))]),
                 (STATUS_E, struct.pack("<HHHBx", t.faults & 0xFFFF, _sat16(t.rx_lost), _sat16(t.late),
                                        t.state or 0))]
     reply: tuple[int, int, int, float] | None = None
@@ -283,7 +286,7 @@ class TelemetryAssembler:
             self._enc = None
             return (f"ENC:{left},{right},VEL:{_centi(vl)},{_centi(vr)},MODE:{MODES[mode]}\r\n"
                     .encode())
-        if can_id in (STATUS_A, STATUS_B, STATUS_C, STATUS_D):
+        if can_id in (STATUS_A, STATUS_B, STATUS_C, STATUS_D, STATUS_F):
             if can_id == STATUS_A:
                 self._status = {}
             if self._status is not None:
@@ -291,7 +294,7 @@ class TelemetryAssembler:
             return b""
         if can_id == STATUS_E:
             status, self._status = self._status, None
-            if status is None or len(status) != 4:
+            if status is None or any(i not in status for i in (STATUS_A, STATUS_B, STATUS_C, STATUS_D)):
                 return b""
             millis, rx = struct.unpack("<II", status[STATUS_A][:8])
             seq, pwm_l, pwm_r, dirs, flags, free = struct.unpack("<HBBBBH", status[STATUS_B][:8])
@@ -300,6 +303,8 @@ class TelemetryAssembler:
             faults, rx_lost, late, state = struct.unpack("<HHHB", data[:7])
             values = (millis, rx, seq, pwm_l, pwm_r, dirs & 1, dirs >> 1 & 1, ill_l, ill_r, flags,
                       rej, crc, free, faults, rx_lost, late, state)
+            if STATUS_F in status:          # the supply (boards since it was measured)
+                values += struct.unpack("<H", status[STATUS_F][:2])
             return b"TLM:" + b",".join(str(v).encode() for v in values) + b"\r\n"
         if can_id == REPLY:
             return _reply_line(data)

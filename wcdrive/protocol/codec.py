@@ -236,7 +236,7 @@ class Corrupt:
 #: (protocol/PROTOCOL.md, "Faults").
 FAULT_NAMES = ("ENC_STALL_L", "ENC_STALL_R", "ENC_REVERSED_L", "ENC_REVERSED_R",
                "ENC_IMPLAUSIBLE_L", "ENC_IMPLAUSIBLE_R", "DRIVER_DEAD", "MOTOR_L", "MOTOR_R",
-               "BRAKE_OPEN", "BRAKE_SHORT", "OVERHEAT_L", "OVERHEAT_R")
+               "BRAKE_OPEN", "BRAKE_SHORT", "OVERHEAT_L", "OVERHEAT_R", "UNDERVOLT")
 
 
 def fault_names(faults: int) -> tuple[str, ...]:
@@ -272,8 +272,12 @@ class ExtendedTelemetry:
     #: bit 1: the neutral fault (refused 5 s without one); bit 2: driving inhibited by
     #: an inhibit input (``ERR:inhibit``); bit 3: the speed capped by one; bit 4: a fitted
     #: parking brake applied (``brake_fitted`` 1, its pin LOW); bit 5: push mode (the
-    #: brake released by hand). Boards before this field end at ``late`` (None).
+    #: brake released by hand); bit 6: the thermal rollback; bit 7: the low-battery
+    #: rollback. Boards before this field end at ``late`` (None).
     state: int | None = None
+    #: The supply the board measures, filtered, in tenths of a volt (``supply_v``).
+    #: Boards before this field end at ``state`` (None).
+    supply_dv: int | None = None
 
     @property
     def needs_neutral(self) -> bool:
@@ -314,6 +318,18 @@ class ExtendedTelemetry:
         """State bit 6: a motor's estimated winding temperature is past the rollback's
         start: its current limit and the top speed are lowered (``EVT:THERMAL,1``)."""
         return bool(self.state and self.state & 64)
+
+    @property
+    def battery_low(self) -> bool:
+        """State bit 7: the filtered supply is below BATTERY_LOW_V: the top speed is
+        lowered (``EVT:BATTERY,1``)."""
+        return bool(self.state and self.state & 128)
+
+    @property
+    def supply_v(self) -> float | None:
+        """The battery voltage the board measures (filtered, V); None from a board that
+        does not send it."""
+        return None if self.supply_dv is None else self.supply_dv / 10.0
 
     @property
     def fault_latched(self) -> bool:
@@ -416,7 +432,7 @@ def _float(text: bytes) -> float:
     return float(text)
 
 
-_TLM = re.compile(rb"TLM:(\d+(?:,\d+){12}(?:,\d+){0,4})")
+_TLM = re.compile(rb"TLM:(\d+(?:,\d+){12}(?:,\d+){0,5})")
 _HELLO = re.compile(rb"HELLO:(\d+),([\w.-]+)(?:,([\w.-]+),([0-9a-f]+))?")
 _PARAM = re.compile(rb"PAR:(\w+),(\d+(?:\.\d+)?)")
 _ACK = re.compile(rb"ACK:(\d+)")

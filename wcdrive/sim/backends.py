@@ -230,7 +230,8 @@ class SimavrBackend:
         trace = Trace(duration=end_cycle / F_CPU, serial=[(c / F_CPU, d) for c, d in sorted(runs + piloted)],
                       encoders=encoders,
                       inhibits=sorted([(c.at, c.number, c.active) for c in rig.inhibits
-                                       if c.number != LEVER_INPUT] + pins.input_changes))
+                                       if c.number != LEVER_INPUT] + pins.input_changes),
+                      supply=list(pins.supply_changes))
         report = compare(recorder.recording(trace))
         mega.close()
         return BackendRun(end_cycle, Lockstep(len(report.mismatches), report.events))

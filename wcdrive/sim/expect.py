@@ -72,7 +72,7 @@ FIGURES = (
     "collisions", "first_collision_s", "max_impact_ns", "contact_s",
     "goal_error_m", "goal_reached_s", "goal_within_tolerance", "firmware_differences",
     "truth_x", "truth_y", "truth_heading_deg", "tracking_rms_rad_s", "ticks", "simulated_s",
-    "winding_temp_max_c", "distance_m",
+    "winding_temp_max_c", "battery_min_v", "distance_m",
     *(f"odom_{o}_{e}" for o in ("wheel", "velocity", "gyro")
       for e in ("position_error_m", "heading_error_deg")),
     # Eddie's (wcdrive.eddie.runner.figures)

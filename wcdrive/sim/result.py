@@ -59,6 +59,9 @@ class GroundTruth:
     step_volts: np.ndarray = field(default_factory=lambda: _empty(0, 2))
     #: Each motor's winding temperature at each tick (left, right; deg C).
     winding_temp: np.ndarray = field(default_factory=lambda: _empty(0, 2))
+    #: The battery at each tick: its terminal voltage (V; the ideal supply's without a
+    #: battery model) and its state of charge (0..1).
+    battery: np.ndarray = field(default_factory=lambda: _empty(0, 2))
 
 
 @dataclass
@@ -330,7 +333,8 @@ class SimResult:
         port-vs-firmware differences, the line counts, the board's events (``events``:
         ``[s, line]`` for every ``EVT:`` line), the fault figures (``fault_metrics``), the
         floor and the stop figures (``stop_metrics``); ``winding_temp_max_c``, the hotter
-        motor winding's highest temperature (deg C; None without a tick); ``distance_m``,
+        motor winding's highest temperature (deg C; None without a tick);
+        ``battery_min_v``, the battery's lowest terminal voltage at a tick (V); ``distance_m``,
         the length of the chair's true path (m, tick to tick).
 
         The floor: ``slope_deg`` and ``downhill_heading_deg`` (the ``[world]`` table's
@@ -371,6 +375,8 @@ class SimResult:
         out["caster_side_impulse_ns"] = truth.caster_side_impulse
         temps = truth.winding_temp
         out["winding_temp_max_c"] = float(temps.max()) if temps.size else None
+        volts = truth.battery[:, 0] if truth.battery.size else truth.battery
+        out["battery_min_v"] = float(volts.min()) if volts.size else None
         out["distance_m"] = float(np.hypot(*np.diff(truth.pose[:, :2], axis=0).T).sum())
         out["firmware_differences"] = self.firmware_differences
         out.update({f"lines_{k}": v for k, v in link.line_counts.items()})

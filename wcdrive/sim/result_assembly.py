@@ -61,7 +61,7 @@ def assemble_result(scenario: Scenario, params: ChairParams, rig: Rig, ran: Back
                         step_time=motion[:, 0],
                         step_speed=contact.max(axis=1) if contact.size else np.zeros(0),
                         step_contact_speed=contact, step_volts=motion[:, 4:6],
-                        winding_temp=cols["winding_temp"])
+                        winding_temp=cols["winding_temp"], battery=cols["battery"])
     board = BoardLog(cols["tick_time"], cols["setpoint"], cols["measured"], cols["pwm"], cols["counts"],
                      cols["tick_cycles"])
     odometry = Odometry(cols["odom_wheel"], cols["odom_velocity"], cols["odom_gyro"],

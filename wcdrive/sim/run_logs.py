@@ -25,7 +25,8 @@ __all__ = ["LineLog", "TickLog"]
 #: The tick log's columns and their widths, in the order ``TickLog.add`` writes them.
 _LOG_COLUMNS = (("tick_time", 1), ("truth", 3), ("odom_wheel", 3), ("odom_velocity", 3), ("odom_gyro", 3),
                 ("setpoint", 2), ("measured", 2), ("wheel_speed", 2), ("pwm", 2), ("caster", 2),
-                ("counts", 2), ("odom_ekf", 3), ("odom_ekf_vel", 3), ("winding_temp", 2))
+                ("counts", 2), ("odom_ekf", 3), ("odom_ekf_vel", 3), ("winding_temp", 2),
+                ("battery", 2))
 _LOG_WIDTH = sum(width for _, width in _LOG_COLUMNS)
 #: Where each column starts in a row.
 _LOG_OFFSETS = {name: sum(w for _, w in _LOG_COLUMNS[:i]) for i, (name, _) in enumerate(_LOG_COLUMNS)}
@@ -50,7 +51,8 @@ class TickLog:
         caster = plant.caster_heading
         self._flat.extend((cycle / F_CPU, *plant.pose, *wheel, *velocity, *gyro, setpoint[0], setpoint[1],
                            measured[0], measured[1], speed[0], speed[1], pwm[0], pwm[1], caster[0], caster[1],
-                           counts[0], counts[1], *ekf, *ekf_vel, *plant.winding_temps))
+                           counts[0], counts[1], *ekf, *ekf_vel, *plant.winding_temps,
+                           *plant.battery))
         self.tick_cycles.append(cycle)
 
     def board(self, row: int, setpoint, measured, pwm, counts) -> None:

@@ -31,6 +31,7 @@ from pathlib import Path
 from wcdrive.avr.timer0 import F_CPU
 from wcdrive.boards.simavr.mega_board import MegaBoard
 from wcdrive.boards.simavr.virtual_mega import ENCODER_PINS, HarnessError, Reset, VirtualMega, _lib
+from wcdrive.boards.supply_sense import NOMINAL_MV, SUPPLY_CHANNEL
 from wcdrive.errors import WcdriveFileError
 from wcdrive.plant import ChairParams
 
@@ -117,6 +118,7 @@ class BootloaderMega(VirtualMega):
         self._uart_free_at = 0
         self._closed_cycle = 0
         self._pin_level = {}
+        self._analog = {}
         self.tx_log = []
         self.keep_records = True
         self.hit_log = []
@@ -140,6 +142,8 @@ class BootloaderMega(VirtualMega):
         for side in ENCODER_PINS:
             for pin in ENCODER_PINS[side]:
                 self.set_pin(pin, 1, at=0)
+        # The program flashed may read the supply sense: a 24 V battery, as VirtualMega's.
+        self.set_analog(SUPPLY_CHANNEL, NOMINAL_MV, at=0)
 
     def _declare(self) -> None:
         p, u32, i32, sz = ctypes.c_void_p, ctypes.c_uint32, ctypes.c_int, ctypes.c_size_t

@@ -30,14 +30,14 @@ VARIABLE_FORMATS = {
           "lastTravel", "pendingL", "pendingR", "kpL", "kiL", "kdL", "kpR", "kiR", "kdR",
           "maxWheel", "maxAccel", "estopDecel", "effortSpeedL", "effortSpeedR", "effortSetpointL",
           "effortSetpointR", "overspeedFromL", "overspeedFromR", "haltIntegralL", "haltIntegralR",
-          "haltSetpointL", "haltSetpointR", "windingTempL", "windingTempR"),
+          "haltSetpointL", "haltSetpointR", "windingTempL", "windingTempR", "supplyVolts"),
     "i": ("encoderValueL", "encoderValueR", "encTickL", "encTickR", "prevEncL", "prevEncR", "holdRefL",
           "holdRefR", "holdStepL", "holdStepR"),
     "I": ("illegalL", "illegalR", "lastControlTime", "tickCount", "lastCmdTime", "rejectedCount",
           "errSuppressed", "txDropped", "timer0_millis", "timer0_overflow_count", "illTickL",
           "illTickR", "rxCount", "crcRejected", "txRingFull", "rxGaps", "rxLost", "rxLostTick",
           "lastTickTime", "lateTicks"),
-    "H": ("freeRam", "watchdogMs", "lastSeq", "faultFlags", "txCredit"),
+    "H": ("freeRam", "watchdogMs", "lastSeq", "faultFlags", "txCredit", "supplyTick"),
     "B": ("mode", "pwmL", "pwmR", "dirL", "dirR", "pivotPhase", "pivotTicksLeft", "cmdSinceTick",
           "watchdogArmed", "emergencyStop", "ppmLost", "stillTicks", "parked", "cmdLen",
           "cmdCommas", "cmdDiscarding", "errLinesThisTick", "lastEncodedL", "lastEncodedR",
@@ -52,7 +52,7 @@ VARIABLE_FORMATS = {
           "inhibitCountL", "inhibitCountR", "inhibitLatched", "inhibitPending",
           "inhibitOn", "inhibitCountP",
           "brakeFitted", "brakePhase", "brakeTicks", "brakeStatusTick", "brakeStatusTicks",
-          "thermalRollback", "thermalPending"),
+          "thermalRollback", "thermalPending", "batteryLow", "batteryPending"),
 }
 _FORMAT_OF = {name: fmt for fmt, names in VARIABLE_FORMATS.items() for name in names}
 

@@ -2,8 +2,9 @@
 board (``MegaBoard``) and ``wcdrive sim --backend simavr`` take.
 
 Per physics step: the plant advances, the wheels' motion over the step becomes
-encoder edges queued on the encoder pins, the firmware runs through the step, and its
-PWM and DIR pins drive the plant over the next one.
+encoder edges queued on the encoder pins, the battery's terminal voltage over the step
+goes on the supply sense (A0, from the step's start), the firmware runs through the
+step, and its PWM and DIR pins drive the plant over the next one.
 
 Faults (``wcdrive.plant.faults``, given as ``faults=``): the encoder kinds act on the
 wires (``EncoderWire``: a cut queues no more edges, a reversal swaps the two bits of
@@ -24,6 +25,7 @@ from wcdrive.avr.timer0 import F_CPU
 from wcdrive.boards.port_loop import advance
 from wcdrive.boards.simavr.mega_pins import BRAKE_STATUS_PIN, PUSH_PIN
 from wcdrive.boards.simavr.virtual_mega import VirtualMega
+from wcdrive.boards.supply_sense import SUPPLY_CHANNEL, plant_millivolts
 from wcdrive.plant import Gyro, Plant
 from wcdrive.plant.encoders import EdgeTrain, edges_from_trajectory
 from wcdrive.plant.faults import PLANT_KINDS, EncoderWire, Fault, apply_plant_faults
@@ -56,6 +58,10 @@ class PlantOnPins:
         #: and the lever's switch (s, 4, LOW), inputs 3 and 4 of a lock-step trace
         #: (``wcdrive.boards.simavr.mega_pins.INPUT_PINS``).
         self.input_changes: list[tuple[float, int, bool]] = []
+        #: The millivolts put on the supply sense (A0) as they changed: (s, mV), the
+        #: lock-step trace's ``supply``; the board starts at ``NOMINAL_MV``. Kept while
+        #: ``mega.keep_records`` (a live board's battery would log a change a step).
+        self.supply_changes: list[tuple[float, int]] = []
 
     def step(self, t0: float, t1: float, run_until: Callable[[int], None] | None = None,
              reset: Callable[[], object] | None = None) -> dict[str, EdgeTrain]:
@@ -83,6 +89,7 @@ class PlantOnPins:
                 self.mega.encoder_edges(side, train)
             trains[side] = train
             self._position[side] = new[side]
+        self._supply(c0)
         run = run_until or self.mega.run_until
         while self._resets and self._resets[0] <= c1:
             cycle = self._resets.pop(0)
@@ -98,3 +105,14 @@ class PlantOnPins:
                 self.mega.set_pin(pin, 0 if low else 1)
                 self.input_changes.append((self.mega.cycle / F_CPU, number, low))
         return trains
+
+    def _supply(self, c0: int) -> None:
+        """The battery's terminal voltage over the step just taken onto A0 from the
+        step's start ``c0``, when its millivolts changed: a tick in the step reads the
+        voltage of the step it runs in. (The port's tick reads the plant's voltage as
+        the plant last computed it too, ``PortLoop``: there the step before the tick.)"""
+        mv = plant_millivolts(self.plant)
+        if mv != self.mega.analog(SUPPLY_CHANNEL):
+            self.mega.set_analog(SUPPLY_CHANNEL, mv, at=c0)
+            if self.mega.keep_records:
+                self.supply_changes.append((c0 / F_CPU, mv))

@@ -13,7 +13,11 @@ is queued at exact cycles, so one trace always gives the same bytes.
 A reset (``reset``: external, brown-out, power-on; or the AVR's own watchdog) restarts
 the core but not the clock: ``cycle`` keeps counting from the first power-on, queued
 bytes and pin edges stay queued at their cycles, the pins driven from outside keep
-their levels, and ``resets`` logs each one with MCUSR as the chip shows it.
+their levels (the analog inputs too), and ``resets`` logs each one with MCUSR as the
+chip shows it.
+
+The analog inputs (``set_analog``) take millivolts, AVcc 5 V the reference; the supply
+sense (A0, ``wcdrive.boards.supply_sense``) starts at a 24 V battery's ``NOMINAL_MV``.
 
 This module holds ``VirtualMega``: its life, its clock and resets, the stimulus it
 queues and the records it gathers. The rest is where its concerns part, and
@@ -58,15 +62,20 @@ from wcdrive.boards.simavr.mega_pins import (
     RELAY_PIN,
     MegaPins,
 )
+from wcdrive.boards.supply_sense import NOMINAL_MV, SUPPLY_CHANNEL
 from wcdrive.plant.encoders import EdgeTrain
 
-__all__ = ["BORF", "BRAKE_PIN", "DIR_PINS", "ENCODER_PINS", "EXTRF", "F_CPU", "HOOKS", "JTRF",
-           "MEGA_PORT_BIT", "PORF", "RELAY_PIN", "RESET_CAUSES", "RX_LOSS_CAUSES", "SRAM_OFFSET",
+__all__ = ["ANALOG_CHANNELS", "BORF", "BRAKE_PIN", "DIR_PINS", "ENCODER_PINS", "EXTRF", "F_CPU", "HOOKS",
+           "JTRF", "MEGA_PORT_BIT", "PORF", "RELAY_PIN", "RESET_CAUSES", "RX_LOSS_CAUSES", "SRAM_OFFSET",
            "VARIABLE_FORMATS", "WDRF", "HarnessError", "Hit", "Reset", "RxLoss", "VirtualMega",
            "read_symbols"]
 
 #: Functions whose entries are logged: (name, what the harness records).
 HOOKS = ("processByte", "controlTick", "rxGap", "main", "doneOp", "eepromReady")
+#: The analog channels the harness drives (simavr 1.6 keeps a value for ADC0..ADC7), and
+#: the event kind that sets one (``csrc/wcsim.c``).
+ANALOG_CHANNELS = range(8)
+_ANALOG_EVENT = 2
 
 
 class VirtualMega(MegaPins):
@@ -98,6 +107,7 @@ class VirtualMega(MegaPins):
         self._uart_free_at = 0
         self._closed_cycle = 0
         self._pin_level: dict[tuple[str, int], int] = {}
+        self._analog: dict[int, int] = {}
         self.tx_log: list[tuple[int, int]] = []
         #: Whether ``rx_wire`` and ``hit_log`` are kept (the lock-step harness's records);
         #: a live board that runs for hours turns it off, and they stay empty.
@@ -119,6 +129,8 @@ class VirtualMega(MegaPins):
                 self.set_pin(pin, 1, at=0)
         for pin in INPUT_PINS.values():
             self.set_pin(pin, 1, at=0)
+        # The supply sense reads a 24 V battery until someone (a plant) says otherwise.
+        self.set_analog(SUPPLY_CHANNEL, NOMINAL_MV, at=0)
         if vcd is not None:
             pins = "".join(f"{p}{b}:{n};" for n, (p, b) in self._named_pins().items())
             if self._c.wcsim_vcd_open(self._s, str(vcd).encode(), pins.encode()) != 0:
@@ -256,6 +268,26 @@ class VirtualMega(MegaPins):
         cycle = self.cycle if at is None else int(at)
         self._c.wcsim_schedule(self._s, cycle, 0, ord(port), bit, 1 if level else 0)
         self._pin_level[pin] = 1 if level else 0
+
+    def analog(self, channel: int) -> int:
+        """The millivolts last set on an analog input (``set_analog``; 0 for one never
+        set), whether or not their cycle has come."""
+        return self._analog.get(channel, 0)
+
+    def set_analog(self, channel: int, millivolts: int, at: int | None = None) -> None:
+        """Puts ``millivolts`` (0..65535) on analog input ``channel`` (ADC0..ADC7, A0..A7)
+        from cycle ``at`` (default: now) on. The ADC converts the value on the pin when
+        the firmware reads ADCL (simavr samples lazily), scaled by AVcc, 5 V
+        (``wcdrive.boards.supply_sense.adc_counts``); resets keep it."""
+        if channel not in ANALOG_CHANNELS:
+            raise ValueError(f"no analog input {channel}: 0 to 7")
+        mv = int(millivolts)
+        if not 0 <= mv <= 0xFFFF:
+            raise ValueError(f"{millivolts} mV is outside 0..65535")
+        cycle = self.cycle if at is None else int(at)
+        if self._c.wcsim_schedule(self._s, cycle, _ANALOG_EVENT, 0, channel, mv) != 0:
+            raise HarnessError("out of memory queueing an analog input")
+        self._analog[channel] = mv
 
     def send(self, data: bytes, at: int | None = None) -> list[int]:
         """Queues bytes on the RX wire, one per byte time, starting at ``at`` (default:

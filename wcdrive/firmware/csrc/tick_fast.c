@@ -100,7 +100,8 @@ static double f_from_int(int64_t n) { return rnd((double)n); }   /* |n| < 2**53 
     X(needNeutral) X(neutralFault) \
     X(inhibitTick) X(inhibitStable) X(inhibitCountL) X(inhibitCountR) X(inhibitLatched) X(inhibitPending) X(inhibitOn) X(inhibitCountP) \
     X(brakeFitted) X(brakePhase) X(brakeTicks) X(brakeStatusTick) X(brakeStatusTicks) \
-    X(windingTempL) X(windingTempR) X(thermalRollback) X(thermalPending)
+    X(windingTempL) X(windingTempR) X(thermalRollback) X(thermalPending) \
+    X(supplyTick) X(supplyVolts) X(batteryLow) X(batteryPending)
 
 #define ENUM(name) F_##name,
 enum { FIELDS(ENUM) N_FIELDS };
@@ -161,7 +162,8 @@ static struct {
         overspeed_margin, overspeed_gain,
         pivot_start_speed,
         pivot_speed, rounding2, thermal_emf, effort_max, thermal_ambient, thermal_resistance,
-        thermal_capacity, thermal_loss, thermal_rollback_temp;
+        thermal_capacity, thermal_loss, thermal_rollback_temp, supply_volts_per_count, supply_filter,
+        battery_low_v;
     int64_t control_period_ms, tx_credit_max, tx_credit_per_ms, stall_pwm, stall_pwm_standing, stall_ticks,
         stall_ticks_turning,
         reverse_ticks, runaway_pwm, runaway_ticks, effort_pwm, effort_ticks, illegal_per_tick, still_ticks, pivot_ticks,
@@ -428,7 +430,7 @@ static const int float_fields[] = {
     F_effortSpeedR, F_effortSetpointR, F_setpointL, F_setpointR, F_targetL, F_targetR,
     F_prevMeasL, F_prevMeasR, F_estopDecel, F_maxAccel, F_integralL, F_integralR, F_outputL,
     F_outputR, F_kpL, F_kiL, F_kdL, F_kpR, F_kiR, F_kdR, F_pendingL, F_pendingR,
-    F_overspeedFromL, F_overspeedFromR, F_windingTempL, F_windingTempR,
+    F_overspeedFromL, F_overspeedFromR, F_windingTempL, F_windingTempR, F_supplyVolts,
 };
 
 static unsigned char field_is_float[N_FIELDS];     /* set by _bind from float_fields */
@@ -439,18 +441,18 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
         PyErr_SetString(PyExc_RuntimeError, "tick_fast: _bind() was not called");
         return NULL;
     }
-    if (nargs != 10) {
-        PyErr_SetString(PyExc_TypeError, "tick() takes 10 arguments");
+    if (nargs != 11) {
+        PyErr_SetString(PyExc_TypeError, "tick() takes 11 arguments");
         return NULL;
     }
     PyObject *s = args[0];
     if (Py_TYPE(s) != state_type)
         Py_RETURN_NONE;
-    int64_t now, count_l, count_r, illegal_l, illegal_r, storm_l, storm_r, rx_lost, inhibit;
+    int64_t now, count_l, count_r, illegal_l, illegal_r, storm_l, storm_r, rx_lost, inhibit, supply;
     if (!arg_int(args[1], &now) || !arg_int(args[2], &count_l) || !arg_int(args[3], &count_r)
         || !arg_int(args[4], &illegal_l) || !arg_int(args[5], &illegal_r)
         || !arg_int(args[6], &storm_l) || !arg_int(args[7], &storm_r) || !arg_int(args[8], &rx_lost)
-        || !arg_int(args[9], &inhibit))
+        || !arg_int(args[9], &inhibit) || !arg_int(args[10], &supply))
         Py_RETURN_NONE;
 
     Vals v;
@@ -480,6 +482,8 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
         Py_RETURN_NONE;             /* a fitted brake not released and settled, or its status LOW */
     if (I(thermalRollback) || I(thermalPending))
         Py_RETURN_NONE;             /* the thermal rollback on, or its event to send */
+    if (I(batteryLow) || I(batteryPending))
+        Py_RETURN_NONE;             /* the low-battery rollback on, or its event to send */
     SETI(brakeStatusTick, brake_status);
     PyObject *mode_name = PyDict_GetItemWithError(mode_names, *slot(s, F_mode));
     if (mode_name == NULL) {
@@ -518,6 +522,7 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
     SETI(stormTickL, storm_l != 0);
     SETI(stormTickR, storm_r != 0);
     SETI(rxLostTick, rx_lost & M32);
+    SETI(supplyTick, supply & 0x3FF);
     int64_t delta_l = i32(I(encTickL) - I(prevEncL));
     int64_t delta_r = i32(I(encTickR) - I(prevEncR));
     SETI(prevEncL, I(encTickL));
@@ -533,6 +538,12 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
     SETF(windingTempL, winding_step(D(windingTempL), winding_loss(I(pwmL), I(dirL), D(filtVelL)), dt));
     SETF(windingTempR, winding_step(D(windingTempR), winding_loss(I(pwmR), I(dirR), D(filtVelR)), dt));
     if (D(windingTempL) > K.thermal_rollback_temp || D(windingTempR) > K.thermal_rollback_temp)
+        Py_RETURN_NONE;
+    /* update_supply: a supply below the low-battery threshold goes to the Python tick */
+    double volts = f_mul(f_from_int(I(supplyTick)), K.supply_volts_per_count);
+    SETF(supplyVolts, D(supplyVolts) == 0.0 ? volts
+                      : f_add(D(supplyVolts), f_mul(K.supply_filter, f_sub(volts, D(supplyVolts)))));
+    if (!(D(supplyVolts) >= K.battery_low_v))
         Py_RETURN_NONE;
 
     /* _check_faults: a fault that latches goes to the Python tick */
@@ -701,14 +712,16 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
         int64_t flags = (I(watchdogArmed) ? 1 : 0) | (I(emergencyStop) ? 2 : 0)
                         | (I(estopLatched) ? 4 : 0) | (I(ppmLost) ? 8 : 0) | (I(parked) ? 16 : 0)
                         | (int64_t)(((uint64_t)I(pivotPhase) << 5) & 0xFF) | (I(faultFlags) ? 128 : 0);
-        int64_t tlm[17] = { now & M32, I(rxCount), I(lastSeq), I(pwmL), I(pwmR), I(dirL), I(dirR),
+        int64_t tlm[18] = { now & M32, I(rxCount), I(lastSeq), I(pwmL), I(pwmR), I(dirL), I(dirR),
                             I(illTickL), I(illTickR), flags, I(rejectedCount), I(crcRejected),
                             I(freeRam), I(faultFlags), I(rxLostTick), I(lateTicks),
                             (I(needNeutral) ? 1 : 0) | (I(neutralFault) ? 2 : 0)
-                            | (I(brakeFitted) && !I(brakeReleased) ? 16 : 0) };
+                            | (I(brakeFitted) && !I(brakeReleased) ? 16 : 0),
+                            /* the supply, tenths of a volt: positive and small here */
+                            (int64_t)f_add(f_mul(D(supplyVolts), 10.0), 0.5) };
         Buf t = { .n = 0 };
         puts_(&t, "TLM:");
-        for (int k = 0; k < 17; k++) {
+        for (int k = 0; k < 18; k++) {
             if (k)
                 puts_(&t, ",");
             put_ll(&t, (long long)tlm[k]);
@@ -819,6 +832,9 @@ static PyObject *bind(PyObject *self, PyObject *args) {
           && const_double(consts, "THERMAL_CAPACITY", &k.thermal_capacity)
           && const_double(consts, "THERMAL_LOSS", &k.thermal_loss)
           && const_double(consts, "THERMAL_ROLLBACK_TEMP", &k.thermal_rollback_temp)
+          && const_double(consts, "SUPPLY_VOLTS_PER_COUNT", &k.supply_volts_per_count)
+          && const_double(consts, "SUPPLY_FILTER", &k.supply_filter)
+          && const_double(consts, "BATTERY_LOW_V", &k.battery_low_v)
           && const_int(consts, "CONTROL_PERIOD_MS", &k.control_period_ms)
           && const_int(consts, "TX_CREDIT_MAX", &k.tx_credit_max)
           && const_int(consts, "TX_CREDIT_PER_MS", &k.tx_credit_per_ms)

@@ -123,6 +123,21 @@ def motor_heat(tlm: ExtendedTelemetry, hardware_id: str) -> dict[str, Any]:
                   {"thermal_rollback": tlm.thermal_rollback, "cut_off": ",".join(cut)})
 
 
+def battery(tlm: ExtendedTelemetry, hardware_id: str) -> dict[str, Any]:
+    """``wcdrive: battery``, from the board's TLM: the supply it measures (filtered, V);
+    WARN while its low-battery rollback lowers the top speed (TLM ``state`` bit 7),
+    ERROR once the cut-off fault (``UNDERVOLT``) is latched, else OK."""
+    volts = "" if tlm.supply_v is None else f"{tlm.supply_v:.1f}"
+    if "UNDERVOLT" in tlm.fault_names:
+        level, message = ERROR, f"cut off: the supply at {volts} V"
+    elif tlm.battery_low:
+        level, message = WARN, f"low: {volts} V, top speed lowered"
+    else:
+        level, message = OK, f"{volts} V" if volts else "not measured"
+    return status("wcdrive: battery", level, message, hardware_id,
+                  {"supply_v": volts, "battery_low": tlm.battery_low})
+
+
 def diagnostics(t: float, statuses: list[dict[str, Any]]) -> dict[str, Any]:
     """``diagnostic_msgs/msg/DiagnosticArray``."""
     return {"header": header(t, ""), "status": statuses}

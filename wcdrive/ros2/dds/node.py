@@ -516,6 +516,7 @@ class ChairNode:
                                             hardware, dataclasses.asdict(tlm)))
         if isinstance(tlm, ExtendedTelemetry):
             statuses.append(messages.motor_heat(tlm, hardware))
+            statuses.append(messages.battery(tlm, hardware))
         try:
             self._pub["/diagnostics"].publish(messages.diagnostics(self.now(), statuses))
         except Exception as exc:

@@ -19,6 +19,10 @@
  * stimulus and logs keep their meaning. MCUSR shows the cause as the hardware's does;
  * the pins driven from outside keep their levels; every reset is logged.
  *
+ * Analog inputs: the ADC's channels 0..7 take millivolts (event kind 2), which simavr
+ * keeps across resets; it samples lazily, at the firmware's read of ADCL, scaled by
+ * AVcc (5 V here, as on an Arduino Mega: WCSIM_SUPPLY_MV).
+ *
  * Compiled on first use by wcdrive/boards/simavr/build.py into libwcsim.so (gcc, -lsimavr -lelf).
  */
 #include <stdarg.h>
@@ -32,7 +36,7 @@
 #include <simavr/sim_io.h>
 #include <simavr/sim_irq.h>
 #include <simavr/sim_vcd_file.h>
-#include <simavr/avr_ioport.h>
+#include <simavr/avr_adc.h>
 #include <simavr/avr_ioport.h>
 #include <simavr/avr_uart.h>
 #include <simavr/avr_watchdog.h>
@@ -42,13 +46,18 @@
 #define WCSIM_MAX_HOOKS 16
 /* The ATmega2560's interrupt response: 5 cycles from the flag to the vector (3-byte PC). */
 #define WCSIM_IRQ_ENTRY_CYCLES 5
+/* The board's supply, AVcc and AREF (mV): an Arduino Mega's 5 V. simavr 1.6 takes the
+ * ADC's AVcc reference from avr->avcc (3.3 V, with a warning, when it is 0). */
+#define WCSIM_SUPPLY_MV 5000
+/* The ADC channels simavr 1.6 keeps a value for (adc_values[8]). */
+#define WCSIM_ADC_CHANNELS 8
 
 typedef struct {
     uint64_t cycle;
-    uint8_t kind;   /* 0 pin, 1 uart byte */
+    uint8_t kind;   /* 0 pin, 1 uart byte, 2 analog input */
     uint8_t port;   /* 'A'.. for pins */
-    uint8_t bit;
-    uint8_t value;
+    uint8_t bit;    /* the pin's bit; the ADC channel for an analog input */
+    uint16_t value; /* the level, the byte, or the analog input's millivolts */
 } wcsim_event_t;
 
 typedef struct {
@@ -145,6 +154,7 @@ typedef struct {
     uint8_t *feed;
     size_t n_feed, cap_feed, next_feed;
     avr_uart_t *uart0;
+    avr_adc_t *adc;
 } wcsim_t;
 
 static void no_sleep(avr_t *avr, avr_cycle_count_t how_long) {
@@ -282,6 +292,34 @@ static void io_write(avr_t *avr, avr_io_addr_t addr, uint8_t v) {
         avr->data[addr] = v;
 }
 
+/* The ADC module (for its read status); simavr keeps it only in the core's struct. */
+static avr_adc_t *find_adc(avr_t *avr) {
+    for (avr_io_t *io = avr->io_port; io; io = io->next) {
+        if (io->kind && strcmp(io->kind, "adc") == 0) return (avr_adc_t *)io;
+    }
+    return NULL;
+}
+
+/* The ADC as a reset leaves the chip's: its data register (zeroed with the I/O
+ * registers) reads 0 until a conversion completes. simavr 1.6 would sample the input
+ * at the first ADCL read after a power-on, and keeps its read status across resets;
+ * marked read, ADCL and ADCH give the register until the next conversion's end clears
+ * the mark. The channels' millivolts are simavr's adc_values, which its reset leaves. */
+static void adc_after_reset(wcsim_t *s) {
+    if (s->adc) s->adc->read_status = 2;
+}
+
+/* The board's supply voltages: AVcc (the ADC's reference), AREF and Vcc, 5 V. Set once,
+ * after the ELF is loaded (an ELF's .mmcu section may carry its own): avr_reset() leaves
+ * them as they are. */
+static void set_supply(wcsim_t *s) {
+    s->avr->vcc = WCSIM_SUPPLY_MV;
+    s->avr->avcc = WCSIM_SUPPLY_MV;
+    s->avr->aref = WCSIM_SUPPLY_MV;
+    s->adc = find_adc(s->avr);
+    adc_after_reset(s);
+}
+
 /* After avr_reset() (which zeroes every I/O register, MCUSR and PINx included):
  *  - MCUSR as the hardware has it: a power-on leaves PORF alone; any other reset adds
  *    its flag to those the program has not cleared (simavr 1.6 sets only WDRF, on a
@@ -321,6 +359,7 @@ static void after_reset(wcsim_t *s, int cause, uint8_t mcusr_before) {
     }
     s->rx.n = 0;          /* the USART is reset with the chip: its FIFO is empty */
     if (s->uart) rx_update(s);
+    adc_after_reset(s);
     s->at_break = 0;
     s->crashed = 0;
     log_reset(s, cause);
@@ -357,6 +396,7 @@ wcsim_t *wcsim_new(const char *elf_path, char *err, int errlen) {
     s->avr->log = 0;
     avr_load_firmware(s->avr, &s->fw);
     s->avr->sleep = no_sleep;
+    set_supply(s);
 
     listen_to_uart_tx(s);
     /* The receiver is the harness's: UDR0 reads come here, not to simavr's 64-byte queue. */
@@ -394,7 +434,9 @@ uint32_t wcsim_frequency(wcsim_t *s) { return s->avr->frequency; }
 int wcsim_crashed(wcsim_t *s) { return s->crashed; }
 
 /* Events must be queued in non-decreasing cycle order per call sequence; an
- * event earlier than one already queued is inserted in place. */
+ * event earlier than one already queued is inserted in place. kind 0: pin (port, bit)
+ * to level value; 1: the byte value reaches the USART; 2: ADC channel bit (0..7) at
+ * value millivolts (0..65535). */
 int wcsim_schedule(wcsim_t *s, uint64_t cycle, int kind, int port, int bit, int value) {
     wcsim_event_t *e = grow(s->events, &s->cap_events, s->n_events + 1, sizeof(*e));
     if (!e) return -1;
@@ -408,7 +450,7 @@ int wcsim_schedule(wcsim_t *s, uint64_t cycle, int kind, int port, int bit, int 
     s->events[i].kind = (uint8_t)kind;
     s->events[i].port = (uint8_t)port;
     s->events[i].bit = (uint8_t)bit;
-    s->events[i].value = (uint8_t)value;
+    s->events[i].value = (uint16_t)value;
     s->n_events++;
     return 0;
 }
@@ -427,8 +469,15 @@ static void apply_event(wcsim_t *s, const wcsim_event_t *e) {
         }
         avr_irq_t *irq = avr_io_getirq(s->avr, AVR_IOCTL_IOPORT_GETIRQ(e->port), e->bit);
         if (irq) avr_raise_irq(irq, e->value);
+    } else if (e->kind == 2) {
+        /* simavr's ADC keeps the channel's millivolts and converts them when the
+         * firmware reads ADCL (avr_adc_read_l: mV * 0x3ff / AVcc, clipped to 0x3ff) */
+        if (e->bit < WCSIM_ADC_CHANNELS) {
+            avr_irq_t *irq = avr_io_getirq(s->avr, AVR_IOCTL_ADC_GETIRQ, ADC_IRQ_ADC0 + e->bit);
+            if (irq) avr_raise_irq(irq, e->value);
+        }
     } else {
-        rx_arrive(s, e->value);
+        rx_arrive(s, (uint8_t)e->value);
     }
 }
 
@@ -769,6 +818,7 @@ wcsim_t *wcsim_new_chip(const char *mmcu, uint32_t frequency, char *err, int err
     memset(s->avr->flash, 0xFF, s->avr->flashend + 1);
     s->avr->codeend = s->avr->flashend;
     s->avr->sleep = no_sleep;
+    set_supply(s);
     listen_to_uart_tx(s);
     static const char *pwm_names[] = {"8>pwm_left", "8>pwm_right"};
     s->pwm_irq = avr_alloc_irq(&s->avr->irq_pool, 0, 2, pwm_names);
