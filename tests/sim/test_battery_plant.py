@@ -24,7 +24,7 @@ def _charged(name: str) -> runner.SimResult:
 def test_a_charged_battery_rides_the_same_drive_without_an_event() -> None:
     """``battery_low_flat`` on a full battery (25.6 V at rest, 0.05 ohm): the sag of the
     start leaves it at 24.3 V or more, far from the 23 V rollback; no event, and the chair
-    drives 24.3 m in the 10 s, against the worn battery's 16.5."""
+    drives 24.3 m in the 10 s, against the worn battery's 22.1."""
     r = _charged("battery_low_flat")
     m = r.metrics()
     assert [line for _, line in r.link.events if "BATTERY" in line or "EVT:FAULT" in line] == []
