@@ -220,6 +220,15 @@ float kpR = WC_KP_R, kiR = WC_KI_R, kdR = WC_KD_R;
 float maxWheel = WC_MAX_WHEEL_SPEED;        // rad/s: WHEEL range, CMDVEL and PPM cap
 float maxAccel = WC_MAX_ACCEL;              // rad/s^2: normal setpoint ramp
 float estopDecel = WC_EMERGENCY_DECEL;      // rad/s^2: watchdog, PPM loss and e-stop ramp
+// The drive limits, a drive profile's (docs/safety.md, "Drive limits"): the cap of what
+// the host may ask on every command path. Each default limits nothing.
+float fwdSpeed = WC_DRIVE_SPEED_MAX;        // m/s: top speed forward, of the chair's centre
+float revSpeed = WC_DRIVE_SPEED_MAX;        // m/s: top speed backward
+float driveAccel = WC_DRIVE_ACCEL_MAX;      // m/s^2: a wheel speeding up (within maxAccel)
+float driveDecel = WC_DRIVE_ACCEL_MAX;      // m/s^2: a wheel slowing down (within maxAccel)
+float turnSpeed = WC_TURN_SPEED_MAX;        // rad/s: top turn rate
+float turnAccel = WC_TURN_ACCEL_MAX;        // rad/s^2: how fast the turn rate may change
+float turnAtSpeed = WC_TURN_AT_SPEED;       // the share of turnSpeed left at the top speed
 uint16_t watchdogMs = WC_WATCHDOG_MS;
 uint8_t feedbackForm = WC_FEEDBACK_FORM;    // 1: the unframed feedback line ends in the wheels' r/l fields
 
@@ -695,6 +704,59 @@ static float rampToward(float current, float target, float maxChange) {
   float diff = target - current;
   if (fabs(diff) <= maxChange) return target;
   return current + (diff > 0.0f ? maxChange : -maxChange);
+}
+
+// The wheel goals within the drive limits: the chair's speed (the wheels' mean at the
+// rim) within fwdSpeed forward and revSpeed back, its turn rate within turnSpeed, less
+// as the speed nears its top (turnAtSpeed of it there). Goals within them pass as they are.
+static void driveCaps(float& goalL, float& goalR) {
+  float speed = (goalR + goalL) * 0.5f * WC_WHEEL_RADIUS;
+  float turn = (goalR - goalL) * WC_WHEEL_RADIUS / WC_WHEELBASE;
+  float top = speed >= 0.0f ? fwdSpeed : revSpeed;
+  float held = speed;
+  if (speed > fwdSpeed) held = fwdSpeed;
+  else if (speed < -revSpeed) held = -revSpeed;
+  float cap = turnSpeed * (1.0f - (1.0f - turnAtSpeed) * (fabs(held) / top));
+  float turned = turn;
+  if (turn > cap) turned = cap;
+  else if (turn < -cap) turned = -cap;
+  if (held == speed && turned == turn) return;
+  float half = turned * (WC_WHEELBASE * 0.5f);
+  goalL = (held - half) / WC_WHEEL_RADIUS;
+  goalR = (held + half) / WC_WHEEL_RADIUS;
+}
+
+// rad/s^2 a wheel's setpoint may move toward its goal: driveAccel speeding up (away
+// from zero), driveDecel otherwise, within maxAccel.
+static float wheelRate(float setpoint, float goal) {
+  bool speedingUp = (goal > setpoint && setpoint >= 0.0f) || (goal < setpoint && setpoint <= 0.0f);
+  float rate = (speedingUp ? driveAccel : driveDecel) / WC_WHEEL_RADIUS;
+  return maxAccel < rate ? maxAccel : rate;
+}
+
+// Both setpoints a tick toward their goals: the emergency ramp at estopDecel; else each
+// wheel at its wheelRate, the wheels' half difference moving at most turnAccel x half the
+// wheelbase / WHEEL_RADIUS a second (their mean kept).
+static void rampSetpoints(float goalL, float goalR, float dt) {
+  if (emergencyStop) {
+    float step = estopDecel * dt;
+    setpointL = rampToward(setpointL, goalL, step);
+    setpointR = rampToward(setpointR, goalR, step);
+    return;
+  }
+  float newL = rampToward(setpointL, goalL, wheelRate(setpointL, goalL) * dt);
+  float newR = rampToward(setpointR, goalR, wheelRate(setpointR, goalR) * dt);
+  float limit = turnAccel * (WC_WHEELBASE * 0.5f) / WC_WHEEL_RADIUS * dt;
+  float was = (setpointR - setpointL) * 0.5f;
+  float change = (newR - newL) * 0.5f - was;
+  if (change > limit || change < -limit) {
+    float mid = (newR + newL) * 0.5f;
+    float half = was + (change > 0.0f ? limit : -limit);
+    newL = mid - half;
+    newR = mid + half;
+  }
+  setpointL = newL;
+  setpointR = newR;
 }
 
 static bool needsPivot(float travel, float prevTravel) {
@@ -1501,8 +1563,8 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
     }
   }
 
-  float maxChange = (emergencyStop ? estopDecel : maxAccel) * dt;
   float goalL = targetL, goalR = targetR;
+  driveCaps(goalL, goalR);
   float share = inhibitShare();
   float hotShare = thermalShare();
   if (hotShare < share) share = hotShare;
@@ -1520,8 +1582,7 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
   if (brakeFitted && brakePhase != BRAKE_RELEASED) {
     goalL = goalR = 0.0f;   // the brake not yet let go: the setpoints wait at zero
   }
-  setpointL = rampToward(setpointL, goalL, maxChange);
-  setpointR = rampToward(setpointR, goalR, maxChange);
+  rampSetpoints(goalL, goalR, dt);
   if (brakeFitted && faultFlags != 0) {
     // the brake applied at the fault stops the wheels faster than the emergency ramp: the
     // PID may brake them with it, never drive them against it
@@ -1721,11 +1782,11 @@ static const char* const REASONS[] = {
 
 // Runtime parameters: name, variable, range. The first PARAM_FLOATS are floats;
 // watchdog_ms, feedback_form and brake_fitted (the last three) are integers.
-#define PARAM_COUNT 12
-#define PARAM_FLOATS 9
-#define PARAM_WATCHDOG 9
-#define PARAM_FEEDBACK_FORM 10
-#define PARAM_BRAKE_FITTED 11
+#define PARAM_COUNT 19
+#define PARAM_FLOATS 16
+#define PARAM_WATCHDOG 16
+#define PARAM_FEEDBACK_FORM 17
+#define PARAM_BRAKE_FITTED 18
 static const char P_KP_L[] PROGMEM = "kp_l";
 static const char P_KI_L[] PROGMEM = "ki_l";
 static const char P_KD_L[] PROGMEM = "kd_l";
@@ -1735,23 +1796,34 @@ static const char P_KD_R[] PROGMEM = "kd_r";
 static const char P_MAX_WHEEL[] PROGMEM = "max_wheel";
 static const char P_MAX_ACCEL[] PROGMEM = "max_accel";
 static const char P_ESTOP_DECEL[] PROGMEM = "estop_decel";
+static const char P_FWD_SPEED[] PROGMEM = "fwd_speed";
+static const char P_REV_SPEED[] PROGMEM = "rev_speed";
+static const char P_DRIVE_ACCEL[] PROGMEM = "drive_accel";
+static const char P_DRIVE_DECEL[] PROGMEM = "drive_decel";
+static const char P_TURN_SPEED[] PROGMEM = "turn_speed";
+static const char P_TURN_ACCEL[] PROGMEM = "turn_accel";
+static const char P_TURN_AT_SPEED[] PROGMEM = "turn_at_speed";
 static const char P_WATCHDOG[] PROGMEM = "watchdog_ms";
 static const char P_FEEDBACK_FORM[] PROGMEM = "feedback_form";
 static const char P_BRAKE_FITTED[] PROGMEM = "brake_fitted";
 static const char* const PARAM_NAMES[PARAM_COUNT] = {
   P_KP_L, P_KI_L, P_KD_L, P_KP_R, P_KI_R, P_KD_R, P_MAX_WHEEL, P_MAX_ACCEL, P_ESTOP_DECEL,
+  P_FWD_SPEED, P_REV_SPEED, P_DRIVE_ACCEL, P_DRIVE_DECEL, P_TURN_SPEED, P_TURN_ACCEL, P_TURN_AT_SPEED,
   P_WATCHDOG, P_FEEDBACK_FORM, P_BRAKE_FITTED,
 };
 static float* const PARAM_VARS[PARAM_FLOATS] = {
   &kpL, &kiL, &kdL, &kpR, &kiR, &kdR, &maxWheel, &maxAccel, &estopDecel,
+  &fwdSpeed, &revSpeed, &driveAccel, &driveDecel, &turnSpeed, &turnAccel, &turnAtSpeed,
 };
 static const float PARAM_MIN[PARAM_FLOATS] = {
   WC_GAIN_P_MIN, WC_GAIN_I_MIN, 0.0f, WC_GAIN_P_MIN, WC_GAIN_I_MIN, 0.0f, WC_MAX_WHEEL_MIN, WC_ACCEL_MIN,
-  WC_DECEL_MIN,
+  WC_DECEL_MIN, WC_DRIVE_SPEED_MIN, WC_DRIVE_SPEED_MIN, WC_DRIVE_ACCEL_MIN, WC_DRIVE_ACCEL_MIN,
+  WC_TURN_SPEED_MIN, WC_TURN_ACCEL_MIN, 0.0f,
 };
 static const float PARAM_MAX[PARAM_FLOATS] = {
   WC_GAIN_P_MAX, WC_GAIN_I_MAX, WC_GAIN_D_MAX, WC_GAIN_P_MAX, WC_GAIN_I_MAX, WC_GAIN_D_MAX,
-  WC_MAX_WHEEL_SPEED, WC_ACCEL_MAX, WC_DECEL_MAX,
+  WC_MAX_WHEEL_SPEED, WC_ACCEL_MAX, WC_DECEL_MAX, WC_DRIVE_SPEED_MAX, WC_DRIVE_SPEED_MAX, WC_DRIVE_ACCEL_MAX,
+  WC_DRIVE_ACCEL_MAX, WC_TURN_SPEED_MAX, WC_TURN_ACCEL_MAX, 1.0f,
 };
 
 // One answer per command: an optional data line, then ACK:/NAK: for a framed line
@@ -2174,6 +2246,11 @@ static ParseResult restoreDefaults() {
   maxWheel = WC_MAX_WHEEL_SPEED;
   maxAccel = WC_MAX_ACCEL;
   estopDecel = WC_EMERGENCY_DECEL;
+  fwdSpeed = revSpeed = WC_DRIVE_SPEED_MAX;
+  driveAccel = driveDecel = WC_DRIVE_ACCEL_MAX;
+  turnSpeed = WC_TURN_SPEED_MAX;
+  turnAccel = WC_TURN_ACCEL_MAX;
+  turnAtSpeed = WC_TURN_AT_SPEED;
   watchdogMs = WC_WATCHDOG_MS;
   feedbackForm = WC_FEEDBACK_FORM;
   // brake_fitted stays: it says what the chair has, not how it is tuned

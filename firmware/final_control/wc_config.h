@@ -168,10 +168,21 @@
 #define WC_MODE_CMDVEL 1
 #define WC_MODE_PPM 2
 
+// ---- The drive limits: a drive profile's speeds and ramps, runtime parameters (docs/safety.md, "Drive limits"); each default sits past what the wheels can do, so that it limits nothing ---
+#define WC_DRIVE_SPEED_MIN 0.1f    // m/s: fwd_speed, rev_speed in [DRIVE_SPEED_MIN, DRIVE_SPEED_MAX]
+#define WC_DRIVE_SPEED_MAX 2.69f   // m/s: the default of fwd_speed and rev_speed, past the chair's 2.68 (MAX_WHEEL_SPEED at the rim): the top speed forward and back, of the chair's centre
+#define WC_DRIVE_ACCEL_MIN 0.1f    // m/s^2: drive_accel, drive_decel in [DRIVE_ACCEL_MIN, DRIVE_ACCEL_MAX]
+#define WC_DRIVE_ACCEL_MAX 3.0f    // m/s^2: the default of drive_accel (speeding up) and drive_decel (slowing down), each a wheel's ramp (divided by WHEEL_RADIUS) within max_accel, which stays the ceiling: 3.0 is 19.7 rad/s^2, past ACCEL_MAX
+#define WC_TURN_SPEED_MIN 0.1f     // rad/s: turn_speed in [TURN_SPEED_MIN, TURN_SPEED_MAX]
+#define WC_TURN_SPEED_MAX 9.5f     // rad/s: the default of turn_speed, the chair's top turn rate, past the 9.41 of the wheels at MAX_WHEEL_SPEED either way
+#define WC_TURN_ACCEL_MIN 0.5f     // rad/s^2: turn_accel in [TURN_ACCEL_MIN, TURN_ACCEL_MAX]
+#define WC_TURN_ACCEL_MAX 40.0f    // rad/s^2: the default of turn_accel, how fast the turn rate may change (the wheels' difference, WHEELBASE / 2 / WHEEL_RADIUS a rad/s^2 each: 74.8 rad/s^2 at 40, past ACCEL_MAX)
+#define WC_TURN_AT_SPEED 1.0f      // the default of turn_at_speed in [0, 1]: the share of turn_speed left at the top speed (the turn rate falls linearly with the speed toward it; DX's "Turning @ Full Speed")
+
 // ---- Parameters in EEPROM (save / defaults; protocol/PROTOCOL.md) ----------
 #define WC_EEPROM_SIZE 4096        // bytes of the ATmega2560's EEPROM, erased to 0xFF
 #define WC_EEPROM_PARAMS_ADDR 0    // EEPROM address of the parameter block
-#define WC_EEPROM_LAYOUT 3         // the block's first byte: its layout version (a blank EEPROM holds 0xFF; 1 was the block before feedback_form, 2 before brake_fitted)
+#define WC_EEPROM_LAYOUT 4         // the block's first byte: its layout version (a blank EEPROM holds 0xFF; 1 was the block before feedback_form, 2 before brake_fitted, 3 before the drive limits)
 
 // ---- Ranges of the runtime parameters (get:/set:; the defaults are the constants above) ---
 #define WC_GAIN_P_MIN 1.0f         // kp_l, kp_r in [GAIN_P_MIN, GAIN_P_MAX] (tests/firmware/test_gain_safety.py: pure integral control oscillates)

@@ -13,7 +13,8 @@ from hypothesis import strategies as st
 from wcdrive.avr.f32 import f32
 from wcdrive.avr.timer0 import Timer0, millis_after, overflows_until
 from wcdrive.firmware import constants as C
-from wcdrive.firmware.control import compute_pid, ramp_toward
+from wcdrive.firmware.control import compute_pid
+from wcdrive.firmware.drive import ramp_toward
 from wcdrive.firmware.final_control import Firmware
 from wcdrive.firmware.quadrature import QuadratureDecoder
 from wcdrive.firmware.state import FirmwareState

@@ -114,6 +114,15 @@ def test_control_frames() -> None:
         cc.command_to_frames(b"$1:estop*0000\n")
 
 
+def test_parameter_indices_keep_their_parameters() -> None:
+    """WC_PARAM's indices 0 to 11 are the first table's, in its order; the drive limits,
+    added to the serial table before watchdog_ms, take 12 to 18 (protocol/CAN.md)."""
+    assert cc.PARAM_NAMES == ("kp_l", "ki_l", "kd_l", "kp_r", "ki_r", "kd_r", "max_wheel", "max_accel",
+                              "estop_decel", "watchdog_ms", "feedback_form", "brake_fitted", "fwd_speed",
+                              "rev_speed", "drive_accel", "drive_decel", "turn_speed", "turn_accel",
+                              "turn_at_speed")
+
+
 u32 = st.integers(0, 2**32 - 1)
 centi = st.integers(-30000, 30000).map(lambda c: cc._centi(c).encode())
 enc_lines = st.builds(lambda a, b, vl, vr, m: b"ENC:%d,%d,VEL:%s,%s,MODE:%s" % (a, b, vl, vr, m),

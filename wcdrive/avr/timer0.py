@@ -67,8 +67,9 @@ def overflows_until(target_elapsed: int, start_fract: int = 0) -> int:
 #: pin set-up, 26,557; the brake's and push mode's globals took it to 26,746 unseen, within
 #: the test's 200; then the windings' estimates, in .data, and the 8 bytes more of the
 #: line buffer, 26,950; then the supply sense's set-up in ``setup()`` and its globals,
-#: 26,994).
-TIMER0_START_CYCLE = 26_994 - OVERFLOW_CYCLES
+#: 26,994; then the drive limits' seven globals and their parameter table's entries, in
+#: .data, 28,171).
+TIMER0_START_CYCLE = 28_171 - OVERFLOW_CYCLES
 
 
 _WINDOW_START = TIMER0_START_CYCLE + 128 * 64

@@ -4,7 +4,7 @@
 
 from __future__ import annotations
 
-from wcdrive.avr.f32 import f32
+from wcdrive.avr.f32 import div, f32
 from wcdrive.protocol.spec import build_id, integer, real, text
 
 # Serial link
@@ -154,6 +154,22 @@ THERMAL_ROLLBACK_SPAN = f32(THERMAL_CUTOFF_TEMP - THERMAL_ROLLBACK_TEMP)
 THERMAL_ROLLBACK_END = f32(THERMAL_ROLLBACK_TEMP - THERMAL_HYSTERESIS)
 THERMAL_EFFORT_SPAN = f32(real("FAULT_EFFORT_MAX") - THERMAL_EFFORT_MIN)
 THERMAL_SHARE_SPAN = f32(1.0 - THERMAL_SHARE_MIN)
+# The drive limits (docs/safety.md, "Drive limits")
+DRIVE_SPEED_MIN = f32(real("DRIVE_SPEED_MIN"))
+DRIVE_SPEED_MAX = f32(real("DRIVE_SPEED_MAX"))
+DRIVE_ACCEL_MIN = f32(real("DRIVE_ACCEL_MIN"))
+DRIVE_ACCEL_MAX = f32(real("DRIVE_ACCEL_MAX"))
+TURN_SPEED_MIN = f32(real("TURN_SPEED_MIN"))
+TURN_SPEED_MAX = f32(real("TURN_SPEED_MAX"))
+TURN_ACCEL_MIN = f32(real("TURN_ACCEL_MIN"))
+TURN_ACCEL_MAX = f32(real("TURN_ACCEL_MAX"))
+TURN_AT_SPEED = f32(real("TURN_AT_SPEED"))
+#: What the sketch's constant expression folds to: half the wheelbase, m.
+HALF_WHEELBASE = f32(WHEELBASE * 0.5)
+#: rad/s^2: a wheel's ramp at the default drive_accel and drive_decel (``wheel_rate``),
+#: past ACCEL_MAX.
+DRIVE_RATE_MAX = div(DRIVE_ACCEL_MAX, WHEEL_RADIUS)
+
 # The supply, measured, and the low battery (docs/safety.md, "The battery")
 PIN_SUPPLY = integer("PIN_SUPPLY")
 SUPPLY_DIVIDER = f32(real("SUPPLY_DIVIDER"))

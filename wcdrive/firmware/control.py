@@ -14,6 +14,7 @@ from wcdrive.firmware.brake import (
     braking_output,
     braking_setpoint,
 )
+from wcdrive.firmware.drive import ramp_setpoints
 from wcdrive.firmware.inhibit import capped_goals, send_inhibit_event, update_inhibits
 from wcdrive.firmware.motion import PIVOT_NONE, emergency_halt, pivot_step, require_neutral
 from wcdrive.firmware.motors import i32, motors
@@ -58,14 +59,6 @@ def compute_pid(setpoint: float, measurement: float, integral: float, prev_meas:
         if (integral > 0.0) != (clamped > 0.0):
             integral = 0.0
     return clamped, integral
-
-
-def ramp_toward(current: float, target: float, max_change: float) -> float:
-    """``rampToward``: ``current`` moved toward ``target`` by at most ``max_change``."""
-    diff = sub(target, current)
-    if abs(diff) <= max_change:
-        return target
-    return add(current, max_change if diff > 0.0 else neg(max_change))
 
 
 WHEEL_OK, WHEEL_SUSPECT, WHEEL_STALLED, WHEEL_REVERSED, WHEEL_IMPLAUSIBLE, WHEEL_NO_EFFECT = range(6)
@@ -507,12 +500,10 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
     elif s.needNeutral:
         _confirm_neutral(s, out)
 
-    max_change = mul(s.estopDecel if s.emergencyStop else s.maxAccel, dt)
     goal_l, goal_r = capped_goals(s)
     if s.brakeFitted and s.brakePhase != BRAKE_RELEASED:
         goal_l = goal_r = 0.0           # the brake not yet let go: the setpoints wait at zero
-    s.setpointL = ramp_toward(s.setpointL, goal_l, max_change)
-    s.setpointR = ramp_toward(s.setpointR, goal_r, max_change)
+    ramp_setpoints(s, goal_l, goal_r, dt)
     if s.brakeFitted and s.faultFlags:
         # the brake applied at the fault: the PID may brake the wheels with it, never drive
         s.setpointL = braking_setpoint(s.setpointL, s.filtVelL)

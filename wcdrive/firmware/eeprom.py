@@ -3,9 +3,9 @@ EEPROM-ready interrupt (``eepromReady``) of final_control.ino.
 
 The EEPROM is ``FirmwareState.eeprom`` (``EEPROM_SIZE`` bytes, erased to 0xFF). The
 parameter block at ``EEPROM_PARAMS_ADDR`` (protocol/PROTOCOL.md, "Parameters in
-EEPROM"): the layout version, the 9 float parameters in table order (binary32,
+EEPROM"): the layout version, the 16 float parameters in table order (binary32,
 little-endian), ``watchdog_ms`` (uint16), ``feedback_form`` and ``brake_fitted``
-(uint8 each), and the CRC-16/XMODEM of those 41 bytes (uint16, little-endian), 43 bytes
+(uint8 each), and the CRC-16/XMODEM of those 69 bytes (uint16, little-endian), 71 bytes
 in all.
 
 ``save`` snapshots the block into ``eeBlock`` and writes its first byte that differs

@@ -27,6 +27,7 @@ FLOAT_FIELDS = (
     "haltSetpointR", "effortSpeedL", "effortSpeedR", "effortSetpointL",
     "effortSetpointR", "overspeedFromL", "overspeedFromR", "windingTempL", "windingTempR", "supplyVolts",
     "kpL", "kiL", "kdL", "kpR", "kiR", "kdR", "maxWheel", "maxAccel", "estopDecel",
+    "fwdSpeed", "revSpeed", "driveAccel", "driveDecel", "turnSpeed", "turnAccel", "turnAtSpeed",
 )
 #: Integer and flag globals compared exactly.
 INT_FIELDS = (
@@ -114,6 +115,16 @@ class FirmwareState:
     maxWheel: float = C.MAX_WHEEL_SPEED
     maxAccel: float = C.MAX_ACCEL
     estopDecel: float = C.EMERGENCY_DECEL
+    #: The drive limits (``wcdrive.firmware.drive``): top speeds forward and back (m/s),
+    #: the ramps speeding up and slowing down (m/s^2), the top turn rate (rad/s), how
+    #: fast it may change (rad/s^2) and its share left at the top speed.
+    fwdSpeed: float = C.DRIVE_SPEED_MAX
+    revSpeed: float = C.DRIVE_SPEED_MAX
+    driveAccel: float = C.DRIVE_ACCEL_MAX
+    driveDecel: float = C.DRIVE_ACCEL_MAX
+    turnSpeed: float = C.TURN_SPEED_MAX
+    turnAccel: float = C.TURN_ACCEL_MAX
+    turnAtSpeed: float = C.TURN_AT_SPEED
     watchdogMs: int = C.WATCHDOG_MS
     feedbackForm: int = C.FEEDBACK_FORM
     brakeFitted: int = C.BRAKE_FITTED

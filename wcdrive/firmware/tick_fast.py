@@ -5,7 +5,8 @@ supply)``
 returns the bytes ``control.control_tick`` would send, having changed ``state`` as it
 would, or None having changed nothing: then the Python tick, the reference, runs
 (``Firmware.tick`` does that). The C path declines everything but the common case: a
-fault that latches, the watchdog firing, a tick that waits for neutral, any binary32
+fault that latches, the watchdog firing, a tick that waits for neutral, a drive limit
+set away from its default (``wcdrive.firmware.drive``), any binary32
 result that is not an ordinary number (``wcdrive.avr.f32`` computes those bit by bit as
 avr-libc does), a field of an unexpected type. tests/firmware/test_tick_fast.py holds it to the Python tick.
 
@@ -37,7 +38,8 @@ _FLOATS = ("ALPHA", "ONE_MINUS_ALPHA", "CPR", "TWO_PI", "PID_OUT_MAX", "PWM_SCAL
            "FAULT_EFFORT_OVERRUN", "PIVOT_START_SPEED", "PIVOT_SPEED",
            "OVERSPEED_MARGIN", "OVERSPEED_GAIN", "THERMAL_EMF", "FAULT_EFFORT_MAX", "THERMAL_AMBIENT",
            "THERMAL_RESISTANCE", "THERMAL_CAPACITY", "THERMAL_LOSS", "THERMAL_ROLLBACK_TEMP",
-           "SUPPLY_VOLTS_PER_COUNT", "SUPPLY_FILTER", "BATTERY_LOW_V")
+           "SUPPLY_VOLTS_PER_COUNT", "SUPPLY_FILTER", "BATTERY_LOW_V", "DRIVE_SPEED_MAX", "DRIVE_ACCEL_MAX",
+           "TURN_SPEED_MAX", "TURN_ACCEL_MAX", "TURN_AT_SPEED", "DRIVE_RATE_MAX", "WHEEL_RADIUS", "WHEELBASE")
 _INTS = ("CONTROL_PERIOD_MS", "TX_CREDIT_MAX", "TX_CREDIT_PER_MS", "FAULT_STALL_PWM",
          "FAULT_STALL_PWM_STANDING",
          "FAULT_STALL_TICKS",

@@ -24,7 +24,6 @@ from wcdrive.avr.f32 import bits
 from wcdrive.errors import WcdriveError
 from wcdrive.protocol.codec import (
     INTEGER_PARAMS,
-    PARAM_RANGES,
     Ack,
     Boot,
     Error,
@@ -39,6 +38,7 @@ from wcdrive.protocol.codec import (
     frame,
 )
 from wcdrive.protocol.motion import VelocityCommand, WheelCommand, parse_motion
+from wcdrive.protocol.spec import PARAMETERS
 
 # Host -> chair
 CMD_VEL = 0x300
@@ -61,7 +61,11 @@ CHAIR_TO_HOST = (FEEDBACK_ENC, FEEDBACK_VEL, STATUS_A, STATUS_B, STATUS_C, STATU
                  STATUS_F)
 
 CONTROL_OPS = {1: b"hello", 2: b"estop", 3: b"reset", 4: b"save", 5: b"defaults", 6: b"hello:4"}
-PARAM_NAMES = tuple(PARAM_RANGES)
+#: WC_PARAM's indices: each parameter's ``can_index`` in the spec, else the parameters
+#: without one in the table's order (an index once given keeps its parameter).
+_UNINDEXED = iter(range(len(PARAMETERS)))
+_CAN_INDEX = {p.name: p.can_index if p.can_index is not None else next(_UNINDEXED) for p in PARAMETERS}
+PARAM_NAMES = tuple(sorted(_CAN_INDEX, key=_CAN_INDEX.__getitem__))
 MODES = ("WHEEL", "CMDVEL", "PPM")
 REASONS = ("", "syntax", "number", "range", "fields", "overlong", "checksum", "estop", "busy",
            "param", "unframed", "fault", "overrun", "limit", "neutral",

@@ -95,6 +95,8 @@ class Parameter:
     low: float         # range, as the spec writes it (binary32 rounding is the port's)
     high: float
     integer: bool = False
+    #: Its WC_PARAM index on CAN, where that is not its place in the table (None).
+    can_index: int | None = None
 
 
 def _bound(entry: float | str) -> float:
@@ -105,7 +107,7 @@ def parameters(spec: dict[str, Any] | None = None) -> tuple[Parameter, ...]:
     """The parameter table in the firmware's order."""
     spec = spec or load()
     return tuple(Parameter(p["name"], p["field"], _bound(p["low"]), _bound(p["high"]),
-                           bool(p.get("integer", False))) for p in spec["parameter"])
+                           bool(p.get("integer", False)), p.get("can_index")) for p in spec["parameter"])
 
 
 PARAMETERS: tuple[Parameter, ...] = parameters()

@@ -101,7 +101,8 @@ static double f_from_int(int64_t n) { return rnd((double)n); }   /* |n| < 2**53 
     X(inhibitTick) X(inhibitStable) X(inhibitCountL) X(inhibitCountR) X(inhibitLatched) X(inhibitPending) X(inhibitOn) X(inhibitCountP) \
     X(brakeFitted) X(brakePhase) X(brakeTicks) X(brakeStatusTick) X(brakeStatusTicks) \
     X(windingTempL) X(windingTempR) X(thermalRollback) X(thermalPending) \
-    X(supplyTick) X(supplyVolts) X(batteryLow) X(batteryPending)
+    X(supplyTick) X(supplyVolts) X(batteryLow) X(batteryPending) \
+    X(fwdSpeed) X(revSpeed) X(driveAccel) X(driveDecel) X(turnSpeed) X(turnAccel) X(turnAtSpeed)
 
 #define ENUM(name) F_##name,
 enum { FIELDS(ENUM) N_FIELDS };
@@ -163,7 +164,8 @@ static struct {
         pivot_start_speed,
         pivot_speed, rounding2, thermal_emf, effort_max, thermal_ambient, thermal_resistance,
         thermal_capacity, thermal_loss, thermal_rollback_temp, supply_volts_per_count, supply_filter,
-        battery_low_v;
+        battery_low_v, drive_speed_max, drive_accel_max, turn_speed_max, turn_accel_max, turn_at_speed,
+        drive_rate_max, wheel_radius, wheelbase;
     int64_t control_period_ms, tx_credit_max, tx_credit_per_ms, stall_pwm, stall_pwm_standing, stall_ticks,
         stall_ticks_turning,
         reverse_ticks, runaway_pwm, runaway_ticks, effort_pwm, effort_ticks, illegal_per_tick, still_ticks, pivot_ticks,
@@ -431,6 +433,7 @@ static const int float_fields[] = {
     F_prevMeasL, F_prevMeasR, F_estopDecel, F_maxAccel, F_integralL, F_integralR, F_outputL,
     F_outputR, F_kpL, F_kiL, F_kdL, F_kpR, F_kiR, F_kdR, F_pendingL, F_pendingR,
     F_overspeedFromL, F_overspeedFromR, F_windingTempL, F_windingTempR, F_supplyVolts,
+    F_fwdSpeed, F_revSpeed, F_driveAccel, F_driveDecel, F_turnSpeed, F_turnAccel, F_turnAtSpeed,
 };
 
 static unsigned char field_is_float[N_FIELDS];     /* set by _bind from float_fields */
@@ -484,6 +487,20 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
         Py_RETURN_NONE;             /* the thermal rollback on, or its event to send */
     if (I(batteryLow) || I(batteryPending))
         Py_RETURN_NONE;             /* the low-battery rollback on, or its event to send */
+    if (D(fwdSpeed) != K.drive_speed_max || D(revSpeed) != K.drive_speed_max
+        || D(driveAccel) != K.drive_accel_max || D(driveDecel) != K.drive_accel_max
+        || D(turnSpeed) != K.turn_speed_max || D(turnAccel) != K.turn_accel_max
+        || D(turnAtSpeed) != K.turn_at_speed)
+        Py_RETURN_NONE;             /* a drive limit set (at the defaults none binds): the Python tick */
+    {
+        /* drive_caps and wheel_rate at the defaults: targets the wheels can take pass, and
+         * a max_accel below the default ramp's rate is the ramp; anything else, Python */
+        double speed = f_mul(f_mul(f_add(D(targetR), D(targetL)), 0.5), K.wheel_radius);
+        double turn = f_div(f_mul(f_sub(D(targetR), D(targetL)), K.wheel_radius), K.wheelbase);
+        if (!(speed <= K.drive_speed_max && speed >= -K.drive_speed_max && turn <= K.turn_speed_max
+              && turn >= -K.turn_speed_max && D(maxAccel) < K.drive_rate_max))
+            Py_RETURN_NONE;
+    }
     SETI(brakeStatusTick, brake_status);
     PyObject *mode_name = PyDict_GetItemWithError(mode_names, *slot(s, F_mode));
     if (mode_name == NULL) {
@@ -835,6 +852,14 @@ static PyObject *bind(PyObject *self, PyObject *args) {
           && const_double(consts, "SUPPLY_VOLTS_PER_COUNT", &k.supply_volts_per_count)
           && const_double(consts, "SUPPLY_FILTER", &k.supply_filter)
           && const_double(consts, "BATTERY_LOW_V", &k.battery_low_v)
+          && const_double(consts, "DRIVE_SPEED_MAX", &k.drive_speed_max)
+          && const_double(consts, "DRIVE_ACCEL_MAX", &k.drive_accel_max)
+          && const_double(consts, "TURN_SPEED_MAX", &k.turn_speed_max)
+          && const_double(consts, "TURN_ACCEL_MAX", &k.turn_accel_max)
+          && const_double(consts, "TURN_AT_SPEED", &k.turn_at_speed)
+          && const_double(consts, "DRIVE_RATE_MAX", &k.drive_rate_max)
+          && const_double(consts, "WHEEL_RADIUS", &k.wheel_radius)
+          && const_double(consts, "WHEELBASE", &k.wheelbase)
           && const_int(consts, "CONTROL_PERIOD_MS", &k.control_period_ms)
           && const_int(consts, "TX_CREDIT_MAX", &k.tx_credit_max)
           && const_int(consts, "TX_CREDIT_PER_MS", &k.tx_credit_per_ms)
