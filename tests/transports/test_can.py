@@ -78,7 +78,8 @@ def test_wheel_frame_matches_the_dbc(right, left, seq) -> None:
 @given(st.sampled_from(sorted(PARAM_RANGES)), st.data(), seqs)
 def test_param_set_reaches_the_board_as_the_same_binary32(name, data, seq) -> None:
     low, high = PARAM_RANGES[name]
-    if PARAMS[cc.PARAM_NAMES.index(name)].integer:
+    param = next(p for p in PARAMS if p.name == name)       # the table's order is not CAN's
+    if param.integer:
         value = data.draw(st.integers(int(low), int(high)))
     else:
         value = data.draw(st.floats(low, high).map(lambda x: round(x, data.draw(st.integers(0, 7)))))
@@ -90,8 +91,7 @@ def test_param_set_reaches_the_board_as_the_same_binary32(name, data, seq) -> No
     direct, via_can = Firmware(), Firmware()
     direct.feed(line + b"\n")
     via_can.feed(cc.frame_to_command(can_id, payload))
-    field = PARAMS[cc.PARAM_NAMES.index(name)].field
-    assert bits(getattr(direct.state, field)) == bits(getattr(via_can.state, field))
+    assert bits(getattr(direct.state, param.field)) == bits(getattr(via_can.state, param.field))
 
 
 @given(st.integers(0, 10**12), st.integers(0, 12), st.integers(0, 3))
