@@ -4,8 +4,9 @@ on the port and on the compiled firmware in simavr.
 
     python benchmarks/drive_profiles.py [--backend port|simavr|both] [--json]
 
-A profile is a set of the drive-limit parameters (``[params]``, sent with ``set:``
-before the drive); ``none`` leaves them at their defaults, which limit nothing. Per
+A profile is a row of the board's table of drive profiles, selected by number
+(``set:profile=<n>`` before the drive; the presets of protocol/spec.toml's
+``[[profile]]``); ``open``, profile 0, is each limit's default, which limits nothing. Per
 profile, three drives from rest on the level with an 80 kg rider, the host asking for
 the chair's full speed (``MAX_LINEAR``, 2.68 m/s) or full turn:
 
@@ -28,20 +29,18 @@ import math
 
 import numpy as np
 
-from wcdrive.protocol.spec import real
+from wcdrive.protocol.spec import PROFILE_PARAMETERS, real
+from wcdrive.protocol.spec import PROFILES as PRESETS
 from wcdrive.sim import runner
 from wcdrive.sim.scenario import Scenario, Segment
 
-#: The profiles measured: the drive-limit parameters each sets.
-PROFILES: dict[str, dict[str, float]] = {
-    "none": {},
-    "indoor": {"fwd_speed": 1.0, "rev_speed": 0.5, "drive_accel": 0.5, "drive_decel": 0.6,
-               "turn_speed": 1.0, "turn_accel": 2.0, "turn_at_speed": 0.5},
-    "outdoor": {"fwd_speed": 2.0, "rev_speed": 0.8, "drive_accel": 0.7, "drive_decel": 0.7,
-                "turn_speed": 1.5, "turn_accel": 3.0, "turn_at_speed": 0.4},
-    "attendant": {"fwd_speed": 0.6, "rev_speed": 0.4, "drive_accel": 0.4, "drive_decel": 0.5,
-                  "turn_speed": 0.8, "turn_accel": 1.5, "turn_at_speed": 0.8},
-}
+#: The profiles measured, by name: their numbers in the board's table.
+PROFILES: dict[str, int] = {p.name: number for number, p in enumerate(PRESETS)}
+
+
+def limits(name: str) -> dict[str, float]:
+    """Profile ``name``'s drive limits as its preset sets them."""
+    return dict(zip(PROFILE_PARAMETERS, PRESETS[PROFILES[name]].values, strict=True))
 FULL = real("MAX_LINEAR")
 SPIN = real("MAX_ANGULAR")
 WINDOW_S = 0.5
@@ -118,14 +117,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
     backends = ("port", "simavr") if args.backend == "both" else (args.backend,)
-    results = {name: {b: measure(PROFILES[name], b) for b in backends} for name in args.profiles}
+    results = {name: {b: measure({"profile": PROFILES[name]}, b) for b in backends}
+               for name in args.profiles}
     if args.json:
         print(json.dumps(results, indent=1))
     else:
         print(table(results))
         for name in args.profiles:
-            values = ", ".join(f"{k} {v}" for k, v in PROFILES[name].items())
-            print(f"\n{name}: " + (values or "the defaults"))
+            values = ", ".join(f"{k} {v}" for k, v in limits(name).items())
+            print(f"\n{name} (profile {PROFILES[name]}): {values}")
     bad = [k for by_b in results.values() for f in by_b.values()
            for k, v in f.items() if not math.isfinite(v)]
     return 1 if bad else 0

@@ -205,15 +205,16 @@ def neutral_board() -> FirmwareState:
     raise RuntimeError("the neutral prelude did not bring the board to neutral")
 
 
-_MUTABLE = ("eeprom", "eeBlock", "cmdBuf")
+_MUTABLE = ("eeprom", "eeBlock", "cmdBuf", "profileTable")
 
 
 def _clone(state: FirmwareState) -> Firmware:
-    """A board in a copy of ``state`` (a shallow copy with its buffers copied: a deep
-    copy takes five times as long)."""
+    """A board in a copy of ``state`` (a shallow copy with its buffers and the drive
+    profiles' table copied: a deep copy takes five times as long)."""
     s = copy.copy(state)
     for name in _MUTABLE:
-        setattr(s, name, bytearray(getattr(state, name)))
+        value = getattr(state, name)
+        setattr(s, name, list(value) if isinstance(value, list) else bytearray(value))
     return Firmware(s)
 
 

@@ -229,6 +229,15 @@ float driveDecel = WC_DRIVE_ACCEL_MAX;      // m/s^2: a wheel slowing down (with
 float turnSpeed = WC_TURN_SPEED_MAX;        // rad/s: top turn rate
 float turnAccel = WC_TURN_ACCEL_MAX;        // rad/s^2: how fast the turn rate may change
 float turnAtSpeed = WC_TURN_AT_SPEED;       // the share of turnSpeed left at the top speed
+// The drive profiles (docs/safety.md, "Drive profiles"): WC_PROFILE_COUNT rows of the
+// seven drive limits above, in their parameter table order; the row of the profile in
+// force is the limits above, which set: changes together with it. In .noinit: setup()
+// fills it from the presets (presetProfiles) before loadParams, so reset's clearing
+// loop need not.
+#define PROFILE_FLOATS 7
+uint8_t profile = WC_PROFILE;               // runtime parameter profile: the row in force
+float profileTable[WC_PROFILE_COUNT][PROFILE_FLOATS] __attribute__((section(".noinit")));
+static const float PROFILE_PRESETS[WC_PROFILE_COUNT][PROFILE_FLOATS] PROGMEM = WC_PROFILE_PRESETS;
 uint16_t watchdogMs = WC_WATCHDOG_MS;
 uint8_t feedbackForm = WC_FEEDBACK_FORM;    // 1: the unframed feedback line ends in the wheels' r/l fields
 
@@ -1319,9 +1328,10 @@ static void sendTelemetry(uint32_t now) {
                   (faultFlags != 0 ? 128 : 0);
   // state: bit 0 waiting for neutral (motion refused), 1 the neutral fault, 2 driving
   // inhibited, 3 the speed capped by an inhibit input, 4 a fitted brake applied, 5 push
-  // mode (the brake released by hand), 6 the thermal rollback, 7 the low-battery rollback
+  // mode (the brake released by hand), 6 the thermal rollback, 7 the low-battery rollback,
+  // 8 and 9 the drive profile in force
   uint8_t engaged = inhibitEngaged();
-  uint8_t state = (needNeutral ? 1 : 0) | (neutralFault ? 2 : 0) | ((engaged & INHIBIT_STOP_MASK) ? 4 : 0) |
+  uint16_t state = ((uint16_t)profile << 8) | (needNeutral ? 1 : 0) | (neutralFault ? 2 : 0) | ((engaged & INHIBIT_STOP_MASK) ? 4 : 0) |
                   ((engaged & (uint8_t)~INHIBIT_STOP_MASK) ? 8 : 0) | (brakeFitted && !brakeReleased ? 16 : 0) |
                   ((engaged & INHIBIT_PUSH) ? 32 : 0) | (thermalRollback ? 64 : 0) | (batteryLow ? 128 : 0);
   const uint32_t fields[] = {
@@ -1782,11 +1792,13 @@ static const char* const REASONS[] = {
 
 // Runtime parameters: name, variable, range. The first PARAM_FLOATS are floats;
 // watchdog_ms, feedback_form and brake_fitted (the last three) are integers.
-#define PARAM_COUNT 19
+#define PARAM_COUNT 20
 #define PARAM_FLOATS 16
+#define PARAM_DRIVE_FIRST 9   // fwd_speed: the first of a profile's PROFILE_FLOATS limits
 #define PARAM_WATCHDOG 16
 #define PARAM_FEEDBACK_FORM 17
 #define PARAM_BRAKE_FITTED 18
+#define PARAM_PROFILE 19
 static const char P_KP_L[] PROGMEM = "kp_l";
 static const char P_KI_L[] PROGMEM = "ki_l";
 static const char P_KD_L[] PROGMEM = "kd_l";
@@ -1806,10 +1818,11 @@ static const char P_TURN_AT_SPEED[] PROGMEM = "turn_at_speed";
 static const char P_WATCHDOG[] PROGMEM = "watchdog_ms";
 static const char P_FEEDBACK_FORM[] PROGMEM = "feedback_form";
 static const char P_BRAKE_FITTED[] PROGMEM = "brake_fitted";
+static const char P_PROFILE[] PROGMEM = "profile";
 static const char* const PARAM_NAMES[PARAM_COUNT] = {
   P_KP_L, P_KI_L, P_KD_L, P_KP_R, P_KI_R, P_KD_R, P_MAX_WHEEL, P_MAX_ACCEL, P_ESTOP_DECEL,
   P_FWD_SPEED, P_REV_SPEED, P_DRIVE_ACCEL, P_DRIVE_DECEL, P_TURN_SPEED, P_TURN_ACCEL, P_TURN_AT_SPEED,
-  P_WATCHDOG, P_FEEDBACK_FORM, P_BRAKE_FITTED,
+  P_WATCHDOG, P_FEEDBACK_FORM, P_BRAKE_FITTED, P_PROFILE,
 };
 static float* const PARAM_VARS[PARAM_FLOATS] = {
   &kpL, &kiL, &kdL, &kpR, &kiR, &kdR, &maxWheel, &maxAccel, &estopDecel,
@@ -1825,6 +1838,15 @@ static const float PARAM_MAX[PARAM_FLOATS] = {
   WC_MAX_WHEEL_SPEED, WC_ACCEL_MAX, WC_DECEL_MAX, WC_DRIVE_SPEED_MAX, WC_DRIVE_SPEED_MAX, WC_DRIVE_ACCEL_MAX,
   WC_DRIVE_ACCEL_MAX, WC_TURN_SPEED_MAX, WC_TURN_ACCEL_MAX, 1.0f,
 };
+
+// The drive profiles' table back to its presets.
+static void presetProfiles() { memcpy_P(profileTable, PROFILE_PRESETS, sizeof(profileTable)); }
+
+// Profile p in force: its row becomes the drive limits.
+static void useProfile(uint8_t p) {
+  profile = p;
+  for (uint8_t i = 0; i < PROFILE_FLOATS; i++) *PARAM_VARS[PARAM_DRIVE_FIRST + i] = profileTable[p][i];
+}
 
 // One answer per command: an optional data line, then ACK:/NAK: for a framed line
 // with a sequence number, ERR: for any other rejected command. At most
@@ -1851,6 +1873,8 @@ static void answer(ParseResult r, int32_t seq, uint8_t data) {
       line.println(feedbackForm);
     } else if (replyParam == PARAM_BRAKE_FITTED) {
       line.println(brakeFitted);
+    } else if (replyParam == PARAM_PROFILE) {
+      line.println(profile);
     } else {
       line.println(*PARAM_VARS[replyParam], 4);
     }
@@ -2151,12 +2175,21 @@ static ParseResult parseSet(uint8_t& data) {
     brakePhase = brakeReleased ? BRAKE_RELEASED : BRAKE_ENGAGING;
     brakeTicks = 0;
     brakeStatusTicks = 0;
+  } else if (i == PARAM_PROFILE) {
+    int32_t p = parseDigits(eq + 1, 4);
+    if (p < 0) return ERR_NUMBER;
+    if (p > WC_PROFILE_MAX) return ERR_RANGE;
+    useProfile((uint8_t)p);
   } else {
     float v;
     ParseResult r = parseNumber(eq + 1, false, v);
     if (r != PARSE_OK) return r;
     if (!(v >= PARAM_MIN[i] && v <= PARAM_MAX[i])) return ERR_RANGE;
     *PARAM_VARS[i] = v;
+    // a drive limit: the profile in force's, its row changed with it
+    if (i >= PARAM_DRIVE_FIRST && i < PARAM_DRIVE_FIRST + PROFILE_FLOATS) {
+      profileTable[profile][i - PARAM_DRIVE_FIRST] = v;
+    }
   }
   replyParam = (uint8_t)i;
   data = DATA_PARAM;
@@ -2165,17 +2198,21 @@ static ParseResult parseSet(uint8_t& data) {
 
 // ---------------------------------------------------------------------------
 // Parameters in EEPROM (protocol/PROTOCOL.md, "Parameters in EEPROM"). The block at
-// WC_EEPROM_PARAMS_ADDR: the layout version (WC_EEPROM_LAYOUT), the 9 float parameters in
-// table order (binary32, little-endian), watchdog_ms (uint16), feedback_form (uint8),
-// brake_fitted (uint8), then the CRC-16/XMODEM of those 41 bytes (uint16, little-endian):
-// 43 bytes.
+// WC_EEPROM_PARAMS_ADDR: the layout version (WC_EEPROM_LAYOUT), the 9 float parameters
+// before the drive limits in table order (binary32, little-endian), the drive profiles'
+// table (WC_PROFILE_COUNT rows of PROFILE_FLOATS), watchdog_ms (uint16), feedback_form,
+// brake_fitted and profile (uint8 each), then the CRC-16/XMODEM of those 154 bytes
+// (uint16, little-endian): 156 bytes.
 // ---------------------------------------------------------------------------
-#define EE_WATCHDOG_AT (1 + 4 * PARAM_FLOATS)
+#define EE_TABLE_AT (1 + 4 * PARAM_DRIVE_FIRST)
+#define EE_WATCHDOG_AT (EE_TABLE_AT + (int)sizeof(profileTable))
 #define EE_FORM_AT (EE_WATCHDOG_AT + 2)
 #define EE_FITTED_AT (EE_FORM_AT + 1)
-#define EE_DATA_BYTES (EE_FITTED_AT + 1)
+#define EE_PROFILE_AT (EE_FITTED_AT + 1)
+#define EE_DATA_BYTES (EE_PROFILE_AT + 1)
 #define EE_BLOCK_BYTES (EE_DATA_BYTES + 2)
-static uint8_t eeBlock[EE_BLOCK_BYTES];   // what save writes
+// What save writes. In .noinit, as profileTable: save fills it before anything reads it.
+static uint8_t eeBlock[EE_BLOCK_BYTES] __attribute__((section(".noinit")));
 uint8_t eeNext = EE_BLOCK_BYTES;          // the next byte of eeBlock to compare and write
 uint8_t eeBusy = 0;                       // a save is being written (the interrupt is on)
 
@@ -2227,10 +2264,12 @@ ISR(EE_READY_vect) {
 static ParseResult saveParams() {
   if (eeBusy) return ERR_BUSY;
   eeBlock[0] = WC_EEPROM_LAYOUT;
-  for (uint8_t i = 0; i < PARAM_FLOATS; i++) memcpy(eeBlock + 1 + 4 * i, PARAM_VARS[i], 4);
+  for (uint8_t i = 0; i < PARAM_DRIVE_FIRST; i++) memcpy(eeBlock + 1 + 4 * i, PARAM_VARS[i], 4);
+  memcpy(eeBlock + EE_TABLE_AT, profileTable, sizeof(profileTable));
   memcpy(eeBlock + EE_WATCHDOG_AT, &watchdogMs, 2);
   eeBlock[EE_FORM_AT] = feedbackForm;
   eeBlock[EE_FITTED_AT] = brakeFitted;
+  eeBlock[EE_PROFILE_AT] = profile;
   uint16_t crc = eeCrc(eeBlock);
   memcpy(eeBlock + EE_DATA_BYTES, &crc, 2);
   eeNext = 0;
@@ -2246,11 +2285,8 @@ static ParseResult restoreDefaults() {
   maxWheel = WC_MAX_WHEEL_SPEED;
   maxAccel = WC_MAX_ACCEL;
   estopDecel = WC_EMERGENCY_DECEL;
-  fwdSpeed = revSpeed = WC_DRIVE_SPEED_MAX;
-  driveAccel = driveDecel = WC_DRIVE_ACCEL_MAX;
-  turnSpeed = WC_TURN_SPEED_MAX;
-  turnAccel = WC_TURN_ACCEL_MAX;
-  turnAtSpeed = WC_TURN_AT_SPEED;
+  presetProfiles();
+  useProfile(WC_PROFILE);
   watchdogMs = WC_WATCHDOG_MS;
   feedbackForm = WC_FEEDBACK_FORM;
   // brake_fitted stays: it says what the chair has, not how it is tuned
@@ -2278,17 +2314,21 @@ static void loadParams() {
   } else if (crc != eeCrc(b)) {
     why = F("crc");
   } else if (ms < WC_WATCHDOG_MIN_MS || ms > WC_WATCHDOG_MAX_MS || b[EE_FORM_AT] > WC_FEEDBACK_FORM_MAX ||
-             b[EE_FITTED_AT] > WC_BRAKE_FITTED_MAX) {
+             b[EE_FITTED_AT] > WC_BRAKE_FITTED_MAX || b[EE_PROFILE_AT] > WC_PROFILE_MAX) {
     why = F("range");
   } else {
-    for (uint8_t i = 0; i < PARAM_FLOATS; i++) {
+    for (uint8_t i = 0; i < PARAM_DRIVE_FIRST + PROFILE_FLOATS * WC_PROFILE_COUNT; i++) {
+      // the floats before the drive limits, then the table's, row by row
+      uint8_t param = i < PARAM_DRIVE_FIRST ? i : PARAM_DRIVE_FIRST + (i - PARAM_DRIVE_FIRST) % PROFILE_FLOATS;
       float v;
       memcpy(&v, b + 1 + 4 * i, 4);
-      if (!(v >= PARAM_MIN[i] && v <= PARAM_MAX[i])) why = F("range");   // NaN too
+      if (!(v >= PARAM_MIN[param] && v <= PARAM_MAX[param])) why = F("range");   // NaN too
     }
   }
   if (why == NULL) {
-    for (uint8_t i = 0; i < PARAM_FLOATS; i++) memcpy(PARAM_VARS[i], b + 1 + 4 * i, 4);
+    for (uint8_t i = 0; i < PARAM_DRIVE_FIRST; i++) memcpy(PARAM_VARS[i], b + 1 + 4 * i, 4);
+    memcpy(profileTable, b + EE_TABLE_AT, sizeof(profileTable));
+    useProfile(b[EE_PROFILE_AT]);
     watchdogMs = ms;
     feedbackForm = b[EE_FORM_AT];
     brakeFitted = b[EE_FITTED_AT];   // at boot: the brake engaged from reset (BRAKE_ENGAGED)
@@ -2533,6 +2573,7 @@ void setup() {
   // WC_TX_CREDIT_MAX once the ring is empty, and the 2 ms by which millis() may run
   // ahead of the UART between two ticks: the ring never holds more than 511.
   txCredit = WC_TX_CREDIT_BOOT;
+  presetProfiles();             // the table's rows before a saved block replaces them
   loadParams();                 // and its EVT line, within the budget
   wdt_enable(WC_HW_WATCHDOG);   // a loop() pass that hangs resets the board
   lastControlTime = lastTickTime = millis();

@@ -336,9 +336,10 @@ def _values(p: Param) -> st.SearchStrategy[float]:
 #: brake, whose driver would see an open coil: tests/firmware/test_brake.py).
 #: The drive limits cap the step itself (its speed, its ramp: docs/safety.md, "Drive
 #: limits"), so a step under them never reaches what was asked; they are held to their
-#: own figures in tests/firmware/test_drive_limits.py and stay at their defaults here.
+#: own figures in tests/firmware/test_drive_limits.py and stay at their defaults here, and
+#: so does the drive profile that sets them (profile 0, whose limits are those defaults).
 DRIVE_LIMITS = ("fwd_speed", "rev_speed", "drive_accel", "drive_decel", "turn_speed", "turn_accel",
-                "turn_at_speed")
+                "turn_at_speed", "profile")
 PARAMETER_SETS = st.fixed_dictionaries({p.name: _values(p) for p in PARAMS
                                         if p.name != "brake_fitted" and p.name not in DRIVE_LIMITS})
 SPEEDS = st.builds(lambda magnitude, sign: sign * round(magnitude, 3),

@@ -138,7 +138,9 @@ def test_a_hot_motor_rolls_back_its_current_limit_and_the_top_speed() -> None:
     last = hot[-1]                      # its estimate a little below 120 by now: its own share
     share_cap = C.MAX_WHEEL_SPEED * (1 - 0.5 * rollback_of(max(last["windingTempL"], last["windingTempR"])))
     assert last["setpointL"] == last["setpointR"] == pytest.approx(share_cap, rel=1e-5)
-    assert after[0]["thermalRollback"] == 0 and after[-1]["pwmL"] == after[-1]["pwmR"] == 255
+    # full duty again (until the scripted wheels, short of the setpoint at full duty,
+    # read as stalled on a grade: EVT:STALLED_ON_GRADE near the trace's end)
+    assert after[0]["thermalRollback"] == 0 and any(a["pwmL"] == a["pwmR"] == 255 for a in after)
     tlm = [parse_line(line) for line in board_lines(rec, b"TLM:")]     # as a host reads them
     assert all(isinstance(m, ExtendedTelemetry) for m in tlm)
     hot_seen = [m.thermal_rollback for m in tlm if isinstance(m, ExtendedTelemetry)]

@@ -42,3 +42,14 @@ def test_charged_low_and_cut_off() -> None:
     # another fault alone is the faults status's, not this one's
     assert messages.battery(_tlm(0x800, 0, 250), "sim://")["level"] == messages.OK
     assert messages.battery(_tlm(0, 0, None), "sim://")["message"] == "not measured"
+
+
+def test_the_drive_profile_in_force() -> None:
+    """``wcdrive: drive profile``: TLM ``state`` bits 8 and 9, by number and by the
+    preset's name, beside the other bits (docs/safety.md, "Drive profiles")."""
+    tlm = _tlm(0, (2 << 8) | 128, 230)
+    assert tlm.drive_profile == 2 and tlm.battery_low
+    shown = messages.drive_profile(tlm, "sim://")
+    assert shown["name"] == "wcdrive: drive profile" and shown["level"] == messages.OK
+    assert shown["message"] == "profile 2 (outdoor)" and _values(shown)["name"] == "outdoor"
+    assert messages.drive_profile(_tlm(0, 0, 250), "sim://")["message"] == "profile 0 (open)"

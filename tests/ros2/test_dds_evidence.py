@@ -168,8 +168,9 @@ def test_every_topic_arrives(square: dict[str, Any]) -> None:
     assert peer["joint_names"] == ["left_wheel_joint", "right_wheel_joint"]
     assert counts["rt/scan"] >= 10                             # the scan source plugs in
     assert peer["scans"][-1][0] == "laser" and peer["scans"][-1][1] == [1.5] * 8
-    assert peer["diagnostics"] == ["wcdrive: TLM", "wcdrive: battery", "wcdrive: cmd_vel", "wcdrive: e-stop",
-                                   "wcdrive: faults", "wcdrive: link", "wcdrive: motor heat"]
+    assert peer["diagnostics"] == ["wcdrive: TLM", "wcdrive: battery", "wcdrive: cmd_vel",
+                                   "wcdrive: drive profile", "wcdrive: e-stop", "wcdrive: faults",
+                                   "wcdrive: link", "wcdrive: motor heat"]
     assert int(peer["cmd_vel_diag"][-1]["accepted"]) > 100
 
 

@@ -1,6 +1,7 @@
-"""The drive limits with the plant (docs/safety.md, "Drive limits"): the ISO 7176-6-style
-figures of ``benchmarks/drive_profiles.py`` on the port, each held to the profile's own
-limits, and the profile that sets none to what the chair did before them."""
+"""The drive profiles with the plant (docs/safety.md, "Drive profiles"): the ISO
+7176-6-style figures of ``benchmarks/drive_profiles.py`` on the port, each profile of the
+board's table selected by number and held to its own limits, and the open profile to
+what the chair did before them."""
 
 from __future__ import annotations
 
@@ -24,8 +25,8 @@ def test_each_figure_keeps_within_its_profile(name: str) -> None:
     spin's turn within turn_speed (9.4 rad/s asked), the turn at the top speed within
     turn_speed x turn_at_speed, the acceleration within drive_accel, and the stop from
     the top speed no shorter than drive_decel allows (v^2 / 2a)."""
-    p = bench.PROFILES[name]
-    f = bench.measure(p, "port")
+    p = bench.limits(name)
+    f = bench.measure({"profile": bench.PROFILES[name]}, "port")
     assert p["fwd_speed"] * 0.95 <= f["top_forward_mps"] <= p["fwd_speed"] * 1.02
     assert p["rev_speed"] * 0.95 <= f["top_backward_mps"] <= p["rev_speed"] * 1.02
     assert f["top_turn_rad_s"] <= p["turn_speed"] * 1.02
@@ -34,8 +35,8 @@ def test_each_figure_keeps_within_its_profile(name: str) -> None:
     assert f["stopping_distance_m"] >= f["top_forward_mps"] ** 2 / (2 * p["drive_decel"])
 
 
-def test_the_defaults_limit_nothing() -> None:
-    """With none set the chair reaches 2.6 m/s forward and spins past 2.5 rad/s: what the
+def test_the_open_profile_limits_nothing() -> None:
+    """In profile 0 the chair reaches 2.6 m/s forward and spins past 2.5 rad/s: what the
     wheels give, far past any profile above."""
-    f = bench.measure({}, "port")
+    f = bench.measure({"profile": bench.PROFILES["open"]}, "port")
     assert f["top_forward_mps"] > 2.5 and f["top_turn_rad_s"] > 2.5

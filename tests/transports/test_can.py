@@ -116,11 +116,12 @@ def test_control_frames() -> None:
 
 def test_parameter_indices_keep_their_parameters() -> None:
     """WC_PARAM's indices 0 to 11 are the first table's, in its order; the drive limits,
-    added to the serial table before watchdog_ms, take 12 to 18 (protocol/CAN.md)."""
+    added to the serial table before watchdog_ms, take 12 to 18, and the drive profile
+    19 (protocol/CAN.md)."""
     assert cc.PARAM_NAMES == ("kp_l", "ki_l", "kd_l", "kp_r", "ki_r", "kd_r", "max_wheel", "max_accel",
                               "estop_decel", "watchdog_ms", "feedback_form", "brake_fitted", "fwd_speed",
                               "rev_speed", "drive_accel", "drive_decel", "turn_speed", "turn_accel",
-                              "turn_at_speed")
+                              "turn_at_speed", "profile")
 
 
 u32 = st.integers(0, 2**32 - 1)
@@ -131,7 +132,7 @@ enc_lines = st.builds(lambda a, b, vl, vr, m: b"ENC:%d,%d,VEL:%s,%s,MODE:%s" % (
 tlm_fields = st.tuples(u32, u32, st.integers(0, 65535), st.integers(0, 255), st.integers(0, 255),
                        st.integers(0, 1), st.integers(0, 1), u32, u32, st.integers(0, 255), u32, u32,
                        st.integers(0, 8191), st.integers(0, 0x3FFF), st.integers(0, 65535),
-                       st.integers(0, 65535), st.integers(0, 255))
+                       st.integers(0, 65535), st.integers(0, 1023))   # state: bits 8-9 the profile
 # the supply (tenths of a volt), the 18th field; None: a board before it
 supply_fields = st.one_of(st.none(), st.integers(0, 65535))
 tlm_lines = st.builds(lambda v, dv: b"TLM:" + b",".join(b"%d" % x for x in v + (() if dv is None else (dv,))),

@@ -26,6 +26,7 @@ from wcdrive.firmware.inhibit import drive_inhibited
 from wcdrive.firmware.motion import accept_command, emergency_halt, require_neutral
 from wcdrive.firmware.output import DATA_HELLO, DATA_NONE, DATA_PARAM, answer, reject, send, send_event
 from wcdrive.firmware.params import BY_NAME, PARAMS
+from wcdrive.firmware.profiles import drive_limit_set, use_profile
 from wcdrive.firmware.state import FirmwareState
 
 NEWLINE, RETURN, COMMA, DOLLAR = 0x0A, 0x0D, 0x2C, 0x24
@@ -294,6 +295,8 @@ def parse_set(s: FirmwareState, body: bytes) -> tuple[str | None, int]:
             return "range", 0
         if p.field == "brakeFitted":
             set_brake_fitted(s, ms)
+        elif p.field == "profile":
+            use_profile(s, ms)
         else:
             setattr(s, p.field, ms)
         return None, i
@@ -304,6 +307,7 @@ def parse_set(s: FirmwareState, body: bytes) -> tuple[str | None, int]:
     if not (value >= p.low and value <= p.high):
         return "range", 0
     setattr(s, p.field, value)
+    drive_limit_set(s, i, value)
     return None, i
 
 

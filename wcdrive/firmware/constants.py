@@ -164,6 +164,9 @@ TURN_SPEED_MAX = f32(real("TURN_SPEED_MAX"))
 TURN_ACCEL_MIN = f32(real("TURN_ACCEL_MIN"))
 TURN_ACCEL_MAX = f32(real("TURN_ACCEL_MAX"))
 TURN_AT_SPEED = f32(real("TURN_AT_SPEED"))
+PROFILE_COUNT = integer("PROFILE_COUNT")
+PROFILE = integer("PROFILE")
+PROFILE_MAX = integer("PROFILE_MAX")
 #: What the sketch's constant expression folds to: half the wheelbase, m.
 HALF_WHEELBASE = f32(WHEELBASE * 0.5)
 #: rad/s^2: a wheel's ramp at the default drive_accel and drive_decel (``wheel_rate``),

@@ -3,10 +3,11 @@ EEPROM-ready interrupt (``eepromReady``) of final_control.ino.
 
 The EEPROM is ``FirmwareState.eeprom`` (``EEPROM_SIZE`` bytes, erased to 0xFF). The
 parameter block at ``EEPROM_PARAMS_ADDR`` (protocol/PROTOCOL.md, "Parameters in
-EEPROM"): the layout version, the 16 float parameters in table order (binary32,
-little-endian), ``watchdog_ms`` (uint16), ``feedback_form`` and ``brake_fitted``
-(uint8 each), and the CRC-16/XMODEM of those 69 bytes (uint16, little-endian), 71 bytes
-in all.
+EEPROM"): the layout version, the 9 float parameters before the drive limits in table
+order (binary32, little-endian), the drive profiles' table (``PROFILE_COUNT`` rows of
+the 7 drive limits, ``wcdrive.firmware.profiles``), ``watchdog_ms`` (uint16),
+``feedback_form``, ``brake_fitted`` and ``profile`` (uint8 each), and the
+CRC-16/XMODEM of those 154 bytes (uint16, little-endian), 156 bytes in all.
 
 ``save`` snapshots the block into ``eeBlock`` and writes its first byte that differs
 from the EEPROM; each EEPROM-ready interrupt (3.4 ms later on the chip) writes the next
@@ -22,19 +23,29 @@ import struct
 from wcdrive.firmware import constants as C
 from wcdrive.firmware.output import CRLF, send, send_event
 from wcdrive.firmware.params import PARAMS
+from wcdrive.firmware.profiles import DRIVE_FIRST, PRESETS, PROFILE_FLOATS, preset_profiles, use_profile
 from wcdrive.firmware.state import EE_BLOCK_BYTES, FirmwareState
 
 #: The block's bytes before its CRC, and in all.
 BLOCK_BYTES = EE_BLOCK_BYTES
 DATA_BYTES = BLOCK_BYTES - 2
-_FLOATS = tuple(p for p in PARAMS if not p.integer)
+#: The float parameters before the drive limits, and the parameter each of the block's
+#: floats is checked against: those, then the table's, row by row.
+_FLOATS = PARAMS[:DRIVE_FIRST]
+_BLOCK_FLOATS = _FLOATS + PARAMS[DRIVE_FIRST:DRIVE_FIRST + PROFILE_FLOATS] * (len(PRESETS) // PROFILE_FLOATS)
 _WATCHDOG = next(p for p in PARAMS if p.field == "watchdogMs")
 _FORM = next(p for p in PARAMS if p.field == "feedbackForm")
 _FITTED = next(p for p in PARAMS if p.field == "brakeFitted")
-#: Where ``watchdog_ms``, ``feedback_form`` and ``brake_fitted`` sit in the block.
-_WATCHDOG_AT = 1 + 4 * len(_FLOATS)
+_PROFILE = next(p for p in PARAMS if p.field == "profile")
+#: Where the table, ``watchdog_ms``, ``feedback_form``, ``brake_fitted`` and ``profile``
+#: sit in the block.
+_TABLE_AT = 1 + 4 * len(_FLOATS)
+_WATCHDOG_AT = 1 + 4 * len(_BLOCK_FLOATS)
 _FORM_AT = _WATCHDOG_AT + 2
 _FITTED_AT = _FORM_AT + 1
+_PROFILE_AT = _FITTED_AT + 1
+#: A drive limit's place in a row, by field.
+_DRIVE_INDEX = {p.field: i for i, p in enumerate(PARAMS[DRIVE_FIRST:DRIVE_FIRST + PROFILE_FLOATS])}
 #: The parameters' defaults (the globals' initial values).
 _DEFAULT_VALUES: dict[str, float | int] = {p.field: getattr(FirmwareState(), p.field) for p in PARAMS}
 
@@ -47,18 +58,27 @@ def ee_crc(block: bytes | bytearray) -> int:
 def pack(s: FirmwareState) -> bytes:
     """The block that ``save`` writes for the parameters in force."""
     data = bytes([C.EEPROM_LAYOUT]) + b"".join(struct.pack("<f", getattr(s, p.field)) for p in _FLOATS)
-    data += struct.pack("<HBB", getattr(s, _WATCHDOG.field), getattr(s, _FORM.field),
-                        getattr(s, _FITTED.field))
+    data += struct.pack(f"<{len(s.profileTable)}f", *s.profileTable)
+    data += struct.pack("<HBBB", getattr(s, _WATCHDOG.field), getattr(s, _FORM.field),
+                        getattr(s, _FITTED.field), s.profile)
     return data + struct.pack("<H", ee_crc(data))
 
 
 def block_image(values: dict[str, float | int] | None = None, *, layout: int = C.EEPROM_LAYOUT) -> bytes:
     """An EEPROM image (``EEPROM_SIZE`` bytes, erased elsewhere) holding a block with the
     defaults overridden by ``values`` (FirmwareState field names), as ``save`` writes it;
-    ``layout`` other than ``EEPROM_LAYOUT`` makes a block of another layout version."""
+    ``layout`` other than ``EEPROM_LAYOUT`` makes a block of another layout version. A
+    drive limit given sets it in the row of the profile in force (``profile``, given or
+    the default)."""
     s = FirmwareState()
-    for name, value in (values or {}).items():
+    values = values or {}
+    if "profile" in values:
+        use_profile(s, int(values["profile"]))
+    for name, value in values.items():
         setattr(s, name, value)
+        index = _DRIVE_INDEX.get(name)
+        if index is not None:
+            s.profileTable[s.profile * PROFILE_FLOATS + index] = float(value)
     block = bytearray(pack(s))
     if layout != C.EEPROM_LAYOUT:
         block[0] = layout
@@ -152,10 +172,14 @@ def save_params(s: FirmwareState) -> str | None:
 
 def restore_defaults(s: FirmwareState) -> None:
     """``restoreDefaults``: ``defaults`` (the EEPROM is not written): every parameter but
-    ``brake_fitted``, which says what the chair has, not how it is tuned."""
-    for p in PARAMS:
-        if p.field != _FITTED.field:
-            setattr(s, p.field, _DEFAULT_VALUES[p.field])
+    ``brake_fitted``, which says what the chair has, not how it is tuned; the profiles'
+    table back to its presets, profile ``PROFILE`` in force."""
+    for p in PARAMS[:DRIVE_FIRST]:
+        setattr(s, p.field, _DEFAULT_VALUES[p.field])
+    preset_profiles(s)
+    use_profile(s, C.PROFILE)
+    for p in (_WATCHDOG, _FORM):
+        setattr(s, p.field, _DEFAULT_VALUES[p.field])
 
 
 def check(block: bytes) -> str | None:
@@ -169,9 +193,9 @@ def check(block: bytes) -> str | None:
         return "crc"
     ms = struct.unpack_from("<H", block, _WATCHDOG_AT)[0]
     if (ms < _WATCHDOG.low or ms > _WATCHDOG.high or block[_FORM_AT] > _FORM.high
-            or block[_FITTED_AT] > _FITTED.high):
+            or block[_FITTED_AT] > _FITTED.high or block[_PROFILE_AT] > _PROFILE.high):
         return "range"
-    for i, p in enumerate(_FLOATS):
+    for i, p in enumerate(_BLOCK_FLOATS):
         v = struct.unpack_from("<f", block, 1 + 4 * i)[0]
         if not (v >= p.low and v <= p.high):
             return "range"
@@ -189,6 +213,8 @@ def load_params(s: FirmwareState, out: bytearray) -> None:
         return
     for i, p in enumerate(_FLOATS):
         setattr(s, p.field, struct.unpack_from("<f", block, 1 + 4 * i)[0])
+    s.profileTable[:] = struct.unpack_from(f"<{len(s.profileTable)}f", block, _TABLE_AT)
+    use_profile(s, block[_PROFILE_AT])
     setattr(s, _WATCHDOG.field, struct.unpack_from("<H", block, _WATCHDOG_AT)[0])
     setattr(s, _FORM.field, block[_FORM_AT])
     setattr(s, _FITTED.field, block[_FITTED_AT])    # at boot: the brake engaged from reset

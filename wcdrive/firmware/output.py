@@ -105,7 +105,7 @@ def send_telemetry(s: FirmwareState, now: int) -> bytes:
     state = ((1 if s.needNeutral else 0) | (2 if s.neutralFault else 0)
              | (4 if engaged & C.INHIBIT_STOP_MASK else 0) | (8 if engaged & ~C.INHIBIT_STOP_MASK & 7 else 0)
              | (16 if s.brakeFitted and not s.brakeReleased else 0) | (32 if engaged & C.INHIBIT_PUSH else 0)
-             | (64 if s.thermalRollback else 0) | (128 if s.batteryLow else 0))
+             | (64 if s.thermalRollback else 0) | (128 if s.batteryLow else 0) | (s.profile << 8))
     # the filtered supply in tenths of a volt, rounded (``supplyDecivolts``)
     supply = to_u32(add(mul(s.supplyVolts, 10.0), 0.5))
     # Every field is unsigned and in range, so %d prints what Print::print prints.

@@ -8,7 +8,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from wcdrive.avr.f32 import f32
-from wcdrive.protocol.spec import PARAMETERS
+from wcdrive.protocol.spec import PARAMETERS, PROFILE_PARAMETERS, PROFILES
 
 
 @dataclass(frozen=True)
@@ -27,3 +27,10 @@ PARAMS: tuple[Param, ...] = tuple(
           int(p.high) if p.integer else f32(p.high), p.integer)
     for p in PARAMETERS)
 BY_NAME: dict[bytes, int] = {p.name.encode(): i for i, p in enumerate(PARAMS)}
+#: The drive limits a profile's row holds, and the table index of the first
+#: (``PARAM_DRIVE_FIRST``): ``wcdrive.firmware.profiles``.
+PROFILE_FLOATS = len(PROFILE_PARAMETERS)
+DRIVE_FIRST = next(i for i, p in enumerate(PARAMS) if p.name == PROFILE_PARAMETERS[0])
+assert tuple(p.name for p in PARAMS[DRIVE_FIRST:DRIVE_FIRST + PROFILE_FLOATS]) == PROFILE_PARAMETERS
+#: ``PROFILE_PRESETS``: the profiles' presets, row after row, as binary32.
+PRESETS: tuple[float, ...] = tuple(f32(v) for profile in PROFILES for v in profile.values)

@@ -12,12 +12,14 @@ from dataclasses import dataclass, field, fields
 
 from wcdrive.firmware import constants as C
 from wcdrive.firmware.constants import HIGH, MODE_CMDVEL
-from wcdrive.firmware.params import PARAMS
+from wcdrive.firmware.params import PARAMS, PRESETS, PROFILE_FLOATS
 
 #: The EEPROM parameter block (``EE_BLOCK_BYTES``): the layout version, the float
-#: parameters (4 bytes each), ``watchdog_ms`` (2 bytes), ``feedback_form`` and
-#: ``brake_fitted`` (1 byte each) and a CRC-16 (2 bytes).
-EE_BLOCK_BYTES = 1 + 4 * sum(1 for p in PARAMS if not p.integer) + 2 + 1 + 1 + 2
+#: parameters before the drive limits and the profiles' table (4 bytes each),
+#: ``watchdog_ms`` (2 bytes), ``feedback_form``, ``brake_fitted`` and ``profile`` (1 byte
+#: each) and a CRC-16 (2 bytes).
+EE_BLOCK_BYTES = (1 + 4 * (sum(1 for p in PARAMS if not p.integer) - PROFILE_FLOATS)
+                  + 4 * len(PRESETS) + 2 + 1 + 1 + 1 + 2)
 
 #: The controller floats compared bit for bit against the firmware's SRAM.
 FLOAT_FIELDS = (
@@ -35,7 +37,8 @@ INT_FIELDS = (
     "lastControlTime", "tickCount", "pivotPhase", "pivotTicksLeft", "cmdSinceTick", "watchdogArmed",
     "lastCmdTime", "emergencyStop", "ppmLost", "stillTicks", "parked", "rejectedCount",
     "errSuppressed", "errLinesThisTick", "cmdLen", "cmdCommas", "cmdDiscarding",
-    "illTickL", "illTickR", "watchdogMs", "feedbackForm", "brakeFitted", "estopLatched", "tlmEnabled",
+    "illTickL", "illTickR", "watchdogMs", "feedbackForm", "brakeFitted", "profile", "estopLatched",
+    "tlmEnabled",
     "linesFramed", "lineCounter", "unframedLine", "lastSeq",
     "rxCount", "crcRejected", "stormTickL", "stormTickR", "faultFlags", "stallTicksL",
     "stallTicksR", "reverseTicksL", "reverseTicksR", "runawayTicksL", "runawayTicksR", "effortPwmL",
@@ -128,6 +131,10 @@ class FirmwareState:
     watchdogMs: int = C.WATCHDOG_MS
     feedbackForm: int = C.FEEDBACK_FORM
     brakeFitted: int = C.BRAKE_FITTED
+    #: The drive profile in force and the profiles' table, row after row
+    #: (``wcdrive.firmware.profiles``; the firmware's ``profileTable``, filled by setup()).
+    profile: int = C.PROFILE
+    profileTable: list[float] = field(default_factory=lambda: list(PRESETS))
     lastTravel: float = 0.0
     pivotPhase: int = 0
     pivotTicksLeft: int = 0

@@ -367,9 +367,10 @@ class Wheelchair:
     def save_params(self, timeout: float = 1.0) -> None:
         """Stores the parameters in force in the board's EEPROM (protocol/PROTOCOL.md,
         "Parameters in EEPROM"): it loads them at every boot from then on
-        (``params_at_boot``). The board writes them in the background, one byte per
-        3.4 ms (about 140 ms); a save sent meanwhile is refused ``busy``, and this
-        retries it until ``timeout``."""
+        (``params_at_boot``). The board writes them in the background, one changed byte
+        per 3.4 ms (up to 530 ms for the whole block; a reset before it is done leaves
+        the defaults at the next boot); a save sent meanwhile is refused ``busy``, and
+        this retries it until ``timeout``."""
         self._eeprom_command(Request.save(), timeout)
 
     def restore_defaults(self) -> None:

@@ -230,8 +230,8 @@ def message_to_frames(msg: Message) -> list[tuple[int, bytes]]:
                 (STATUS_C, struct.pack("<II", t.illegal_left, t.illegal_right)),
                 (STATUS_D, struct.pack("<II", t.rejected, t.crc_rejected)),
                 *([] if t.supply_dv is None else [(STATUS_F, struct.pack("<H6x", _sat16(t.supply_dv)))]),
-                (STATUS_E, struct.pack("<HHHBx", t.faults & 0xFFFF, _sat16(t.rx_lost), _sat16(t.late),
-                                       t.state or 0))]
+                (STATUS_E, struct.pack("<HHHH", t.faults & 0xFFFF, _sat16(t.rx_lost), _sat16(t.late),
+                                       (t.state or 0) & 0xFFFF))]
     reply: tuple[int, int, int, float] | None = None
     if isinstance(msg, Ack):
         reply = (KIND_ACK, 0, msg.seq, 0.0)
@@ -304,7 +304,7 @@ class TelemetryAssembler:
             seq, pwm_l, pwm_r, dirs, flags, free = struct.unpack("<HBBBBH", status[STATUS_B][:8])
             ill_l, ill_r = struct.unpack("<II", status[STATUS_C][:8])
             rej, crc = struct.unpack("<II", status[STATUS_D][:8])
-            faults, rx_lost, late, state = struct.unpack("<HHHB", data[:7])
+            faults, rx_lost, late, state = struct.unpack("<HHHH", data[:8])
             values = (millis, rx, seq, pwm_l, pwm_r, dirs & 1, dirs >> 1 & 1, ill_l, ill_r, flags,
                       rej, crc, free, faults, rx_lost, late, state)
             if STATUS_F in status:          # the supply (boards since it was measured)

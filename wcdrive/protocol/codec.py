@@ -273,7 +273,8 @@ class ExtendedTelemetry:
     #: an inhibit input (``ERR:inhibit``); bit 3: the speed capped by one; bit 4: a fitted
     #: parking brake applied (``brake_fitted`` 1, its pin LOW); bit 5: push mode (the
     #: brake released by hand); bit 6: the thermal rollback; bit 7: the low-battery
-    #: rollback. Boards before this field end at ``late`` (None).
+    #: rollback; bits 8-9: the drive profile in force. Boards before this field end at
+    #: ``late`` (None).
     state: int | None = None
     #: The supply the board measures, filtered, in tenths of a volt (``supply_v``).
     #: Boards before this field end at ``state`` (None).
@@ -324,6 +325,12 @@ class ExtendedTelemetry:
         """State bit 7: the filtered supply is below BATTERY_LOW_V: the top speed is
         lowered (``EVT:BATTERY,1``)."""
         return bool(self.state and self.state & 128)
+
+    @property
+    def drive_profile(self) -> int | None:
+        """State bits 8-9: the drive profile in force (``set:profile``); None from a
+        board that does not send the state."""
+        return None if self.state is None else (self.state >> 8) & 3
 
     @property
     def supply_v(self) -> float | None:

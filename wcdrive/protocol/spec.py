@@ -112,6 +112,29 @@ def parameters(spec: dict[str, Any] | None = None) -> tuple[Parameter, ...]:
 
 PARAMETERS: tuple[Parameter, ...] = parameters()
 
+#: The drive limits a profile holds, in the parameter table's order (contiguous there).
+PROFILE_PARAMETERS: tuple[str, ...] = ("fwd_speed", "rev_speed", "drive_accel", "drive_decel",
+                                       "turn_speed", "turn_accel", "turn_at_speed")
+
+
+@dataclass(frozen=True)
+class Profile:
+    """A drive profile's preset (``[[profile]]``): its name and its drive limits, in
+    ``PROFILE_PARAMETERS`` order, as the spec writes them."""
+
+    name: str
+    values: tuple[float, ...]
+
+
+def profiles(spec: dict[str, Any] | None = None) -> tuple[Profile, ...]:
+    """The drive profiles' presets, by number."""
+    spec = spec or load()
+    return tuple(Profile(p["name"], tuple(_bound(p[name]) for name in PROFILE_PARAMETERS))
+                 for p in spec["profile"])
+
+
+PROFILES: tuple[Profile, ...] = profiles()
+
 
 def build_id(sketch_dir: Path | None = None) -> str:
     """The firmware's build id, as its Makefile computes it: the first 8 hex digits of
@@ -154,7 +177,13 @@ def header(spec: dict[str, Any] | None = None) -> str:
                 continue
             define = f"#define WC_{name} {_literal(entry)}"
             lines.append(f"{define:<34} // {entry['doc']}" if entry.get("doc") else define)
-    lines += ["", "#endif", ""]
+    lines += ["", "// ---- The drive profiles' presets ([[profile]]), rows of "
+              + ", ".join(PROFILE_PARAMETERS) + " " + "-" * 3,
+              "#define WC_PROFILE_PRESETS { \\"]
+    for number, profile in enumerate(profiles(spec)):
+        row = ", ".join(f"{v!r}f" for v in profile.values)
+        lines.append(f"  {{ {row} }},  /* {number}: {profile.name} */ \\")
+    lines += ["}", "", "#endif", ""]
     return "\n".join(lines)
 
 

@@ -199,7 +199,9 @@ def _replay_boot(segment: bytes, sent: bytes) -> ReplayReport:
     else:
         fw = Firmware(FirmwareState())
         produced = bytearray()
-    fw.state.lastControlTime = candidates[0]
+    # setup() ends with lastControlTime = lastTickTime = millis(): both, or the first
+    # tick's speeds are over a period 1 ms off once setup() runs past millis() 0
+    fw.state.lastControlTime = fw.state.lastTickTime = candidates[0]
     recorded = b"".join(lines[:tick_starts[-1] + (2 if tick_starts[-1] in tlm_of else 1)])
     pos = 0
     for k, i in enumerate(tick_starts):

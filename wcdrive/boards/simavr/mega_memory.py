@@ -52,7 +52,7 @@ VARIABLE_FORMATS = {
           "notNeutralPending", "notNeutralTicks", "neutralFault", "inhibitTick", "inhibitStable",
           "inhibitCountL", "inhibitCountR", "inhibitLatched", "inhibitPending",
           "inhibitOn", "inhibitCountP",
-          "brakeFitted", "brakePhase", "brakeTicks", "brakeStatusTick", "brakeStatusTicks",
+          "brakeFitted", "profile", "brakePhase", "brakeTicks", "brakeStatusTick", "brakeStatusTicks",
           "thermalRollback", "thermalPending", "batteryLow", "batteryPending"),
 }
 _FORMAT_OF = {name: fmt for fmt, names in VARIABLE_FORMATS.items() for name in names}

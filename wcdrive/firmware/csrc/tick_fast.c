@@ -99,7 +99,7 @@ static double f_from_int(int64_t n) { return rnd((double)n); }   /* |n| < 2**53 
     X(brakeReleased) X(overspeedTicksL) X(overspeedTicksR) X(overspeedFromL) X(overspeedFromR) \
     X(needNeutral) X(neutralFault) \
     X(inhibitTick) X(inhibitStable) X(inhibitCountL) X(inhibitCountR) X(inhibitLatched) X(inhibitPending) X(inhibitOn) X(inhibitCountP) \
-    X(brakeFitted) X(brakePhase) X(brakeTicks) X(brakeStatusTick) X(brakeStatusTicks) \
+    X(brakeFitted) X(profile) X(brakePhase) X(brakeTicks) X(brakeStatusTick) X(brakeStatusTicks) \
     X(windingTempL) X(windingTempR) X(thermalRollback) X(thermalPending) \
     X(supplyTick) X(supplyVolts) X(batteryLow) X(batteryPending) \
     X(fwdSpeed) X(revSpeed) X(driveAccel) X(driveDecel) X(turnSpeed) X(turnAccel) X(turnAtSpeed)
@@ -733,7 +733,7 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
                             I(illTickL), I(illTickR), flags, I(rejectedCount), I(crcRejected),
                             I(freeRam), I(faultFlags), I(rxLostTick), I(lateTicks),
                             (I(needNeutral) ? 1 : 0) | (I(neutralFault) ? 2 : 0)
-                            | (I(brakeFitted) && !I(brakeReleased) ? 16 : 0),
+                            | (I(brakeFitted) && !I(brakeReleased) ? 16 : 0) | (I(profile) << 8),
                             /* the supply, tenths of a volt: positive and small here */
                             (int64_t)f_add(f_mul(D(supplyVolts), 10.0), 0.5) };
         Buf t = { .n = 0 };

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from wcdrive.protocol.codec import ExtendedTelemetry
+from wcdrive.protocol.spec import PROFILES
 from wcdrive.ros2 import bridge
 from wcdrive.ros2.bridge import BASE_FRAME as BASE_FRAME
 from wcdrive.ros2.bridge import ODOM_FRAME as ODOM_FRAME
@@ -136,6 +137,17 @@ def battery(tlm: ExtendedTelemetry, hardware_id: str) -> dict[str, Any]:
         level, message = OK, f"{volts} V" if volts else "not measured"
     return status("wcdrive: battery", level, message, hardware_id,
                   {"supply_v": volts, "battery_low": tlm.battery_low})
+
+
+def drive_profile(tlm: ExtendedTelemetry, hardware_id: str) -> dict[str, Any]:
+    """``wcdrive: drive profile``, from the board's TLM (``state`` bits 8 and 9): the
+    profile in force by number and by its preset's name (OK: a profile is a setting, not
+    a condition). The preset's limits are what the profile started as: ``set:`` may have
+    changed them on the board (``get:`` reads them)."""
+    number = tlm.drive_profile or 0
+    preset = PROFILES[number]
+    return status("wcdrive: drive profile", OK, f"profile {number} ({preset.name})", hardware_id,
+                  {"profile": number, "name": preset.name})
 
 
 def diagnostics(t: float, statuses: list[dict[str, Any]]) -> dict[str, Any]:

@@ -517,6 +517,7 @@ class ChairNode:
         if isinstance(tlm, ExtendedTelemetry):
             statuses.append(messages.motor_heat(tlm, hardware))
             statuses.append(messages.battery(tlm, hardware))
+            statuses.append(messages.drive_profile(tlm, hardware))
         try:
             self._pub["/diagnostics"].publish(messages.diagnostics(self.now(), statuses))
         except Exception as exc:
