@@ -74,6 +74,7 @@ __attribute__((used, aligned(16))) static const int8_t QUAD_R[16] = {
 // interrupts per encoder a period; "reset" unmasks.
 volatile uint8_t stormL = 0, stormR = 0;
 volatile uint8_t stormEdgesL = WC_STORM_EDGES, stormEdgesR = WC_STORM_EDGES;
+extern uint8_t stormTickL, stormTickR;   // the flags as the control tick latched them (below)
 
 // The pins as the interrupts read them; GPIOR1/GPIOR2 keep the last reading << 2 (GPIOR0
 // holds SREG while an encoder interrupt runs: they do not nest).
@@ -164,21 +165,24 @@ ISR(INT3_vect, ISR_NAKED) {
 ISR(INT2_vect, ISR_ALIASOF(INT3_vect));
 
 // "reset" after an implausible-encoder fault: the pins read afresh, the interrupts on
-// again.
+// again. Only an encoder whose storm a tick has latched (stormTickL/R: the fault this
+// reset clears): one masked since the last tick stays masked, and the next tick latches
+// its fault. (Unmasked at once, a storm between a tick and a reset went unreported, and
+// the edges lost while it was masked with it.)
 static void unmaskEncoders() {
   ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
     // The pins are read last, the interrupts already on (taken once this block ends): an
     // edge before the read is in the state read, one after it sets its flag and is
     // taken from that state. (Read first, an edge between the read and the unmask was
     // lost, and the next one counted as an illegal transition.)
-    if (stormL) {
+    if (stormL && stormTickL) {
       EIFR = _BV(INTF4) | _BV(INTF5);
       EIMSK |= _BV(INT4) | _BV(INT5);
       stormEdgesL = WC_STORM_EDGES;
       stormL = 0;
       GPIOR1 = (uint8_t)(readEncoderL() << 2);
     }
-    if (stormR) {
+    if (stormR && stormTickR) {
       EIFR = _BV(INTF2) | _BV(INTF3);
       EIMSK |= _BV(INT2) | _BV(INT3);
       stormEdgesR = WC_STORM_EDGES;
@@ -2121,7 +2125,7 @@ static ParseResult latchEstop() {
 }
 
 // reset: release the e-stop and any fault once the chair is parked (at rest, motors
-// off); encoders masked by the storm guard come back.
+// off); encoders masked by the storm guard come back (those whose storm a tick latched).
 static ParseResult resetEstop() {
   if ((estopLatched || faultFlags != 0) && !parked) return ERR_BUSY;
   if (estopLatched || faultFlags != 0) requireNeutral();

@@ -417,9 +417,14 @@ def reset_estop(s: FirmwareState) -> str | None:
 
 
 def unmask_encoders(s: FirmwareState) -> None:
-    """``unmaskEncoders``: the storm flags cleared; the ISR model (``QuadratureDecoder``,
-    driven by ``PortLoop``) sees them cleared and reads the pins afresh (``unmask``)."""
-    s.stormL = s.stormR = 0
+    """``unmaskEncoders``: the storm flags of the encoders whose storm a tick latched
+    cleared (one masked since stays masked: the next tick latches its fault); the ISR
+    model (``QuadratureDecoder``, driven by ``PortLoop``) sees them cleared and reads the
+    pins afresh (``unmask``)."""
+    if s.stormTickL:
+        s.stormL = 0
+    if s.stormTickR:
+        s.stormR = 0
 
 
 def dispatch(s: FirmwareState, body: bytes, out: bytearray) -> tuple[str | None, int, int]:
