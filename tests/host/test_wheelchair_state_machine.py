@@ -82,6 +82,7 @@ import wcdrive
 from tests.conftest import thorough
 from tests.support.board_of import board_of
 from wcdrive.avr.avrlibc import strtod
+from wcdrive.avr.f32 import f32
 from wcdrive.boards.sim_board import SimulatedBoard
 from wcdrive.errors import WcdriveCommandError, WcdriveConnectionError, WcdriveEstopError, WcdriveNeutralError
 from wcdrive.firmware import constants as C
@@ -90,7 +91,7 @@ from wcdrive.firmware.state import FirmwareState
 from wcdrive.host.requests import Request
 from wcdrive.host.telemetry import LinkLost, LinkRestored
 from wcdrive.protocol.codec import MAX_ANGULAR, MAX_LINEAR, MAX_WHEEL, encode_cmdvel, encode_wheel
-from wcdrive.protocol.spec import PARAMETERS
+from wcdrive.protocol.spec import PARAMETERS, PROFILE_PARAMETERS, PROFILES
 from wcdrive.transports.faulty import FaultyPort
 
 BY_NAME = {p.name: p for p in PARAMETERS}
@@ -343,6 +344,10 @@ class WheelchairMachine(RuleBasedStateMachine):
     def _new_board_model(self) -> None:
         """What a board holds just after reset."""
         self.params = dict(DEFAULTS)
+        # the drive profiles' table: set:profile puts a row's drive limits in force, set:
+        # of a drive limit changes the row in force (docs/safety.md, "Drive profiles")
+        self.profiles = [{name: float(f32(v)) for name, v in zip(PROFILE_PARAMETERS, p.values, strict=True)}
+                         for p in PROFILES]
         self.mode = C.MODE_CMDVEL
         self.target = (0.0, 0.0)            # (right, left): the board's, or pending in a pivot
         self.armed = False                  # a motion command is in force: the watchdog may stop it
@@ -457,6 +462,10 @@ class WheelchairMachine(RuleBasedStateMachine):
             elif body.startswith(b"set:"):
                 name, text = body[4:].decode().split("=")
                 self.params[name] = int(text) if BY_NAME[name].integer else strtod(text.encode())[0]
+                if name == "profile":
+                    self.params.update(self.profiles[self.params[name]])
+                elif name in PROFILE_PARAMETERS:
+                    self.profiles[self.params["profile"]][name] = self.params[name]
             elif body.startswith(b"get:") or body in (b"hello", b"hello:4"):
                 pass
             else:
