@@ -22,8 +22,8 @@ import struct
 
 from wcdrive.firmware import constants as C
 from wcdrive.firmware.output import CRLF, send, send_event
-from wcdrive.firmware.params import PARAMS
-from wcdrive.firmware.profiles import DRIVE_FIRST, PRESETS, PROFILE_FLOATS, preset_profiles, use_profile
+from wcdrive.firmware.params import DRIVE_FIRST, PARAMS, PRESETS, PROFILE_FLOATS
+from wcdrive.firmware.profiles import drive_limit_set, preset_profiles, use_profile
 from wcdrive.firmware.state import EE_BLOCK_BYTES, FirmwareState
 
 #: The block's bytes before its CRC, and in all.
@@ -44,8 +44,8 @@ _WATCHDOG_AT = 1 + 4 * len(_BLOCK_FLOATS)
 _FORM_AT = _WATCHDOG_AT + 2
 _FITTED_AT = _FORM_AT + 1
 _PROFILE_AT = _FITTED_AT + 1
-#: A drive limit's place in a row, by field.
-_DRIVE_INDEX = {p.field: i for i, p in enumerate(PARAMS[DRIVE_FIRST:DRIVE_FIRST + PROFILE_FLOATS])}
+#: A parameter's place in the table, by field.
+_INDEX = {p.field: i for i, p in enumerate(PARAMS)}
 #: The parameters' defaults (the globals' initial values).
 _DEFAULT_VALUES: dict[str, float | int] = {p.field: getattr(FirmwareState(), p.field) for p in PARAMS}
 
@@ -76,9 +76,8 @@ def block_image(values: dict[str, float | int] | None = None, *, layout: int = C
         use_profile(s, int(values["profile"]))
     for name, value in values.items():
         setattr(s, name, value)
-        index = _DRIVE_INDEX.get(name)
-        if index is not None:
-            s.profileTable[s.profile * PROFILE_FLOATS + index] = float(value)
+        if name in _INDEX:
+            drive_limit_set(s, _INDEX[name], float(value))
     block = bytearray(pack(s))
     if layout != C.EEPROM_LAYOUT:
         block[0] = layout

@@ -16,8 +16,7 @@ from __future__ import annotations
 from wcdrive.firmware.params import DRIVE_FIRST, PARAMS, PRESETS, PROFILE_FLOATS
 from wcdrive.firmware.state import FirmwareState
 
-__all__ = ["DRIVE_FIRST", "PRESETS", "PROFILE_FLOATS", "drive_limit_set", "preset_profiles",
-           "use_profile"]
+__all__ = ["drive_limit_set", "preset_profiles", "use_profile"]
 
 _FIELDS = tuple(p.field for p in PARAMS[DRIVE_FIRST:DRIVE_FIRST + PROFILE_FLOATS])
 
