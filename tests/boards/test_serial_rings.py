@@ -19,27 +19,20 @@ import re
 import numpy as np
 import pytest
 
+from tests.support.recordings import chatter
 from wcdrive.boards.simavr.virtual_mega import F_CPU, VirtualMega
 from wcdrive.firmware import constants as C
 from wcdrive.firmware.final_control import Firmware
 from wcdrive.firmware.state import FirmwareState
 from wcdrive.hil.lockstep import Recording, compare, record
 from wcdrive.hil.traces import Trace
-from wcdrive.plant.encoders import EdgeTrain, edges_from_trajectory
+from wcdrive.plant.encoders import edges_from_trajectory
 from wcdrive.protocol.can_frames import REASONS
 from wcdrive.protocol.codec import frame
 
 pytestmark = pytest.mark.simavr
 
 ACK = re.compile(rb"ACK:(\d+)\r\n")
-
-
-def chatter(t0: float, duration: float, rate: float) -> EdgeTrain:
-    """Channel A of an encoder toggling ``rate`` times a second (a loose connector)."""
-    n = int(duration * rate)
-    times = t0 + np.arange(n) / rate
-    states = np.where(np.arange(n) % 2 == 0, 0b01, 0b11).astype(np.uint8)
-    return EdgeTrain(times, states, 0, 0)
 
 
 def storm_during_a_stream() -> Trace:

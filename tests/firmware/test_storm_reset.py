@@ -6,27 +6,17 @@ swallowed. Both backends, in lock step."""
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 
-from tests.support.recordings import recorded, tick_states
+from tests.support.recordings import chatter, recorded, tick_states
 from wcdrive.hil.traces import Trace
-from wcdrive.plant.encoders import EdgeTrain
 
 pytestmark = pytest.mark.simavr
 
 
-def _chatter(t0: float, duration: float, rate: float) -> EdgeTrain:
-    """Channel A of the right encoder toggling ``rate`` times a second (a loose connector)."""
-    n = int(duration * rate) // 2 * 2
-    times = t0 + np.arange(n) / rate
-    states = np.where(np.arange(n) % 2 == 0, 0b01, 0b11).astype(np.uint8)
-    return EdgeTrain(times, states, 0, 0)
-
-
 def _storm_and_reset(reset_at: float):
     return recorded(Trace(duration=0.4, serial=[(reset_at, b"reset\n")],
-                          encoders={"right": _chatter(0.105, 0.0025, 100_000)}))
+                          encoders={"right": chatter(0.105, 0.0025, 100_000)}))
 
 
 def test_a_storm_masked_before_a_reset_is_latched_at_the_next_tick() -> None:

@@ -2,7 +2,7 @@
 simavr and replayed on the port with no mismatch (``recorded``), its control ticks
 (``tick_states``) and the board's lines (``board_lines``, unframed); and the pieces the
 traces are made of: a command repeated (``every``), a wheel turning steadily
-(``turning``)."""
+(``turning``), an encoder's channel A chattering (``chatter``)."""
 
 from __future__ import annotations
 
@@ -52,3 +52,11 @@ def turning(until: float, mirrored: bool, speed: float) -> EdgeTrain:
     t = np.linspace(0.0, until, 4000)
     angle = np.where(t < 0.3, 0.0, (t - 0.3) * speed)
     return edges_from_trajectory(t, 0.5 + (-1 if mirrored else 1) * angle * COUNTS_PER_RAD)
+
+
+def chatter(t0: float, duration: float, rate: float) -> EdgeTrain:
+    """Channel A of an encoder toggling ``rate`` times a second (a loose connector)."""
+    n = int(duration * rate)
+    times = t0 + np.arange(n) / rate
+    states = np.where(np.arange(n) % 2 == 0, 0b01, 0b11).astype(np.uint8)
+    return EdgeTrain(times, states, 0, 0)
