@@ -7,6 +7,7 @@
 # Two depths, one command, both derandomized (a red run is red again on the same code):
 #   bash scripts/test.sh            the fast profile ("default"), a short differential, and
 #                                   not the packaging checks marked slow (the wheel builds)
+#                                   nor the long repeats marked thorough
 #   CI=true bash scripts/test.sh    the thorough profile ("ci"): 200 examples a test and
 #                                   the full differential (what .ci/run runs)
 # HYPOTHESIS_PROFILE=NAME overrides either; extra arguments go to pytest.
@@ -47,8 +48,9 @@ python3 -m ruff check .
 echo "== mypy"
 python3 -m mypy
 
-# The fast depth leaves out the packaging checks that build wheels (-m slow).
-DEPTH=(-m "not slow")
+# The fast depth leaves out the packaging checks that build wheels (-m slow) and the
+# long repeats of what a faster test covers (-m thorough).
+DEPTH=(-m "not slow and not thorough")
 if [ "${CI:-}" = "true" ]; then DEPTH=(); fi
 if [ -z "${HYPOTHESIS_PROFILE:-}" ]; then
   if [ "${CI:-}" = "true" ]; then HYPOTHESIS_PROFILE=ci; else HYPOTHESIS_PROFILE=default; fi

@@ -216,6 +216,7 @@ def test_the_fitted_plant_predicts_a_held_out_run(fit: Fit, recordings: dict[str
     assert float(theirs.split()[1]) == pytest.approx(default.speed_rms, abs=1e-4)
 
 
+@pytest.mark.thorough
 def test_on_the_floor_alone_the_wheel_inertia_is_held_and_said_so(
         recordings: dict[str, Recording], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     floor = tmp_path / "ident_floor.wcrec.json"
@@ -277,6 +278,7 @@ def test_a_chair_with_every_figure_30_percent_low_is_found_or_flagged(low_runs: 
     assert abs(errors["rolling_resistance"]) < 0.05 or "rolling_resistance" in fit.unpinned
 
 
+@pytest.mark.thorough
 def test_rival_minima_that_disagree_are_flagged(low_runs: list[Run],
                                                monkeypatch: pytest.MonkeyPatch) -> None:
     """Plain least squares from the true body (0.7) and from the default's (1.0), every
@@ -291,6 +293,7 @@ def test_rival_minima_that_disagree_are_flagged(low_runs: list[Run],
     assert any("different minima" in note for note in fit.notes)
 
 
+@pytest.mark.thorough
 def test_a_poorer_recording_still_meets_the_goals_or_says_what_it_missed(runs: list[Run]) -> None:
     """Counted as by a 1000-count encoder, 5 % of the ticks' lines lost. (A line that
     reaches the host late changes nothing: ``test_a_recording_reads...``; coarser counts

@@ -102,6 +102,7 @@ def test_the_documented_commands_run_it(command: list[str]) -> None:
 
 
 @pytest.mark.simavr
+@pytest.mark.thorough
 def test_quick_run_on_the_firmware(rel: ModuleType, elf: Path) -> None:
     r1 = rel.firmware_r1(rel.QUICK["firmware_lines"], random.Random(5), elf)
     for name, st in r1.items():
