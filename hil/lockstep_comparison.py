@@ -39,9 +39,11 @@ from __future__ import annotations
 import numpy as np
 
 from wcdrive.avr.f32 import bits, f32
+from wcdrive.boards.current_sense import ZERO_MV as CURRENT_ZERO_MV
 from wcdrive.boards.inhibits import InhibitChange, active_bits
 from wcdrive.boards.simavr.virtual_mega import F_CPU
 from wcdrive.boards.supply_sense import NOMINAL_MV, adc_counts
+from wcdrive.firmware.constants import CURRENT_ZERO_COUNTS
 from wcdrive.firmware.final_control import Firmware, reset_cause_name
 from wcdrive.firmware.quadrature import ILLEGAL, QUAD_TABLE
 from wcdrive.firmware.state import FLOAT_FIELDS, INT_FIELDS, FirmwareState
@@ -100,6 +102,8 @@ def compare(recording: Recording) -> Report:
     decoded = {side: _decoded_counts(recording.trace, side) for side in ("left", "right")}
     inhibits = [InhibitChange(t, number, active) for t, number, active in recording.trace.inhibits]
     supply = _supply_timeline(recording.trace)
+    currents = {side: _current_timeline(recording.trace, side) for side in ("left", "right")}
+    last_tick: int | None = None         # the cycle of the last tick since the boot
     # What the decoder had counted when the firmware's counts started from 0 (at
     # setup(), somewhere between a reset and the first event after it): the candidates.
     offsets: dict[tuple[str, int], set[int]] = {(side, k): {0} for side in ("left", "right") for k in (0, 1)}
@@ -164,6 +168,16 @@ def compare(recording: Recording) -> Report:
             if supply_count not in _supply_counts(supply, ev.cycle, exit_cycle):
                 mismatches.append(Mismatch(i, ticks, "supplyTick", "the trace's supply disagrees",
                                            str(supply_count)))
+            # The motors' current counts: the ADC interrupt converted A1 and A2 after the
+            # last tick began (the globals' CURRENT_ZERO_COUNTS before the boot's first).
+            current_counts = (int(ev.after["currentTickL"]), int(ev.after["currentTickR"]))
+            for side, count in zip(("left", "right"), current_counts, strict=True):
+                possible = ({CURRENT_ZERO_COUNTS} if last_tick is None
+                            else _supply_counts(currents[side], last_tick, ev.cycle))
+                if count not in possible:
+                    mismatches.append(Mismatch(i, ticks, f"currentTick {side}",
+                                               "the trace's current sense disagrees", str(count)))
+            last_tick = ev.cycle
             # freeRam is measured by loop() just before the call: the state at entry.
             before = events[i - 1].after if i > 0 else recording.initial
             for name, value in ev.poke.items():     # what the harness set at the entry
@@ -171,7 +185,8 @@ def compare(recording: Recording) -> Report:
             tx += fw.tick(ev.arg, latched["encTickL"], latched["encTickR"], latched["illTickL"],
                           latched["illTickR"], free_ram=int(before["freeRam"]),
                           storm_l=latched["stormTickL"], storm_r=latched["stormTickR"],
-                          rx_lost=int(ev.after["rxLostTick"]), inputs=inputs, supply=supply_count)
+                          rx_lost=int(ev.after["rxLostTick"]), inputs=inputs, supply=supply_count,
+                          current_l=current_counts[0], current_r=current_counts[1])
         # The EEPROM-ready interrupts that came before the state was read: their writes
         # touch nothing the event does, so their order within it does not matter.
         while w < len(writes) and writes[w] < ev.after_cycle:
@@ -194,6 +209,7 @@ def compare(recording: Recording) -> Report:
             # and must match the new boot's state.
             cycle, mcusr, booted = resets.pop(0)
             masked.clear()                  # the new boot counts from 0, unmasked
+            last_tick = None
             # The EEPROM survives: the new boot loads what the port itself wrote.
             fw = Firmware(boot_millis=int(booted["lastControlTime"]), eeprom=fw.state.eeprom,
                           cause=reset_cause_name(mcusr))
@@ -258,9 +274,20 @@ def _supply_timeline(trace: Trace) -> tuple[np.ndarray, np.ndarray]:
     return cycles, mvs
 
 
+def _current_timeline(trace: Trace, side: str) -> tuple[np.ndarray, np.ndarray]:
+    """The trace's current sense on ``side`` as (cycle, mV) arrays from power-on, as
+    ``_supply_timeline``: 0 A (``ZERO_MV``) at cycle 0."""
+    changes = sorted(((round(t * F_CPU), int(mv)) for t, s, mv in trace.currents if s == side),
+                     key=lambda c: c[0])
+    cycles = np.array([0] + [c for c, _ in changes], dtype=np.int64)
+    mvs = np.array([CURRENT_ZERO_MV] + [mv for _, mv in changes], dtype=np.int64)
+    return cycles, mvs
+
+
 def _supply_counts(timeline: tuple[np.ndarray, np.ndarray], start: int, stop: int) -> set[int]:
-    """The ADC counts a read of A0 at some cycle in [start, stop] may give: the mV in
-    force at ``start`` (the tick's entry) and every mV set until ``stop`` (its exit)."""
+    """The ADC counts a read of an analog input at some cycle in [start, stop] may give:
+    the mV in force at ``start`` (the tick's entry) and every mV set until ``stop`` (its
+    exit)."""
     cycles, mvs = timeline
     lo = int(np.searchsorted(cycles, start, "right")) - 1
     hi = int(np.searchsorted(cycles, stop, "right"))

@@ -23,6 +23,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from wcdrive.boards.current_sense import CURRENT_CHANNELS
 from wcdrive.boards.simavr.mega_pins import INPUT_PINS
 from wcdrive.boards.simavr.virtual_mega import F_CPU, RxLoss, VirtualMega
 from wcdrive.boards.supply_sense import SUPPLY_CHANNEL
@@ -202,6 +203,8 @@ def record(trace: Trace, elf: str | Path | None = None) -> Recording:
             mega.set_pin(INPUT_PINS[number], 0 if active else 1, at=round(t * F_CPU))
         for t, mv in trace.supply:
             mega.set_analog(SUPPLY_CHANNEL, mv, at=round(t * F_CPU))
+        for t, side, mv in trace.currents:
+            mega.set_analog(CURRENT_CHANNELS[side], mv, at=round(t * F_CPU))
         recorder = Recorder(mega, trace.pokes)
         for t, cause in sorted(trace.resets):
             recorder.run_until(round(t * F_CPU))

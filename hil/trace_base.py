@@ -125,6 +125,9 @@ class Trace:
     #: The supply sense's changes: (s, mV at A0, ``wcdrive.boards.supply_sense``); the
     #: board starts at a 24 V battery's ``NOMINAL_MV``.
     supply: list[tuple[float, int]] = field(default_factory=list)
+    #: The motors' current senses' changes: (s, side, mV at A1 left or A2 right,
+    #: ``wcdrive.boards.current_sense``); the board starts at 0 A (``ZERO_MV``).
+    currents: list[tuple[float, str, int]] = field(default_factory=list)
 
     def describe(self) -> str:
         """The trace as text for a failure report, one serial write a line."""
@@ -144,5 +147,6 @@ class Trace:
         lines += [f"  set {values} at the first tick from t={t:.4f}s" for t, values in self.pokes]
         lines += [f"  supply {mv} mV at A0 ({mv * float(SUPPLY_DIVIDER) / 1000:.2f} V) from t={t:.4f}s"
                   for t, mv in self.supply]
+        lines += [f"  {side} current sense {mv} mV from t={t:.4f}s" for t, side, mv in self.currents]
         return "\n".join(lines)
 

@@ -20,7 +20,10 @@ brake driver's status pulled low (coil faults); a motor hot from a long climb (a
 the windings' estimates set below, at and past the thermal rollback, and at the
 cut-off, ``Trace.pokes``); the battery's voltage at the supply sense changed a few
 times (a third: from a cut wire's 0 V to 29 V, mostly across the low-battery and
-cut-off thresholds, ``Trace.supply``); bursts of
+cut-off thresholds, ``Trace.supply``); the motors' current senses changed a few times
+(a third: mostly about the stall current either way, some small, some a failed sense's
+volts, ``Trace.currents``; with the stall clock set near its timeout now and then, so
+that the stall timeout can fire within a trace); bursts of
 20 to 150 commands back to back (the output budget is spent), floods of long ``set:``
 frames at top speed (``flood``: loop() falls behind, received bytes are lost and
 accounted for) and encoder storms of 60,000 to 500,000 edges/s (the storm guard, the
@@ -39,6 +42,7 @@ import numpy as np
 
 from wcdrive.boards.supply_sense import pin_millivolts
 from wcdrive.firmware.params import PARAMS
+from wcdrive.hil.current_traces import held_against_a_wall
 from wcdrive.hil.profiles import PROFILE_P, motion_profile
 from wcdrive.hil.trace_base import (  # Draw, RandomDraw, HypothesisDraw, Trace: callers import them here
     FIRST_COMMAND_S,
@@ -75,6 +79,8 @@ SUPPLY_EVERY = 3
 #: The least time between two supply changes (s): more than a tick takes, so that a tick
 #: reads the voltage before a change or after it.
 SUPPLY_SPACING_S = 0.03
+#: One trace in this many changes the motors' current senses (``held_against_a_wall``).
+CURRENTS_EVERY = 3
 
 __all__ = ["FIRST_COMMAND_S", "MAX_TRACE_EDGE_RATE", "Draw", "HypothesisDraw", "RandomDraw", "Trace",
            "generate_trace"]
@@ -434,6 +440,9 @@ def generate_trace(draw: Draw, duration: float) -> Trace:
     # whose rule the low-battery rollback or the under-voltage fault would cut short).
     if getattr(draw, "supplies", True) and trace.profile is None and (crc >> 13) % SUPPLY_EVERY == 1:
         trace.supply = supply_changes(np.random.default_rng(crc + 4), duration)
+    # The motors' currents, from the same CRC (a third of the traces; not a profile's).
+    if getattr(draw, "currents", True) and trace.profile is None and (crc >> 15) % CURRENTS_EVERY == 1:
+        held_against_a_wall(np.random.default_rng(crc + 5), trace)
     return trace
 
 

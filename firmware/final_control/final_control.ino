@@ -338,6 +338,15 @@ float supplyVolts = 0.0f;
 uint8_t batteryLow = 0;                     // the rollback on (EVT:BATTERY,1 sent or pending)
 uint8_t batteryPending = 0;                 // events to send: bit 0 BATTERY,1, bit 1 BATTERY,0
 
+// The motors' currents, measured at WC_PIN_CURRENT_L/R (A1, A2) by Hall sensors: the ADC
+// interrupt converts them after the tick's start (adcCurrentL/R), then starts the
+// supply's conversion for the next tick to read; the tick reads the counts the last one
+// left (currentTickL/R). A wheel held at its current limit for WC_STALL_TIMEOUT seconds
+// stops the chair (docs/safety.md, "Stall timeout").
+volatile uint16_t adcCurrentL = WC_CURRENT_ZERO_COUNTS, adcCurrentR = WC_CURRENT_ZERO_COUNTS;
+uint16_t currentTickL = WC_CURRENT_ZERO_COUNTS, currentTickR = WC_CURRENT_ZERO_COUNTS;
+float stallTime = 0.0f;                     // s a wheel has been held at its current limit
+
 // Faults (EVT:FAULT,<name>; docs/safety.md): latched until "reset", motion refused, motors off.
 #define FAULT_STALL_L 0x01
 #define FAULT_STALL_R 0x02
@@ -354,6 +363,7 @@ uint8_t batteryPending = 0;                 // events to send: bit 0 BATTERY,1, 
 #define FAULT_OVERHEAT_L 0x800
 #define FAULT_OVERHEAT_R 0x1000
 #define FAULT_UNDERVOLT 0x2000
+#define FAULT_CURRENT_SENSE 0x4000
 // The faults after which a wheel's encoder is no longer trusted: its own, and the driver's.
 #define FAULTS_UNTRUSTED_L (FAULT_STALL_L | FAULT_REVERSED_L | FAULT_IMPLAUSIBLE_L | FAULT_MOTOR_L | FAULT_DRIVER)
 #define FAULTS_UNTRUSTED_R (FAULT_STALL_R | FAULT_REVERSED_R | FAULT_IMPLAUSIBLE_R | FAULT_MOTOR_R | FAULT_DRIVER)
@@ -447,6 +457,22 @@ class WcSerial : public HardwareSerial {
 };
 
 static WcSerial wcSerial(&UBRR0H, &UBRR0L, &UCSR0A, &UCSR0B, &UCSR0C, &UDR0);
+
+// The ADC's conversions after the tick's start: the left motor's current, the right's,
+// then the supply's, which runs without an interrupt until the next tick reads it.
+// Interruptible (ISR_NOBLOCK): an encoder edge waits a few cycles, not the body's.
+ISR(ADC_vect, ISR_NOBLOCK) {
+  uint16_t count = ADC;
+  if ((ADMUX & 7) == WC_PIN_CURRENT_L) {
+    adcCurrentL = count;
+    ADMUX = _BV(REFS0) | WC_PIN_CURRENT_R;
+    ADCSRA |= _BV(ADSC);
+  } else {
+    adcCurrentR = count;
+    ADMUX = _BV(REFS0) | WC_PIN_SUPPLY;
+    ADCSRA = (uint8_t)((ADCSRA & ~_BV(ADIE)) | _BV(ADSC));
+  }
+}
 
 ISR(USART0_RX_vect) { wcSerial.rxInterrupt(); }
 ISR(USART0_UDRE_vect) { wcSerial.txInterrupt(); }
@@ -562,10 +588,12 @@ static const char F_BRAKE_SHORT[] PROGMEM = "BRAKE_SHORT";
 static const char F_OVERHEAT_L[] PROGMEM = "OVERHEAT_L";
 static const char F_OVERHEAT_R[] PROGMEM = "OVERHEAT_R";
 static const char F_UNDERVOLT[] PROGMEM = "UNDERVOLT";
-#define FAULT_COUNT 14
+static const char F_CURRENT_SENSE[] PROGMEM = "CURRENT_SENSE";
+#define FAULT_COUNT 15
 static const char* const FAULT_NAMES[FAULT_COUNT] = {
   F_STALL_L, F_STALL_R, F_REVERSED_L, F_REVERSED_R, F_IMPLAUSIBLE_L, F_IMPLAUSIBLE_R, F_DRIVER,
   F_MOTOR_L, F_MOTOR_R, F_BRAKE_OPEN, F_BRAKE_SHORT, F_OVERHEAT_L, F_OVERHEAT_R, F_UNDERVOLT,
+  F_CURRENT_SENSE,
 };
 
 // One EVT:FAULT,<name> line per fault bit set.
@@ -711,6 +739,20 @@ static float batteryShare() {
 // The filtered supply below WC_BATTERY_CUTOFF_V (a sense wire cut reads 0 V): its fault.
 static uint16_t batteryFault() {
   return supplyVolts < WC_BATTERY_CUTOFF_V ? FAULT_UNDERVOLT : 0;
+}
+
+// The motors' currents (docs/safety.md, "Stall timeout")
+
+// The current an ADC count of a current sense reads, A, either way round.
+static float senseAmps(uint16_t count) {
+  return fabs((float)((int16_t)count - WC_CURRENT_ZERO_COUNTS) * WC_CURRENT_AMPS_PER_COUNT);
+}
+
+// A current sense reading beyond WC_CURRENT_SENSE_MAX (its output cut or shorted): its fault.
+static uint16_t currentSenseFault() {
+  return (senseAmps(currentTickL) > WC_CURRENT_SENSE_MAX || senseAmps(currentTickR) > WC_CURRENT_SENSE_MAX)
+             ? FAULT_CURRENT_SENSE
+             : 0;
 }
 
 static float rampToward(float current, float target, float maxChange) {
@@ -1191,12 +1233,33 @@ static bool straining(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, fl
          appliedPwm >= WC_GRADE_PWM && progress < WC_FAULT_EFFORT_SHORTFALL * fabs(setpoint);
 }
 
+// A wheel held at its current limit: without a count this tick, driven toward its
+// setpoint at WC_FAULT_STALL_PWM_STANDING or more, its partner not carrying the chair its
+// way (otherRaw, this tick's speed: standing, or rolling back), its motor drawing
+// WC_STALL_CURRENT or more. Not an encoder fault but the stall timeout's: its PID runs
+// within WC_STALL_HELD_OUTPUT (heldBounds), so that a current that high means the wheel
+// turns at most (duty - its current's share) / back-EMF a rad/s: 0.5. A cut encoder's
+// wheel that turns faster draws less, and is a stalled encoder.
+static bool heldAtLimit(int32_t delta, uint8_t appliedPwm, uint8_t appliedDir, float setpoint,
+                        float otherRaw, uint16_t current) {
+  float otherAlong = setpoint > 0.0f ? otherRaw : -otherRaw;
+  return delta == 0 && otherAlong < WC_FAULT_STANDING_SPEED && appliedPwm >= WC_FAULT_STALL_PWM_STANDING &&
+         setpoint != 0.0f && (appliedDir == HIGH) == (setpoint > 0.0f) && senseAmps(current) >= WC_STALL_CURRENT;
+}
+
+// The PID's bounds (pidBounds) within WC_STALL_HELD_OUTPUT either way, for a wheel held
+// at its current limit.
+static void heldBounds(float& lo, float& hi) {
+  if (hi > WC_STALL_HELD_OUTPUT) hi = WC_STALL_HELD_OUTPUT;
+  if (lo < -WC_STALL_HELD_OUTPUT) lo = -WC_STALL_HELD_OUTPUT;
+}
+
 static uint8_t checkWheel(int32_t delta, uint32_t illegal, uint8_t storm, uint8_t appliedPwm,
                           uint8_t appliedDir, float setpoint, float measured, float other,
                           uint8_t otherPwm, bool otherOverruns, uint8_t& stallTicks,
                           uint8_t& reverseTicks, uint8_t& runawayTicks, uint8_t& effortPwm,
                           float& effortSpeed, float& effortSetpoint, uint8_t& effortTicks,
-                          float prevMeasured) {
+                          float prevMeasured, bool held) {
   if (storm || illegal >= WC_FAULT_ILLEGAL_PER_TICK) return WHEEL_IMPLAUSIBLE;
   // A wheel that stands while its partner does not carry the chair its way (stands, or
   // rolls back) may stand on a grade below the motor's full torque.
@@ -1205,7 +1268,8 @@ static uint8_t checkWheel(int32_t delta, uint32_t illegal, uint8_t storm, uint8_
   uint8_t stallPwm = standing ? WC_FAULT_STALL_PWM_STANDING : WC_FAULT_STALL_PWM;
   bool driven = appliedPwm >= stallPwm && setpoint != 0.0f &&
                 (appliedDir == HIGH) == (setpoint > 0.0f);
-  bool stalled = driven && delta == 0;
+  // held at its current limit (heldAtLimit): the stall timeout's, not a stalled encoder
+  bool stalled = driven && delta == 0 && !held;
   stallTicks = stalled ? stallTicks + 1 : 0;
   bool turning = prevMeasured != 0.0f && (prevMeasured > 0.0f) != (setpoint > 0.0f);
   uint8_t stallLimit = turning ? WC_FAULT_STALL_TICKS_TURNING : WC_FAULT_STALL_TICKS;
@@ -1220,10 +1284,11 @@ static uint8_t checkWheel(int32_t delta, uint32_t illegal, uint8_t storm, uint8_
   if (runsAway(appliedPwm, appliedDir, setpoint, measured, prevMeasured)) runawayTicks++;
   else runawayTicks = (runawayTicks > 0 && !holding) ? runawayTicks - 1 : 0;
   if (runawayTicks >= WC_FAULT_RUNAWAY_TICKS) return WHEEL_REVERSED;
-  if (noEffect(appliedPwm, appliedDir, setpoint, measured, other, otherPwm, otherOverruns, effortPwm,
-               effortSpeed, effortSetpoint, effortTicks)) {
-    return WHEEL_NO_EFFECT;
-  }
+  bool noProgress = noEffect(appliedPwm, appliedDir, setpoint, measured, other, otherPwm, otherOverruns,
+                             effortPwm, effortSpeed, effortSetpoint, effortTicks);
+  // held at its current limit, its motor draws it: no dead motor, no effort to count
+  if (held) effortTicks = 0;
+  else if (noProgress) return WHEEL_NO_EFFECT;
   return (stalled || against) ? WHEEL_SUSPECT : WHEEL_OK;
 }
 
@@ -1391,13 +1456,17 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
     stormTickL = stormL != 0;   // the ISR sets a non-zero byte
     stormTickR = stormR != 0;
     rxLostTick = rxLost;
+    currentTickL = adcCurrentL;   // the ADC interrupt's, done 0.2 ms after the last tick began
+    currentTickR = adcCurrentR;
   }
   inhibitTick = (digitalRead(WC_PIN_INHIBIT_1) == LOW ? 1 : 0) | (digitalRead(WC_PIN_INHIBIT_2) == LOW ? 2 : 0) |
                 (digitalRead(WC_PIN_PUSH) == LOW ? INHIBIT_PUSH : 0);
   brakeStatusTick = digitalRead(WC_PIN_BRAKE_STATUS) == LOW ? 1 : 0;
-  // The conversion the last tick started (long done: 104 us), then the next one.
+  // The supply's conversion the ADC interrupt started after the last tick's currents
+  // (long done: 104 us), then the currents' (ISR(ADC_vect)).
   supplyTick = ADC;
-  ADCSRA |= _BV(ADSC);
+  ADMUX = _BV(REFS0) | WC_PIN_CURRENT_L;
+  ADCSRA |= _BV(ADIE) | _BV(ADSC);
   encTickL = countL + stepsL;
   encTickR = countR + stepsR;
   uint32_t illNowL = illL + illStepsL;
@@ -1423,18 +1492,23 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
   // The chair's limits are not faults: they park it (halt) under the hold, braking hardest
   // (hardest) on an overspeed.
   uint8_t checkL = WHEEL_OK, checkR = WHEEL_OK;
+  bool stallHeldL = false, stallHeldR = false;
   bool halt = false, hardest = false;
   if (faultFlags == 0) {
     bool strainL = straining(pwmL, dirL, setpointL, filtVelL);
     bool strainR = straining(pwmR, dirR, setpointR, filtVelR);
     bool overrunL = overruns(pwmL, dirL, setpointL, filtVelL);
     bool overrunR = overruns(pwmR, dirR, setpointR, filtVelR);
+    stallHeldL = heldAtLimit(deltaL, pwmL, dirL, setpointL, rawVelR, currentTickL);
+    stallHeldR = heldAtLimit(deltaR, pwmR, dirR, setpointR, rawVelL, currentTickR);
     checkL = checkWheel(deltaL, illDeltaL, stormTickL, pwmL, dirL, setpointL, filtVelL, filtVelR,
                         pwmR, overrunR, stallTicksL, reverseTicksL, runawayTicksL, effortPwmL, effortSpeedL,
-                        effortSetpointL, effortTicksL, prevMeasL);
+                        effortSetpointL, effortTicksL, prevMeasL, stallHeldL);
     checkR = checkWheel(deltaR, illDeltaR, stormTickR, pwmR, dirR, setpointR, filtVelR, filtVelL,
                         pwmL, overrunL, stallTicksR, reverseTicksR, runawayTicksR, effortPwmR, effortSpeedR,
-                        effortSetpointR, effortTicksR, prevMeasR);
+                        effortSetpointR, effortTicksR, prevMeasR, stallHeldR);
+    // Driving, a wheel held at its current limit runs the stall timeout's clock.
+    stallTime = (!holding && (stallHeldL || stallHeldR)) ? stallTime + dt : 0.0f;
     // Effort without progress is one motor's only while its effort leads the other's.
     bool leadsL = checkL == WHEEL_NO_EFFECT &&
                   effortLeads(pwmL, dirL, setpointL, filtVelL, pwmR, dirR, setpointR, filtVelR);
@@ -1485,6 +1559,7 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
     if (faults == 0) faults = brakeCoilFault();
     if (faults == 0) faults = thermalFault();
     if (faults == 0) faults = batteryFault();
+    if (faults == 0) faults = currentSenseFault();
     if (faults != 0) {
       faultFlags = faults;
       emergencyHalt();
@@ -1500,6 +1575,11 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
     } else if (limitL || limitR) {
       halt = true;
       sendEvent(F("STALLED_ON_GRADE"));
+    } else if (stallTime >= WC_STALL_TIMEOUT) {
+      // held at the current limit too long (a wall, a kerb): motion needs a neutral command
+      halt = true;
+      requireNeutral();
+      sendEvent(F("STALL_TIMEOUT"));
     }
     if (halt) {
       limitLatched = true;
@@ -1509,6 +1589,7 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
       runawayTicksL = runawayTicksR = 0;
       effortTicksL = effortTicksR = 0;
       overspeedTicksL = overspeedTicksR = 0;
+      stallTime = 0.0f;
     }
   }
 
@@ -1653,12 +1734,16 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
     // A suspect wheel keeps its output: no count is no reason to push harder.
     // Past the thermal rollback's start, each within its motor's rolled-back current limit.
     float lo, hi;
+    // A wheel held at its current limit pushes at the motor's full torque, no harder
+    // (heldBounds: its current then bounds how fast it can turn).
     if (trustedL && checkL != WHEEL_SUSPECT) {
       pidBounds(windingTempL, filtVelL, lo, hi);
+      if (stallHeldL) heldBounds(lo, hi);
       outputL = computePID(setpointL, filtVelL, integralL, prevMeasL, kpL, kiL, kdL, dt, lo, hi);
     }
     if (trustedR && checkR != WHEEL_SUSPECT) {
       pidBounds(windingTempR, filtVelR, lo, hi);
+      if (stallHeldR) heldBounds(lo, hi);
       outputR = computePID(setpointR, filtVelR, integralR, prevMeasR, kpR, kiR, kdR, dt, lo, hi);
     }
     // After a fault, the faulty wheel at duty 0: the driver brakes it whichever way it
@@ -2544,11 +2629,11 @@ void setup() {
   pinMode(WC_PIN_ENC_L_B, INPUT);
   pinMode(WC_PIN_ENC_R_A, INPUT);
   pinMode(WC_PIN_ENC_R_B, INPUT);
-  // The supply sense: ADC0 (MUX5 clear) against AVcc, the ADC clock at 125 kHz, the pin's
-  // digital buffer off; the first conversion, which the first tick reads.
+  // The supply sense: ADC0 (MUX5 clear) against AVcc, the ADC clock at 125 kHz, the
+  // analog pins' digital buffers off; the first conversion, which the first tick reads.
   ADMUX = _BV(REFS0) | (WC_PIN_SUPPLY & 7);
   ADCSRB &= (uint8_t)~_BV(MUX5);
-  DIDR0 = _BV(WC_PIN_SUPPLY);
+  DIDR0 = _BV(WC_PIN_SUPPLY) | _BV(WC_PIN_CURRENT_L) | _BV(WC_PIN_CURRENT_R);
   ADCSRA = _BV(ADEN) | _BV(ADPS2) | _BV(ADPS1) | _BV(ADPS0);
   ADCSRA |= _BV(ADSC);
 

@@ -150,6 +150,18 @@
 #define WC_BATTERY_CUTOFF_V 19.5f  // V (filtered): EVT:FAULT,UNDERVOLT, the chair stops along the fault ramp and parks (held, or braked with a brake fitted): a lead-acid battery's end of discharge under a heavy load (1.63 V a cell; assumed), below the 21 V of a low battery the chair must still drive on (tests/sim/test_grade_false_alarms.py); a supply sense that reads nothing (a cut wire, A0 at ground) faults too
 #define WC_BATTERY_SHARE_MIN 0.5f  // of max_wheel: the top speed at BATTERY_CUTOFF_V, the curvature kept
 
+// ---- The motors' currents, measured, and the stall timeout (docs/safety.md, "Stall timeout") ---
+#define WC_PIN_CURRENT_L 1         // analog input (A1, PF1, ADC1) of the left motor's current sense: a bidirectional Hall sensor in the motor lead (Allegro ACS758LCB-050B: 40 mV/A, VCC/2 at 0 A, ratiometric to the 5 V AVcc the ADC takes for its reference); converted after the tick's start, by the ADC interrupt, and read by the next tick
+#define WC_PIN_CURRENT_R 2         // analog input (A2, PF2, ADC2) of the right motor's current sense (as PIN_CURRENT_L)
+#define WC_CURRENT_ZERO_COUNTS 512 // the ADC count of 0 A: the sensor's VCC/2
+#define WC_CURRENT_AMPS_PER_COUNT 0.1220703125f // A per ADC count from CURRENT_ZERO_COUNTS: 5 V / 1024 / 0.040 V/A; either way round (the sign is the motor's direction)
+#define WC_STALL_CURRENT 11.0f     // A: a motor drawing this much or more, its wheel standing beside a standing partner and driven toward its setpoint at FAULT_STALL_PWM_STANDING or more, is held at its current limit (the driver's 13 A: the PID's largest effort, FAULT_EFFORT_MAX, draws 12.9 A into a standing motor): not an encoder fault (ENC_STALL, DRIVER), which is a wheel driven without counts while its motor draws less (a cut encoder's wheel spins up, its back-EMF takes the current off), but the stall timeout's
+#define WC_STALL_HELD_OUTPUT 16.5f // percent of full duty (duty 42, FAULT_STALL_PWM_STANDING: the driver's current limit into a standing motor, its full torque): the PID's bound either way for a wheel held at its current limit (STALL_CURRENT), its integral back-calculated to it: no harder than the motor's full torque at a standstill. Its current then bounds how fast it turns: a duty of 42 less the 35 that drive 11 A through the armature leaves 7 for back-EMF, 0.5 rad/s (0.076 m/s); a wheel turning faster (a cut encoder's) draws less and is an encoder fault
+#define WC_STALL_TIMEOUT 15.0f     // s: the default of stall_timeout: a wheel held at its current limit (STALL_CURRENT) this long without a break stops the chair (EVT:STALL_TIMEOUT, the emergency ramp and the hold; motion refused until a stop, then a neutral command). Dynamic Controls DX's default, in its 5 to 50 s
+#define WC_STALL_TIMEOUT_MIN 1.0f  // s: stall_timeout in [STALL_TIMEOUT_MIN, STALL_TIMEOUT_MAX]
+#define WC_STALL_TIMEOUT_MAX 60.0f
+#define WC_CURRENT_SENSE_MAX 30.0f // A: a current sense reading more, either way, has failed (a cut output reads 0 V, -62 A; one shorted to 5 V, +62 A): EVT:FAULT,CURRENT_SENSE. The driver limits each motor to 13 A
+
 // ---- Hill hold and rollaway (parked without a fault; protocol/PROTOCOL.md) ---
 #define WC_HOLD_DEADBAND_COUNTS 10 // encoder counts (1 mm of travel) a held wheel may be off the count it stopped at before the hold drives it back
 #define WC_HOLD_GAIN 1             // hold duty per count of error beyond HOLD_DEADBAND_COUNTS

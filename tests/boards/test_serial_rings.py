@@ -154,9 +154,9 @@ def test_the_budget_refills_per_millisecond_and_caps() -> None:
 
 
 #: The widest fault field: the faults that can latch together are one group's (the
-#: wheels' and the driver's, else the brake's, else the windings', else the supply's), at
-#: most 4 digits.
-WIDEST_FAULTS = 0x1800
+#: wheels' and the driver's, else the brake's, else the windings', else the supply's,
+#: else the current senses'), at most 5 digits: the current sense's bit alone, 16384.
+WIDEST_FAULTS = 0x4000
 
 
 def test_the_worst_tick_fits_the_refill() -> None:

@@ -108,6 +108,12 @@ def states(draw) -> tuple[FirmwareState, int, tuple[int, ...]]:
     if draw(st.booleans()):
         s.supplyVolts = draw(st.floats(20.0, 26.0, width=32))
     supply = draw(st.one_of(st.just(C.SUPPLY_NOMINAL_COUNTS), st.integers(700, 900), st.integers(0, 1023)))
+    # the motors' currents: at rest, about the stall current (11 A: 90 counts from 512) either
+    # way, or anywhere; and the stall clock running
+    current = st.one_of(st.just(C.CURRENT_ZERO_COUNTS), st.integers(412, 612), st.integers(0, 1023))
+    currents = (draw(current), draw(current))
+    if draw(st.booleans()):
+        s.stallTime = draw(st.floats(0.0, 16.0, width=32))
     # Waiting for neutral (a boot's default) the C tick declines: mostly a board that drives.
     s.needNeutral = draw(st.sampled_from((0, 0, 0, 1)))
     s.lastControlTime = draw(u32)
@@ -123,7 +129,7 @@ def states(draw) -> tuple[FirmwareState, int, tuple[int, ...]]:
               (s.illTickL + draw(st.integers(0, 3))) & 0xFFFFFFFF,
               (s.illTickR + draw(st.integers(0, 3))) & 0xFFFFFFFF,
               draw(st.sampled_from((0, 0, 0, 1))), draw(st.sampled_from((0, 0, 0, 1))), draw(u32),
-              draw(st.sampled_from((0, 0, 0, 0, 0, 1, 2, 3))), supply)
+              draw(st.sampled_from((0, 0, 0, 0, 0, 1, 2, 3))), supply, *currents)
     return s, now, inputs
 
 
@@ -131,9 +137,9 @@ def states(draw) -> tuple[FirmwareState, int, tuple[int, ...]]:
 @settings(max_examples=2000 if thorough() else 500)
 @given(states())
 @example((FirmwareState(lastControlTime=1000, targetL=2.0, targetR=2.0, needNeutral=0), 1050,
-          (0, 0, 0, 0, 0, 0, 0, 0, 819)))
+          (0, 0, 0, 0, 0, 0, 0, 0, 819, 512, 512)))
 @example((FirmwareState(lastControlTime=1000, lastTickTime=1050, needNeutral=0), 1050,
-          (5, 5, 0, 0, 0, 0, 0, 0, 819)))  # dt 0
+          (5, 5, 0, 0, 0, 0, 0, 0, 819, 512, 512)))  # dt 0
 def test_the_c_tick_agrees_with_the_python_tick(case) -> None:
     state, now, inputs = case
     agree(state, now, inputs)
@@ -156,7 +162,8 @@ def test_random_ordinary_ticks_take_the_c_path() -> None:
         now = (now + 50) & 0xFFFFFFFF
         left += int(rng.integers(-400, 400))
         right += int(rng.integers(-400, 400))
-        inputs = (left, right, 0, 0, 0, 0, 0, 0, C.SUPPLY_NOMINAL_COUNTS)
+        inputs = (left, right, 0, 0, 0, 0, 0, 0, C.SUPPLY_NOMINAL_COUNTS, C.CURRENT_ZERO_COUNTS,
+                  C.CURRENT_ZERO_COUNTS)
         taken += agree(s, now, inputs)
         python_tick(s, now, *inputs)            # the trajectory goes on in Python
         s.faultFlags = 0                        # (random counts would latch faults,
@@ -169,23 +176,23 @@ def test_a_fault_or_the_watchdog_goes_to_the_python_tick() -> None:
     """A tick that latches a fault or fires the watchdog is refused, the state as it was."""
     stalled = FirmwareState(lastControlTime=1000, setpointL=2.0, targetL=2.0, pwmL=200, dirL=C.HIGH,
                             stallTicksL=C.FAULT_STALL_TICKS - 1)
-    assert fast_tick(stalled.copy(), 1050, 0, 0, 0, 0, 0, 0, 0, 0, 819) is None
-    assert b"EVT:FAULT" in python_tick(stalled.copy(), 1050, 0, 0, 0, 0, 0, 0, 0, 0, 819)
+    assert fast_tick(stalled.copy(), 1050, 0, 0, 0, 0, 0, 0, 0, 0, 819, 512, 512) is None
+    assert b"EVT:FAULT" in python_tick(stalled.copy(), 1050, 0, 0, 0, 0, 0, 0, 0, 0, 819, 512, 512)
     watched = FirmwareState(lastControlTime=1000, watchdogArmed=1, lastCmdTime=0, watchdogMs=500)
-    assert fast_tick(watched.copy(), 1050, 0, 0, 0, 0, 0, 0, 0, 0, 819) is None
-    assert b"EVT:WATCHDOG" in python_tick(watched.copy(), 1050, 0, 0, 0, 0, 0, 0, 0, 0, 819)
+    assert fast_tick(watched.copy(), 1050, 0, 0, 0, 0, 0, 0, 0, 0, 819, 512, 512) is None
+    assert b"EVT:WATCHDOG" in python_tick(watched.copy(), 1050, 0, 0, 0, 0, 0, 0, 0, 0, 819, 512, 512)
 
 
 def test_an_unexpected_field_type_goes_to_the_python_tick() -> None:
     for name, value in (("targetL", 2), ("pwmL", 3.0), ("mode", True), ("tickCount", 2**70)):
         s = FirmwareState(lastControlTime=1000)
         setattr(s, name, value)
-        assert fast_tick(s, 1050, 0, 0, 0, 0, 0, 0, 0, 0, 819) is None, name
+        assert fast_tick(s, 1050, 0, 0, 0, 0, 0, 0, 0, 0, 819, 512, 512) is None, name
 
     class Sub(FirmwareState):
         pass
 
-    assert fast_tick(Sub(lastControlTime=1000), 1050, 0, 0, 0, 0, 0, 0, 0, 0, 819) is None
+    assert fast_tick(Sub(lastControlTime=1000), 1050, 0, 0, 0, 0, 0, 0, 0, 0, 819, 512, 512) is None
 
 
 def test_the_firmware_ticks_in_c() -> None:

@@ -64,6 +64,7 @@ def test_a_soaks_board_runs_again_bit_for_bit_from_its_record(tmp_path: Path) ->
     assert loop.plant.pose == report.final_truth
 
 
+@pytest.mark.thorough
 def test_the_soak_sees_a_host_that_leaks(monkeypatch: pytest.MonkeyPatch) -> None:
     """A host that keeps 1 kB for every read of the board's bytes: the soak's memory
     check, which starts at the 10-minute mark, goes red within 12 simulated minutes."""

@@ -265,6 +265,7 @@ def low_runs() -> list[Run]:
     return [blocks_run(truth), run_of(stepped_recording("ident_floor", truth), name="ident_floor")]
 
 
+@pytest.mark.thorough
 def test_a_chair_with_every_figure_30_percent_low_is_found_or_flagged(low_runs: list[Run]) -> None:
     """The floor's cost in plain least squares is rugged, with false valleys near the
     true body: from the three fixed body starts this recording's fit ended at mass

@@ -69,8 +69,9 @@ def overflows_until(target_elapsed: int, start_fract: int = 0) -> int:
 #: line buffer, 26,950; then the supply sense's set-up in ``setup()`` and its globals,
 #: 26,994; then the drive limits' seven globals and their parameter table's entries, in
 #: .data, 28,171; then the drive profiles, whose table and the larger EEPROM block went to
-#: .noinit, which is not cleared, taking the block's 71 bytes out of .bss, 27,751).
-TIMER0_START_CYCLE = 27_751 - OVERFLOW_CYCLES
+#: .noinit, which is not cleared, taking the block's 71 bytes out of .bss, 27,751; then the
+#: motors' current counts, in .data at 0 A's count, 27,773).
+TIMER0_START_CYCLE = 27_773 - OVERFLOW_CYCLES
 
 
 _WINDOW_START = TIMER0_START_CYCLE + 128 * 64

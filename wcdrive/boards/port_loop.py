@@ -34,7 +34,9 @@ Wheel and motor faults act on the plant from the physics step at which they star
 The supply sense: each tick reads the ADC count of the battery's terminal voltage as
 the plant last computed it (``Plant.battery``), through the divider as the compiled
 firmware's board reads it (``wcdrive.boards.supply_sense``); ``set_supply`` puts a
-voltage of the caller's in its place.
+voltage of the caller's in its place. The motors' current senses: each tick reads the
+counts of the plant's motor currents as they were just after the last tick began (the
+ADC interrupt's conversions, ``wcdrive.boards.current_sense``).
 
 ``PortLoop`` is shared by ``wcdrive sim`` (whole scenarios) and the live simulated
 board behind ``wcsim://`` and the pty (small steps paced to the wall clock).
@@ -60,8 +62,10 @@ from wcdrive.avr.timer0 import (
     storm_window,
 )
 from wcdrive.avr.uart import UART_BYTE_CYCLES
+from wcdrive.boards.current_sense import plant_current_millivolts
 from wcdrive.boards.inhibits import LEVER_INPUT, InhibitChange, input_number
 from wcdrive.boards.supply_sense import SupplyOverrides, adc_counts, pin_millivolts, plant_millivolts
+from wcdrive.firmware import constants as C
 from wcdrive.firmware.eeprom import ReadyInterrupt
 from wcdrive.firmware.final_control import Firmware
 from wcdrive.firmware.quadrature import QuadratureDecoder
@@ -211,6 +215,10 @@ class PortLoop:
         self.inhibit_bits = 0
         self._inhibits_due = sorted(inhibits, key=lambda c: c.at)
         self._supply = SupplyOverrides()
+        #: The motors' current counts the next tick reads: what the ADC interrupt
+        #: converted after the last tick began (the firmware's globals start at
+        #: CURRENT_ZERO_COUNTS until the first tick's conversions).
+        self._currents = (C.CURRENT_ZERO_COUNTS, C.CURRENT_ZERO_COUNTS)
         self._scale = plant.p.counts_per_rev / (2.0 * math.pi)
         self._encoders = {side: _Encoder(side, self._wire(side)) for side in SIDES}
         self._left, self._right = self._encoders["left"], self._encoders["right"]
@@ -409,7 +417,11 @@ class PortLoop:
         dl, dr = left.decoder, right.decoder
         out = fw.tick(millis, left.count(true_l), right.count(true_r), dl.illegal, dr.illegal, None,
                       int(dl.storm), int(dr.storm),
-                      inputs=self._inputs_at(overflow), supply=self.supply_counts(overflow))
+                      inputs=self._inputs_at(overflow), supply=self.supply_counts(overflow),
+                      current_l=self._currents[0], current_r=self._currents[1])
+        # the ADC interrupt's conversions of the motors' currents, just after the tick began
+        mv = plant_current_millivolts(self.plant)
+        self._currents = (adc_counts(mv["left"]), adc_counts(mv["right"]))
         s = fw.state
         self.plant.set_drive(s.pwmL, s.dirL, s.pwmR, s.dirR)
         self.plant.set_brake(bool(s.brakeReleased))
@@ -451,6 +463,7 @@ class PortLoop:
         self._advance_to(now)
         # The EEPROM survives, as far as a save had written it.
         self.fw = Firmware(boot_millis=0, eeprom=self.fw.state.eeprom, cause=RESET_CAUSE)
+        self._currents = (C.CURRENT_ZERO_COUNTS, C.CURRENT_ZERO_COUNTS)
         self._eeprom_ready = ReadyInterrupt()
         self.timer = Timer0()
         self.boot_cycle = now

@@ -189,6 +189,18 @@ BATTERY_SHARE_SPAN = f32(1.0 - BATTERY_SHARE_MIN)
 #: The ADC count of a 24 V supply (datasheet rounding): what a tick reads when a caller
 #: gives it no supply (``Firmware.tick``'s default).
 SUPPLY_NOMINAL_COUNTS = round(24.0 / SUPPLY_VOLTS_PER_COUNT)
+
+# The motors' currents, measured, and the stall timeout
+PIN_CURRENT_L = integer("PIN_CURRENT_L")
+PIN_CURRENT_R = integer("PIN_CURRENT_R")
+CURRENT_ZERO_COUNTS = integer("CURRENT_ZERO_COUNTS")
+CURRENT_AMPS_PER_COUNT = f32(real("CURRENT_AMPS_PER_COUNT"))
+STALL_CURRENT = f32(real("STALL_CURRENT"))
+STALL_HELD_OUTPUT = f32(real("STALL_HELD_OUTPUT"))
+STALL_TIMEOUT = f32(real("STALL_TIMEOUT"))
+STALL_TIMEOUT_MIN = f32(real("STALL_TIMEOUT_MIN"))
+STALL_TIMEOUT_MAX = f32(real("STALL_TIMEOUT_MAX"))
+CURRENT_SENSE_MAX = f32(real("CURRENT_SENSE_MAX"))
 HOLD_DEADBAND_COUNTS = integer("HOLD_DEADBAND_COUNTS")
 HOLD_GAIN = integer("HOLD_GAIN")
 HOLD_PWM_MAX = integer("HOLD_PWM_MAX")

@@ -16,7 +16,7 @@ from wcdrive.firmware.brake import (
 )
 from wcdrive.firmware.drive import ramp_setpoints
 from wcdrive.firmware.inhibit import capped_goals, send_inhibit_event, update_inhibits
-from wcdrive.firmware.motion import PIVOT_NONE, emergency_halt, pivot_step, require_neutral
+from wcdrive.firmware.motion import PIVOT_NONE, confirm_neutral, emergency_halt, pivot_step, require_neutral
 from wcdrive.firmware.motors import i32, motors
 from wcdrive.firmware.output import (
     feedback_line,
@@ -26,6 +26,7 @@ from wcdrive.firmware.output import (
     send_fault_events,
     send_telemetry,
 )
+from wcdrive.firmware.stall import current_sense_fault, held_at_limit, held_bounds
 from wcdrive.firmware.state import FirmwareState
 from wcdrive.firmware.thermal import (
     pid_bounds,
@@ -246,7 +247,8 @@ def stalls_loaded(setpoint: float, prev_measured: float, other: float) -> bool:
 def check_wheel(delta: int, illegal: int, storm: int, applied_pwm: int, applied_dir: int,
                 setpoint: float, measured: float, other: float, other_pwm: int, other_overruns: bool,
                 stall_ticks: int, reverse_ticks: int, runaway_ticks: int,
-                effort: Effort, prev_measured: float, holding: int) -> tuple[int, int, int, int, Effort]:
+                effort: Effort, prev_measured: float, holding: int,
+                held: bool = False) -> tuple[int, int, int, int, Effort]:
     """``checkWheel``: ``(verdict, stall ticks, reverse ticks, runaway ticks, effort
     reference)`` for one wheel over the interval that ended: WHEEL_OK, WHEEL_SUSPECT
     (hold the output), or a fault. A stall is a duty toward a non-zero setpoint without
@@ -268,7 +270,8 @@ def check_wheel(delta: int, illegal: int, storm: int, applied_pwm: int, applied_
     stall_pwm = C.FAULT_STALL_PWM_STANDING if standing else C.FAULT_STALL_PWM
     driven = (applied_pwm >= stall_pwm and setpoint != 0.0
               and (applied_dir == C.HIGH) == (setpoint > 0.0))
-    stalled = driven and delta == 0
+    # held at its current limit (held_at_limit): the stall timeout's, not a stalled encoder
+    stalled = driven and delta == 0 and not held
     stall_ticks = (stall_ticks + 1) & 0xFF if stalled else 0
     turning = prev_measured != 0.0 and (prev_measured > 0.0) != (setpoint > 0.0)
     if stall_ticks >= (C.FAULT_STALL_TICKS_TURNING if turning else C.FAULT_STALL_TICKS):
@@ -288,7 +291,9 @@ def check_wheel(delta: int, illegal: int, storm: int, applied_pwm: int, applied_
         return WHEEL_REVERSED, stall_ticks, reverse_ticks, runaway_ticks, effort
     tripped, effort = no_effect(applied_pwm, applied_dir, setpoint, measured, other, other_pwm,
                                 other_overruns, effort)
-    if tripped:
+    if held:        # held at its current limit, its motor draws it: no dead motor, no effort
+        effort = (effort[0], effort[1], effort[2], 0)
+    elif tripped:
         return WHEEL_NO_EFFECT, stall_ticks, reverse_ticks, runaway_ticks, effort
     verdict = WHEEL_SUSPECT if stalled or against else WHEEL_OK
     return verdict, stall_ticks, reverse_ticks, runaway_ticks, effort
@@ -307,29 +312,35 @@ def wheel_faults(check: int, stall: int, reversed_: int, implausible: int, motor
     return 0
 
 
-def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_r: int,
-                  out: bytearray) -> tuple[int, int, bool, bool]:
+def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_r: int, dt: float,
+                  out: bytearray) -> tuple[int, int, bool, bool, bool, bool]:
     """The tick's fault checks (until one latches); a new fault halts the chair and
     sends its events. The chair's limits are not faults: an overspeed
     (``EVT:OVERSPEED``) or, driving, both wheels at their limit (``EVT:STALLED_ON_GRADE``)
-    park it under the hold. Returns both wheels' verdicts, whether to park
-    (halt) and whether the hold brakes hardest from the start."""
+    park it under the hold, and so does a wheel held at its current limit for
+    ``stallTimeout`` s (``EVT:STALL_TIMEOUT``). Returns both wheels' verdicts, whether
+    to park (halt), whether the hold brakes hardest from the start and whether each
+    wheel is held at its current limit (``held_at_limit``)."""
     if s.faultFlags:
-        return WHEEL_OK, WHEEL_OK, False, False
+        return WHEEL_OK, WHEEL_OK, False, False, False, False
     strain_l = straining(s.pwmL, s.dirL, s.setpointL, s.filtVelL)
     strain_r = straining(s.pwmR, s.dirR, s.setpointR, s.filtVelR)
     overrun_l = overruns(s.pwmL, s.dirL, s.setpointL, s.filtVelL)
     overrun_r = overruns(s.pwmR, s.dirR, s.setpointR, s.filtVelR)
+    held_l = held_at_limit(delta_l, s.pwmL, s.dirL, s.setpointL, s.rawVelR, s.currentTickL)
+    held_r = held_at_limit(delta_r, s.pwmR, s.dirR, s.setpointR, s.rawVelL, s.currentTickR)
     check_l, s.stallTicksL, s.reverseTicksL, s.runawayTicksL, effort_l = check_wheel(
         delta_l, ill_l, s.stormTickL, s.pwmL, s.dirL, s.setpointL, s.filtVelL, s.filtVelR,
         s.pwmR, overrun_r, s.stallTicksL, s.reverseTicksL, s.runawayTicksL,
-        (s.effortPwmL, s.effortSpeedL, s.effortSetpointL, s.effortTicksL), s.prevMeasL, s.holding)
+        (s.effortPwmL, s.effortSpeedL, s.effortSetpointL, s.effortTicksL), s.prevMeasL, s.holding, held_l)
     s.effortPwmL, s.effortSpeedL, s.effortSetpointL, s.effortTicksL = effort_l
     check_r, s.stallTicksR, s.reverseTicksR, s.runawayTicksR, effort_r = check_wheel(
         delta_r, ill_r, s.stormTickR, s.pwmR, s.dirR, s.setpointR, s.filtVelR, s.filtVelL,
         s.pwmL, overrun_l, s.stallTicksR, s.reverseTicksR, s.runawayTicksR,
-        (s.effortPwmR, s.effortSpeedR, s.effortSetpointR, s.effortTicksR), s.prevMeasR, s.holding)
+        (s.effortPwmR, s.effortSpeedR, s.effortSetpointR, s.effortTicksR), s.prevMeasR, s.holding, held_r)
     s.effortPwmR, s.effortSpeedR, s.effortSetpointR, s.effortTicksR = effort_r
+    # driving, a wheel held at its current limit runs the stall timeout's clock
+    s.stallTime = add(s.stallTime, dt) if not s.holding and (held_l or held_r) else 0.0
     # effort without progress is one motor's only while its effort leads the other's
     leads_l = check_l == WHEEL_NO_EFFECT and effort_leads(s.pwmL, s.dirL, s.setpointL, s.filtVelL,
                                                           s.pwmR, s.dirR, s.setpointR, s.filtVelR)
@@ -382,6 +393,8 @@ def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_
         faults = thermal_fault(s)
     if not faults:
         faults = battery_fault(s)
+    if not faults:
+        faults = current_sense_fault(s.currentTickL, s.currentTickR)
     if faults:
         s.faultFlags = faults
         emergency_halt(s)
@@ -390,7 +403,7 @@ def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_
         s.stallTicksL = s.stallTicksR = s.reverseTicksL = s.reverseTicksR = 0
         s.runawayTicksL = s.runawayTicksR = 0
         send_fault_events(s, faults, out)
-        return check_l, check_r, False, False
+        return check_l, check_r, False, False, held_l, held_r
     halt = hardest = False
     # both wheels: gravity on the whole chair (one alone is its motor's fault, above)
     if over_l and over_r:
@@ -399,6 +412,11 @@ def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_
     elif limit_l or limit_r:
         halt = True
         send(s, send_event("STALLED_ON_GRADE"), out)
+    elif s.stallTime >= C.STALL_TIMEOUT:
+        # held at the current limit too long (a wall, a kerb): motion needs a neutral command
+        halt = True
+        require_neutral(s)
+        send(s, send_event("STALL_TIMEOUT"), out)
     if halt:
         s.limitLatched = 1
         emergency_halt(s)
@@ -407,40 +425,21 @@ def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_
         s.runawayTicksL = s.runawayTicksR = 0
         s.effortTicksL = s.effortTicksR = 0
         s.overspeedTicksL = s.overspeedTicksR = 0
-    return check_l, check_r, halt, hardest
-
-
-def _confirm_neutral(s: FirmwareState, out: bytearray) -> None:
-    """The wait for neutral, at most one event a tick and none beside ``WATCHDOG`` (the
-    output budget's worst tick): the refusal (``EVT:NOT_NEUTRAL``); the neutral command
-    stood ``NEUTRAL_TICKS`` ticks, confirmed (``EVT:NEUTRAL`` when something was refused
-    meanwhile); refused for ``NEUTRAL_FAULT_TICKS`` ticks without a neutral command, a
-    deflected control (``EVT:DEFLECTED``, until neutral)."""
-    if s.notNeutralPending:
-        s.notNeutralPending = 0
-        send(s, send_event("NOT_NEUTRAL"), out)
-    elif s.neutralSeen:
-        s.neutralTicks = (s.neutralTicks + 1) & 0xFF
-        if s.neutralTicks >= C.NEUTRAL_TICKS:
-            if s.notNeutralSent:
-                send(s, send_event("NEUTRAL"), out)
-            s.needNeutral = s.neutralSeen = s.notNeutralSent = s.neutralFault = 0
-    elif s.notNeutralSent and not s.neutralFault:
-        s.notNeutralTicks = (s.notNeutralTicks + 1) & 0xFF
-        if s.notNeutralTicks >= C.NEUTRAL_FAULT_TICKS:
-            s.neutralFault = 1
-            send(s, send_event("DEFLECTED"), out)
+        s.stallTime = 0.0
+    return check_l, check_r, halt, hardest, held_l, held_r
 
 
 def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: bytearray,
                  illegal_l: int = 0, illegal_r: int = 0, storm_l: int = 0, storm_r: int = 0,
-                 rx_lost: int = 0, inputs: int = 0, supply: int = C.SUPPLY_NOMINAL_COUNTS) -> None:
+                 rx_lost: int = 0, inputs: int = 0, supply: int = C.SUPPLY_NOMINAL_COUNTS,
+                 current_l: int = C.CURRENT_ZERO_COUNTS, current_r: int = C.CURRENT_ZERO_COUNTS) -> None:
     """``controlTick(now)`` with what it latches atomically from the interrupts: the
     encoder counts, the illegal-transition counts, the storm flags and the RX
     interrupt's count of lost bytes (``rxLost``); and the input pins it reads
     (``inputs``: bit 0 inhibit input 1, bit 1 input 2, 1 active; bit 2 the brake
-    driver's status LOW; bit 3 the brake's manual release pulled, push mode) and the ADC
-    count it reads at PIN_SUPPLY (``supply``)."""
+    driver's status LOW; bit 3 the brake's manual release pulled, push mode), the ADC
+    count it reads at PIN_SUPPLY (``supply``) and the counts of the motors' currents the
+    ADC interrupt converted after the last tick began (``current_l``, ``current_r``)."""
     last_tick = s.lastControlTime if s.lastTickTime is None else s.lastTickTime
     elapsed = (now - last_tick) & 0xFFFFFFFF            # since the last tick ran
     dt = div(from_int(elapsed), 1000.0)
@@ -464,6 +463,7 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
     s.inhibitTick = (inputs & 3) | ((inputs >> 3) & 1) << 2
     s.brakeStatusTick = (inputs >> 2) & 1
     s.supplyTick = supply & 0x3FF
+    s.currentTickL, s.currentTickR = current_l & 0x3FF, current_r & 0x3FF
     delta_l = i32(s.encTickL - s.prevEncL)
     delta_r = i32(s.encTickR - s.prevEncR)
     s.prevEncL, s.prevEncR = s.encTickL, s.encTickR
@@ -476,7 +476,8 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
 
     update_thermal(s, dt)
     update_supply(s)
-    check_l, check_r, halt, hardest = _check_faults(s, delta_l, delta_r, ill_l, ill_r, out)
+    check_l, check_r, halt, hardest, held_l, held_r = _check_faults(s, delta_l, delta_r, ill_l, ill_r, dt,
+                                                                    out)
 
     update_inhibits(s)
     if s.cmdSinceTick:
@@ -498,7 +499,7 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
     elif s.batteryPending:
         send_battery_event(s, out)
     elif s.needNeutral:
-        _confirm_neutral(s, out)
+        confirm_neutral(s, out)
 
     goal_l, goal_r = capped_goals(s)
     if s.brakeFitted and s.brakePhase != BRAKE_RELEASED:
@@ -550,12 +551,14 @@ def control_tick(s: FirmwareState, now: int, count_l: int, count_r: int, out: by
         # A suspect wheel keeps its output: no count is no reason to push harder.
         # beyond the thermal rollback, each within its motor's rolled-back current limit
         if trusted_l and check_l != WHEEL_SUSPECT:
-            lo, hi = pid_bounds(s.windingTempL, s.filtVelL)
+            lo, hi = held_bounds(*pid_bounds(s.windingTempL, s.filtVelL)) if held_l else \
+                pid_bounds(s.windingTempL, s.filtVelL)
             s.outputL, s.integralL = compute_pid(s.setpointL, s.filtVelL, s.integralL, s.prevMeasL,
                                                  s.kpL, s.kiL, s.kdL, dt, lo, hi)
             s.prevMeasL = s.filtVelL
         if trusted_r and check_r != WHEEL_SUSPECT:
-            lo, hi = pid_bounds(s.windingTempR, s.filtVelR)
+            lo, hi = held_bounds(*pid_bounds(s.windingTempR, s.filtVelR)) if held_r else \
+                pid_bounds(s.windingTempR, s.filtVelR)
             s.outputR, s.integralR = compute_pid(s.setpointR, s.filtVelR, s.integralR, s.prevMeasR,
                                                  s.kpR, s.kiR, s.kdR, dt, lo, hi)
             s.prevMeasR = s.filtVelR

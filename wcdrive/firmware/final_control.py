@@ -52,7 +52,7 @@ def boot_line(cause: str = "POWER_ON") -> bytes:
 #: What ``measureFreeRam()`` reports on the Mega build (bytes between the heap and the
 #: stack in loop()); the simulated board reports it too. tests/firmware/test_estop_and_reset.py checks
 #: it against the ELF running in simavr, so a firmware change that moves it fails there.
-FREE_RAM = 6126
+FREE_RAM = 6122
 
 
 class Firmware:
@@ -120,23 +120,26 @@ class Firmware:
 
     def tick(self, now: int, count_l: int, count_r: int, illegal_l: int = 0, illegal_r: int = 0,
              free_ram: int | None = None, storm_l: int = 0, storm_r: int = 0,
-             rx_lost: int = 0, inputs: int = 0, supply: int = C.SUPPLY_NOMINAL_COUNTS) -> bytes:
+             rx_lost: int = 0, inputs: int = 0, supply: int = C.SUPPLY_NOMINAL_COUNTS,
+             current_l: int = C.CURRENT_ZERO_COUNTS, current_r: int = C.CURRENT_ZERO_COUNTS) -> bytes:
         """``controlTick(now)``. What it latches from the interrupts (encoder counts,
         illegal transitions, storm flags, the RX interrupt's lost bytes) are inputs, and
         so is ``free_ram`` (what loop() measured before the tick; None: ``self.free_ram``,
         which starts at the figure of the Mega build, ``FREE_RAM``), and the input pins it
         reads (``inputs``: bit 0 inhibit input 1, bit 1 input 2, bit 2 the brake driver's
-        status; 1 active, the pin LOW) and the supply (``supply``: the ADC count at
-        PIN_SUPPLY, 0 to 1023)."""
+        status; 1 active, the pin LOW), the supply (``supply``: the ADC count at
+        PIN_SUPPLY, 0 to 1023) and the motors' currents (``current_l``, ``current_r``: the
+        ADC counts at PIN_CURRENT_L/R the interrupt converted after the last tick began;
+        CURRENT_ZERO_COUNTS is 0 A)."""
         self.state.freeRam = self.free_ram if free_ram is None else free_ram
         if _fast_tick is not None:          # the common case in C (``tick_fast``), or None
             sent = _fast_tick(self.state, now, count_l, count_r, illegal_l, illegal_r, storm_l, storm_r,
-                              rx_lost, inputs, supply)
+                              rx_lost, inputs, supply, current_l, current_r)
             if sent is not None:
                 return sent
         out = bytearray()
         control_tick(self.state, now, count_l, count_r, out, illegal_l, illegal_r, storm_l, storm_r,
-                     rx_lost, inputs, supply)
+                     rx_lost, inputs, supply, current_l, current_r)
         return bytes(out)
 
 

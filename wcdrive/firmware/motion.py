@@ -3,11 +3,14 @@
 On a reversal the pivot first brings the chair to rest (PIVOT_STOPPING: setpoints at
 zero and both wheels below PIVOT_START_SPEED), then rotates
 it in place for PIVOT_TICKS (PIVOT_ROTATING) so the casters swing round, then applies
-the pending command. ``pivot_step`` runs once per control tick, after the outputs."""
+the pending command. ``pivot_step`` runs once per control tick, after the outputs.
+``require_neutral`` starts a wait for a neutral command, ``confirm_neutral`` runs it a
+tick at a time."""
 
 from __future__ import annotations
 
 from wcdrive.avr.f32 import add, div, mul
+from wcdrive.firmware import constants as C
 from wcdrive.firmware.constants import (
     PIVOT_SPEED,
     PIVOT_START_SPEED,
@@ -15,6 +18,7 @@ from wcdrive.firmware.constants import (
     PIVOT_TICKS,
     WHEEL_RADIUS,
 )
+from wcdrive.firmware.output import send, send_event
 from wcdrive.firmware.state import FirmwareState
 
 PIVOT_NONE, PIVOT_STOPPING, PIVOT_ROTATING = 0, 1, 2
@@ -114,3 +118,25 @@ def pivot_step(s: FirmwareState) -> None:
             s.pivotPhase = PIVOT_NONE
             s.targetL = s.pendingL
             s.targetR = s.pendingR
+
+
+def confirm_neutral(s: FirmwareState, out: bytearray) -> None:
+    """The wait for neutral, at most one event a tick and none beside ``WATCHDOG`` (the
+    output budget's worst tick): the refusal (``EVT:NOT_NEUTRAL``); the neutral command
+    stood ``NEUTRAL_TICKS`` ticks, confirmed (``EVT:NEUTRAL`` when something was refused
+    meanwhile); refused for ``NEUTRAL_FAULT_TICKS`` ticks without a neutral command, a
+    deflected control (``EVT:DEFLECTED``, until neutral)."""
+    if s.notNeutralPending:
+        s.notNeutralPending = 0
+        send(s, send_event("NOT_NEUTRAL"), out)
+    elif s.neutralSeen:
+        s.neutralTicks = (s.neutralTicks + 1) & 0xFF
+        if s.neutralTicks >= C.NEUTRAL_TICKS:
+            if s.notNeutralSent:
+                send(s, send_event("NEUTRAL"), out)
+            s.needNeutral = s.neutralSeen = s.notNeutralSent = s.neutralFault = 0
+    elif s.notNeutralSent and not s.neutralFault:
+        s.notNeutralTicks = (s.notNeutralTicks + 1) & 0xFF
+        if s.notNeutralTicks >= C.NEUTRAL_FAULT_TICKS:
+            s.neutralFault = 1
+            send(s, send_event("DEFLECTED"), out)

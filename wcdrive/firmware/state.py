@@ -30,6 +30,7 @@ FLOAT_FIELDS = (
     "effortSetpointR", "overspeedFromL", "overspeedFromR", "windingTempL", "windingTempR", "supplyVolts",
     "kpL", "kiL", "kdL", "kpR", "kiR", "kdR", "maxWheel", "maxAccel", "estopDecel",
     "fwdSpeed", "revSpeed", "driveAccel", "driveDecel", "turnSpeed", "turnAccel", "turnAtSpeed",
+    "stallTime",
 )
 #: Integer and flag globals compared exactly.
 INT_FIELDS = (
@@ -52,7 +53,7 @@ INT_FIELDS = (
     "neutralFault", "inhibitTick", "inhibitStable", "inhibitCountL", "inhibitCountR", "inhibitCountP",
     "inhibitLatched",
     "inhibitPending", "inhibitOn", "thermalRollback", "thermalPending", "supplyTick", "batteryLow",
-    "batteryPending",
+    "batteryPending", "currentTickL", "currentTickR",
 )
 
 #: Globals the tick takes as inputs rather than computes (loop() measures them).
@@ -185,6 +186,11 @@ class FirmwareState:
     supplyVolts: float = 0.0
     batteryLow: int = 0
     batteryPending: int = 0
+    #: The motors' currents (``wcdrive.firmware.stall``): the ADC counts the tick read at
+    #: PIN_CURRENT_L/R and the seconds a wheel has been held at its current limit.
+    currentTickL: int = C.CURRENT_ZERO_COUNTS
+    currentTickR: int = C.CURRENT_ZERO_COUNTS
+    stallTime: float = 0.0
     #: Halted at the chair's limit (``EVT:OVERSPEED``, ``EVT:STALLED_ON_GRADE``): motion
     #: refused with ``ERR:limit`` until a stop.
     limitLatched: int = 0

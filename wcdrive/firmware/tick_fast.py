@@ -1,7 +1,7 @@
 """The control tick's common case in C (``csrc/tick_fast.c``), for speed.
 
 ``tick(state, now, count_l, count_r, illegal_l, illegal_r, storm_l, storm_r, rx_lost, inputs,
-supply)``
+supply, current_l, current_r)``
 returns the bytes ``control.control_tick`` would send, having changed ``state`` as it
 would, or None having changed nothing: then the Python tick, the reference, runs
 (``Firmware.tick`` does that). The C path declines everything but the common case: a
@@ -39,14 +39,15 @@ _FLOATS = ("ALPHA", "ONE_MINUS_ALPHA", "CPR", "TWO_PI", "PID_OUT_MAX", "PWM_SCAL
            "OVERSPEED_MARGIN", "OVERSPEED_GAIN", "THERMAL_EMF", "FAULT_EFFORT_MAX", "THERMAL_AMBIENT",
            "THERMAL_RESISTANCE", "THERMAL_CAPACITY", "THERMAL_LOSS", "THERMAL_ROLLBACK_TEMP",
            "SUPPLY_VOLTS_PER_COUNT", "SUPPLY_FILTER", "BATTERY_LOW_V", "DRIVE_SPEED_MAX", "DRIVE_ACCEL_MAX",
-           "TURN_SPEED_MAX", "TURN_ACCEL_MAX", "TURN_AT_SPEED", "DRIVE_RATE_MAX", "WHEEL_RADIUS", "WHEELBASE")
+           "TURN_SPEED_MAX", "TURN_ACCEL_MAX", "TURN_AT_SPEED", "DRIVE_RATE_MAX", "WHEEL_RADIUS", "WHEELBASE",
+           "CURRENT_AMPS_PER_COUNT", "STALL_CURRENT", "CURRENT_SENSE_MAX")
 _INTS = ("CONTROL_PERIOD_MS", "TX_CREDIT_MAX", "TX_CREDIT_PER_MS", "FAULT_STALL_PWM",
          "FAULT_STALL_PWM_STANDING",
          "FAULT_STALL_TICKS",
          "FAULT_STALL_TICKS_TURNING", "FAULT_REVERSE_TICKS", "FAULT_RUNAWAY_PWM", "FAULT_RUNAWAY_TICKS",
          "FAULT_EFFORT_PWM", "FAULT_EFFORT_TICKS", "FAULT_ILLEGAL_PER_TICK",
          "STILL_TICKS", "PIVOT_TICKS", "HIGH", "LOW", "HOLD_DEADBAND_COUNTS", "OVERSPEED_PWM",
-         "OVERSPEED_TICKS")
+         "OVERSPEED_TICKS", "CURRENT_ZERO_COUNTS")
 
 
 def _constants() -> dict[str, float | int]:

@@ -236,7 +236,7 @@ class Corrupt:
 #: (protocol/PROTOCOL.md, "Faults").
 FAULT_NAMES = ("ENC_STALL_L", "ENC_STALL_R", "ENC_REVERSED_L", "ENC_REVERSED_R",
                "ENC_IMPLAUSIBLE_L", "ENC_IMPLAUSIBLE_R", "DRIVER_DEAD", "MOTOR_L", "MOTOR_R",
-               "BRAKE_OPEN", "BRAKE_SHORT", "OVERHEAT_L", "OVERHEAT_R", "UNDERVOLT")
+               "BRAKE_OPEN", "BRAKE_SHORT", "OVERHEAT_L", "OVERHEAT_R", "UNDERVOLT", "CURRENT_SENSE")
 
 
 def fault_names(faults: int) -> tuple[str, ...]:

@@ -231,7 +231,7 @@ class SimavrBackend:
                       encoders=encoders,
                       inhibits=sorted([(c.at, c.number, c.active) for c in rig.inhibits
                                        if c.number != LEVER_INPUT] + pins.input_changes),
-                      supply=list(pins.supply_changes))
+                      supply=list(pins.supply_changes), currents=list(pins.current_changes))
         report = compare(recorder.recording(trace))
         mega.close()
         return BackendRun(end_cycle, Lockstep(len(report.mismatches), report.events))

@@ -29,6 +29,8 @@ import time
 from pathlib import Path
 
 from wcdrive.avr.timer0 import F_CPU
+from wcdrive.boards.current_sense import CURRENT_CHANNELS
+from wcdrive.boards.current_sense import ZERO_MV as CURRENT_ZERO_MV
 from wcdrive.boards.simavr.mega_board import MegaBoard
 from wcdrive.boards.simavr.virtual_mega import ENCODER_PINS, HarnessError, Reset, VirtualMega, _lib
 from wcdrive.boards.supply_sense import NOMINAL_MV, SUPPLY_CHANNEL
@@ -144,6 +146,8 @@ class BootloaderMega(VirtualMega):
                 self.set_pin(pin, 1, at=0)
         # The program flashed may read the supply sense: a 24 V battery, as VirtualMega's.
         self.set_analog(SUPPLY_CHANNEL, NOMINAL_MV, at=0)
+        for channel in CURRENT_CHANNELS.values():
+            self.set_analog(channel, CURRENT_ZERO_MV, at=0)
 
     def _declare(self) -> None:
         p, u32, i32, sz = ctypes.c_void_p, ctypes.c_uint32, ctypes.c_int, ctypes.c_size_t

@@ -22,6 +22,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from wcdrive.avr.timer0 import F_CPU
+from wcdrive.boards.current_sense import CURRENT_CHANNELS, plant_current_millivolts
 from wcdrive.boards.port_loop import advance
 from wcdrive.boards.simavr.mega_pins import BRAKE_STATUS_PIN, PUSH_PIN
 from wcdrive.boards.simavr.virtual_mega import VirtualMega
@@ -62,6 +63,9 @@ class PlantOnPins:
         #: lock-step trace's ``supply``; the board starts at ``NOMINAL_MV``. Kept while
         #: ``mega.keep_records`` (a live board's battery would log a change a step).
         self.supply_changes: list[tuple[float, int]] = []
+        #: ...and on the motors' current senses (A1, A2): (s, side, mV), the trace's
+        #: ``currents``; the board starts at 0 A (``current_sense.ZERO_MV``).
+        self.current_changes: list[tuple[float, str, int]] = []
 
     def step(self, t0: float, t1: float, run_until: Callable[[int], None] | None = None,
              reset: Callable[[], object] | None = None) -> dict[str, EdgeTrain]:
@@ -116,3 +120,10 @@ class PlantOnPins:
             self.mega.set_analog(SUPPLY_CHANNEL, mv, at=c0)
             if self.mega.keep_records:
                 self.supply_changes.append((c0 / F_CPU, mv))
+        # the motors' currents too (the ADC interrupt reads them after a tick begins)
+        for side, mv in plant_current_millivolts(self.plant).items():
+            channel = CURRENT_CHANNELS[side]
+            if mv != self.mega.analog(channel):
+                self.mega.set_analog(channel, mv, at=c0)
+                if self.mega.keep_records:
+                    self.current_changes.append((c0 / F_CPU, side, mv))

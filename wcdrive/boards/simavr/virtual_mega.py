@@ -38,6 +38,8 @@ import numpy as np
 
 from wcdrive.avr.timer0 import F_CPU
 from wcdrive.avr.uart import UART_BYTE_CYCLES
+from wcdrive.boards.current_sense import CURRENT_CHANNELS
+from wcdrive.boards.current_sense import ZERO_MV as CURRENT_ZERO_MV
 from wcdrive.boards.simavr.build import firmware_elf
 from wcdrive.boards.simavr.harness_binding import HarnessError, _lib
 from wcdrive.boards.simavr.harness_records import (
@@ -131,6 +133,9 @@ class VirtualMega(MegaPins):
             self.set_pin(pin, 1, at=0)
         # The supply sense reads a 24 V battery until someone (a plant) says otherwise.
         self.set_analog(SUPPLY_CHANNEL, NOMINAL_MV, at=0)
+        # ...and the motors' current senses read 0 A (wcdrive.boards.current_sense).
+        for channel in CURRENT_CHANNELS.values():
+            self.set_analog(channel, CURRENT_ZERO_MV, at=0)
         if vcd is not None:
             pins = "".join(f"{p}{b}:{n};" for n, (p, b) in self._named_pins().items())
             if self._c.wcsim_vcd_open(self._s, str(vcd).encode(), pins.encode()) != 0:

@@ -3,8 +3,8 @@
  * control_tick) as a CPython extension, for speed: the simulation runs the tick 20
  * times a simulated second, and in Python it is about a fifth of a run's time.
  *
- * tick(state, now, count_l, count_r, illegal_l, illegal_r, storm_l, storm_r, rx_lost)
- * computes what control_tick(state, now, ..., out, ...) computes and returns the bytes
+ * tick(state, now, count_l, count_r, illegal_l, illegal_r, storm_l, storm_r, rx_lost,
+ * inputs, supply, current_l, current_r) computes what control_tick(state, now, ..., out, ...) computes and returns the bytes
  * it would append to ``out``, or returns None having changed nothing. It returns None
  * (and the Python tick, the reference, runs instead) for everything but the common
  * case:
@@ -23,6 +23,9 @@
  *   - with a brake fitted (brakeFitted), a tick that parks, finds the brake other than
  *     released and settled (its phase, wcdrive.firmware.brake) or reads its driver's
  *     status LOW;
+ *   - a wheel without a count whose motor's current sense reads STALL_CURRENT or more
+ *     (it may be held at its current limit, the stall clock may run), or a sense past
+ *     CURRENT_SENSE_MAX (failed);
  *   - a mode that MODE_NAMES does not name.
  * Each binary32 operation is one IEEE double operation rounded once to binary32, as
  * f32.py (and f32_fast.c) computes the ordinary case. The whole tick is computed into
@@ -102,6 +105,7 @@ static double f_from_int(int64_t n) { return rnd((double)n); }   /* |n| < 2**53 
     X(brakeFitted) X(profile) X(brakePhase) X(brakeTicks) X(brakeStatusTick) X(brakeStatusTicks) \
     X(windingTempL) X(windingTempR) X(thermalRollback) X(thermalPending) \
     X(supplyTick) X(supplyVolts) X(batteryLow) X(batteryPending) \
+    X(currentTickL) X(currentTickR) X(stallTime) \
     X(fwdSpeed) X(revSpeed) X(driveAccel) X(driveDecel) X(turnSpeed) X(turnAccel) X(turnAtSpeed)
 
 #define ENUM(name) F_##name,
@@ -165,12 +169,13 @@ static struct {
         pivot_speed, rounding2, thermal_emf, effort_max, thermal_ambient, thermal_resistance,
         thermal_capacity, thermal_loss, thermal_rollback_temp, supply_volts_per_count, supply_filter,
         battery_low_v, drive_speed_max, drive_accel_max, turn_speed_max, turn_accel_max, turn_at_speed,
-        drive_rate_max, wheel_radius, wheelbase;
+        drive_rate_max, wheel_radius, wheelbase, current_amps_per_count, stall_current, current_sense_max;
     int64_t control_period_ms, tx_credit_max, tx_credit_per_ms, stall_pwm, stall_pwm_standing, stall_ticks,
         stall_ticks_turning,
         reverse_ticks, runaway_pwm, runaway_ticks, effort_pwm, effort_ticks, illegal_per_tick, still_ticks, pivot_ticks,
         hold_deadband, overspeed_pwm, overspeed_ticks,
-        high, low, pivot_none, pivot_stopping, pivot_rotating, untrusted_l, untrusted_r, brake_released;
+        high, low, pivot_none, pivot_stopping, pivot_rotating, untrusted_l, untrusted_r, brake_released,
+        current_zero_counts;
 } K;
 static PyObject *mode_names;      /* dict: mode -> bytes */
 static int bound;
@@ -433,7 +438,7 @@ static const int float_fields[] = {
     F_prevMeasL, F_prevMeasR, F_estopDecel, F_maxAccel, F_integralL, F_integralR, F_outputL,
     F_outputR, F_kpL, F_kiL, F_kdL, F_kpR, F_kiR, F_kdR, F_pendingL, F_pendingR,
     F_overspeedFromL, F_overspeedFromR, F_windingTempL, F_windingTempR, F_supplyVolts,
-    F_fwdSpeed, F_revSpeed, F_driveAccel, F_driveDecel, F_turnSpeed, F_turnAccel, F_turnAtSpeed,
+    F_fwdSpeed, F_revSpeed, F_driveAccel, F_driveDecel, F_turnSpeed, F_turnAccel, F_turnAtSpeed, F_stallTime,
 };
 
 static unsigned char field_is_float[N_FIELDS];     /* set by _bind from float_fields */
@@ -444,18 +449,20 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
         PyErr_SetString(PyExc_RuntimeError, "tick_fast: _bind() was not called");
         return NULL;
     }
-    if (nargs != 11) {
-        PyErr_SetString(PyExc_TypeError, "tick() takes 11 arguments");
+    if (nargs != 13) {
+        PyErr_SetString(PyExc_TypeError, "tick() takes 13 arguments");
         return NULL;
     }
     PyObject *s = args[0];
     if (Py_TYPE(s) != state_type)
         Py_RETURN_NONE;
     int64_t now, count_l, count_r, illegal_l, illegal_r, storm_l, storm_r, rx_lost, inhibit, supply;
+    int64_t current_l, current_r;
     if (!arg_int(args[1], &now) || !arg_int(args[2], &count_l) || !arg_int(args[3], &count_r)
         || !arg_int(args[4], &illegal_l) || !arg_int(args[5], &illegal_r)
         || !arg_int(args[6], &storm_l) || !arg_int(args[7], &storm_r) || !arg_int(args[8], &rx_lost)
-        || !arg_int(args[9], &inhibit) || !arg_int(args[10], &supply))
+        || !arg_int(args[9], &inhibit) || !arg_int(args[10], &supply)
+        || !arg_int(args[11], &current_l) || !arg_int(args[12], &current_r))
         Py_RETURN_NONE;
 
     Vals v;
@@ -540,10 +547,19 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
     SETI(stormTickR, storm_r != 0);
     SETI(rxLostTick, rx_lost & M32);
     SETI(supplyTick, supply & 0x3FF);
+    SETI(currentTickL, current_l & 0x3FF);
+    SETI(currentTickR, current_r & 0x3FF);
     int64_t delta_l = i32(I(encTickL) - I(prevEncL));
     int64_t delta_r = i32(I(encTickR) - I(prevEncR));
     SETI(prevEncL, I(encTickL));
     SETI(prevEncR, I(encTickR));
+    /* sense_amps: a wheel without a count whose motor draws STALL_CURRENT or more (it may
+     * be held at its limit), or a failed sense, goes to the Python tick */
+    double amps_l = fabs(f_mul(f_from_int(I(currentTickL) - K.current_zero_counts), K.current_amps_per_count));
+    double amps_r = fabs(f_mul(f_from_int(I(currentTickR) - K.current_zero_counts), K.current_amps_per_count));
+    if ((delta_l == 0 && !(amps_l < K.stall_current)) || (delta_r == 0 && !(amps_r < K.stall_current))
+        || !(amps_l <= K.current_sense_max) || !(amps_r <= K.current_sense_max))
+        Py_RETURN_NONE;
 
     double per_second = f_div(K.two_pi, dt);
     SETF(rawVelL, f_mul(-f_div(f_from_int(delta_l), K.cpr), per_second));
@@ -583,6 +599,7 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
         SETI(stallTicksL, stall_l); SETI(reverseTicksL, rev_l);
         SETI(stallTicksR, stall_r); SETI(reverseTicksR, rev_r);
         SETI(runawayTicksL, run_l); SETI(runawayTicksR, run_r);
+        SETF(stallTime, 0.0);     /* no wheel held at its current limit (above) */
         SETI(effortPwmL, el.pwm); SETF(effortSpeedL, el.speed);
         SETF(effortSetpointL, el.setpoint); SETI(effortTicksL, el.ticks);
         SETI(effortPwmR, er.pwm); SETF(effortSpeedR, er.speed);
@@ -860,6 +877,10 @@ static PyObject *bind(PyObject *self, PyObject *args) {
           && const_double(consts, "DRIVE_RATE_MAX", &k.drive_rate_max)
           && const_double(consts, "WHEEL_RADIUS", &k.wheel_radius)
           && const_double(consts, "WHEELBASE", &k.wheelbase)
+          && const_double(consts, "CURRENT_AMPS_PER_COUNT", &k.current_amps_per_count)
+          && const_double(consts, "STALL_CURRENT", &k.stall_current)
+          && const_double(consts, "CURRENT_SENSE_MAX", &k.current_sense_max)
+          && const_int(consts, "CURRENT_ZERO_COUNTS", &k.current_zero_counts)
           && const_int(consts, "CONTROL_PERIOD_MS", &k.control_period_ms)
           && const_int(consts, "TX_CREDIT_MAX", &k.tx_credit_max)
           && const_int(consts, "TX_CREDIT_PER_MS", &k.tx_credit_per_ms)

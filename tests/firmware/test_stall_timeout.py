@@ -1,0 +1,155 @@
+"""The motors' current senses and the stall timeout (docs/safety.md, "Stall timeout"):
+the rules worked by hand on the port, then each condition injected on both backends (the
+compiled firmware in simavr, its current senses on A1 and A2, replayed on the port in
+lock step with no mismatch)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tests.support.recordings import board_lines, every, recorded, tick_states, turning
+from wcdrive.boards.current_sense import current_millivolts
+from wcdrive.boards.supply_sense import adc_counts
+from wcdrive.firmware import constants as C
+from wcdrive.firmware.stall import current_sense_fault, held_at_limit, held_bounds, sense_amps
+from wcdrive.hil.current_traces import stand_still
+from wcdrive.hil.lockstep import Recording
+from wcdrive.hil.traces import Trace
+
+#: The duty of a wheel held at its current limit.
+HELD_DUTY = int(C.STALL_HELD_OUTPUT * C.PWM_SCALE)
+
+
+# ---- the rules, by hand ------------------------------------------------------------------
+def test_a_count_reads_its_amps_either_way() -> None:
+    """40 mV/A at 5 V / 1024 a count: 0.1220703125 A a count from 512 (2.5 V)."""
+    assert sense_amps(C.CURRENT_ZERO_COUNTS) == 0.0
+    assert sense_amps(512 + 90) == sense_amps(512 - 90) == pytest.approx(10.986328125, abs=0)
+    assert sense_amps(512 + 91) == pytest.approx(11.108398438)       # the first past 11 A
+    # what simavr's ADC makes of the mV a 12.5 A current puts on the pin (3000 mV: 613)
+    assert current_millivolts(12.5) == 3000 and adc_counts(3000) == 613
+    assert sense_amps(613) == pytest.approx(12.329101562)
+
+
+def test_a_sense_past_30_amps_either_way_has_failed() -> None:
+    """245 counts from 512 is 29.9 A, within; 246 is 30.03 A, a failed sense; a cut
+    output (0 V, count 0) reads 62.5 A, one shorted to 5 V (1023) 62.4 A."""
+    assert current_sense_fault(512 + 245, 512 - 245) == 0
+    for left, right in ((512 + 246, 512), (512, 512 - 246), (0, 512), (512, 1023)):
+        assert current_sense_fault(left, right) == 0x4000
+
+
+def test_a_wheel_is_held_only_standing_driven_and_at_its_limit() -> None:
+    """Held: no count, driven its setpoint's way at duty 42 or more, its partner not
+    turning the chair's way faster than 0.3 rad/s this tick, 11 A or more. Each
+    condition alone taken away is not held."""
+    amps = 512 + 100                                   # 12.2 A
+    assert held_at_limit(0, 42, C.HIGH, 2.0, 0.0, amps)
+    assert held_at_limit(0, 42, C.LOW, -2.0, 0.0, 512 - 100)           # backward, either sign
+    assert held_at_limit(0, 90, C.HIGH, 2.0, -1.0, amps)               # partner rolling back
+    assert not held_at_limit(1, 42, C.HIGH, 2.0, 0.0, amps)            # a count
+    assert not held_at_limit(0, 41, C.HIGH, 2.0, 0.0, amps)            # below full torque
+    assert not held_at_limit(0, 42, C.LOW, 2.0, 0.0, amps)             # driven against its setpoint
+    assert not held_at_limit(0, 42, C.HIGH, 0.0, 0.0, amps)            # no setpoint
+    assert not held_at_limit(0, 42, C.HIGH, 2.0, 0.31, amps)           # the partner carries the chair
+    assert not held_at_limit(0, 42, C.HIGH, 2.0, 0.0, 512 + 90)        # 10.99 A
+
+
+def test_a_held_wheel_pushes_at_full_torque_and_no_harder() -> None:
+    """The PID's bounds within 16.5 % either way (duty 42): a motor at duty 42 drawing
+    11 A or more turns at most (42 x 24 / 255 - 11 x 0.3) / (14 x 24 / 255) rad/s: 0.50
+    (the plant's 0.3 ohm and 14 duty a rad/s of back-EMF; the sensor's bound on a cut
+    encoder's wheel passing for a held one)."""
+    assert held_bounds(-100.0, 100.0) == (-C.STALL_HELD_OUTPUT, C.STALL_HELD_OUTPUT)
+    assert held_bounds(-5.0, 10.0) == (-5.0, 10.0)                     # a rollback's tighter bound stays
+    assert HELD_DUTY == 42
+    volts_per_duty = 24.0 / 255.0
+    fastest = (HELD_DUTY * volts_per_duty - C.STALL_CURRENT * 0.3) / (14.0 * volts_per_duty)
+    assert fastest == pytest.approx(0.496, abs=1e-3)
+
+
+# ---- both backends -------------------------------------------------------------------------
+def _push(duration: float, wall: float | None, amps: tuple[float, float], speed: float = 3.0,
+          pokes: list[tuple[float, dict[str, float | int]]] | None = None,
+          cut: tuple[str, ...] = ("left", "right"), serial: list[tuple[float, bytes]] | None = None,
+          ) -> Recording:
+    """A neutral command, then rp/lp ``speed`` every 0.1 s; both wheels turning at
+    ``speed`` until ``wall`` s, where the encoders of ``cut`` stand (a wall: both; a cut
+    encoder: one), the motors drawing ``amps`` (left, right) A from 0.06 s before."""
+    command = b"rp%05.2f,lp%05.2f\n" % (speed, speed)
+    writes = [(0.02, b"rp0,lp0,\n"), *every(command, 0.2, duration - 0.05), *(serial or [])]
+    encoders = {side: turning(duration, side == "left", speed) for side in ("left", "right")}
+    currents: list[tuple[float, str, int]] = []
+    if wall is not None:
+        encoders = {side: stand_still(train, wall, duration) if side in cut else train
+                    for side, train in encoders.items()}
+        currents = [(wall - 0.06, side, current_millivolts(a)) for side, a in zip(("left", "right"), amps,
+                                                                                  strict=True)]
+    return recorded(Trace(duration=duration, serial=sorted(writes), encoders=encoders, currents=currents,
+                          pokes=pokes or []))
+
+
+@pytest.mark.simavr
+def test_against_a_wall_both_wheels_push_at_their_limit_without_a_fault() -> None:
+    """Both encoders stand from 1.0 s, both motors at 12.5 A (the wall): no fault
+    (before the senses: DRIVER_DEAD two ticks on), the stall clock runs a tick at a
+    time, both wheels at duty 42; the host's commands go on being taken."""
+    rec = _push(2.0, 1.0, (12.5, -12.5))
+    assert board_lines(rec, b"EVT:") == [b"EVT:PARAMS_DEFAULT,blank"]
+    pushing = [(t, a) for t, a in tick_states(rec) if t > 1.15]
+    assert all(a["faultFlags"] == 0 and a["pwmL"] == a["pwmR"] == HELD_DUTY for _, a in pushing)
+    clock = [a["stallTime"] for _, a in pushing]
+    assert clock[0] > 0.0 and np.all(np.diff(clock) == pytest.approx(0.05, abs=0.002))
+
+
+@pytest.mark.simavr
+def test_the_stall_clock_run_out_stops_the_chair_until_a_stop_then_neutral() -> None:
+    """The same wall, the stall clock set at 14.8 s at 1.3 s: 15 s comes four ticks on,
+    ``EVT:STALL_TIMEOUT``, the chair parked under the hold (its clock back at 0). The
+    host's rp/lp commands are refused until it sends a stop (``limit``, then
+    ``neutral``) and a neutral command has stood: then it drives again. Red with the
+    timeout's branch taken out: no event, the chair pushing on."""
+    rec = _push(3.2, 1.0, (12.5, 12.5), pokes=[(1.3, {"stallTime": 14.8})],
+                serial=[(2.02, b"rp0,lp0,\n"), *every(b"rp0,lp0,\n", 2.1, 2.4, 0.05)])
+    events = board_lines(rec, b"EVT:")
+    assert events[:2] == [b"EVT:PARAMS_DEFAULT,blank", b"EVT:STALL_TIMEOUT"], events
+    ticks = tick_states(rec)
+    at = next(t for t, a in ticks if a["limitLatched"])
+    assert 1.45 < at < 1.6
+    assert all(a["stallTime"] == 0.0 and a["targetL"] == 0.0 and a["needNeutral"]
+               for t, a in ticks if at <= t < 2.0)
+    assert b"ERR:limit" in rec.tx or b"ERR:neutral" in rec.tx
+    assert any(a["targetL"] > 0.0 for t, a in ticks if t > 2.5)      # driving again after neutral
+
+
+@pytest.mark.simavr
+def test_both_encoders_cut_while_the_motors_spin_is_still_the_driver_fault() -> None:
+    """Both encoders cut at 1.0 s while the motors turn on, drawing 3 A (not held: a
+    turning motor's back-EMF takes the current off its limit): DRIVER_DEAD two ticks
+    on, as before the current senses."""
+    rec = _push(1.5, 1.0, (3.0, -3.0))
+    assert board_lines(rec, b"EVT:FAULT") == [b"EVT:FAULT,DRIVER_DEAD"]
+
+
+@pytest.mark.simavr
+def test_one_encoder_cut_while_its_partner_turns_is_its_stall_fault_at_any_current() -> None:
+    """The right encoder cut at 1.0 s, its motor at 12.5 A, the left wheel turning on at
+    3 rad/s: the partner carries the chair, so the right wheel is not held but its
+    encoder failed: ENC_STALL_R."""
+    rec = _push(1.5, 1.0, (3.0, 12.5), cut=("right",))
+    assert board_lines(rec, b"EVT:FAULT") == [b"EVT:FAULT,ENC_STALL_R"]
+
+
+@pytest.mark.simavr
+def test_a_failed_current_sense_latches_its_fault() -> None:
+    """The left sense's output cut (0 V on A1) at 0.5 s while the chair drives on the
+    level: ``EVT:FAULT,CURRENT_SENSE`` at the tick after the ADC read it; the chair
+    stops along the emergency ramp."""
+    writes = [(0.02, b"rp0,lp0,\n"), *every(b"rp03.00,lp03.00\n", 0.2, 0.95)]
+    rec = recorded(Trace(duration=1.0, serial=writes,
+                         encoders={side: turning(1.0, side == "left", 3.0) for side in ("left", "right")},
+                         currents=[(0.5, "left", 0)]))
+    assert board_lines(rec, b"EVT:FAULT") == [b"EVT:FAULT,CURRENT_SENSE"]
+    at = next(t for t, a in tick_states(rec) if a["faultFlags"])
+    assert 0.5 < at < 0.62 and tick_states(rec)[-1][1]["targetL"] == 0.0

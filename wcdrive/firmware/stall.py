@@ -1,0 +1,70 @@
+"""The motors' currents as final_control.ino measures them, and the stall timeout: the
+sketch's ``senseAmps``, ``currentSenseFault`` and ``heldAtLimit``
+(docs/safety.md, "Stall timeout").
+
+Each motor lead carries a bidirectional Hall current sensor on PIN_CURRENT_L /
+PIN_CURRENT_R (A1, A2): CURRENT_ZERO_COUNTS at 0 A, CURRENT_AMPS_PER_COUNT amps a count
+either way. The ADC interrupt converts both after a tick has begun; the next tick reads
+them (``currentTickL``/``R``).
+
+A wheel held at its current limit (``held_at_limit``: without a count, driven toward its
+setpoint at FAULT_STALL_PWM_STANDING or more, its partner not carrying the chair its
+way, its motor drawing STALL_CURRENT or more) is not an encoder fault: ``check_wheel``
+does not count it toward ENC_STALL or DRIVER_DEAD, and its PID runs within
+STALL_HELD_OUTPUT (``held_bounds``), the motor's full torque at a standstill (the
+integral back-calculated to it: no wind-up to spend when it next counts). Its current then
+bounds how fast it can turn: duty 42 less the 35 that drive 11 A through the armature
+leaves 7 for back-EMF, 0.5 rad/s. A cut encoder's wheel that turns faster draws less
+and is a stalled encoder; a dead driver draws nothing. While a wheel is held, driving
+(not under the hold), the tick runs the stall clock
+(``stallTime``, seconds); at STALL_TIMEOUT the chair stops as at its other limits
+(``EVT:STALL_TIMEOUT``, the emergency ramp and the hold) and motion needs a neutral
+command. A sense that reads beyond CURRENT_SENSE_MAX either way (a cut or shorted
+output) latches ``CURRENT_SENSE``.
+"""
+
+from __future__ import annotations
+
+from wcdrive.avr.f32 import from_int, mul
+from wcdrive.firmware import constants as C
+
+__all__ = ["FAULT_CURRENT_SENSE", "current_sense_fault", "held_at_limit", "held_bounds", "sense_amps"]
+
+FAULT_CURRENT_SENSE = 0x4000
+
+
+def sense_amps(count: int) -> float:
+    """``senseAmps``: the current an ADC count of a current sense reads, A, either way
+    round."""
+    return abs(mul(from_int(count - C.CURRENT_ZERO_COUNTS), C.CURRENT_AMPS_PER_COUNT))
+
+
+def current_sense_fault(count_l: int, count_r: int) -> int:
+    """``currentSenseFault``: FAULT_CURRENT_SENSE when either sense reads beyond
+    CURRENT_SENSE_MAX."""
+    if sense_amps(count_l) > C.CURRENT_SENSE_MAX or sense_amps(count_r) > C.CURRENT_SENSE_MAX:
+        return FAULT_CURRENT_SENSE
+    return 0
+
+
+def held_at_limit(delta: int, applied_pwm: int, applied_dir: int, setpoint: float, other_raw: float,
+                  current: int) -> bool:
+    """``heldAtLimit``: a wheel without a count this tick, driven toward its setpoint at
+    FAULT_STALL_PWM_STANDING or more, its partner not carrying the chair its way
+    (``other_raw``, the partner's speed this tick: standing, or rolling back), its motor
+    drawing STALL_CURRENT or more. Its PID then runs within STALL_HELD_OUTPUT
+    (``held_bounds``), so that a current that high bounds how fast it turns."""
+    other_along = other_raw if setpoint > 0.0 else -other_raw
+    return (delta == 0 and other_along < C.FAULT_STANDING_SPEED
+            and applied_pwm >= C.FAULT_STALL_PWM_STANDING and setpoint != 0.0
+            and (applied_dir == C.HIGH) == (setpoint > 0.0) and sense_amps(current) >= C.STALL_CURRENT)
+
+
+def held_bounds(lo: float, hi: float) -> tuple[float, float]:
+    """``heldBounds``: the PID's bounds ``lo``, ``hi`` (``pid_bounds``) within
+    STALL_HELD_OUTPUT either way, for a wheel held at its current limit."""
+    if hi > C.STALL_HELD_OUTPUT:
+        hi = C.STALL_HELD_OUTPUT
+    if lo < -C.STALL_HELD_OUTPUT:
+        lo = -C.STALL_HELD_OUTPUT
+    return lo, hi
