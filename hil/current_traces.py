@@ -10,7 +10,8 @@ STALL_TIMEOUT once or twice inside it, with the chair driving into the wall then
 and its random commands seldom drive while its encoders stand), and the senses changed
 at random times besides
 (``current_changes``): mostly about STALL_CURRENT, some small, a tenth at a failed
-sense's volts (past CURRENT_SENSE_MAX).
+sense's volts (past CURRENT_SENSE_MAX). Half of them set ``stall_timeout`` first, in
+range (1, 14.95, 15.5, 60 s) or out (0.5, 61).
 """
 
 from __future__ import annotations
@@ -45,6 +46,11 @@ def held_against_a_wall(rng: np.random.Generator, trace: Trace) -> None:
     clock = [(round(float(rng.uniform(start, stop)), 4), pushing(rng))
              for _ in range(int(rng.integers(1, 3)))]
     trace.pokes = sorted(trace.pokes + clock, key=lambda p: p[0])
+    # the stall timeout set, in range and out, in half of them: from the start (the
+    # clock set near 15 s then times out or not by it)
+    if rng.random() < 0.5:
+        value = float(rng.choice([0.5, 1.0, 14.95, 15.5, 60.0, 61.0]))
+        trace.serial.insert(0, (0.01, b"set:stall_timeout=%g\n" % value))
 
 
 def pushing(rng: np.random.Generator) -> dict[str, float | int]:

@@ -65,10 +65,11 @@ INHIBIT_EVERY = 3
 #: comes (chosen by the CRC of the writes, not drawn: every seed draws what it drew before).
 NEUTRAL_FIRST_EVERY = 4
 NEUTRAL_LEAD_S = 0.12
-#: The parameters ``param_command`` draws from: those before ``brake_fitted``, so that a
-#: seed draws what it drew before it came (``brake_fitted`` is set, out of range and in,
-#: at the start of the traces that fit the brake).
-DRAWN_PARAMS = tuple(p for p in PARAMS if p.name != "brake_fitted")
+#: The parameters ``param_command`` draws from: all but ``brake_fitted`` and
+#: ``stall_timeout``, so that a seed draws what it drew before they came (``brake_fitted``
+#: is set, out of range and in, at the start of the traces that fit the brake;
+#: ``stall_timeout`` in the traces with a stand against a wall, ``current_traces``).
+DRAWN_PARAMS = tuple(p for p in PARAMS if p.name not in ("brake_fitted", "stall_timeout"))
 #: One trace in this many sets ``brake_fitted`` 1 first; half of those pull the brake
 #: driver's status low now and then (``pin_pulls``).
 BRAKE_FITTED_EVERY = 3

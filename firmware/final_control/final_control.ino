@@ -341,10 +341,11 @@ uint8_t batteryPending = 0;                 // events to send: bit 0 BATTERY,1, 
 // The motors' currents, measured at WC_PIN_CURRENT_L/R (A1, A2) by Hall sensors: the ADC
 // interrupt converts them after the tick's start (adcCurrentL/R), then starts the
 // supply's conversion for the next tick to read; the tick reads the counts the last one
-// left (currentTickL/R). A wheel held at its current limit for WC_STALL_TIMEOUT seconds
+// left (currentTickL/R). A wheel held at its current limit for stallTimeout seconds
 // stops the chair (docs/safety.md, "Stall timeout").
 volatile uint16_t adcCurrentL = WC_CURRENT_ZERO_COUNTS, adcCurrentR = WC_CURRENT_ZERO_COUNTS;
 uint16_t currentTickL = WC_CURRENT_ZERO_COUNTS, currentTickR = WC_CURRENT_ZERO_COUNTS;
+float stallTimeout = WC_STALL_TIMEOUT;      // s (the parameter stall_timeout)
 float stallTime = 0.0f;                     // s a wheel has been held at its current limit
 
 // Faults (EVT:FAULT,<name>; docs/safety.md): latched until "reset", motion refused, motors off.
@@ -1233,18 +1234,18 @@ static bool straining(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, fl
          appliedPwm >= WC_GRADE_PWM && progress < WC_FAULT_EFFORT_SHORTFALL * fabs(setpoint);
 }
 
-// A wheel held at its current limit: without a count this tick, driven toward its
-// setpoint at WC_FAULT_STALL_PWM_STANDING or more, its partner not carrying the chair its
-// way (otherRaw, this tick's speed: standing, or rolling back), its motor drawing
-// WC_STALL_CURRENT or more. Not an encoder fault but the stall timeout's: its PID runs
-// within WC_STALL_HELD_OUTPUT (heldBounds), so that a current that high means the wheel
-// turns at most (duty - its current's share) / back-EMF a rad/s: 0.5. A cut encoder's
-// wheel that turns faster draws less, and is a stalled encoder.
-static bool heldAtLimit(int32_t delta, uint8_t appliedPwm, uint8_t appliedDir, float setpoint,
-                        float otherRaw, uint16_t current) {
-  float otherAlong = setpoint > 0.0f ? otherRaw : -otherRaw;
-  return delta == 0 && otherAlong < WC_FAULT_STANDING_SPEED && appliedPwm >= WC_FAULT_STALL_PWM_STANDING &&
-         setpoint != 0.0f && (appliedDir == HIGH) == (setpoint > 0.0f) && senseAmps(current) >= WC_STALL_CURRENT;
+// A wheel held at its current limit: the chair standing (either wheel WC_STALL_CREEP_COUNTS
+// this tick at most, either way), the wheel driven toward its setpoint at
+// WC_FAULT_STALL_PWM_STANDING or more, its motor drawing WC_STALL_CURRENT or more. Not an encoder fault but the stall
+// timeout's: its PID runs within WC_STALL_HELD_OUTPUT (heldBounds), so that a current
+// that high means the wheel turns at most (duty - its current's share) / back-EMF a
+// rad/s: 0.5. A cut encoder's wheel that turns faster draws less, and one beside a
+// partner that counts (a chair crawling up a grade at its limit) is a stalled encoder.
+static bool heldAtLimit(int32_t delta, int32_t otherDelta, uint8_t appliedPwm, uint8_t appliedDir,
+                        float setpoint, uint16_t current) {
+  return labs(delta) <= WC_STALL_CREEP_COUNTS && labs(otherDelta) <= WC_STALL_CREEP_COUNTS &&
+         appliedPwm >= WC_FAULT_STALL_PWM_STANDING && setpoint != 0.0f &&
+         (appliedDir == HIGH) == (setpoint > 0.0f) && senseAmps(current) >= WC_STALL_CURRENT;
 }
 
 // The PID's bounds (pidBounds) within WC_STALL_HELD_OUTPUT either way, for a wheel held
@@ -1499,8 +1500,8 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
     bool strainR = straining(pwmR, dirR, setpointR, filtVelR);
     bool overrunL = overruns(pwmL, dirL, setpointL, filtVelL);
     bool overrunR = overruns(pwmR, dirR, setpointR, filtVelR);
-    stallHeldL = heldAtLimit(deltaL, pwmL, dirL, setpointL, rawVelR, currentTickL);
-    stallHeldR = heldAtLimit(deltaR, pwmR, dirR, setpointR, rawVelL, currentTickR);
+    stallHeldL = heldAtLimit(deltaL, deltaR, pwmL, dirL, setpointL, currentTickL);
+    stallHeldR = heldAtLimit(deltaR, deltaL, pwmR, dirR, setpointR, currentTickR);
     checkL = checkWheel(deltaL, illDeltaL, stormTickL, pwmL, dirL, setpointL, filtVelL, filtVelR,
                         pwmR, overrunR, stallTicksL, reverseTicksL, runawayTicksL, effortPwmL, effortSpeedL,
                         effortSetpointL, effortTicksL, prevMeasL, stallHeldL);
@@ -1575,7 +1576,7 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
     } else if (limitL || limitR) {
       halt = true;
       sendEvent(F("STALLED_ON_GRADE"));
-    } else if (stallTime >= WC_STALL_TIMEOUT) {
+    } else if (stallTime >= stallTimeout) {
       // held at the current limit too long (a wall, a kerb): motion needs a neutral command
       halt = true;
       requireNeutral();
@@ -1881,13 +1882,13 @@ static const char* const REASONS[] = {
 
 // Runtime parameters: name, variable, range. The first PARAM_FLOATS are floats;
 // watchdog_ms, feedback_form and brake_fitted (the last three) are integers.
-#define PARAM_COUNT 20
-#define PARAM_FLOATS 16
-#define PARAM_DRIVE_FIRST 9   // fwd_speed: the first of a profile's PROFILE_FLOATS limits
-#define PARAM_WATCHDOG 16
-#define PARAM_FEEDBACK_FORM 17
-#define PARAM_BRAKE_FITTED 18
-#define PARAM_PROFILE 19
+#define PARAM_COUNT 21
+#define PARAM_FLOATS 17
+#define PARAM_DRIVE_FIRST 10   // fwd_speed: the first of a profile's PROFILE_FLOATS limits
+#define PARAM_WATCHDOG 17
+#define PARAM_FEEDBACK_FORM 18
+#define PARAM_BRAKE_FITTED 19
+#define PARAM_PROFILE 20
 static const char P_KP_L[] PROGMEM = "kp_l";
 static const char P_KI_L[] PROGMEM = "ki_l";
 static const char P_KD_L[] PROGMEM = "kd_l";
@@ -1897,6 +1898,7 @@ static const char P_KD_R[] PROGMEM = "kd_r";
 static const char P_MAX_WHEEL[] PROGMEM = "max_wheel";
 static const char P_MAX_ACCEL[] PROGMEM = "max_accel";
 static const char P_ESTOP_DECEL[] PROGMEM = "estop_decel";
+static const char P_STALL_TIMEOUT[] PROGMEM = "stall_timeout";
 static const char P_FWD_SPEED[] PROGMEM = "fwd_speed";
 static const char P_REV_SPEED[] PROGMEM = "rev_speed";
 static const char P_DRIVE_ACCEL[] PROGMEM = "drive_accel";
@@ -1909,22 +1911,22 @@ static const char P_FEEDBACK_FORM[] PROGMEM = "feedback_form";
 static const char P_BRAKE_FITTED[] PROGMEM = "brake_fitted";
 static const char P_PROFILE[] PROGMEM = "profile";
 static const char* const PARAM_NAMES[PARAM_COUNT] = {
-  P_KP_L, P_KI_L, P_KD_L, P_KP_R, P_KI_R, P_KD_R, P_MAX_WHEEL, P_MAX_ACCEL, P_ESTOP_DECEL,
+  P_KP_L, P_KI_L, P_KD_L, P_KP_R, P_KI_R, P_KD_R, P_MAX_WHEEL, P_MAX_ACCEL, P_ESTOP_DECEL, P_STALL_TIMEOUT,
   P_FWD_SPEED, P_REV_SPEED, P_DRIVE_ACCEL, P_DRIVE_DECEL, P_TURN_SPEED, P_TURN_ACCEL, P_TURN_AT_SPEED,
   P_WATCHDOG, P_FEEDBACK_FORM, P_BRAKE_FITTED, P_PROFILE,
 };
 static float* const PARAM_VARS[PARAM_FLOATS] = {
-  &kpL, &kiL, &kdL, &kpR, &kiR, &kdR, &maxWheel, &maxAccel, &estopDecel,
+  &kpL, &kiL, &kdL, &kpR, &kiR, &kdR, &maxWheel, &maxAccel, &estopDecel, &stallTimeout,
   &fwdSpeed, &revSpeed, &driveAccel, &driveDecel, &turnSpeed, &turnAccel, &turnAtSpeed,
 };
 static const float PARAM_MIN[PARAM_FLOATS] = {
   WC_GAIN_P_MIN, WC_GAIN_I_MIN, 0.0f, WC_GAIN_P_MIN, WC_GAIN_I_MIN, 0.0f, WC_MAX_WHEEL_MIN, WC_ACCEL_MIN,
-  WC_DECEL_MIN, WC_DRIVE_SPEED_MIN, WC_DRIVE_SPEED_MIN, WC_DRIVE_ACCEL_MIN, WC_DRIVE_ACCEL_MIN,
+  WC_DECEL_MIN, WC_STALL_TIMEOUT_MIN, WC_DRIVE_SPEED_MIN, WC_DRIVE_SPEED_MIN, WC_DRIVE_ACCEL_MIN, WC_DRIVE_ACCEL_MIN,
   WC_TURN_SPEED_MIN, WC_TURN_ACCEL_MIN, 0.0f,
 };
 static const float PARAM_MAX[PARAM_FLOATS] = {
   WC_GAIN_P_MAX, WC_GAIN_I_MAX, WC_GAIN_D_MAX, WC_GAIN_P_MAX, WC_GAIN_I_MAX, WC_GAIN_D_MAX,
-  WC_MAX_WHEEL_SPEED, WC_ACCEL_MAX, WC_DECEL_MAX, WC_DRIVE_SPEED_MAX, WC_DRIVE_SPEED_MAX, WC_DRIVE_ACCEL_MAX,
+  WC_MAX_WHEEL_SPEED, WC_ACCEL_MAX, WC_DECEL_MAX, WC_STALL_TIMEOUT_MAX, WC_DRIVE_SPEED_MAX, WC_DRIVE_SPEED_MAX, WC_DRIVE_ACCEL_MAX,
   WC_DRIVE_ACCEL_MAX, WC_TURN_SPEED_MAX, WC_TURN_ACCEL_MAX, 1.0f,
 };
 
@@ -2287,11 +2289,11 @@ static ParseResult parseSet(uint8_t& data) {
 
 // ---------------------------------------------------------------------------
 // Parameters in EEPROM (protocol/PROTOCOL.md, "Parameters in EEPROM"). The block at
-// WC_EEPROM_PARAMS_ADDR: the layout version (WC_EEPROM_LAYOUT), the 9 float parameters
+// WC_EEPROM_PARAMS_ADDR: the layout version (WC_EEPROM_LAYOUT), the 10 float parameters
 // before the drive limits in table order (binary32, little-endian), the drive profiles'
 // table (WC_PROFILE_COUNT rows of PROFILE_FLOATS), watchdog_ms (uint16), feedback_form,
-// brake_fitted and profile (uint8 each), then the CRC-16/XMODEM of those 154 bytes
-// (uint16, little-endian): 156 bytes.
+// brake_fitted and profile (uint8 each), then the CRC-16/XMODEM of those 158 bytes
+// (uint16, little-endian): 160 bytes.
 // ---------------------------------------------------------------------------
 #define EE_TABLE_AT (1 + 4 * PARAM_DRIVE_FIRST)
 #define EE_WATCHDOG_AT (EE_TABLE_AT + (int)sizeof(profileTable))
@@ -2374,6 +2376,7 @@ static ParseResult restoreDefaults() {
   maxWheel = WC_MAX_WHEEL_SPEED;
   maxAccel = WC_MAX_ACCEL;
   estopDecel = WC_EMERGENCY_DECEL;
+  stallTimeout = WC_STALL_TIMEOUT;
   presetProfiles();
   useProfile(WC_PROFILE);
   watchdogMs = WC_WATCHDOG_MS;

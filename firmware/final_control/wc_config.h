@@ -156,8 +156,9 @@
 #define WC_CURRENT_ZERO_COUNTS 512 // the ADC count of 0 A: the sensor's VCC/2
 #define WC_CURRENT_AMPS_PER_COUNT 0.1220703125f // A per ADC count from CURRENT_ZERO_COUNTS: 5 V / 1024 / 0.040 V/A; either way round (the sign is the motor's direction)
 #define WC_STALL_CURRENT 11.0f     // A: a motor drawing this much or more, its wheel standing beside a standing partner and driven toward its setpoint at FAULT_STALL_PWM_STANDING or more, is held at its current limit (the driver's 13 A: the PID's largest effort, FAULT_EFFORT_MAX, draws 12.9 A into a standing motor): not an encoder fault (ENC_STALL, DRIVER), which is a wheel driven without counts while its motor draws less (a cut encoder's wheel spins up, its back-EMF takes the current off), but the stall timeout's
+#define WC_STALL_CREEP_COUNTS 2    // encoder counts a tick (0.025 rad/s, 4 mm/s) either way that a wheel held at its current limit, and its partner, may creep (a tyre against a wall gives a little): more from the partner is a chair that moves (crawling up a grade at its limit: 14 counts a tick at 0.18 rad/s), beside which a count-less wheel is a stalled encoder
 #define WC_STALL_HELD_OUTPUT 16.5f // percent of full duty (duty 42, FAULT_STALL_PWM_STANDING: the driver's current limit into a standing motor, its full torque): the PID's bound either way for a wheel held at its current limit (STALL_CURRENT), its integral back-calculated to it: no harder than the motor's full torque at a standstill. Its current then bounds how fast it turns: a duty of 42 less the 35 that drive 11 A through the armature leaves 7 for back-EMF, 0.5 rad/s (0.076 m/s); a wheel turning faster (a cut encoder's) draws less and is an encoder fault
-#define WC_STALL_TIMEOUT 15.0f     // s: the default of stall_timeout: a wheel held at its current limit (STALL_CURRENT) this long without a break stops the chair (EVT:STALL_TIMEOUT, the emergency ramp and the hold; motion refused until a stop, then a neutral command). Dynamic Controls DX's default, in its 5 to 50 s
+#define WC_STALL_TIMEOUT 15.0f     // s: the default of stall_timeout, a runtime parameter saved in EEPROM: a wheel held at its current limit (STALL_CURRENT) this long without a break stops the chair (EVT:STALL_TIMEOUT, the emergency ramp and the hold; motion refused until a stop, then a neutral command). Dynamic Controls DX's default, in its 5 to 50 s
 #define WC_STALL_TIMEOUT_MIN 1.0f  // s: stall_timeout in [STALL_TIMEOUT_MIN, STALL_TIMEOUT_MAX]
 #define WC_STALL_TIMEOUT_MAX 60.0f
 #define WC_CURRENT_SENSE_MAX 30.0f // A: a current sense reading more, either way, has failed (a cut output reads 0 V, -62 A; one shorted to 5 V, +62 A): EVT:FAULT,CURRENT_SENSE. The driver limits each motor to 13 A
@@ -197,7 +198,7 @@
 // ---- Parameters in EEPROM (save / defaults; protocol/PROTOCOL.md) ----------
 #define WC_EEPROM_SIZE 4096        // bytes of the ATmega2560's EEPROM, erased to 0xFF
 #define WC_EEPROM_PARAMS_ADDR 0    // EEPROM address of the parameter block
-#define WC_EEPROM_LAYOUT 5         // the block's first byte: its layout version (a blank EEPROM holds 0xFF; 1 was the block before feedback_form, 2 before brake_fitted, 3 before the drive limits, 4 before the table of drive profiles)
+#define WC_EEPROM_LAYOUT 6         // the block's first byte: its layout version (a blank EEPROM holds 0xFF; 1 was the block before feedback_form, 2 before brake_fitted, 3 before the drive limits, 4 before the table of drive profiles, 5 before stall_timeout)
 
 // ---- Ranges of the runtime parameters (get:/set:; the defaults are the constants above) ---
 #define WC_GAIN_P_MIN 1.0f         // kp_l, kp_r in [GAIN_P_MIN, GAIN_P_MAX] (tests/firmware/test_gain_safety.py: pure integral control oscillates)

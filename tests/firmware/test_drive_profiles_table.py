@@ -12,8 +12,9 @@ import pytest
 
 from tests.support.recordings import board_lines, every, recorded, tick_states, turning
 from wcdrive.firmware import constants as C
-from wcdrive.firmware.eeprom import DATA_BYTES, block_image, check, ee_crc
+from wcdrive.firmware.eeprom import BLOCK_BYTES, DATA_BYTES, block_image, check, ee_crc
 from wcdrive.firmware.final_control import Firmware
+from wcdrive.firmware.params import DRIVE_FIRST
 from wcdrive.hil.traces import Trace
 from wcdrive.protocol.codec import ExtendedTelemetry, frame, parse_line
 from wcdrive.protocol.spec import PROFILE_PARAMETERS, PROFILES
@@ -85,11 +86,11 @@ def test_a_saved_table_and_profile_come_back_at_boot_on_the_port() -> None:
     again.feed(b"set:profile=2\n")
     assert again.state.fwdSpeed == 1.5
     bad = bytearray(block_image({"profile": 1}))
-    assert check(bytes(bad[:156])) is None
-    bad[1 + 4 * 9 + 4 * 7 * 3] = 0xFF                      # row 3's fwd_speed: past 2.69
-    bad[1 + 4 * 9 + 4 * 7 * 3 + 3] = 0x7F
+    assert check(bytes(bad[:BLOCK_BYTES])) is None
+    bad[1 + 4 * DRIVE_FIRST + 4 * 7 * 3] = 0xFF            # row 3's fwd_speed: past 2.69
+    bad[1 + 4 * DRIVE_FIRST + 4 * 7 * 3 + 3] = 0x7F
     bad[DATA_BYTES:DATA_BYTES + 2] = ee_crc(bytes(bad)).to_bytes(2, "little")
-    assert check(bytes(bad[:156])) == "range"
+    assert check(bytes(bad[:BLOCK_BYTES])) == "range"
 
 
 @pytest.mark.simavr

@@ -12,6 +12,7 @@ from tests.support.recordings import board_lines, every, recorded, tick_states, 
 from wcdrive.boards.current_sense import current_millivolts
 from wcdrive.boards.supply_sense import adc_counts
 from wcdrive.firmware import constants as C
+from wcdrive.firmware.final_control import Firmware
 from wcdrive.firmware.stall import current_sense_fault, held_at_limit, held_bounds, sense_amps
 from wcdrive.hil.current_traces import stand_still
 from wcdrive.hil.lockstep import Recording
@@ -41,19 +42,22 @@ def test_a_sense_past_30_amps_either_way_has_failed() -> None:
 
 
 def test_a_wheel_is_held_only_standing_driven_and_at_its_limit() -> None:
-    """Held: no count, driven its setpoint's way at duty 42 or more, its partner not
-    turning the chair's way faster than 0.3 rad/s this tick, 11 A or more. Each
-    condition alone taken away is not held."""
+    """Held: either wheel 2 counts this tick at most (the chair stands; a tyre against a
+    wall creeps), driven its setpoint's way at duty 42 or more, 11 A or more. Each
+    condition alone taken away is not held: a partner that moves (a chair crawling up a
+    grade at its limit, 14 counts a tick at 0.18 rad/s) leaves a count-less wheel a
+    stalled encoder."""
     amps = 512 + 100                                   # 12.2 A
-    assert held_at_limit(0, 42, C.HIGH, 2.0, 0.0, amps)
-    assert held_at_limit(0, 42, C.LOW, -2.0, 0.0, 512 - 100)           # backward, either sign
-    assert held_at_limit(0, 90, C.HIGH, 2.0, -1.0, amps)               # partner rolling back
-    assert not held_at_limit(1, 42, C.HIGH, 2.0, 0.0, amps)            # a count
-    assert not held_at_limit(0, 41, C.HIGH, 2.0, 0.0, amps)            # below full torque
-    assert not held_at_limit(0, 42, C.LOW, 2.0, 0.0, amps)             # driven against its setpoint
-    assert not held_at_limit(0, 42, C.HIGH, 0.0, 0.0, amps)            # no setpoint
-    assert not held_at_limit(0, 42, C.HIGH, 2.0, 0.31, amps)           # the partner carries the chair
-    assert not held_at_limit(0, 42, C.HIGH, 2.0, 0.0, 512 + 90)        # 10.99 A
+    assert held_at_limit(0, 0, 42, C.HIGH, 2.0, amps)
+    assert held_at_limit(0, 0, 42, C.LOW, -2.0, 512 - 100)            # backward, either sign
+    assert held_at_limit(2, -2, 42, C.HIGH, 2.0, amps)                # creeping, 2 counts a tick
+    assert not held_at_limit(3, 0, 42, C.HIGH, 2.0, amps)             # moving
+    assert not held_at_limit(0, 14, 42, C.HIGH, 2.0, amps)            # the partner moves
+    assert not held_at_limit(0, -3, 42, C.HIGH, 2.0, amps)            # ...either way
+    assert not held_at_limit(0, 0, 41, C.HIGH, 2.0, amps)             # below full torque
+    assert not held_at_limit(0, 0, 42, C.LOW, 2.0, amps)              # driven against its setpoint
+    assert not held_at_limit(0, 0, 42, C.HIGH, 0.0, amps)             # no setpoint
+    assert not held_at_limit(0, 0, 42, C.HIGH, 2.0, 512 + 90)         # 10.99 A
 
 
 def test_a_held_wheel_pushes_at_full_torque_and_no_harder() -> None:
@@ -153,3 +157,35 @@ def test_a_failed_current_sense_latches_its_fault() -> None:
     assert board_lines(rec, b"EVT:FAULT") == [b"EVT:FAULT,CURRENT_SENSE"]
     at = next(t for t, a in tick_states(rec) if a["faultFlags"])
     assert 0.5 < at < 0.62 and tick_states(rec)[-1][1]["targetL"] == 0.0
+
+
+# ---- the parameter ---------------------------------------------------------------------------
+def test_stall_timeout_is_a_parameter_in_range_saved_and_restored() -> None:
+    """``stall_timeout``: 15 s by default, 1 to 60 s (``ERR:range`` beyond); a save brings
+    it back at boot (EEPROM layout 6), ``defaults`` restores 15 s."""
+    for bad in (b"0.99", b"60.01"):
+        fw = Firmware()
+        assert fw.feed(b"set:stall_timeout=" + bad + b"\n") == b"ERR:range\r\n"
+        assert fw.state.stallTimeout == 15.0
+    fw = Firmware()
+    assert fw.feed(b"get:stall_timeout\n") == b"PAR:stall_timeout,15.0000\r\n"
+    assert fw.feed(b"set:stall_timeout=5\n") == b"PAR:stall_timeout,5.0000\r\n"
+    fw.feed(b"save\n")
+    while fw.state.eeBusy:
+        fw.eeprom_ready()
+    again = Firmware(eeprom=fw.state.eeprom)
+    assert again.boot_output().endswith(b"EVT:PARAMS_LOADED\r\n") and again.state.stallTimeout == 5.0
+    again.feed(b"defaults\n")
+    assert again.state.stallTimeout == 15.0
+
+
+@pytest.mark.simavr
+def test_a_shorter_stall_timeout_stops_the_chair_sooner() -> None:
+    """``set:stall_timeout=1`` first; both encoders stand from 1.0 s, both motors at
+    12.5 A: the clock starts at the first tick that finds them held and runs out 20
+    ticks later, ``EVT:STALL_TIMEOUT`` 1.0 to 1.2 s after the wall, no clock set by
+    hand. Red with the parameter at 15 s: no event within the trace."""
+    rec = _push(2.6, 1.0, (12.5, 12.5), serial=[(0.01, b"set:stall_timeout=1\n")])
+    assert board_lines(rec, b"EVT:STALL") == [b"EVT:STALL_TIMEOUT"]
+    at = next(t for t, a in tick_states(rec) if a["limitLatched"])
+    assert 2.0 < at < 2.2

@@ -107,7 +107,8 @@ def test_the_envelope_drives_that_faulted_latch_nothing(path: Path) -> None:
 
 
 @pytest.mark.xfail(strict=True, reason="known: a healthy chair at 2.68 m/s coming off a band latches MOTOR_R "
-                   "(1913, and 414 at the drive profiles' Timer0 phase: 133 kg off a 3.5 deg band); one at "
+                   "(1913; 414, 133 kg off a 3.5 deg band, did at the drive profiles' Timer0 phase, and no "
+                   "longer does at stall_timeout's: envelope_drives); one at "
                    "0.3 m/s across 94 % of its rated grade with a weak integral gain stands a wheel at the "
                    "suspect hold's duty and latches ENC_STALL_L (176) (docs/safety.md, The envelope)")
 @pytest.mark.parametrize("path", sorted(OPEN_DRIVES.glob("*.toml")), ids=lambda p: p.stem)

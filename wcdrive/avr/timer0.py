@@ -70,8 +70,9 @@ def overflows_until(target_elapsed: int, start_fract: int = 0) -> int:
 #: 26,994; then the drive limits' seven globals and their parameter table's entries, in
 #: .data, 28,171; then the drive profiles, whose table and the larger EEPROM block went to
 #: .noinit, which is not cleared, taking the block's 71 bytes out of .bss, 27,751; then the
-#: motors' current counts, in .data at 0 A's count, 27,773).
-TIMER0_START_CYCLE = 27_773 - OVERFLOW_CYCLES
+#: motors' current counts, in .data at 0 A's count, 27,773; then stall_timeout and its
+#: parameter table's entries, in .data, 27,917).
+TIMER0_START_CYCLE = 27_917 - OVERFLOW_CYCLES
 
 
 _WINDOW_START = TIMER0_START_CYCLE + 128 * 64

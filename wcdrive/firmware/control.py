@@ -327,8 +327,8 @@ def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_
     strain_r = straining(s.pwmR, s.dirR, s.setpointR, s.filtVelR)
     overrun_l = overruns(s.pwmL, s.dirL, s.setpointL, s.filtVelL)
     overrun_r = overruns(s.pwmR, s.dirR, s.setpointR, s.filtVelR)
-    held_l = held_at_limit(delta_l, s.pwmL, s.dirL, s.setpointL, s.rawVelR, s.currentTickL)
-    held_r = held_at_limit(delta_r, s.pwmR, s.dirR, s.setpointR, s.rawVelL, s.currentTickR)
+    held_l = held_at_limit(delta_l, delta_r, s.pwmL, s.dirL, s.setpointL, s.currentTickL)
+    held_r = held_at_limit(delta_r, delta_l, s.pwmR, s.dirR, s.setpointR, s.currentTickR)
     check_l, s.stallTicksL, s.reverseTicksL, s.runawayTicksL, effort_l = check_wheel(
         delta_l, ill_l, s.stormTickL, s.pwmL, s.dirL, s.setpointL, s.filtVelL, s.filtVelR,
         s.pwmR, overrun_r, s.stallTicksL, s.reverseTicksL, s.runawayTicksL,
@@ -412,7 +412,7 @@ def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_
     elif limit_l or limit_r:
         halt = True
         send(s, send_event("STALLED_ON_GRADE"), out)
-    elif s.stallTime >= C.STALL_TIMEOUT:
+    elif s.stallTime >= s.stallTimeout:
         # held at the current limit too long (a wall, a kerb): motion needs a neutral command
         halt = True
         require_neutral(s)

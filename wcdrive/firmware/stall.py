@@ -7,9 +7,9 @@ PIN_CURRENT_R (A1, A2): CURRENT_ZERO_COUNTS at 0 A, CURRENT_AMPS_PER_COUNT amps 
 either way. The ADC interrupt converts both after a tick has begun; the next tick reads
 them (``currentTickL``/``R``).
 
-A wheel held at its current limit (``held_at_limit``: without a count, driven toward its
-setpoint at FAULT_STALL_PWM_STANDING or more, its partner not carrying the chair its
-way, its motor drawing STALL_CURRENT or more) is not an encoder fault: ``check_wheel``
+A wheel held at its current limit (``held_at_limit``: the chair standing, either wheel
+STALL_CREEP_COUNTS at most, the wheel driven toward its setpoint at FAULT_STALL_PWM_STANDING or more,
+its motor drawing STALL_CURRENT or more) is not an encoder fault: ``check_wheel``
 does not count it toward ENC_STALL or DRIVER_DEAD, and its PID runs within
 STALL_HELD_OUTPUT (``held_bounds``), the motor's full torque at a standstill (the
 integral back-calculated to it: no wind-up to spend when it next counts). Its current then
@@ -17,7 +17,8 @@ bounds how fast it can turn: duty 42 less the 35 that drive 11 A through the arm
 leaves 7 for back-EMF, 0.5 rad/s. A cut encoder's wheel that turns faster draws less
 and is a stalled encoder; a dead driver draws nothing. While a wheel is held, driving
 (not under the hold), the tick runs the stall clock
-(``stallTime``, seconds); at STALL_TIMEOUT the chair stops as at its other limits
+(``stallTime``, seconds); at ``stallTimeout`` (the parameter ``stall_timeout``,
+STALL_TIMEOUT by default) the chair stops as at its other limits
 (``EVT:STALL_TIMEOUT``, the emergency ramp and the hold) and motion needs a neutral
 command. A sense that reads beyond CURRENT_SENSE_MAX either way (a cut or shorted
 output) latches ``CURRENT_SENSE``.
@@ -47,17 +48,18 @@ def current_sense_fault(count_l: int, count_r: int) -> int:
     return 0
 
 
-def held_at_limit(delta: int, applied_pwm: int, applied_dir: int, setpoint: float, other_raw: float,
+def held_at_limit(delta: int, other_delta: int, applied_pwm: int, applied_dir: int, setpoint: float,
                   current: int) -> bool:
-    """``heldAtLimit``: a wheel without a count this tick, driven toward its setpoint at
-    FAULT_STALL_PWM_STANDING or more, its partner not carrying the chair its way
-    (``other_raw``, the partner's speed this tick: standing, or rolling back), its motor
-    drawing STALL_CURRENT or more. Its PID then runs within STALL_HELD_OUTPUT
-    (``held_bounds``), so that a current that high bounds how fast it turns."""
-    other_along = other_raw if setpoint > 0.0 else -other_raw
-    return (delta == 0 and other_along < C.FAULT_STANDING_SPEED
-            and applied_pwm >= C.FAULT_STALL_PWM_STANDING and setpoint != 0.0
-            and (applied_dir == C.HIGH) == (setpoint > 0.0) and sense_amps(current) >= C.STALL_CURRENT)
+    """``heldAtLimit``: the chair standing (either wheel STALL_CREEP_COUNTS this tick at
+    most, either way: ``delta``, ``other_delta``), the wheel driven toward its setpoint at
+    FAULT_STALL_PWM_STANDING or more, its motor drawing STALL_CURRENT or more. Its PID
+    then runs within STALL_HELD_OUTPUT (``held_bounds``), so that a current that high
+    bounds how fast it turns; a partner that counts (a chair crawling up a grade at its
+    limit) leaves a count-less wheel a stalled encoder."""
+    return (abs(delta) <= C.STALL_CREEP_COUNTS and abs(other_delta) <= C.STALL_CREEP_COUNTS
+            and applied_pwm >= C.FAULT_STALL_PWM_STANDING
+            and setpoint != 0.0 and (applied_dir == C.HIGH) == (setpoint > 0.0)
+            and sense_amps(current) >= C.STALL_CURRENT)
 
 
 def held_bounds(lo: float, hi: float) -> tuple[float, float]:

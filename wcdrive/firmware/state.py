@@ -30,7 +30,7 @@ FLOAT_FIELDS = (
     "effortSetpointR", "overspeedFromL", "overspeedFromR", "windingTempL", "windingTempR", "supplyVolts",
     "kpL", "kiL", "kdL", "kpR", "kiR", "kdR", "maxWheel", "maxAccel", "estopDecel",
     "fwdSpeed", "revSpeed", "driveAccel", "driveDecel", "turnSpeed", "turnAccel", "turnAtSpeed",
-    "stallTime",
+    "stallTimeout", "stallTime",
 )
 #: Integer and flag globals compared exactly.
 INT_FIELDS = (
@@ -187,9 +187,11 @@ class FirmwareState:
     batteryLow: int = 0
     batteryPending: int = 0
     #: The motors' currents (``wcdrive.firmware.stall``): the ADC counts the tick read at
-    #: PIN_CURRENT_L/R and the seconds a wheel has been held at its current limit.
+    #: PIN_CURRENT_L/R, the stall timeout (s, the parameter ``stall_timeout``) and the
+    #: seconds a wheel has been held at its current limit.
     currentTickL: int = C.CURRENT_ZERO_COUNTS
     currentTickR: int = C.CURRENT_ZERO_COUNTS
+    stallTimeout: float = C.STALL_TIMEOUT
     stallTime: float = 0.0
     #: Halted at the chair's limit (``EVT:OVERSPEED``, ``EVT:STALLED_ON_GRADE``): motion
     #: refused with ``ERR:limit`` until a stop.

@@ -23,9 +23,9 @@
  *   - with a brake fitted (brakeFitted), a tick that parks, finds the brake other than
  *     released and settled (its phase, wcdrive.firmware.brake) or reads its driver's
  *     status LOW;
- *   - a wheel without a count whose motor's current sense reads STALL_CURRENT or more
- *     (it may be held at its current limit, the stall clock may run), or a sense past
- *     CURRENT_SENSE_MAX (failed);
+ *   - both wheels within STALL_CREEP_COUNTS and a motor's current sense at STALL_CURRENT
+ *     or more (a wheel may be held at its current limit, the stall clock may run), or a
+ *     sense past CURRENT_SENSE_MAX (failed);
  *   - a mode that MODE_NAMES does not name.
  * Each binary32 operation is one IEEE double operation rounded once to binary32, as
  * f32.py (and f32_fast.c) computes the ordinary case. The whole tick is computed into
@@ -175,7 +175,7 @@ static struct {
         reverse_ticks, runaway_pwm, runaway_ticks, effort_pwm, effort_ticks, illegal_per_tick, still_ticks, pivot_ticks,
         hold_deadband, overspeed_pwm, overspeed_ticks,
         high, low, pivot_none, pivot_stopping, pivot_rotating, untrusted_l, untrusted_r, brake_released,
-        current_zero_counts;
+        current_zero_counts, stall_creep_counts;
 } K;
 static PyObject *mode_names;      /* dict: mode -> bytes */
 static int bound;
@@ -553,11 +553,12 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
     int64_t delta_r = i32(I(encTickR) - I(prevEncR));
     SETI(prevEncL, I(encTickL));
     SETI(prevEncR, I(encTickR));
-    /* sense_amps: a wheel without a count whose motor draws STALL_CURRENT or more (it may
-     * be held at its limit), or a failed sense, goes to the Python tick */
+    /* sense_amps: both wheels within STALL_CREEP_COUNTS and a motor at STALL_CURRENT or
+     * more (a wheel may be held at its limit), or a failed sense, goes to the Python tick */
     double amps_l = fabs(f_mul(f_from_int(I(currentTickL) - K.current_zero_counts), K.current_amps_per_count));
     double amps_r = fabs(f_mul(f_from_int(I(currentTickR) - K.current_zero_counts), K.current_amps_per_count));
-    if ((delta_l == 0 && !(amps_l < K.stall_current)) || (delta_r == 0 && !(amps_r < K.stall_current))
+    int creeping = llabs(delta_l) <= K.stall_creep_counts && llabs(delta_r) <= K.stall_creep_counts;
+    if ((creeping && !(amps_l < K.stall_current && amps_r < K.stall_current))
         || !(amps_l <= K.current_sense_max) || !(amps_r <= K.current_sense_max))
         Py_RETURN_NONE;
 
@@ -881,6 +882,7 @@ static PyObject *bind(PyObject *self, PyObject *args) {
           && const_double(consts, "STALL_CURRENT", &k.stall_current)
           && const_double(consts, "CURRENT_SENSE_MAX", &k.current_sense_max)
           && const_int(consts, "CURRENT_ZERO_COUNTS", &k.current_zero_counts)
+          && const_int(consts, "STALL_CREEP_COUNTS", &k.stall_creep_counts)
           && const_int(consts, "CONTROL_PERIOD_MS", &k.control_period_ms)
           && const_int(consts, "TX_CREDIT_MAX", &k.tx_credit_max)
           && const_int(consts, "TX_CREDIT_PER_MS", &k.tx_credit_per_ms)
