@@ -3,15 +3,15 @@ inputs show it (``held_against_a_wall``), and the current senses about it.
 
 A trace's encoders are scripted, not driven by the duty, so a wheel held at its current
 limit is drawn as what the board reads: both encoders without an edge for a while
-(``stand_still``), both current senses at 11.5 to 14 A either way from just before it
-(the ADC interrupt after a tick reads them), the stall clock set within 0.1 s of
-STALL_TIMEOUT once or twice inside it, with the chair driving into the wall then
-(``pushing``, ``Trace.pokes``: a trace of a few seconds cannot run the clock for 15 s,
-and its random commands seldom drive while its encoders stand), and the senses changed
-at random times besides
-(``current_changes``): mostly about STALL_CURRENT, some small, a tenth at a failed
-sense's volts (past CURRENT_SENSE_MAX). Half of them set ``stall_timeout`` first, in
-range (1, 14.95, 15.5, 60 s) or out (0.5, 61).
+(``stand_still``); both current senses at 11.5 to 14 A, forward or back, from just
+before it (the ADC interrupt after a tick reads them); the stall clock set within 0.1 s
+of STALL_TIMEOUT once or twice inside it, with the chair driving into the wall the
+currents' way then (``pushing``, ``Trace.pokes``: a trace of a few seconds cannot run
+the clock for 15 s, and its random commands seldom drive while its encoders stand); and
+the senses changed at random times besides (``current_changes``): mostly about
+STALL_CURRENT either way, some small, a tenth at a failed sense's volts (past
+CURRENT_SENSE_MAX). Half of them set ``stall_timeout`` first, in range (1, 14.95, 15.5,
+60 s) or out (0.5, 61).
 """
 
 from __future__ import annotations
@@ -37,13 +37,13 @@ def held_against_a_wall(rng: np.random.Generator, trace: Trace) -> None:
     stop = round(min(duration - 0.05, start + float(rng.uniform(0.3, 1.5))), 4)
     trace.encoders = {side: stand_still(train, start, stop) for side, train in trace.encoders.items()}
     before = max(0.0, round(start - 0.06, 4))
-    held = [(before, side, current_millivolts((1.0 if rng.random() < 0.5 else -1.0)
-                                              * float(rng.uniform(11.5, 14.0))))
+    way = 1.0 if rng.random() < 0.5 else -1.0        # forward or back, the currents with it
+    held = [(before, side, current_millivolts(way * float(rng.uniform(11.5, 14.0))))
             for side in ("left", "right")]
     others = [c for c in current_changes(rng, duration)
               if abs(c[0] - before) >= CURRENT_SPACING_S]
     trace.currents = sorted(held + others)
-    clock = [(round(float(rng.uniform(start, stop)), 4), pushing(rng))
+    clock = [(round(float(rng.uniform(start, stop)), 4), pushing(rng, way))
              for _ in range(int(rng.integers(1, 3)))]
     trace.pokes = sorted(trace.pokes + clock, key=lambda p: p[0])
     # the stall timeout set, in range and out, in half of them: from the start (the
@@ -53,12 +53,12 @@ def held_against_a_wall(rng: np.random.Generator, trace: Trace) -> None:
         trace.serial.insert(0, (0.01, b"set:stall_timeout=%g\n" % value))
 
 
-def pushing(rng: np.random.Generator) -> dict[str, float | int]:
+def pushing(rng: np.random.Generator, way: float) -> dict[str, float | int]:
     """A chair driving into the wall at a tick's entry: both wheels' targets and setpoints
-    one way (1 to 4 rad/s), their duties the last tick applied that way (42 to 120: the
+    ``way`` (1 to 4 rad/s), their duties the last tick applied that way (42 to 120: the
     PID's, at or past FAULT_STALL_PWM_STANDING), and the stall clock nine times in ten
     within 0.1 s of STALL_TIMEOUT (else at 0)."""
-    speed = (1.0 if rng.random() < 0.5 else -1.0) * round(float(rng.uniform(1.0, 4.0)), 3)
+    speed = way * round(float(rng.uniform(1.0, 4.0)), 3)
     duty = int(rng.integers(42, 121))
     way = 1 if speed > 0.0 else 0
     clock = round(float(rng.uniform(14.9, 14.99)), 3) if rng.random() < 0.9 else 0.0

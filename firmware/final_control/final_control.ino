@@ -639,7 +639,8 @@ static float computePID(float setpoint, float measurement, float& integral, floa
 // positive) while its wheel turns at vel: the effort (the duty less what the back-EMF
 // takes, WC_THERMAL_EMF a rad/s, within the driver's current limit) squared,
 // WC_THERMAL_LOSS a duty squared.
-// The board measures no current: this is what it commands, less what it measures.
+// From what it commands, less what it measures: the estimate does not read the current
+// senses (it came before them; docs/safety.md, "Motor heat").
 static float windingLoss(uint8_t pwm, uint8_t dir, float vel) {
   float duty = dir == HIGH ? (float)pwm : -(float)pwm;
   float effort = duty - WC_THERMAL_EMF * vel;
@@ -744,14 +745,15 @@ static uint16_t batteryFault() {
 
 // The motors' currents (docs/safety.md, "Stall timeout")
 
-// The current an ADC count of a current sense reads, A, either way round.
+// The current an ADC count of a current sense reads, A: positive drives the wheel
+// forward (DIR HIGH), negative backward (or brakes a wheel driven forward).
 static float senseAmps(uint16_t count) {
-  return fabs((float)((int16_t)count - WC_CURRENT_ZERO_COUNTS) * WC_CURRENT_AMPS_PER_COUNT);
+  return (float)((int16_t)count - WC_CURRENT_ZERO_COUNTS) * WC_CURRENT_AMPS_PER_COUNT;
 }
 
 // A current sense reading beyond WC_CURRENT_SENSE_MAX (its output cut or shorted): its fault.
 static uint16_t currentSenseFault() {
-  return (senseAmps(currentTickL) > WC_CURRENT_SENSE_MAX || senseAmps(currentTickR) > WC_CURRENT_SENSE_MAX)
+  return (fabs(senseAmps(currentTickL)) > WC_CURRENT_SENSE_MAX || fabs(senseAmps(currentTickR)) > WC_CURRENT_SENSE_MAX)
              ? FAULT_CURRENT_SENSE
              : 0;
 }
@@ -1236,16 +1238,19 @@ static bool straining(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, fl
 
 // A wheel held at its current limit: the chair standing (either wheel WC_STALL_CREEP_COUNTS
 // this tick at most, either way), the wheel driven toward its setpoint at
-// WC_FAULT_STALL_PWM_STANDING or more, its motor drawing WC_STALL_CURRENT or more. Not an encoder fault but the stall
+// WC_FAULT_STALL_PWM_STANDING or more, its motor drawing WC_STALL_CURRENT or more the way
+// it is driven (a braking current, a wheel pushed faster than its duty turns it, is not). Not an encoder fault but the stall
 // timeout's: its PID runs within WC_STALL_HELD_OUTPUT (heldBounds), so that a current
 // that high means the wheel turns at most (duty - its current's share) / back-EMF a
 // rad/s: 0.5. A cut encoder's wheel that turns faster draws less, and one beside a
 // partner that counts (a chair crawling up a grade at its limit) is a stalled encoder.
 static bool heldAtLimit(int32_t delta, int32_t otherDelta, uint8_t appliedPwm, uint8_t appliedDir,
                         float setpoint, uint16_t current) {
-  return labs(delta) <= WC_STALL_CREEP_COUNTS && labs(otherDelta) <= WC_STALL_CREEP_COUNTS &&
+  float drawn = appliedDir == HIGH ? senseAmps(current) : -senseAmps(current);
+  return delta >= -WC_STALL_CREEP_COUNTS && delta <= WC_STALL_CREEP_COUNTS &&
+         otherDelta >= -WC_STALL_CREEP_COUNTS && otherDelta <= WC_STALL_CREEP_COUNTS &&
          appliedPwm >= WC_FAULT_STALL_PWM_STANDING && setpoint != 0.0f &&
-         (appliedDir == HIGH) == (setpoint > 0.0f) && senseAmps(current) >= WC_STALL_CURRENT;
+         (appliedDir == HIGH) == (setpoint > 0.0f) && drawn >= WC_STALL_CURRENT;
 }
 
 // The PID's bounds (pidBounds) within WC_STALL_HELD_OUTPUT either way, for a wheel held
@@ -1457,17 +1462,23 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
     stormTickL = stormL != 0;   // the ISR sets a non-zero byte
     stormTickR = stormR != 0;
     rxLostTick = rxLost;
-    currentTickL = adcCurrentL;   // the ADC interrupt's, done 0.2 ms after the last tick began
-    currentTickR = adcCurrentR;
   }
   inhibitTick = (digitalRead(WC_PIN_INHIBIT_1) == LOW ? 1 : 0) | (digitalRead(WC_PIN_INHIBIT_2) == LOW ? 2 : 0) |
                 (digitalRead(WC_PIN_PUSH) == LOW ? INHIBIT_PUSH : 0);
   brakeStatusTick = digitalRead(WC_PIN_BRAKE_STATUS) == LOW ? 1 : 0;
-  // The supply's conversion the ADC interrupt started after the last tick's currents
-  // (long done: 104 us), then the currents' (ISR(ADC_vect)).
-  supplyTick = ADC;
-  ADMUX = _BV(REFS0) | WC_PIN_CURRENT_L;
-  ADCSRA |= _BV(ADIE) | _BV(ADSC);
+  // The ADC interrupt's chain the last tick started (the currents, 0.2 ms on, then the
+  // supply's conversion, 0.3 ms on: long done), then the next one (ISR(ADC_vect)). A tick
+  // that came before it was done (none does: a tick takes longer) would keep the last
+  // counts and let it finish.
+  if (!(ADCSRA & (_BV(ADSC) | _BV(ADIE)))) {
+    supplyTick = ADC;
+    currentTickL = adcCurrentL;
+    currentTickR = adcCurrentR;
+    ADMUX = _BV(REFS0) | (WC_PIN_CURRENT_L & 7);
+    // ADIF written 1 (the supply's conversion set it, its interrupt off) clears it in the
+    // write that sets ADIE: else the interrupt would come at once
+    ADCSRA = _BV(ADEN) | _BV(ADPS2) | _BV(ADPS1) | _BV(ADPS0) | _BV(ADIF) | _BV(ADIE) | _BV(ADSC);
+  }
   encTickL = countL + stepsL;
   encTickR = countR + stepsR;
   uint32_t illNowL = illL + illStepsL;
@@ -1563,6 +1574,7 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
     if (faults == 0) faults = currentSenseFault();
     if (faults != 0) {
       faultFlags = faults;
+      stallTime = 0.0f;
       emergencyHalt();
       cmdSinceTick = false;
       watchdogArmed = false;

@@ -133,7 +133,7 @@
 #define WC_THERMAL_RESISTANCE 2.5f // K/W, winding to ambient (the motor's figure; assumed, as the plant's)
 #define WC_THERMAL_CAPACITY 360.0f // J/K, the winding's thermal mass (assumed, as the plant's: a time constant of 900 s)
 #define WC_THERMAL_EMF 14.0f       // duty per rad/s of wheel speed that the motor's back-EMF takes, for the heat estimate: the motor's own constant (Ke G x 255 / 24 V; the plant's, 14.0), not FAULT_EFFORT_EMF's rounded 14.5, which reads a cruising motor's current 16 % low
-#define WC_THERMAL_LOSS 0.029527f  // W of copper loss per duty squared of effort (duty less THERMAL_EMF a rad/s, within FAULT_EFFORT_MAX): (24 V / 255)^2 / 0.3 ohm; the board measures no current, so it estimates it from what it commands and what the encoders measure
+#define WC_THERMAL_LOSS 0.029527f  // W of copper loss per duty squared of effort (duty less THERMAL_EMF a rad/s, within FAULT_EFFORT_MAX): (24 V / 255)^2 / 0.3 ohm; the estimate does not read the current senses (it came before them), so it estimates the current from what it commands and what the encoders measure
 #define WC_THERMAL_ROLLBACK_TEMP 110.0f // deg C (estimated): above it the rollback lowers each motor's current limit (the driving effort the PID may ask, from FAULT_EFFORT_MAX toward THERMAL_EFFORT_MIN) and the top speed (toward THERMAL_SHARE_MIN of max_wheel), linearly to THERMAL_CUTOFF_TEMP; EVT:THERMAL,1
 #define WC_THERMAL_HYSTERESIS 5.0f // K: the rollback's end (EVT:THERMAL,0) waits until both estimates are this far below THERMAL_ROLLBACK_TEMP
 #define WC_THERMAL_CUTOFF_TEMP 125.0f // deg C (estimated): EVT:FAULT,OVERHEAT_L/R; the rollback is full here. In a 20 to 30 deg C room the winding is then at 120 to 130 deg C, within its class B rating (130)

@@ -17,6 +17,7 @@ from wcdrive.firmware.stall import current_sense_fault, held_at_limit, held_boun
 from wcdrive.hil.current_traces import stand_still
 from wcdrive.hil.lockstep import Recording
 from wcdrive.hil.traces import Trace
+from wcdrive.plant.params import ChairParams
 
 #: The duty of a wheel held at its current limit.
 HELD_DUTY = int(C.STALL_HELD_OUTPUT * C.PWM_SCALE)
@@ -24,9 +25,10 @@ HELD_DUTY = int(C.STALL_HELD_OUTPUT * C.PWM_SCALE)
 
 # ---- the rules, by hand ------------------------------------------------------------------
 def test_a_count_reads_its_amps_either_way() -> None:
-    """40 mV/A at 5 V / 1024 a count: 0.1220703125 A a count from 512 (2.5 V)."""
+    """40 mV/A at 5 V / 1024 a count: 0.1220703125 A a count from 512 (2.5 V), above it
+    for a current that drives the wheel forward."""
     assert sense_amps(C.CURRENT_ZERO_COUNTS) == 0.0
-    assert sense_amps(512 + 90) == sense_amps(512 - 90) == pytest.approx(10.986328125, abs=0)
+    assert sense_amps(512 + 90) == -sense_amps(512 - 90) == pytest.approx(10.986328125, abs=0)
     assert sense_amps(512 + 91) == pytest.approx(11.108398438)       # the first past 11 A
     # what simavr's ADC makes of the mV a 12.5 A current puts on the pin (3000 mV: 613)
     assert current_millivolts(12.5) == 3000 and adc_counts(3000) == 613
@@ -43,13 +45,16 @@ def test_a_sense_past_30_amps_either_way_has_failed() -> None:
 
 def test_a_wheel_is_held_only_standing_driven_and_at_its_limit() -> None:
     """Held: either wheel 2 counts this tick at most (the chair stands; a tyre against a
-    wall creeps), driven its setpoint's way at duty 42 or more, 11 A or more. Each
-    condition alone taken away is not held: a partner that moves (a chair crawling up a
-    grade at its limit, 14 counts a tick at 0.18 rad/s) leaves a count-less wheel a
-    stalled encoder."""
+    wall creeps), driven its setpoint's way at duty 42 or more, 11 A or more that way.
+    Each condition alone taken away is not held: a partner that moves (a chair crawling
+    up a grade at its limit, 14 counts a tick at 0.18 rad/s) leaves a count-less wheel a
+    stalled encoder, and a braking current (a wheel pushed downhill faster than its duty
+    turns it) says nothing of a stand."""
     amps = 512 + 100                                   # 12.2 A
     assert held_at_limit(0, 0, 42, C.HIGH, 2.0, amps)
-    assert held_at_limit(0, 0, 42, C.LOW, -2.0, 512 - 100)            # backward, either sign
+    assert held_at_limit(0, 0, 42, C.LOW, -2.0, 512 - 100)            # backward: its current backward
+    assert not held_at_limit(0, 0, 42, C.HIGH, 2.0, 512 - 100)        # braking: pushed faster than it drives
+    assert not held_at_limit(0, 0, 42, C.LOW, -2.0, amps)             # ...backward
     assert held_at_limit(2, -2, 42, C.HIGH, 2.0, amps)                # creeping, 2 counts a tick
     assert not held_at_limit(3, 0, 42, C.HIGH, 2.0, amps)             # moving
     assert not held_at_limit(0, 14, 42, C.HIGH, 2.0, amps)            # the partner moves
@@ -62,15 +67,20 @@ def test_a_wheel_is_held_only_standing_driven_and_at_its_limit() -> None:
 
 def test_a_held_wheel_pushes_at_full_torque_and_no_harder() -> None:
     """The PID's bounds within 16.5 % either way (duty 42): a motor at duty 42 drawing
-    11 A or more turns at most (42 x 24 / 255 - 11 x 0.3) / (14 x 24 / 255) rad/s: 0.50
-    (the plant's 0.3 ohm and 14 duty a rad/s of back-EMF; the sensor's bound on a cut
-    encoder's wheel passing for a held one)."""
+    11 A or more its driven way turns at most (42 V / 255 - 11 A R) / (Ke G) rad/s, the
+    plant's motor: 0.50 rad/s at 24 V, 0.70 on a full battery's 25.6 V (the sensor's
+    bound on a cut encoder's wheel passing for a held one)."""
     assert held_bounds(-100.0, 100.0) == (-C.STALL_HELD_OUTPUT, C.STALL_HELD_OUTPUT)
     assert held_bounds(-5.0, 10.0) == (-5.0, 10.0)                     # a rollback's tighter bound stays
     assert HELD_DUTY == 42
-    volts_per_duty = 24.0 / 255.0
-    fastest = (HELD_DUTY * volts_per_duty - C.STALL_CURRENT * 0.3) / (14.0 * volts_per_duty)
-    assert fastest == pytest.approx(0.496, abs=1e-3)
+    p = ChairParams()
+    ke_g = p.motor_constant * p.gear_ratio
+
+    def fastest(volts: float) -> float:
+        return (HELD_DUTY * volts / 255.0 - C.STALL_CURRENT * p.armature_resistance) / ke_g
+
+    assert fastest(24.0) == pytest.approx(0.495, abs=1e-3)
+    assert fastest(p.battery_full_voltage) == pytest.approx(0.695, abs=1e-3)
 
 
 # ---- both backends -------------------------------------------------------------------------
@@ -99,7 +109,7 @@ def test_against_a_wall_both_wheels_push_at_their_limit_without_a_fault() -> Non
     """Both encoders stand from 1.0 s, both motors at 12.5 A (the wall): no fault
     (before the senses: DRIVER_DEAD two ticks on), the stall clock runs a tick at a
     time, both wheels at duty 42; the host's commands go on being taken."""
-    rec = _push(2.0, 1.0, (12.5, -12.5))
+    rec = _push(2.0, 1.0, (12.5, 12.5))
     assert board_lines(rec, b"EVT:") == [b"EVT:PARAMS_DEFAULT,blank"]
     pushing = [(t, a) for t, a in tick_states(rec) if t > 1.15]
     assert all(a["faultFlags"] == 0 and a["pwmL"] == a["pwmR"] == HELD_DUTY for _, a in pushing)
@@ -123,7 +133,7 @@ def test_the_stall_clock_run_out_stops_the_chair_until_a_stop_then_neutral() -> 
     assert 1.45 < at < 1.6
     assert all(a["stallTime"] == 0.0 and a["targetL"] == 0.0 and a["needNeutral"]
                for t, a in ticks if at <= t < 2.0)
-    assert b"ERR:limit" in rec.tx or b"ERR:neutral" in rec.tx
+    assert b"ERR:limit" in rec.tx
     assert any(a["targetL"] > 0.0 for t, a in ticks if t > 2.5)      # driving again after neutral
 
 
@@ -133,6 +143,16 @@ def test_both_encoders_cut_while_the_motors_spin_is_still_the_driver_fault() -> 
     turning motor's back-EMF takes the current off its limit): DRIVER_DEAD two ticks
     on, as before the current senses."""
     rec = _push(1.5, 1.0, (3.0, -3.0))
+    assert board_lines(rec, b"EVT:FAULT") == [b"EVT:FAULT,DRIVER_DEAD"]
+
+
+@pytest.mark.simavr
+def test_both_encoders_cut_going_downhill_is_still_the_driver_fault() -> None:
+    """Both encoders cut at 1.0 s while the chair, driven forward, is pushed downhill
+    faster than its duty turns it: its motors draw 12.5 A braking (against their DIR).
+    Not held (a braking current says nothing of a stand): DRIVER_DEAD two ticks on.
+    Red with the current's sign ignored: held, no fault, the chair runs on."""
+    rec = _push(1.5, 1.0, (-12.5, -12.5))
     assert board_lines(rec, b"EVT:FAULT") == [b"EVT:FAULT,DRIVER_DEAD"]
 
 

@@ -140,6 +140,13 @@ def states(draw) -> tuple[FirmwareState, int, tuple[int, ...]]:
           (0, 0, 0, 0, 0, 0, 0, 0, 819, 512, 512)))
 @example((FirmwareState(lastControlTime=1000, lastTickTime=1050, needNeutral=0), 1050,
           (5, 5, 0, 0, 0, 0, 0, 0, 819, 512, 512)))  # dt 0
+# both wheels creeping (0 and 2 counts) at the stall current either way, and a failed sense
+@example((FirmwareState(lastControlTime=1000, needNeutral=0, setpointL=2.0, targetL=2.0, setpointR=2.0,
+                        targetR=2.0, pwmL=60, pwmR=60), 1050, (0, 2, 0, 0, 0, 0, 0, 0, 819, 603, 421)))
+@example((FirmwareState(lastControlTime=1000, needNeutral=0, setpointL=2.0, targetL=2.0, setpointR=2.0,
+                        targetR=2.0, pwmL=60, pwmR=60, stallTime=14.99), 1050,
+          (-2, 0, 0, 0, 0, 0, 0, 0, 819, 603, 603)))
+@example((FirmwareState(lastControlTime=1000, needNeutral=0), 1050, (0, 0, 0, 0, 0, 0, 0, 0, 819, 512, 758)))
 def test_the_c_tick_agrees_with_the_python_tick(case) -> None:
     state, now, inputs = case
     agree(state, now, inputs)

@@ -397,6 +397,7 @@ def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_
         faults = current_sense_fault(s.currentTickL, s.currentTickR)
     if faults:
         s.faultFlags = faults
+        s.stallTime = 0.0
         emergency_halt(s)
         s.cmdSinceTick = 0
         s.watchdogArmed = 0

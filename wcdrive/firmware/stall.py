@@ -1,23 +1,25 @@
 """The motors' currents as final_control.ino measures them, and the stall timeout: the
-sketch's ``senseAmps``, ``currentSenseFault`` and ``heldAtLimit``
+sketch's ``senseAmps``, ``currentSenseFault``, ``heldAtLimit`` and ``heldBounds``
 (docs/safety.md, "Stall timeout").
 
 Each motor lead carries a bidirectional Hall current sensor on PIN_CURRENT_L /
-PIN_CURRENT_R (A1, A2): CURRENT_ZERO_COUNTS at 0 A, CURRENT_AMPS_PER_COUNT amps a count
-either way. The ADC interrupt converts both after a tick has begun; the next tick reads
-them (``currentTickL``/``R``).
+PIN_CURRENT_R (A1, A2): CURRENT_ZERO_COUNTS at 0 A, CURRENT_AMPS_PER_COUNT amps a count,
+above it for a current that drives the wheel forward (DIR HIGH). The ADC interrupt
+converts both after a tick has begun; the next tick reads them (``currentTickL``/``R``).
 
 A wheel held at its current limit (``held_at_limit``: the chair standing, either wheel
-STALL_CREEP_COUNTS at most, the wheel driven toward its setpoint at FAULT_STALL_PWM_STANDING or more,
-its motor drawing STALL_CURRENT or more) is not an encoder fault: ``check_wheel``
-does not count it toward ENC_STALL or DRIVER_DEAD, and its PID runs within
+STALL_CREEP_COUNTS at most, the wheel driven toward its setpoint at
+FAULT_STALL_PWM_STANDING or more, its motor drawing STALL_CURRENT or more the way it is
+driven) is not an encoder fault: ``check_wheel`` does not count it toward ENC_STALL or
+DRIVER_DEAD, nor its effort toward MOTOR_L/R, and its PID runs within
 STALL_HELD_OUTPUT (``held_bounds``), the motor's full torque at a standstill (the
-integral back-calculated to it: no wind-up to spend when it next counts). Its current then
-bounds how fast it can turn: duty 42 less the 35 that drive 11 A through the armature
-leaves 7 for back-EMF, 0.5 rad/s. A cut encoder's wheel that turns faster draws less
-and is a stalled encoder; a dead driver draws nothing. While a wheel is held, driving
-(not under the hold), the tick runs the stall clock
-(``stallTime``, seconds); at ``stallTimeout`` (the parameter ``stall_timeout``,
+integral back-calculated to it: no wind-up to spend when it next counts). Its current
+then bounds how fast it can turn: at 24 V, duty 42 less the 35 that drive 11 A through
+the armature leaves 7 for back-EMF, 0.5 rad/s. A cut encoder's wheel that turns faster
+draws less and is a stalled encoder; a dead driver draws nothing; a wheel pushed faster
+than its duty turns it draws a braking current, which does not count. While a wheel is
+held, driving (not under the hold), the tick runs the stall clock (``stallTime``,
+seconds; a fault sets it to 0); at ``stallTimeout`` (the parameter ``stall_timeout``,
 STALL_TIMEOUT by default) the chair stops as at its other limits
 (``EVT:STALL_TIMEOUT``, the emergency ramp and the hold) and motion needs a neutral
 command. A sense that reads beyond CURRENT_SENSE_MAX either way (a cut or shorted
@@ -35,15 +37,16 @@ FAULT_CURRENT_SENSE = 0x4000
 
 
 def sense_amps(count: int) -> float:
-    """``senseAmps``: the current an ADC count of a current sense reads, A, either way
-    round."""
-    return abs(mul(from_int(count - C.CURRENT_ZERO_COUNTS), C.CURRENT_AMPS_PER_COUNT))
+    """``senseAmps``: the current an ADC count of a current sense reads, A: positive
+    drives the wheel forward (DIR HIGH), negative backward (or brakes a wheel driven
+    forward)."""
+    return mul(from_int(count - C.CURRENT_ZERO_COUNTS), C.CURRENT_AMPS_PER_COUNT)
 
 
 def current_sense_fault(count_l: int, count_r: int) -> int:
     """``currentSenseFault``: FAULT_CURRENT_SENSE when either sense reads beyond
     CURRENT_SENSE_MAX."""
-    if sense_amps(count_l) > C.CURRENT_SENSE_MAX or sense_amps(count_r) > C.CURRENT_SENSE_MAX:
+    if abs(sense_amps(count_l)) > C.CURRENT_SENSE_MAX or abs(sense_amps(count_r)) > C.CURRENT_SENSE_MAX:
         return FAULT_CURRENT_SENSE
     return 0
 
@@ -52,14 +55,18 @@ def held_at_limit(delta: int, other_delta: int, applied_pwm: int, applied_dir: i
                   current: int) -> bool:
     """``heldAtLimit``: the chair standing (either wheel STALL_CREEP_COUNTS this tick at
     most, either way: ``delta``, ``other_delta``), the wheel driven toward its setpoint at
-    FAULT_STALL_PWM_STANDING or more, its motor drawing STALL_CURRENT or more. Its PID
+    FAULT_STALL_PWM_STANDING or more, its motor drawing STALL_CURRENT or more the way it
+    is driven (a braking current, a wheel pushed faster than its duty turns it, is not:
+    it says nothing of a stand). Its PID
     then runs within STALL_HELD_OUTPUT (``held_bounds``), so that a current that high
     bounds how fast it turns; a partner that counts (a chair crawling up a grade at its
     limit) leaves a count-less wheel a stalled encoder."""
+    amps = sense_amps(current)
+    drawn = amps if applied_dir == C.HIGH else -amps
     return (abs(delta) <= C.STALL_CREEP_COUNTS and abs(other_delta) <= C.STALL_CREEP_COUNTS
             and applied_pwm >= C.FAULT_STALL_PWM_STANDING
             and setpoint != 0.0 and (applied_dir == C.HIGH) == (setpoint > 0.0)
-            and sense_amps(current) >= C.STALL_CURRENT)
+            and drawn >= C.STALL_CURRENT)
 
 
 def held_bounds(lo: float, hi: float) -> tuple[float, float]:
