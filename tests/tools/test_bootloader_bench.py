@@ -177,6 +177,7 @@ def _timed_flash(args: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[i
     return status, capsys.readouterr().err, time.monotonic() - t0
 
 
+@pytest.mark.thorough
 def test_bench_flash_fails_fast_and_clearly(tmp_path: Path, tiny: dict[str, Path],
                                             capsys: pytest.CaptureFixture[str]) -> None:
     timings = {}
@@ -238,6 +239,7 @@ def test_the_build_id_check_compares_with_the_hex(firmware_hex: Path) -> None:
         bench.check_build_id(f"HELLO:3,final_control,3.0.0,{other}", runs, firmware_hex)
 
 
+@pytest.mark.thorough
 def test_the_whole_bench_flow_on_the_bootloader_stand_in(tmp_path: Path, bridge: PtyBridge,
                                                          capsys: pytest.CaptureFixture[str]) -> None:
     scenario = tmp_path / "short.toml"

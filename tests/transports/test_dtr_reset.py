@@ -87,7 +87,8 @@ def _drive(chair: wcdrive.Wheelchair, seconds: float) -> None:
 
 
 @pytest.mark.simavr
-@pytest.mark.parametrize("bootloader", [False, True], ids=["mega", "mega-with-bootloader"])
+@pytest.mark.parametrize("bootloader", [False, pytest.param(True, marks=pytest.mark.thorough)],
+                         ids=["mega", "mega-with-bootloader"])
 def test_a_reset_mid_run_is_greeted_again_and_odometry_carries_on(elf, bootloader: bool) -> None:
     """With the stk500v2 bootloader the board is silent after each reset, and the link
     is lost: the host's frames that reach the bootloader before the host sees that
