@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from wcdrive.boards.current_sense import current_millivolts
-from wcdrive.hil.trace_base import Trace
+from wcdrive.hil.trace_base import Trace, spaced
 from wcdrive.plant.encoders import EdgeTrain
 
 __all__ = ["CURRENT_SPACING_S", "current_changes", "held_against_a_wall", "pushing", "stand_still"]
@@ -92,10 +92,5 @@ def current_changes(rng: np.random.Generator, duration: float) -> list[tuple[flo
             else:
                 mv = int(rng.integers(0, 5001))
             changes.append((at, mv))
-        changes.sort()
-        spaced = changes[:1]
-        for at, mv in changes[1:]:
-            if at - spaced[-1][0] >= CURRENT_SPACING_S:
-                spaced.append((at, mv))
-        out += [(at, side, mv) for at, mv in spaced]
+        out += [(at, side, mv) for at, mv in spaced(changes, CURRENT_SPACING_S)]
     return sorted(out)

@@ -101,8 +101,9 @@ def compare(recording: Recording) -> Report:
     boots = [bytearray(fw.boot_output())]           # the port's TX, boot by boot
     decoded = {side: _decoded_counts(recording.trace, side) for side in ("left", "right")}
     inhibits = [InhibitChange(t, number, active) for t, number, active in recording.trace.inhibits]
-    supply = _supply_timeline(recording.trace)
-    currents = {side: _current_timeline(recording.trace, side) for side in ("left", "right")}
+    supply = _pin_timeline(recording.trace.supply, NOMINAL_MV)
+    currents = {side: _pin_timeline([(t, mv) for t, s, mv in recording.trace.currents if s == side],
+                                    CURRENT_ZERO_MV) for side in ("left", "right")}
     last_tick: int | None = None         # the cycle of the last tick since the boot
     # What the decoder had counted when the firmware's counts started from 0 (at
     # setup(), somewhere between a reset and the first event after it): the candidates.
@@ -264,23 +265,13 @@ def _ticks_before_storm(events: list[Event]) -> set[tuple[int, str]]:
     return out
 
 
-def _supply_timeline(trace: Trace) -> tuple[np.ndarray, np.ndarray]:
-    """The trace's supply as (cycle, mV) arrays from power-on: ``NOMINAL_MV`` at cycle 0
-    (where the board starts), then each change at its cycle, in time order (a change is
-    made after those before it at the same cycle)."""
-    changes = sorted(((round(t * F_CPU), int(mv)) for t, mv in trace.supply), key=lambda c: c[0])
-    cycles = np.array([0] + [c for c, _ in changes], dtype=np.int64)
-    mvs = np.array([NOMINAL_MV] + [mv for _, mv in changes], dtype=np.int64)
-    return cycles, mvs
-
-
-def _current_timeline(trace: Trace, side: str) -> tuple[np.ndarray, np.ndarray]:
-    """The trace's current sense on ``side`` as (cycle, mV) arrays from power-on, as
-    ``_supply_timeline``: 0 A (``ZERO_MV``) at cycle 0."""
-    changes = sorted(((round(t * F_CPU), int(mv)) for t, s, mv in trace.currents if s == side),
-                     key=lambda c: c[0])
-    cycles = np.array([0] + [c for c, _ in changes], dtype=np.int64)
-    mvs = np.array([CURRENT_ZERO_MV] + [mv for _, mv in changes], dtype=np.int64)
+def _pin_timeline(changes: list[tuple[float, int]], start_mv: int) -> tuple[np.ndarray, np.ndarray]:
+    """An analog pin's (s, mV) changes as (cycle, mV) arrays from power-on: ``start_mv``
+    at cycle 0 (where the board starts), then each change at its cycle, in time order (a
+    change is made after those before it at the same cycle)."""
+    ordered = sorted(((round(t * F_CPU), int(mv)) for t, mv in changes), key=lambda c: c[0])
+    cycles = np.array([0] + [c for c, _ in ordered], dtype=np.int64)
+    mvs = np.array([start_mv] + [mv for _, mv in ordered], dtype=np.int64)
     return cycles, mvs
 
 

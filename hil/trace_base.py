@@ -150,3 +150,13 @@ class Trace:
         lines += [f"  {side} current sense {mv} mV from t={t:.4f}s" for t, side, mv in self.currents]
         return "\n".join(lines)
 
+
+def spaced(changes: list[tuple[float, int]], least: float) -> list[tuple[float, int]]:
+    """Changes of a pin's level, (s, mV), in time order, each kept only when it comes at
+    least ``least`` s after the last kept: so that a tick reads the level before a change
+    or after it."""
+    kept: list[tuple[float, int]] = []
+    for at, mv in sorted(changes):
+        if not kept or at - kept[-1][0] >= least:
+            kept.append((at, mv))
+    return kept

@@ -51,6 +51,7 @@ from wcdrive.hil.trace_base import (  # Draw, RandomDraw, HypothesisDraw, Trace:
     HypothesisDraw,
     RandomDraw,
     Trace,
+    spaced,
 )
 from wcdrive.plant.encoders import EdgeTrain, edges_from_trajectory, state_for_count
 from wcdrive.protocol.codec import SEQ_MAX, crc16, frame
@@ -458,12 +459,7 @@ def supply_changes(rng: np.random.Generator, duration: float) -> list[tuple[floa
         at = round(float(rng.uniform(0.05, max(0.06, duration - 0.05))), 4)
         volts = float(rng.uniform(20.0, 24.5) if rng.random() < 0.7 else rng.uniform(0.0, 29.0))
         changes.append((at, pin_millivolts(volts)))
-    changes.sort()
-    spaced = changes[:1]
-    for at, mv in changes[1:]:
-        if at - spaced[-1][0] >= SUPPLY_SPACING_S:
-            spaced.append((at, mv))
-    return spaced
+    return spaced(changes, SUPPLY_SPACING_S)
 
 
 def hot_windings(rng: np.random.Generator, duration: float) -> list[tuple[float, dict[str, float | int]]]:
