@@ -1253,6 +1253,42 @@ static bool heldAtLimit(int32_t delta, int32_t otherDelta, uint8_t appliedPwm, u
          (appliedDir == HIGH) == (setpoint > 0.0f) && drawn >= WC_STALL_CURRENT;
 }
 
+// Standing by its current: the wheel driven toward its setpoint, its motor drawing
+// WC_STANDING_DRAW_SHARE or more of what its duty drives through a standing armature
+// (WC_MOTOR_AMPS_PER_DUTY a duty), the way it is driven: its back-EMF, so its speed, a
+// quarter of its duty's or less; and its partner short of its own setpoint (slower than
+// WC_FAULT_EFFORT_SHORTFALL of it): the chair is loaded, not this wheel alone. Below full
+// torque it stalls after WC_FAULT_STALL_TICKS_LOADED count-less ticks (checkWheel): a wheel
+// standing under a load creeps; a cut encoder's wheel that turns draws less.
+static bool standsByCurrent(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, uint16_t current,
+                            float otherSetpoint, float other) {
+  if (setpoint == 0.0f || (appliedDir == HIGH) != (setpoint > 0.0f)) return false;
+  float otherProgress = otherSetpoint > 0.0f ? other : -other;
+  if (otherProgress >= WC_FAULT_EFFORT_SHORTFALL * fabs(otherSetpoint)) return false;
+  float drawn = appliedDir == HIGH ? senseAmps(current) : -senseAmps(current);
+  return drawn >= WC_STANDING_DRAW_SHARE * ((float)appliedPwm * WC_MOTOR_AMPS_PER_DUTY);
+}
+
+// The wheel turning its setpoint's way (WC_FAULT_STANDING_SPEED or more), its motor draws
+// WC_MOTOR_DRAW_MIN or more the way its effort calls for, and WC_MOTOR_DRAW_SHARE or more
+// of the current that effort (the duty toward the setpoint less WC_FAULT_EFFORT_EMF a rad/s
+// of its speed that way) drives through the armature: it works, and its effort without
+// progress is its wheel's load, not a dead motor (which draws nothing). A reversed
+// encoder's wheel reads a speed against its setpoint.
+static bool motorDraws(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, float measured,
+                       uint16_t current) {
+  if (setpoint == 0.0f) return false;
+  bool forward = setpoint > 0.0f;
+  float progress = forward ? measured : -measured;
+  if (progress < WC_FAULT_STANDING_SPEED) return false;
+  float duty = (appliedDir == HIGH) == forward ? (float)appliedPwm : -(float)appliedPwm;
+  float called = (duty - WC_FAULT_EFFORT_EMF * progress) * WC_MOTOR_AMPS_PER_DUTY * WC_MOTOR_DRAW_SHARE;
+  float drawn = forward ? senseAmps(current) : -senseAmps(current);
+  if (called > 0.0f) return drawn >= WC_MOTOR_DRAW_MIN && drawn >= called;
+  if (called < 0.0f) return drawn <= -WC_MOTOR_DRAW_MIN && drawn <= called;
+  return false;
+}
+
 // The PID's bounds (pidBounds) within WC_STALL_HELD_OUTPUT either way, for a wheel held
 // at its current limit.
 static void heldBounds(float& lo, float& hi) {
@@ -1265,7 +1301,7 @@ static uint8_t checkWheel(int32_t delta, uint32_t illegal, uint8_t storm, uint8_
                           uint8_t otherPwm, bool otherOverruns, uint8_t& stallTicks,
                           uint8_t& reverseTicks, uint8_t& runawayTicks, uint8_t& effortPwm,
                           float& effortSpeed, float& effortSetpoint, uint8_t& effortTicks,
-                          float prevMeasured, bool held) {
+                          float prevMeasured, bool held, bool loaded) {
   if (storm || illegal >= WC_FAULT_ILLEGAL_PER_TICK) return WHEEL_IMPLAUSIBLE;
   // A wheel that stands while its partner does not carry the chair its way (stands, or
   // rolls back) may stand on a grade below the motor's full torque.
@@ -1278,7 +1314,10 @@ static uint8_t checkWheel(int32_t delta, uint32_t illegal, uint8_t storm, uint8_
   bool stalled = driven && delta == 0 && !held;
   stallTicks = stalled ? stallTicks + 1 : 0;
   bool turning = prevMeasured != 0.0f && (prevMeasured > 0.0f) != (setpoint > 0.0f);
-  uint8_t stallLimit = turning ? WC_FAULT_STALL_TICKS_TURNING : WC_FAULT_STALL_TICKS;
+  // Standing by its current on a loaded chair (standsByCurrent) below full torque, it may
+  // stand a while: a wheel at the edge of moving creeps a count every tick or two.
+  uint8_t stallLimit = loaded && appliedPwm < WC_FAULT_STALL_PWM_STANDING ? WC_FAULT_STALL_TICKS_LOADED
+                       : turning ? WC_FAULT_STALL_TICKS_TURNING : WC_FAULT_STALL_TICKS;
   if (stallTicks >= stallLimit) return WHEEL_STALLED;
   float approach = setpoint > 0.0f ? measured - prevMeasured : prevMeasured - measured;
   bool against = fabs(setpoint) >= WC_FAULT_REVERSE_SPEED && fabs(measured) >= WC_FAULT_REVERSE_SPEED &&
@@ -1513,18 +1552,24 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
     bool overrunR = overruns(pwmR, dirR, setpointR, filtVelR);
     stallHeldL = heldAtLimit(deltaL, deltaR, pwmL, dirL, setpointL, currentTickL);
     stallHeldR = heldAtLimit(deltaR, deltaL, pwmR, dirR, setpointR, currentTickR);
+    bool loadedL = standsByCurrent(pwmL, dirL, setpointL, currentTickL, setpointR, filtVelR);
+    bool loadedR = standsByCurrent(pwmR, dirR, setpointR, currentTickR, setpointL, filtVelL);
     checkL = checkWheel(deltaL, illDeltaL, stormTickL, pwmL, dirL, setpointL, filtVelL, filtVelR,
                         pwmR, overrunR, stallTicksL, reverseTicksL, runawayTicksL, effortPwmL, effortSpeedL,
-                        effortSetpointL, effortTicksL, prevMeasL, stallHeldL);
+                        effortSetpointL, effortTicksL, prevMeasL, stallHeldL, loadedL);
     checkR = checkWheel(deltaR, illDeltaR, stormTickR, pwmR, dirR, setpointR, filtVelR, filtVelL,
                         pwmL, overrunL, stallTicksR, reverseTicksR, runawayTicksR, effortPwmR, effortSpeedR,
-                        effortSetpointR, effortTicksR, prevMeasR, stallHeldR);
+                        effortSetpointR, effortTicksR, prevMeasR, stallHeldR, loadedR);
     // Driving, a wheel held at its current limit runs the stall timeout's clock.
     stallTime = (!holding && (stallHeldL || stallHeldR)) ? stallTime + dt : 0.0f;
-    // Effort without progress is one motor's only while its effort leads the other's.
-    bool leadsL = checkL == WHEEL_NO_EFFECT &&
+    // Effort without progress is one motor's only while its effort leads the other's and
+    // the motor does not draw what its effort calls for, turning or standing loaded (a
+    // working motor's is its load).
+    bool drawsL = loadedL || motorDraws(pwmL, dirL, setpointL, filtVelL, currentTickL);
+    bool drawsR = loadedR || motorDraws(pwmR, dirR, setpointR, filtVelR, currentTickR);
+    bool leadsL = checkL == WHEEL_NO_EFFECT && !drawsL &&
                   effortLeads(pwmL, dirL, setpointL, filtVelL, pwmR, dirR, setpointR, filtVelR);
-    bool leadsR = checkR == WHEEL_NO_EFFECT &&
+    bool leadsR = checkR == WHEEL_NO_EFFECT && !drawsR &&
                   effortLeads(pwmR, dirR, setpointR, filtVelR, pwmL, dirL, setpointL, filtVelL);
     // Driving only: a held wheel that runs away is a fault (a reversed encoder turns the
     // hold into positive feedback), whatever the other wheel does.

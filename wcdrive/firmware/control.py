@@ -26,7 +26,13 @@ from wcdrive.firmware.output import (
     send_fault_events,
     send_telemetry,
 )
-from wcdrive.firmware.stall import current_sense_fault, held_at_limit, held_bounds
+from wcdrive.firmware.stall import (
+    current_sense_fault,
+    held_at_limit,
+    held_bounds,
+    motor_draws,
+    stands_by_current,
+)
 from wcdrive.firmware.state import FirmwareState
 from wcdrive.firmware.thermal import (
     pid_bounds,
@@ -248,7 +254,7 @@ def check_wheel(delta: int, illegal: int, storm: int, applied_pwm: int, applied_
                 setpoint: float, measured: float, other: float, other_pwm: int, other_overruns: bool,
                 stall_ticks: int, reverse_ticks: int, runaway_ticks: int,
                 effort: Effort, prev_measured: float, holding: int,
-                held: bool = False) -> tuple[int, int, int, int, Effort]:
+                held: bool = False, loaded: bool = False) -> tuple[int, int, int, int, Effort]:
     """``checkWheel``: ``(verdict, stall ticks, reverse ticks, runaway ticks, effort
     reference)`` for one wheel over the interval that ended: WHEEL_OK, WHEEL_SUSPECT
     (hold the output), or a fault. A stall is a duty toward a non-zero setpoint without
@@ -260,7 +266,8 @@ def check_wheel(delta: int, illegal: int, storm: int, applied_pwm: int, applied_
     moving away. A runaway (``runs_away``) counts one up a tick; driving, any other tick
     counts one down (to 0), so a wavering speed-up is not started over; ``holding``, it
     starts over (the hold's wheels rolled back by a grade beyond it). FAULT_RUNAWAY_TICKS
-    is a reversed encoder too: the one whose reading flipped sign with its setpoint."""
+    is a reversed encoder too: the one whose reading flipped sign with its setpoint.
+    ``held``, ``loaded``: ``held_at_limit``, ``stands_by_current`` (``stall``)."""
     if storm or illegal >= C.FAULT_ILLEGAL_PER_TICK:
         return WHEEL_IMPLAUSIBLE, stall_ticks, reverse_ticks, runaway_ticks, effort
     # a wheel that stands while its partner does not carry the chair its way (stands, or
@@ -274,7 +281,9 @@ def check_wheel(delta: int, illegal: int, storm: int, applied_pwm: int, applied_
     stalled = driven and delta == 0 and not held
     stall_ticks = (stall_ticks + 1) & 0xFF if stalled else 0
     turning = prev_measured != 0.0 and (prev_measured > 0.0) != (setpoint > 0.0)
-    if stall_ticks >= (C.FAULT_STALL_TICKS_TURNING if turning else C.FAULT_STALL_TICKS):
+    limit = (C.FAULT_STALL_TICKS_LOADED if loaded and applied_pwm < C.FAULT_STALL_PWM_STANDING  # loaded
+             else C.FAULT_STALL_TICKS_TURNING if turning else C.FAULT_STALL_TICKS)
+    if stall_ticks >= limit:
         return WHEEL_STALLED, stall_ticks, reverse_ticks, runaway_ticks, effort
     approach = sub(measured, prev_measured) if setpoint > 0.0 else sub(prev_measured, measured)
     against = (abs(setpoint) >= C.FAULT_REVERSE_SPEED and abs(measured) >= C.FAULT_REVERSE_SPEED
@@ -329,23 +338,29 @@ def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_
     overrun_r = overruns(s.pwmR, s.dirR, s.setpointR, s.filtVelR)
     held_l = held_at_limit(delta_l, delta_r, s.pwmL, s.dirL, s.setpointL, s.currentTickL)
     held_r = held_at_limit(delta_r, delta_l, s.pwmR, s.dirR, s.setpointR, s.currentTickR)
+    loaded_l = stands_by_current(s.pwmL, s.dirL, s.setpointL, s.currentTickL, s.setpointR, s.filtVelR)
+    loaded_r = stands_by_current(s.pwmR, s.dirR, s.setpointR, s.currentTickR, s.setpointL, s.filtVelL)
     check_l, s.stallTicksL, s.reverseTicksL, s.runawayTicksL, effort_l = check_wheel(
         delta_l, ill_l, s.stormTickL, s.pwmL, s.dirL, s.setpointL, s.filtVelL, s.filtVelR,
         s.pwmR, overrun_r, s.stallTicksL, s.reverseTicksL, s.runawayTicksL,
-        (s.effortPwmL, s.effortSpeedL, s.effortSetpointL, s.effortTicksL), s.prevMeasL, s.holding, held_l)
+        (s.effortPwmL, s.effortSpeedL, s.effortSetpointL, s.effortTicksL),
+        s.prevMeasL, s.holding, held_l, loaded_l)
     s.effortPwmL, s.effortSpeedL, s.effortSetpointL, s.effortTicksL = effort_l
     check_r, s.stallTicksR, s.reverseTicksR, s.runawayTicksR, effort_r = check_wheel(
         delta_r, ill_r, s.stormTickR, s.pwmR, s.dirR, s.setpointR, s.filtVelR, s.filtVelL,
         s.pwmL, overrun_l, s.stallTicksR, s.reverseTicksR, s.runawayTicksR,
-        (s.effortPwmR, s.effortSpeedR, s.effortSetpointR, s.effortTicksR), s.prevMeasR, s.holding, held_r)
+        (s.effortPwmR, s.effortSpeedR, s.effortSetpointR, s.effortTicksR),
+        s.prevMeasR, s.holding, held_r, loaded_r)
     s.effortPwmR, s.effortSpeedR, s.effortSetpointR, s.effortTicksR = effort_r
     # driving, a wheel held at its current limit runs the stall timeout's clock
     s.stallTime = add(s.stallTime, dt) if not s.holding and (held_l or held_r) else 0.0
-    # effort without progress is one motor's only while its effort leads the other's
-    leads_l = check_l == WHEEL_NO_EFFECT and effort_leads(s.pwmL, s.dirL, s.setpointL, s.filtVelL,
-                                                          s.pwmR, s.dirR, s.setpointR, s.filtVelR)
-    leads_r = check_r == WHEEL_NO_EFFECT and effort_leads(s.pwmR, s.dirR, s.setpointR, s.filtVelR,
-                                                          s.pwmL, s.dirL, s.setpointL, s.filtVelL)
+    # effort without progress is one motor's while it leads and the motor does not draw
+    draws_l = loaded_l or motor_draws(s.pwmL, s.dirL, s.setpointL, s.filtVelL, s.currentTickL)
+    draws_r = loaded_r or motor_draws(s.pwmR, s.dirR, s.setpointR, s.filtVelR, s.currentTickR)
+    leads_l = check_l == WHEEL_NO_EFFECT and not draws_l and effort_leads(
+        s.pwmL, s.dirL, s.setpointL, s.filtVelL, s.pwmR, s.dirR, s.setpointR, s.filtVelR)
+    leads_r = check_r == WHEEL_NO_EFFECT and not draws_r and effort_leads(
+        s.pwmR, s.dirR, s.setpointR, s.filtVelR, s.pwmL, s.dirL, s.setpointL, s.filtVelL)
     # Driving only: a held wheel that runs away is a fault (a reversed encoder turns the
     # hold into positive feedback), whatever the other wheel does.
     limit_l = not s.holding and at_limit(check_l, leads_l, stalling(s.setpointL, s.filtVelL), strain_r,

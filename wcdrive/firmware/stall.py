@@ -24,14 +24,23 @@ STALL_TIMEOUT by default) the chair stops as at its other limits
 (``EVT:STALL_TIMEOUT``, the emergency ramp and the hold) and motion needs a neutral
 command. A sense that reads beyond CURRENT_SENSE_MAX either way (a cut or shorted
 output) latches ``CURRENT_SENSE``.
+
+Below the current limit the currents say two more things the encoders cannot. A wheel
+driven toward its setpoint whose motor draws STANDING_DRAW_SHARE of what its duty
+drives through a standing armature, its partner short of its own setpoint
+(``stands_by_current``), stands under a load (across a grade, say): below full torque
+it stalls only after FAULT_STALL_TICKS_LOADED count-less ticks. A motor whose wheel turns
+its way, drawing MOTOR_DRAW_SHARE of what its effort calls for (``motor_draws``),
+works, so its effort without progress is its load, never MOTOR_L/R.
 """
 
 from __future__ import annotations
 
-from wcdrive.avr.f32 import from_int, mul
+from wcdrive.avr.f32 import from_int, mul, neg, sub
 from wcdrive.firmware import constants as C
 
-__all__ = ["FAULT_CURRENT_SENSE", "current_sense_fault", "held_at_limit", "held_bounds", "sense_amps"]
+__all__ = ["FAULT_CURRENT_SENSE", "current_sense_fault", "held_at_limit", "held_bounds", "motor_draws",
+           "sense_amps", "stands_by_current"]
 
 FAULT_CURRENT_SENSE = 0x4000
 
@@ -77,3 +86,53 @@ def held_bounds(lo: float, hi: float) -> tuple[float, float]:
     if lo < -C.STALL_HELD_OUTPUT:
         lo = -C.STALL_HELD_OUTPUT
     return lo, hi
+
+
+def stands_by_current(applied_pwm: int, applied_dir: int, setpoint: float, current: int,
+                      other_setpoint: float, other: float) -> bool:
+    """``standsByCurrent``: the wheel driven toward its setpoint, its motor drawing
+    STANDING_DRAW_SHARE or more of the current its duty drives through a standing
+    armature (MOTOR_AMPS_PER_DUTY a duty), the way it is driven: its back-EMF, so its
+    speed, is a quarter of what its duty would turn it at or less (0.73 rad/s at duty 41,
+    24 V); and its partner short of its own setpoint (slower than FAULT_EFFORT_SHORTFALL
+    of it its way, ``other`` its measured speed): the chair is loaded, not this wheel
+    alone. Below FAULT_STALL_PWM_STANDING ``check_wheel`` then counts
+    FAULT_STALL_TICKS_LOADED count-less ticks before a stall: a wheel standing under a
+    load at the edge of moving creeps a count every tick or two, a locked wheel counts
+    none; a cut encoder's wheel that turns draws less, and a wheel that stands while its
+    partner keeps its setpoint is blocked alone."""
+    if setpoint == 0.0 or (applied_dir == C.HIGH) != (setpoint > 0.0):
+        return False
+    other_progress = other if other_setpoint > 0.0 else neg(other)
+    if other_progress >= mul(C.FAULT_EFFORT_SHORTFALL, abs(other_setpoint)):
+        return False
+    amps = sense_amps(current)
+    drawn = amps if applied_dir == C.HIGH else neg(amps)
+    return drawn >= mul(C.STANDING_DRAW_SHARE, mul(from_int(applied_pwm), C.MOTOR_AMPS_PER_DUTY))
+
+
+def motor_draws(applied_pwm: int, applied_dir: int, setpoint: float, measured: float, current: int) -> bool:
+    """``motorDraws``: the wheel turning its setpoint's way (FAULT_STANDING_SPEED or more
+    toward it: not a stand, not a reversal), its motor draws MOTOR_DRAW_MIN or more the
+    way its effort calls for, and MOTOR_DRAW_SHARE or more of the current that effort
+    drives through the armature (the duty toward the setpoint less FAULT_EFFORT_EMF a
+    rad/s of its speed that way, MOTOR_AMPS_PER_DUTY a duty; negative, braking). It
+    works: effort without progress is then its wheel's load (the chair's momentum as it
+    comes off a ramp, say), not a dead motor, which draws nothing. A reversed encoder's
+    wheel reads a speed against its setpoint; its effort, read from that speed, calls for
+    far more than it draws."""
+    if setpoint == 0.0:
+        return False
+    forward = setpoint > 0.0
+    progress = measured if forward else neg(measured)
+    if progress < C.FAULT_STANDING_SPEED:
+        return False
+    duty = from_int(applied_pwm) if (applied_dir == C.HIGH) == forward else neg(from_int(applied_pwm))
+    called = mul(mul(sub(duty, mul(C.FAULT_EFFORT_EMF, progress)), C.MOTOR_AMPS_PER_DUTY), C.MOTOR_DRAW_SHARE)
+    amps = sense_amps(current)
+    drawn = amps if forward else neg(amps)
+    if called > 0.0:
+        return drawn >= C.MOTOR_DRAW_MIN and drawn >= called
+    if called < 0.0:
+        return drawn <= neg(C.MOTOR_DRAW_MIN) and drawn <= called
+    return False

@@ -169,9 +169,10 @@ static struct {
         pivot_speed, rounding2, thermal_emf, effort_max, thermal_ambient, thermal_resistance,
         thermal_capacity, thermal_loss, thermal_rollback_temp, supply_volts_per_count, supply_filter,
         battery_low_v, drive_speed_max, drive_accel_max, turn_speed_max, turn_accel_max, turn_at_speed,
-        drive_rate_max, wheel_radius, wheelbase, current_amps_per_count, stall_current, current_sense_max;
+        drive_rate_max, wheel_radius, wheelbase, current_amps_per_count, stall_current, current_sense_max,
+        motor_amps_per_duty, standing_draw_share, effort_shortfall;
     int64_t control_period_ms, tx_credit_max, tx_credit_per_ms, stall_pwm, stall_pwm_standing, stall_ticks,
-        stall_ticks_turning,
+        stall_ticks_turning, stall_ticks_loaded,
         reverse_ticks, runaway_pwm, runaway_ticks, effort_pwm, effort_ticks, illegal_per_tick, still_ticks, pivot_ticks,
         hold_deadband, overspeed_pwm, overspeed_ticks,
         high, low, pivot_none, pivot_stopping, pivot_rotating, untrusted_l, untrusted_r, brake_released,
@@ -312,7 +313,7 @@ static int check_wheel(int64_t delta, int64_t illegal, int64_t storm, int64_t pw
                        double setpoint, double measured, double other, int64_t other_pwm,
                        int other_overruns,
                        int64_t *stall, int64_t *reverse,
-                       int64_t *runaway, Effort *e, double prev_measured, int holding) {
+                       int64_t *runaway, Effort *e, double prev_measured, int holding, int loaded) {
     if (storm || illegal >= K.illegal_per_tick)
         return WHEEL_FAULT;
     double other_along = setpoint > 0.0 ? other : -other;
@@ -322,7 +323,10 @@ static int check_wheel(int64_t delta, int64_t illegal, int64_t storm, int64_t pw
     int stalled = driven && delta == 0;
     *stall = stalled ? ((*stall + 1) & 0xFF) : 0;
     int turning = prev_measured != 0.0 && ((prev_measured > 0.0) != (setpoint > 0.0));
-    if (*stall >= (turning ? K.stall_ticks_turning : K.stall_ticks))
+    /* standing by its current on a loaded chair below full torque, it may stand a while */
+    int64_t limit = loaded && pwm < K.stall_pwm_standing ? K.stall_ticks_loaded
+                    : turning ? K.stall_ticks_turning : K.stall_ticks;
+    if (*stall >= limit)
         return WHEEL_FAULT;
     double approach = setpoint > 0.0 ? f_sub(measured, prev_measured) : f_sub(prev_measured, measured);
     int against = fabs(setpoint) >= K.reverse_speed && fabs(measured) >= K.reverse_speed
@@ -339,6 +343,19 @@ static int check_wheel(int64_t delta, int64_t illegal, int64_t storm, int64_t pw
     if (no_effect(pwm, dir, setpoint, measured, other, other_pwm, other_overruns, e))
         return WHEEL_FAULT;
     return (stalled || against) ? WHEEL_SUSPECT : WHEEL_OK;
+}
+
+/* stands_by_current: wcdrive.firmware.stall */
+static int stands_by_current(int64_t pwm, int64_t dir, double setpoint, int64_t current,
+                             double other_setpoint, double other) {
+    if (setpoint == 0.0 || (dir == K.high) != (setpoint > 0.0))
+        return 0;
+    double other_progress = other_setpoint > 0.0 ? other : -other;
+    if (other_progress >= f_mul(K.effort_shortfall, fabs(other_setpoint)))
+        return 0;
+    double amps = f_mul(f_from_int(current - K.current_zero_counts), K.current_amps_per_count);
+    double drawn = dir == K.high ? amps : -amps;
+    return drawn >= f_mul(K.standing_draw_share, f_mul(f_from_int(pwm), K.motor_amps_per_duty));
 }
 
 /* winding_loss, winding_step: wcdrive.firmware.thermal */
@@ -591,10 +608,12 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
         int overrun_r = overruns(I(pwmR), I(dirR), D(setpointR), D(filtVelR));
         check_l = check_wheel(delta_l, ill_l, I(stormTickL), I(pwmL), I(dirL), D(setpointL), D(filtVelL),
                               D(filtVelR), I(pwmR), overrun_r, &stall_l, &rev_l, &run_l, &el, D(prevMeasL),
-                              (int)I(holding));
+                              (int)I(holding), stands_by_current(I(pwmL), I(dirL), D(setpointL), I(currentTickL),
+                                                D(setpointR), D(filtVelR)));
         check_r = check_wheel(delta_r, ill_r, I(stormTickR), I(pwmR), I(dirR), D(setpointR), D(filtVelR),
                               D(filtVelL), I(pwmL), overrun_l, &stall_r, &rev_r, &run_r, &er, D(prevMeasR),
-                              (int)I(holding));
+                              (int)I(holding), stands_by_current(I(pwmR), I(dirR), D(setpointR), I(currentTickR),
+                                                D(setpointL), D(filtVelL)));
         if (check_l == WHEEL_FAULT || check_r == WHEEL_FAULT)
             Py_RETURN_NONE;
         SETI(stallTicksL, stall_l); SETI(reverseTicksL, rev_l);
@@ -881,6 +900,9 @@ static PyObject *bind(PyObject *self, PyObject *args) {
           && const_double(consts, "CURRENT_AMPS_PER_COUNT", &k.current_amps_per_count)
           && const_double(consts, "STALL_CURRENT", &k.stall_current)
           && const_double(consts, "CURRENT_SENSE_MAX", &k.current_sense_max)
+          && const_double(consts, "MOTOR_AMPS_PER_DUTY", &k.motor_amps_per_duty)
+          && const_double(consts, "STANDING_DRAW_SHARE", &k.standing_draw_share)
+          && const_double(consts, "FAULT_EFFORT_SHORTFALL", &k.effort_shortfall)
           && const_int(consts, "CURRENT_ZERO_COUNTS", &k.current_zero_counts)
           && const_int(consts, "STALL_CREEP_COUNTS", &k.stall_creep_counts)
           && const_int(consts, "CONTROL_PERIOD_MS", &k.control_period_ms)
@@ -890,6 +912,7 @@ static PyObject *bind(PyObject *self, PyObject *args) {
           && const_int(consts, "FAULT_STALL_PWM_STANDING", &k.stall_pwm_standing)
           && const_int(consts, "FAULT_STALL_TICKS", &k.stall_ticks)
           && const_int(consts, "FAULT_STALL_TICKS_TURNING", &k.stall_ticks_turning)
+          && const_int(consts, "FAULT_STALL_TICKS_LOADED", &k.stall_ticks_loaded)
           && const_int(consts, "FAULT_REVERSE_TICKS", &k.reverse_ticks)
           && const_int(consts, "FAULT_RUNAWAY_PWM", &k.runaway_pwm)
           && const_int(consts, "FAULT_RUNAWAY_TICKS", &k.runaway_ticks)

@@ -1,0 +1,185 @@
+"""What the motors' currents say below the current limit (docs/safety.md, "What the
+currents say"): a wheel that stands by its current is not a stalled encoder below full
+torque, and a motor that draws what its effort calls for is not a dead one. The rules
+worked by hand on the port, then each injected on both backends (the compiled firmware
+in simavr, its current senses on A1 and A2, replayed on the port in lock step with no
+mismatch)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tests.support.recordings import COUNTS_PER_RAD, board_lines, every, recorded, tick_states, turning
+from wcdrive.boards.current_sense import current_millivolts
+from wcdrive.firmware import constants as C
+from wcdrive.firmware.stall import motor_draws, sense_amps, stands_by_current
+from wcdrive.hil.current_traces import stand_still
+from wcdrive.hil.lockstep import Recording
+from wcdrive.hil.traces import Trace
+from wcdrive.plant.encoders import EdgeTrain, edges_from_trajectory
+from wcdrive.plant.params import ChairParams
+
+
+# ---- the rules, by hand ------------------------------------------------------------------
+def test_the_amps_a_duty_drives_through_a_standing_armature_are_the_plants() -> None:
+    """MOTOR_AMPS_PER_DUTY: 24 V / 255 a duty over the armature's 0.3 ohm, 0.3137 A; a
+    standing wheel at duty 26 draws 8.16 A, at 41 12.86 A (the driver's 13 A limit is
+    duty 41.4: FAULT_STALL_PWM_STANDING's full torque)."""
+    p = ChairParams()
+    assert C.MOTOR_AMPS_PER_DUTY == pytest.approx(p.supply_voltage / 255 / p.armature_resistance, rel=1e-4)
+    assert 26 * C.MOTOR_AMPS_PER_DUTY == pytest.approx(8.156, abs=1e-3)
+    assert p.current_limit / C.MOTOR_AMPS_PER_DUTY == pytest.approx(41.44, abs=0.01)
+
+
+def test_a_wheel_stands_by_its_current_at_three_quarters_of_its_stand() -> None:
+    """Duty 30 toward a forward setpoint, the partner short of its own (0.5 of 2 rad/s):
+    a stand draws 9.41 A; 0.75 of it, 7.06 A (count 512 + 58 = 7.08 A) stands, 57
+    (6.96 A) does not; backward alike with the current's sign; a braking current, a duty
+    against the setpoint or no setpoint never stand, nor a wheel whose partner keeps 0.8
+    of its setpoint (blocked alone: locked, or its encoder cut)."""
+    assert sense_amps(512 + 58) >= 0.75 * 30 * C.MOTOR_AMPS_PER_DUTY > sense_amps(512 + 57)
+    short = (2.0, 0.5)                                         # the partner's setpoint, its speed
+    assert stands_by_current(30, C.HIGH, 1.0, 512 + 58, *short)
+    assert not stands_by_current(30, C.HIGH, 1.0, 512 + 57, *short)
+    assert stands_by_current(30, C.LOW, -1.0, 512 - 58, -2.0, -0.5)
+    assert not stands_by_current(30, C.LOW, -1.0, 512 + 58, -2.0, -0.5)    # braking
+    assert not stands_by_current(30, C.HIGH, 1.0, 512 - 58, *short)         # braking
+    assert not stands_by_current(30, C.LOW, 1.0, 512 - 58, *short)          # driven against its setpoint
+    assert not stands_by_current(30, C.HIGH, 0.0, 512 + 58, *short)         # no setpoint
+    assert not stands_by_current(30, C.HIGH, 1.0, 512 + 58, 2.0, 1.61)      # the partner keeps 0.8
+    assert stands_by_current(30, C.HIGH, 1.0, 512 + 58, 2.0, 1.59)
+    assert stands_by_current(30, C.HIGH, 1.0, 512 + 58, -2.0, -1.59)        # a spin: its own way
+
+
+def test_a_turning_wheel_at_the_same_duty_draws_less_than_a_standing_one() -> None:
+    """The bound the share sets, worked from the plant's motor: at duty 41 and 24 V a
+    wheel that draws 0.75 of its stand's current has a back-EMF of a quarter of its
+    duty's volts or less: 0.73 rad/s (0.11 m/s at the rim); a cut encoder's wheel turning
+    at 1.0 rad/s draws 66 % of a stand's current and does not stand."""
+    p = ChairParams()
+    ke_g = p.motor_constant * p.gear_ratio
+    volts = 41 * 24.0 / 255
+
+    def drawn(speed: float) -> float:
+        return (volts - ke_g * speed) / p.armature_resistance
+
+    fastest = (1 - C.STANDING_DRAW_SHARE) * volts / ke_g
+    assert fastest == pytest.approx(0.73, abs=0.01)
+    assert fastest * p.wheel_radius == pytest.approx(0.112, abs=1e-3)
+    assert drawn(fastest) == pytest.approx(C.STANDING_DRAW_SHARE * drawn(0.0), rel=1e-9)
+    assert drawn(1.0) / drawn(0.0) == pytest.approx(0.66, abs=0.01)
+    assert drawn(1.0) / drawn(0.0) < C.STANDING_DRAW_SHARE
+
+
+def test_a_motor_draws_half_the_current_its_effort_calls_for_or_more() -> None:
+    """A wheel at 5 rad/s toward a forward setpoint at duty 100: its effort is
+    100 - 14.5 x 5 = 27.5 duty, 8.63 A through the armature; half of it, 4.31 A (count
+    512 + 36 = 4.39 A) draws, 35 (4.27 A) does not. Braking (duty 50: -22.5, -7.06 A):
+    -3.53 A or more that way. Backward alike. 1 A at the least; not for a wheel slower
+    than 0.3 rad/s its way (a stand is the stall rules'), nor one that reads a speed
+    against its setpoint (a reversed encoder), nor without a setpoint."""
+    assert 0.5 * 27.5 * C.MOTOR_AMPS_PER_DUTY == pytest.approx(4.313, abs=1e-3)
+    assert motor_draws(100, C.HIGH, 1.0, 5.0, 512 + 36) and not motor_draws(100, C.HIGH, 1.0, 5.0, 512 + 35)
+    assert motor_draws(50, C.HIGH, 1.0, 5.0, 512 - 29) and not motor_draws(50, C.HIGH, 1.0, 5.0, 512 - 28)
+    assert motor_draws(100, C.LOW, -1.0, -5.0, 512 - 36) and not motor_draws(100, C.LOW, -1.0, -5.0, 512 + 36)
+    assert not motor_draws(100, C.HIGH, 1.0, 5.0, 512 - 36)                 # against its effort
+    # a small effort (duty 75: 2.5, 0.78 A): 1 A at the least
+    assert not motor_draws(75, C.HIGH, 1.0, 5.0, 512 + 8) and motor_draws(75, C.HIGH, 1.0, 5.0, 512 + 9)
+    assert not motor_draws(100, C.HIGH, 1.0, 0.29, 512 + 60)                # standing
+    assert not motor_draws(100, C.HIGH, 1.0, -5.0, 512 + 60)                # reads against its setpoint
+    assert not motor_draws(100, C.HIGH, 0.0, 5.0, 512 + 60)
+
+
+# ---- both backends -------------------------------------------------------------------------
+def _slowing(until: float, mirrored: bool, speed: float, at: float, share: float) -> EdgeTrain:
+    """A wheel at rest until 0.3 s, at ``speed`` rad/s until ``at``, then at ``share`` of
+    it (dragged)."""
+    t = np.linspace(0.0, until, 4000)
+    angle = np.where(t < 0.3, 0.0, np.where(t < at, (t - 0.3) * speed,
+                                            (at - 0.3) * speed + (t - at) * speed * share))
+    return edges_from_trajectory(t, 0.5 + (-1 if mirrored else 1) * angle * COUNTS_PER_RAD)
+
+
+def _drive(duration: float, speed: float, left: str, right: str, amps: float) -> Recording:
+    """A neutral command, then rp/lp ``speed`` every 0.1 s, both wheels turning at it;
+    from 1.0 s each wheel as its word says: "turns" on, "stands", "creeps" (0.4 % of it: a
+    count every two or three ticks at 1.2 rad/s) or is "dragged" (turns at 40 % of it);
+    the right motor drawing ``amps`` A from 0.06 s before."""
+    command = b"rp%05.2f,lp%05.2f\n" % (speed, speed)
+    writes = [(0.02, b"rp0,lp0,\n"), *every(command, 0.2, duration - 0.05)]
+    encoders = {}
+    for side, how in (("left", left), ("right", right)):
+        mirrored = side == "left"
+        encoders[side] = {"turns": turning(duration, mirrored, speed),
+                          "stands": stand_still(turning(duration, mirrored, speed), 1.0, duration),
+                          "creeps": _slowing(duration, mirrored, speed, 1.0, 0.004),
+                          "dragged": _slowing(duration, mirrored, speed, 1.0, 0.4)}[how]
+    return recorded(Trace(duration=duration, serial=sorted(writes), encoders=encoders,
+                          currents=[(0.94, "right", current_millivolts(amps))]))
+
+
+def _fault_at(rec: Recording) -> float:
+    return next(t for t, a in tick_states(rec) if a["faultFlags"])
+
+
+@pytest.mark.simavr
+def test_a_wheel_creeping_by_its_current_on_a_loaded_chair_is_no_stall() -> None:
+    """1.2 rad/s asked; from 1.0 s the right wheel creeps (a count every two or three
+    ticks), its motor drawing 10 A (a stand's current up to duty 42), and the left one
+    turns at 40 % (the chair is loaded): for the 0.8 s its duty climbs from 26 toward
+    full torque nothing latches, its count-less runs 2 ticks long at the most. Red
+    without the rule: ENC_STALL_R at the first 2-tick run at duty 26 (as the envelope's
+    drive 176 did)."""
+    rec = _drive(1.8, 1.2, "dragged", "creeps", 10.0)
+    assert board_lines(rec, b"EVT:") == [b"EVT:PARAMS_DEFAULT,blank"]
+    ticks = [a for t, a in tick_states(rec) if t > 1.1]
+    assert max(a["stallTicksR"] for a in ticks) in (2, 3)
+    assert 26 <= max(a["pwmR"] for a in ticks) < C.FAULT_STALL_PWM_STANDING
+
+
+@pytest.mark.simavr
+def test_a_wheel_standing_by_its_current_on_a_loaded_chair_stalls_after_six_ticks() -> None:
+    """The same, the right wheel standing (locked, or its encoder cut and the wheel held):
+    ENC_STALL_R after 6 count-less ticks at duty 26, 0.15 s later than without the
+    rule (2 ticks)."""
+    rec = _drive(2.0, 1.2, "dragged", "stands", 10.0)
+    assert board_lines(rec, b"EVT:FAULT") == [b"EVT:FAULT,ENC_STALL_R"]
+    assert 1.3 < _fault_at(rec) < 1.4
+
+
+@pytest.mark.simavr
+@pytest.mark.parametrize(("left", "amps"), [("dragged", 2.0), ("turns", 10.0)],
+                         ids=["draws-little", "blocked-alone"])
+def test_a_standing_wheel_drawing_little_or_blocked_alone_is_a_stall_at_a_tenth_of_full_duty(
+        left: str, amps: float) -> None:
+    """The same stand, the motor drawing 2 A (a cut encoder's wheel that turns, its
+    back-EMF taking the current off); or drawing 10 A while the left wheel keeps its
+    setpoint (the right one blocked alone: locked, or its encoder cut and the wheel
+    held): ENC_STALL_R two ticks after its duty reaches 26, as before the rule."""
+    rec = _drive(1.5, 1.2, left, "stands", amps)
+    assert board_lines(rec, b"EVT:FAULT") == [b"EVT:FAULT,ENC_STALL_R"]
+    assert 1.1 < _fault_at(rec) < 1.2
+
+
+@pytest.mark.simavr
+def test_a_dragged_wheel_whose_motor_draws_is_its_load_not_a_dead_motor() -> None:
+    """3 rad/s asked; from 1.0 s the right wheel turns at 40 % of it while its partner
+    keeps it, its duty winding up without a gain (effort without progress, leading its
+    partner's), its motor drawing 12.5 A (half or more of what its effort calls for up
+    to duty 97 at 1.2 rad/s): no fault. Red without the rule: MOTOR_R."""
+    rec = _drive(2.5, 3.0, "turns", "dragged", 12.5)
+    assert board_lines(rec, b"EVT:") == [b"EVT:PARAMS_DEFAULT,blank"]
+    ticks = tick_states(rec)
+    assert max(a["effortTicksR"] for _, a in ticks) >= C.FAULT_EFFORT_TICKS
+    assert max(a["pwmR"] for _, a in ticks) > 70
+
+
+@pytest.mark.simavr
+@pytest.mark.parametrize("amps", [0.0, 5.0], ids=["dead", "short-of-its-effort"])
+def test_a_dragged_wheel_whose_motor_draws_nothing_or_too_little_is_a_dead_motor(amps: float) -> None:
+    """The same drag, the motor drawing nothing (an open winding, a dead driver), or
+    5 A as its duty climbs past 49 (less than half of what its effort calls for): MOTOR_R,
+    as before the rule."""
+    rec = _drive(2.5, 3.0, "turns", "dragged", amps)
+    assert board_lines(rec, b"EVT:FAULT") == [b"EVT:FAULT,MOTOR_R"]
