@@ -1289,6 +1289,16 @@ static bool motorDraws(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, f
   return false;
 }
 
+// The motor draws less than WC_MOTOR_DRAW_MIN either way while its duty and its wheel's
+// speed call for WC_MOTOR_SILENT_CURRENT or more, either way (the duty, forward positive,
+// less WC_FAULT_EFFORT_EMF a rad/s of the measured speed, over the armature): an open
+// winding or a dead driver, its wheel carried by the chair.
+static bool motorSilent(uint8_t appliedPwm, uint8_t appliedDir, float measured, uint16_t current) {
+  float duty = appliedDir == HIGH ? (float)appliedPwm : -(float)appliedPwm;
+  float called = (duty - WC_FAULT_EFFORT_EMF * measured) * WC_MOTOR_AMPS_PER_DUTY;
+  return fabs(called) >= WC_MOTOR_SILENT_CURRENT && fabs(senseAmps(current)) < WC_MOTOR_DRAW_MIN;
+}
+
 // The PID's bounds (pidBounds) within WC_STALL_HELD_OUTPUT either way, for a wheel held
 // at its current limit.
 static void heldBounds(float& lo, float& hi) {
@@ -1564,13 +1574,25 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
     stallTime = (!holding && (stallHeldL || stallHeldR)) ? stallTime + dt : 0.0f;
     // Effort without progress is one motor's only while its effort leads the other's and
     // the motor does not draw what its effort calls for, turning or standing loaded (a
-    // working motor's is its load).
+    // working motor's is its load). A partner that draws nothing of what its own duty and
+    // speed call for is then the dead one.
     bool drawsL = loadedL || motorDraws(pwmL, dirL, setpointL, filtVelL, currentTickL);
     bool drawsR = loadedR || motorDraws(pwmR, dirR, setpointR, filtVelR, currentTickR);
-    bool leadsL = checkL == WHEEL_NO_EFFECT && !drawsL &&
-                  effortLeads(pwmL, dirL, setpointL, filtVelL, pwmR, dirR, setpointR, filtVelR);
-    bool leadsR = checkR == WHEEL_NO_EFFECT && !drawsR &&
-                  effortLeads(pwmR, dirR, setpointR, filtVelR, pwmL, dirL, setpointL, filtVelL);
+    bool leadL = checkL == WHEEL_NO_EFFECT &&
+                 effortLeads(pwmL, dirL, setpointL, filtVelL, pwmR, dirR, setpointR, filtVelR);
+    bool leadR = checkR == WHEEL_NO_EFFECT &&
+                 effortLeads(pwmR, dirR, setpointR, filtVelR, pwmL, dirL, setpointL, filtVelL);
+    bool leadsL = leadL && !drawsL, leadsR = leadR && !drawsR;
+    if (leadL && drawsL && (checkR == WHEEL_OK || checkR == WHEEL_SUSPECT || checkR == WHEEL_NO_EFFECT) &&
+        motorSilent(pwmR, dirR, filtVelR, currentTickR)) {
+      checkR = WHEEL_NO_EFFECT;
+      leadsR = true;
+    }
+    if (leadR && drawsR && (checkL == WHEEL_OK || checkL == WHEEL_SUSPECT || checkL == WHEEL_NO_EFFECT) &&
+        motorSilent(pwmL, dirL, filtVelL, currentTickL)) {
+      checkL = WHEEL_NO_EFFECT;
+      leadsL = true;
+    }
     // Driving only: a held wheel that runs away is a fault (a reversed encoder turns the
     // hold into positive feedback), whatever the other wheel does.
     bool limitL = !holding && atLimit(checkL, leadsL, stalling(setpointL, filtVelL), strainR,

@@ -13,7 +13,8 @@ import pytest
 from tests.support.recordings import COUNTS_PER_RAD, board_lines, every, recorded, tick_states, turning
 from wcdrive.boards.current_sense import current_millivolts
 from wcdrive.firmware import constants as C
-from wcdrive.firmware.stall import motor_draws, sense_amps, stands_by_current
+from wcdrive.firmware.motor_rule import motor_draws, motor_silent
+from wcdrive.firmware.stall import sense_amps, stands_by_current
 from wcdrive.hil.current_traces import stand_still
 from wcdrive.hil.lockstep import Recording
 from wcdrive.hil.traces import Trace
@@ -101,11 +102,13 @@ def _slowing(until: float, mirrored: bool, speed: float, at: float, share: float
     return edges_from_trajectory(t, 0.5 + (-1 if mirrored else 1) * angle * COUNTS_PER_RAD)
 
 
-def _drive(duration: float, speed: float, left: str, right: str, amps: float) -> Recording:
+def _drive(duration: float, speed: float, left: str, right: str, amps: float,
+           left_amps: float = 3.0) -> Recording:
     """A neutral command, then rp/lp ``speed`` every 0.1 s, both wheels turning at it;
     from 1.0 s each wheel as its word says: "turns" on, "stands", "creeps" (0.4 % of it: a
-    count every two or three ticks at 1.2 rad/s) or is "dragged" (turns at 40 % of it);
-    the right motor drawing ``amps`` A from 0.06 s before."""
+    count every two or three ticks at 1.2 rad/s), is "dragged" (turns at 40 % of it),
+    "slowed" (84 %) or "carried" (110 %); the right motor drawing ``amps`` A and the left
+    one ``left_amps`` (working) from 0.06 s before."""
     command = b"rp%05.2f,lp%05.2f\n" % (speed, speed)
     writes = [(0.02, b"rp0,lp0,\n"), *every(command, 0.2, duration - 0.05)]
     encoders = {}
@@ -114,9 +117,12 @@ def _drive(duration: float, speed: float, left: str, right: str, amps: float) ->
         encoders[side] = {"turns": turning(duration, mirrored, speed),
                           "stands": stand_still(turning(duration, mirrored, speed), 1.0, duration),
                           "creeps": _slowing(duration, mirrored, speed, 1.0, 0.004),
-                          "dragged": _slowing(duration, mirrored, speed, 1.0, 0.4)}[how]
+                          "dragged": _slowing(duration, mirrored, speed, 1.0, 0.4),
+                          "slowed": _slowing(duration, mirrored, speed, 1.0, 0.84),
+                          "carried": _slowing(duration, mirrored, speed, 1.0, 1.1)}[how]
     return recorded(Trace(duration=duration, serial=sorted(writes), encoders=encoders,
-                          currents=[(0.94, "right", current_millivolts(amps))]))
+                          currents=[(0.94, "right", current_millivolts(amps)),
+                                    (0.94, "left", current_millivolts(left_amps))]))
 
 
 def _fault_at(rec: Recording) -> float:
@@ -183,3 +189,25 @@ def test_a_dragged_wheel_whose_motor_draws_nothing_or_too_little_is_a_dead_motor
     as before the rule."""
     rec = _drive(2.5, 3.0, "turns", "dragged", amps)
     assert board_lines(rec, b"EVT:FAULT") == [b"EVT:FAULT,MOTOR_R"]
+
+
+@pytest.mark.simavr
+def test_a_working_motor_is_not_blamed_its_silent_partner_is() -> None:
+    """3 rad/s asked; from 1.0 s the left wheel turns at 40 % of it, its duty winding up
+    without a gain and its motor drawing 12.5 A (it works), while the right wheel keeps
+    its setpoint at duty 7, which at 3 rad/s calls for 11 A of braking, and its motor
+    draws nothing: an open winding carried by the chair (the envelope's dead motors going
+    down a band). MOTOR_R, the silent one. Red without the rule: nothing latches (the
+    working left motor is not blamed); before the currents: MOTOR_L, the healthy one."""
+    rec = _drive(2.5, 3.0, "dragged", "turns", 0.0, left_amps=12.5)
+    assert board_lines(rec, b"EVT:FAULT") == [b"EVT:FAULT,MOTOR_R"]
+
+
+def test_a_motor_is_silent_below_1_amp_where_its_duty_and_speed_call_for_3() -> None:
+    """Duty 7 forward at 3 rad/s calls for (7 - 43.5) x 0.3137 = -11.4 A; drawing 0.98 A
+    (count 512 + 8) either way it is silent, 1.10 A (9) not. Duty 50 at 3.3 rad/s calls
+    for 0.67 A: never silent. Backward alike."""
+    assert motor_silent(7, C.HIGH, 3.0, 512) and motor_silent(7, C.HIGH, 3.0, 512 + 8)
+    assert motor_silent(7, C.HIGH, 3.0, 512 - 8) and not motor_silent(7, C.HIGH, 3.0, 512 - 9)
+    assert not motor_silent(50, C.HIGH, 3.3, 512)
+    assert motor_silent(7, C.LOW, -3.0, 512) and not motor_silent(50, C.LOW, -3.3, 512)

@@ -25,13 +25,11 @@ from wcdrive.firmware.control import (
     at_limit,
     check_wheel,
     compute_pid,
-    effort_leads,
-    effort_of,
-    no_effect,
     overruns,
     stalling,
     stalls_loaded,
 )
+from wcdrive.firmware.motor_rule import effort_leads, effort_of, no_effect
 
 SETPOINT = 2.85   # rad/s toward which the duty rises
 

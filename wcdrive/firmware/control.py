@@ -17,6 +17,7 @@ from wcdrive.firmware.brake import (
 from wcdrive.firmware.drive import ramp_setpoints
 from wcdrive.firmware.inhibit import capped_goals, send_inhibit_event, update_inhibits
 from wcdrive.firmware.motion import PIVOT_NONE, confirm_neutral, emergency_halt, pivot_step, require_neutral
+from wcdrive.firmware.motor_rule import Effort, effort_leads, effort_of, motor_draws, motor_silent, no_effect
 from wcdrive.firmware.motors import i32, motors
 from wcdrive.firmware.output import (
     feedback_line,
@@ -26,13 +27,7 @@ from wcdrive.firmware.output import (
     send_fault_events,
     send_telemetry,
 )
-from wcdrive.firmware.stall import (
-    current_sense_fault,
-    held_at_limit,
-    held_bounds,
-    motor_draws,
-    stands_by_current,
-)
+from wcdrive.firmware.stall import current_sense_fault, held_at_limit, held_bounds, stands_by_current
 from wcdrive.firmware.state import FirmwareState
 from wcdrive.firmware.thermal import (
     pid_bounds,
@@ -75,94 +70,6 @@ FAULT_MOTOR_L, FAULT_MOTOR_R = 0x80, 0x100
 #: The faults after which a wheel's encoder is no longer trusted: its own, and the driver's.
 FAULTS_UNTRUSTED_L = FAULT_STALL_L | FAULT_REVERSED_L | FAULT_IMPLAUSIBLE_L | FAULT_MOTOR_L | FAULT_DRIVER
 FAULTS_UNTRUSTED_R = FAULT_STALL_R | FAULT_REVERSED_R | FAULT_IMPLAUSIBLE_R | FAULT_MOTOR_R | FAULT_DRIVER
-
-
-Effort = tuple[int, float, float, int]
-
-
-def no_effect(applied_pwm: int, applied_dir: int, setpoint: float, measured: float, other: float,
-              other_pwm: int, other_overruns: bool, effort: Effort) -> tuple[bool, Effort]:
-    """``noEffect``: effort without progress, by a wheel that trails ``other`` (the other
-    wheel's measured speed), as a dragged one does (the duty FAULT_EFFORT_PWM above its
-    lowest, or at full duty, which can rise no more, with ``other_pwm`` no more than
-    FAULT_EFFORT_PWM below it: the chair at its top speed, not the outer wheel of a
-    turn), judged from where the wheel last
-    turned faster than its setpoint (being slowed to it). ``effort`` is (lowest duty,
-    speed toward the setpoint, setpoint, ticks) of the reference; returns (tripped, the
-    new one). The other wheel driven on beyond its setpoint (``other_overruns``:
-    ``overruns``) starts the count over: a chair not following its command. Whose load
-    it is, one motor's or the chair's, is the caller's (``effort_leads``)."""
-    effort_pwm, effort_speed, effort_setpoint, ticks = effort
-    progress = measured if setpoint > 0.0 else -measured
-    toward = setpoint != 0.0 and (applied_dir == C.HIGH) == (setpoint > 0.0)
-    if not toward or setpoint != effort_setpoint or progress > effort_speed or progress > abs(setpoint):
-        return False, (applied_pwm, progress, setpoint, 0)
-    effort_pwm = min(effort_pwm, applied_pwm)
-    shortfall = abs(measured) < mul(C.FAULT_EFFORT_SHORTFALL_MOTOR, abs(setpoint))
-    other_progress = other if setpoint > 0.0 else -other
-    trails = progress < add(max(other_progress, 0.0), C.FAULT_EFFORT_LEAD)
-    rose = (applied_pwm >= effort_pwm + C.FAULT_EFFORT_PWM
-            or (applied_pwm == 255 and other_pwm + C.FAULT_EFFORT_PWM >= 255))
-    ticks = (ticks + 1) & 0xFF if shortfall and trails and not other_overruns and rose else 0
-    return ticks >= C.FAULT_EFFORT_TICKS, (effort_pwm, effort_speed, effort_setpoint, ticks)
-
-
-def effort_of(applied_pwm: int, applied_dir: int, setpoint: float, measured: float) -> float:
-    """``effortOf``: the duty toward the setpoint (against it, negative) less what the
-    back-EMF of the wheel's speed that way takes (FAULT_EFFORT_EMF per rad/s): the share
-    of the duty that drives current (negative: braking); within FAULT_EFFORT_MAX either
-    way (the driver's current limit: more gives no more torque). 0 without a setpoint."""
-    if setpoint == 0.0:
-        return 0.0
-    forward = setpoint > 0.0
-    duty = float(applied_pwm) if (applied_dir == C.HIGH) == forward else -float(applied_pwm)
-    progress = measured if forward else -measured
-    effort = sub(duty, mul(C.FAULT_EFFORT_EMF, progress))
-    if effort <= -C.FAULT_EFFORT_MAX:
-        return -C.FAULT_EFFORT_MAX
-    return effort if effort < C.FAULT_EFFORT_MAX else C.FAULT_EFFORT_MAX
-
-
-def effort_leads(applied_pwm: int, applied_dir: int, setpoint: float, measured: float,
-                 other_pwm: int, other_dir: int, other_setpoint: float, other: float) -> bool:
-    """``effortLeads``: the wheel's effort leads the other wheel's by
-    FAULT_EFFORT_LEAD_PWM or more, the other not held back by its own setpoint
-    (FAULT_EFFORT_OVERRUN or more beyond it this wheel's way); or it should brake at the
-    current limit while the other brakes FAULT_EFFORT_LEAD_PWM less, yet its duty winds
-    up without a gain (a dead wheel carried down a grade); or, both at FAULT_EFFORT_MAX
-    (the current limit) and the other short of its setpoint, it turns FAULT_EFFORT_LAG
-    slower than the other, each its own way, beyond what the setpoints ask (a setpoint
-    asking this wheel for more is no excuse: at the limit neither gets its setpoint).
-    One motor doing nothing while its partner carries the chair, not a load both wheels
-    share (a grade, a kerb, a ramp's edge)."""
-    effort = effort_of(applied_pwm, applied_dir, setpoint, measured)
-    other_effort = effort_of(other_pwm, other_dir, other_setpoint, other)
-    other_progress = other if other_setpoint > 0.0 else -other
-    # a partner braking down to its setpoint works as hard as one driving
-    braking_down = other_effort < 0.0 and other_progress > abs(other_setpoint)
-    other_work = -other_effort if braking_down else other_effort
-    # a partner held back by its own setpoint (a spin, a sharp turn, a stop) holds the
-    # chair back: this wheel's effort goes into that
-    held_back = sub(other, other_setpoint) if setpoint > 0.0 else sub(other_setpoint, other)
-    # a partner braking below the current limit while short of its setpoint by
-    # FAULT_EFFORT_SHORTFALL of it and FAULT_EFFORT_OVERRUN (its PID unwinding after a
-    # descent or a cut of its setpoint) slows the chair of its own accord; one braking at
-    # the limit may be holding a dead wheel's chair
-    braking_short = (-C.FAULT_EFFORT_MAX < other_effort < 0.0
-                     and other_progress < mul(C.FAULT_EFFORT_SHORTFALL, abs(other_setpoint))
-                     and other_progress < sub(abs(other_setpoint), C.FAULT_EFFORT_OVERRUN))
-    if (held_back < C.FAULT_EFFORT_OVERRUN and not braking_short
-            and effort >= add(other_work, C.FAULT_EFFORT_LEAD_PWM)):
-        return True
-    if effort <= -C.FAULT_EFFORT_MAX and other_effort >= add(effort, C.FAULT_EFFORT_LEAD_PWM):
-        return True
-    if effort < C.FAULT_EFFORT_MAX or other_effort < C.FAULT_EFFORT_MAX:
-        return False
-    progress = measured if setpoint > 0.0 else -measured
-    if other_progress >= abs(other_setpoint):
-        return False
-    asked = sub(abs(other_setpoint), abs(setpoint))
-    return sub(sub(other_progress, progress), asked if asked > 0.0 else 0.0) >= C.FAULT_EFFORT_LAG
 
 
 def stalling(setpoint: float, measured: float) -> bool:
@@ -354,13 +261,22 @@ def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_
     s.effortPwmR, s.effortSpeedR, s.effortSetpointR, s.effortTicksR = effort_r
     # driving, a wheel held at its current limit runs the stall timeout's clock
     s.stallTime = add(s.stallTime, dt) if not s.holding and (held_l or held_r) else 0.0
-    # effort without progress is one motor's while it leads and the motor does not draw
+    # Effort without progress is one motor's while it leads and the motor does not draw
+    # what its effort calls for, turning or standing loaded. A partner that draws nothing
+    # of what its own duty and speed call for is then the dead one.
     draws_l = loaded_l or motor_draws(s.pwmL, s.dirL, s.setpointL, s.filtVelL, s.currentTickL)
     draws_r = loaded_r or motor_draws(s.pwmR, s.dirR, s.setpointR, s.filtVelR, s.currentTickR)
-    leads_l = check_l == WHEEL_NO_EFFECT and not draws_l and effort_leads(
+    lead_l = check_l == WHEEL_NO_EFFECT and effort_leads(
         s.pwmL, s.dirL, s.setpointL, s.filtVelL, s.pwmR, s.dirR, s.setpointR, s.filtVelR)
-    leads_r = check_r == WHEEL_NO_EFFECT and not draws_r and effort_leads(
+    lead_r = check_r == WHEEL_NO_EFFECT and effort_leads(
         s.pwmR, s.dirR, s.setpointR, s.filtVelR, s.pwmL, s.dirL, s.setpointL, s.filtVelL)
+    leads_l, leads_r = lead_l and not draws_l, lead_r and not draws_r
+    if (lead_l and draws_l and check_r in (WHEEL_OK, WHEEL_SUSPECT, WHEEL_NO_EFFECT)
+            and motor_silent(s.pwmR, s.dirR, s.filtVelR, s.currentTickR)):
+        check_r, leads_r = WHEEL_NO_EFFECT, True
+    if (lead_r and draws_r and check_l in (WHEEL_OK, WHEEL_SUSPECT, WHEEL_NO_EFFECT)
+            and motor_silent(s.pwmL, s.dirL, s.filtVelL, s.currentTickL)):
+        check_l, leads_l = WHEEL_NO_EFFECT, True
     # Driving only: a held wheel that runs away is a fault (a reversed encoder turns the
     # hold into positive feedback), whatever the other wheel does.
     limit_l = not s.holding and at_limit(check_l, leads_l, stalling(s.setpointL, s.filtVelL), strain_r,

@@ -36,11 +36,11 @@ works, so its effort without progress is its load, never MOTOR_L/R.
 
 from __future__ import annotations
 
-from wcdrive.avr.f32 import from_int, mul, neg, sub
+from wcdrive.avr.f32 import from_int, mul, neg
 from wcdrive.firmware import constants as C
 
-__all__ = ["FAULT_CURRENT_SENSE", "current_sense_fault", "held_at_limit", "held_bounds", "motor_draws",
-           "sense_amps", "stands_by_current"]
+__all__ = ["FAULT_CURRENT_SENSE", "current_sense_fault", "held_at_limit", "held_bounds", "sense_amps",
+           "stands_by_current"]
 
 FAULT_CURRENT_SENSE = 0x4000
 
@@ -109,30 +109,3 @@ def stands_by_current(applied_pwm: int, applied_dir: int, setpoint: float, curre
     amps = sense_amps(current)
     drawn = amps if applied_dir == C.HIGH else neg(amps)
     return drawn >= mul(C.STANDING_DRAW_SHARE, mul(from_int(applied_pwm), C.MOTOR_AMPS_PER_DUTY))
-
-
-def motor_draws(applied_pwm: int, applied_dir: int, setpoint: float, measured: float, current: int) -> bool:
-    """``motorDraws``: the wheel turning its setpoint's way (FAULT_STANDING_SPEED or more
-    toward it: not a stand, not a reversal), its motor draws MOTOR_DRAW_MIN or more the
-    way its effort calls for, and MOTOR_DRAW_SHARE or more of the current that effort
-    drives through the armature (the duty toward the setpoint less FAULT_EFFORT_EMF a
-    rad/s of its speed that way, MOTOR_AMPS_PER_DUTY a duty; negative, braking). It
-    works: effort without progress is then its wheel's load (the chair's momentum as it
-    comes off a ramp, say), not a dead motor, which draws nothing. A reversed encoder's
-    wheel reads a speed against its setpoint; its effort, read from that speed, calls for
-    far more than it draws."""
-    if setpoint == 0.0:
-        return False
-    forward = setpoint > 0.0
-    progress = measured if forward else neg(measured)
-    if progress < C.FAULT_STANDING_SPEED:
-        return False
-    duty = from_int(applied_pwm) if (applied_dir == C.HIGH) == forward else neg(from_int(applied_pwm))
-    called = mul(mul(sub(duty, mul(C.FAULT_EFFORT_EMF, progress)), C.MOTOR_AMPS_PER_DUTY), C.MOTOR_DRAW_SHARE)
-    amps = sense_amps(current)
-    drawn = amps if forward else neg(amps)
-    if called > 0.0:
-        return drawn >= C.MOTOR_DRAW_MIN and drawn >= called
-    if called < 0.0:
-        return drawn <= neg(C.MOTOR_DRAW_MIN) and drawn <= called
-    return False
