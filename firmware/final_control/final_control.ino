@@ -1271,18 +1271,24 @@ static bool standsByCurrent(uint8_t appliedPwm, uint8_t appliedDir, float setpoi
 
 // The wheel turning its setpoint's way (WC_FAULT_STANDING_SPEED or more), its motor draws
 // WC_MOTOR_DRAW_MIN or more the way its effort calls for, and WC_MOTOR_DRAW_SHARE or more
-// of the current that effort (the duty toward the setpoint less WC_FAULT_EFFORT_EMF a rad/s
-// of its speed that way) drives through the armature: it works, and its effort without
+// of the current that effort (effortOf: within the driver's current limit) drives through
+// the armature: it works, and its effort without
 // progress is its wheel's load, not a dead motor (which draws nothing). A reversed
-// encoder's wheel reads a speed against its setpoint.
-static bool motorDraws(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, float measured,
-                       uint16_t current) {
+// encoder's wheel reads a speed against its setpoint. Not inlined, and effortOf's clamp
+// written out: either way round it moved a switch's jump table into .data, and with it
+// Timer0's start.
+static __attribute__((noinline)) bool motorDraws(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, float measured,
+                                                uint16_t current) {
   if (setpoint == 0.0f) return false;
   bool forward = setpoint > 0.0f;
   float progress = forward ? measured : -measured;
   if (progress < WC_FAULT_STANDING_SPEED) return false;
-  float duty = (appliedDir == HIGH) == forward ? (float)appliedPwm : -(float)appliedPwm;
-  float called = (duty - WC_FAULT_EFFORT_EMF * progress) * WC_MOTOR_AMPS_PER_DUTY * WC_MOTOR_DRAW_SHARE;
+  // effortOf's effort, within the driver's current limit
+  float effort = ((appliedDir == HIGH) == forward ? (float)appliedPwm : -(float)appliedPwm) -
+                 WC_FAULT_EFFORT_EMF * progress;
+  if (effort <= -WC_FAULT_EFFORT_MAX) effort = -WC_FAULT_EFFORT_MAX;
+  else if (effort >= WC_FAULT_EFFORT_MAX) effort = WC_FAULT_EFFORT_MAX;
+  float called = effort * WC_MOTOR_AMPS_PER_DUTY * WC_MOTOR_DRAW_SHARE;
   float drawn = forward ? senseAmps(current) : -senseAmps(current);
   if (called > 0.0f) return drawn >= WC_MOTOR_DRAW_MIN && drawn >= called;
   if (called < 0.0f) return drawn <= -WC_MOTOR_DRAW_MIN && drawn <= called;

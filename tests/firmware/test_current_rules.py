@@ -77,7 +77,8 @@ def test_a_motor_draws_half_the_current_its_effort_calls_for_or_more() -> None:
     """A wheel at 5 rad/s toward a forward setpoint at duty 100: its effort is
     100 - 14.5 x 5 = 27.5 duty, 8.63 A through the armature; half of it, 4.31 A (count
     512 + 36 = 4.39 A) draws, 35 (4.27 A) does not. Braking (duty 50: -22.5, -7.06 A):
-    -3.53 A or more that way. Backward alike. 1 A at the least; not for a wheel slower
+    -3.53 A or more that way. Backward alike. The effort within the driver's current
+    limit (``effort_of``): a motor at its limit works. 1 A at the least; not for a wheel slower
     than 0.3 rad/s its way (a stand is the stall rules'), nor one that reads a speed
     against its setpoint (a reversed encoder), nor without a setpoint."""
     assert 0.5 * 27.5 * C.MOTOR_AMPS_PER_DUTY == pytest.approx(4.313, abs=1e-3)
@@ -87,6 +88,10 @@ def test_a_motor_draws_half_the_current_its_effort_calls_for_or_more() -> None:
     assert not motor_draws(100, C.HIGH, 1.0, 5.0, 512 - 36)                 # against its effort
     # a small effort (duty 75: 2.5, 0.78 A): 1 A at the least
     assert not motor_draws(75, C.HIGH, 1.0, 5.0, 512 + 8) and motor_draws(75, C.HIGH, 1.0, 5.0, 512 + 9)
+    # at the driver's limit: duty 200 at 5 rad/s asks 127.5, within FAULT_EFFORT_MAX 41:
+    # half of 12.86 A, 6.43 A; a motor at its 13 A limit draws it (unclamped, 20 A)
+    assert motor_draws(200, C.HIGH, 1.0, 5.0, 512 + 106) and motor_draws(200, C.HIGH, 1.0, 5.0, 512 + 53)
+    assert not motor_draws(200, C.HIGH, 1.0, 5.0, 512 + 52)
     assert not motor_draws(100, C.HIGH, 1.0, 0.29, 512 + 60)                # standing
     assert not motor_draws(100, C.HIGH, 1.0, -5.0, 512 + 60)                # reads against its setpoint
     assert not motor_draws(100, C.HIGH, 0.0, 5.0, 512 + 60)
@@ -172,13 +177,14 @@ def test_a_standing_wheel_drawing_little_or_blocked_alone_is_a_stall_at_a_tenth_
 def test_a_dragged_wheel_whose_motor_draws_is_its_load_not_a_dead_motor() -> None:
     """3 rad/s asked; from 1.0 s the right wheel turns at 40 % of it while its partner
     keeps it, its duty winding up without a gain (effort without progress, leading its
-    partner's), its motor drawing 12.5 A (half or more of what its effort calls for up
-    to duty 97 at 1.2 rad/s): no fault. Red without the rule: MOTOR_R."""
-    rec = _drive(2.5, 3.0, "turns", "dragged", 12.5)
+    partner's), its motor drawing 12.5 A, about its current limit (half or more of what
+    its effort, within that limit, calls for, at any duty): no fault as the duty climbs
+    past 150. Red without the rule: MOTOR_R."""
+    rec = _drive(4.5, 3.0, "turns", "dragged", 12.5)
     assert board_lines(rec, b"EVT:") == [b"EVT:PARAMS_DEFAULT,blank"]
     ticks = tick_states(rec)
     assert max(a["effortTicksR"] for _, a in ticks) >= C.FAULT_EFFORT_TICKS
-    assert max(a["pwmR"] for _, a in ticks) > 70
+    assert max(a["pwmR"] for _, a in ticks) > 150
 
 
 @pytest.mark.simavr

@@ -114,17 +114,9 @@ def test_a_hot_chair_stands_on_a_grade_its_rolled_back_limit_cannot_climb() -> N
     assert np.abs(hot.board.pwm[driving]).max() <= 14.0 * np.abs(hot.board.measured[driving]).max() + 33.0
 
 
-@pytest.mark.xfail(strict=True, reason="known: up 1:12 with 80 kg the chair is at 98 % of its current "
-                   "limit and veers; the motor rule or the encoder-stall rule takes the wheel at its "
-                   "limit for a fault (docs/safety.md, Motor heat)")
-def test_the_chair_climbs_1in12_with_80_kg_without_a_fault() -> None:
-    """Up 1:12 (80 kg; the rated grade is 4.87 deg) at 0.3 m/s for 120 s, straight up
-    asked, and on a path followed by pure pursuit: no fault in either. Both fail: the
-    chair veers (the grade turns a chair whose weight is ahead of its drive axle, and
-    no torque is left to steer it back). Straight up, the wheel at its current limit falls
-    to 88 % of its setpoint while the other keeps its own below the limit, and the effort
-    lead latches ``MOTOR_L`` or ``_R`` (at 56 s); on the path, the pilot's turn back
-    stands the wheel at its limit at full duty, and ``ENC_STALL_R`` latches (at 37 s)."""
+def _climb_1in12() -> tuple[scenario.Scenario, scenario.Scenario]:
+    """Up 1:12 (80 kg; the rated grade is 4.87 deg) at 0.3 m/s for 120 s: straight up
+    asked, and on a path followed by pure pursuit."""
     base = scenario.load("ramp_park_1in12")
     terrain = dataclasses.replace(base.terrain, downhill_heading_deg=180.0)
     straight = dataclasses.replace(base, name="climb_1in12", terrain=terrain, expect=None,
@@ -132,5 +124,29 @@ def test_the_chair_climbs_1in12_with_80_kg_without_a_fault() -> None:
     pursued = dataclasses.replace(straight, name="climb_1in12_path", segments=(), path=((100.0, 0.0),),
                                   follow=dataclasses.replace(base.follow, speed=0.3, lookahead=2.0,
                                                              timeout_s=120.0))
-    found = {sc.name: alarms(runner.run(sc, backend="port")) for sc in (straight, pursued)}
-    assert not any(found.values()), found
+    return straight, pursued
+
+
+def test_the_chair_climbs_1in12_with_80_kg_straight_up_without_a_fault() -> None:
+    """Straight up asked: the chair veers (the grade turns a chair whose weight is ahead
+    of its drive axle, and no torque is left to steer it back); the wheel at its current
+    limit falls to 85 % of its setpoint while the other keeps its own below the limit.
+    Its motor draws what its effort calls for (13 A), so the effort lead is its load, not
+    a dead motor: no fault for the 120 s, over 25 m climbed. Red before the currents'
+    rules: ``MOTOR_L`` at 55 s."""
+    straight, _ = _climb_1in12()
+    r = runner.run(straight, backend="port")
+    assert not alarms(r), alarms(r)
+    assert float(np.hypot(*r.truth.pose[-1, :2])) > 25.0
+
+
+@pytest.mark.xfail(strict=True, reason="known: on a path up 1:12 with 80 kg the pilot's spin back stands "
+                   "the wheel at its limit at full duty while its partner creeps its own way: ENC_STALL_R "
+                   "(a cut encoder crawling at its limit looks the same; docs/safety.md, Motor heat)")
+def test_the_chair_climbs_1in12_with_80_kg_on_a_path_without_a_fault() -> None:
+    """The same climb on a path followed by pure pursuit: the pilot's spin back toward
+    the path (a wheel's setpoint each way) stands the right wheel at its current limit at
+    full duty while the left creeps back its own way (0.1 rad/s, more than the held
+    rule's 2 counts a tick), and ``ENC_STALL_R`` latches at 37 s."""
+    _, pursued = _climb_1in12()
+    assert not alarms(runner.run(pursued, backend="port"))

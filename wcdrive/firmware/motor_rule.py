@@ -109,20 +109,18 @@ def motor_draws(applied_pwm: int, applied_dir: int, setpoint: float, measured: f
     """``motorDraws``: the wheel turning its setpoint's way (FAULT_STANDING_SPEED or more
     toward it: not a stand, not a reversal), its motor draws MOTOR_DRAW_MIN or more the
     way its effort calls for, and MOTOR_DRAW_SHARE or more of the current that effort
-    drives through the armature (the duty toward the setpoint less FAULT_EFFORT_EMF a
-    rad/s of its speed that way, MOTOR_AMPS_PER_DUTY a duty; negative, braking). It
-    works: effort without progress is then its wheel's load (the chair's momentum as it
-    comes off a ramp, say), not a dead motor, which draws nothing. A reversed encoder's
-    wheel reads a speed against its setpoint; its effort, read from that speed, calls for
-    far more than it draws."""
+    (``effort_of``: within the driver's current limit) drives through the armature
+    (MOTOR_AMPS_PER_DUTY a duty; negative, braking). It works: effort without progress
+    is then its wheel's load (the chair's momentum as it comes off a ramp, a grade at the
+    current limit), not a dead motor, which draws nothing. A reversed encoder's wheel
+    reads a speed against its setpoint."""
     if setpoint == 0.0:
         return False
     forward = setpoint > 0.0
-    progress = measured if forward else neg(measured)
-    if progress < C.FAULT_STANDING_SPEED:
+    if (measured if forward else neg(measured)) < C.FAULT_STANDING_SPEED:
         return False
-    duty = from_int(applied_pwm) if (applied_dir == C.HIGH) == forward else neg(from_int(applied_pwm))
-    called = mul(mul(sub(duty, mul(C.FAULT_EFFORT_EMF, progress)), C.MOTOR_AMPS_PER_DUTY), C.MOTOR_DRAW_SHARE)
+    called = mul(mul(effort_of(applied_pwm, applied_dir, setpoint, measured), C.MOTOR_AMPS_PER_DUTY),
+                 C.MOTOR_DRAW_SHARE)
     amps = sense_amps(current)
     drawn = amps if forward else neg(amps)
     if called > 0.0:
