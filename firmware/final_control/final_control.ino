@@ -1266,20 +1266,21 @@ static bool standsByCurrent(uint8_t appliedPwm, uint8_t appliedDir, float setpoi
   float otherProgress = otherSetpoint > 0.0f ? other : -other;
   if (otherProgress >= WC_FAULT_EFFORT_SHORTFALL * fabs(otherSetpoint)) return false;
   float drawn = appliedDir == HIGH ? senseAmps(current) : -senseAmps(current);
-  return drawn >= WC_STANDING_DRAW_SHARE * ((float)appliedPwm * WC_MOTOR_AMPS_PER_DUTY);
+  return drawn >= WC_MOTOR_DRAW_MIN && drawn >= WC_STANDING_DRAW_SHARE * ((float)appliedPwm * WC_MOTOR_AMPS_PER_DUTY);
 }
 
-// The wheel turning its setpoint's way (WC_FAULT_STANDING_SPEED or more), its motor draws
+// The wheel turning its setpoint's way (WC_FAULT_STANDING_SPEED or more, and counting this
+// tick: not a wheel just locked whose filtered speed lags), its motor draws
 // WC_MOTOR_DRAW_MIN or more the way its effort calls for, and WC_MOTOR_DRAW_SHARE or more
-// of the current that effort (effortOf: within the driver's current limit) drives through
-// the armature: it works, and its effort without
-// progress is its wheel's load, not a dead motor (which draws nothing). A reversed
-// encoder's wheel reads a speed against its setpoint. Not inlined, and effortOf's clamp
-// written out: either way round it moved a switch's jump table into .data, and with it
-// Timer0's start.
+// of the current that effort (effortOf's: within the driver's current limit) drives
+// through the armature: it works, and its effort without progress is its wheel's load,
+// not a dead motor (which draws nothing). A reversed encoder's wheel turning toward its
+// setpoint reads a speed against it (one rolled back against it reads progress: the
+// reversal and runaway rules'). Not inlined, and effortOf's clamp written out: either
+// way round it moved a switch's jump table into .data, and with it Timer0's start.
 static __attribute__((noinline)) bool motorDraws(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, float measured,
-                                                uint16_t current) {
-  if (setpoint == 0.0f) return false;
+                                                int32_t delta, uint16_t current) {
+  if (setpoint == 0.0f || delta == 0) return false;
   bool forward = setpoint > 0.0f;
   float progress = forward ? measured : -measured;
   if (progress < WC_FAULT_STANDING_SPEED) return false;
@@ -1582,8 +1583,8 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
     // the motor does not draw what its effort calls for, turning or standing loaded (a
     // working motor's is its load). A partner that draws nothing of what its own duty and
     // speed call for is then the dead one.
-    bool drawsL = loadedL || motorDraws(pwmL, dirL, setpointL, filtVelL, currentTickL);
-    bool drawsR = loadedR || motorDraws(pwmR, dirR, setpointR, filtVelR, currentTickR);
+    bool drawsL = loadedL || motorDraws(pwmL, dirL, setpointL, filtVelL, deltaL, currentTickL);
+    bool drawsR = loadedR || motorDraws(pwmR, dirR, setpointR, filtVelR, deltaR, currentTickR);
     bool leadL = checkL == WHEEL_NO_EFFECT &&
                  effortLeads(pwmL, dirL, setpointL, filtVelL, pwmR, dirR, setpointR, filtVelR);
     bool leadR = checkR == WHEEL_NO_EFFECT &&

@@ -38,7 +38,7 @@ def test_a_wheel_stands_by_its_current_at_three_quarters_of_its_stand() -> None:
     a stand draws 9.41 A; 0.75 of it, 7.06 A (count 512 + 58 = 7.08 A) stands, 57
     (6.96 A) does not; backward alike with the current's sign; a braking current, a duty
     against the setpoint or no setpoint never stand, nor a wheel whose partner keeps 0.8
-    of its setpoint (blocked alone: locked, or its encoder cut)."""
+    of its setpoint (blocked alone: locked, or its encoder cut); 1 A at the least."""
     assert sense_amps(512 + 58) >= 0.75 * 30 * C.MOTOR_AMPS_PER_DUTY > sense_amps(512 + 57)
     short = (2.0, 0.5)                                         # the partner's setpoint, its speed
     assert stands_by_current(30, C.HIGH, 1.0, 512 + 58, *short)
@@ -51,6 +51,10 @@ def test_a_wheel_stands_by_its_current_at_three_quarters_of_its_stand() -> None:
     assert not stands_by_current(30, C.HIGH, 1.0, 512 + 58, 2.0, 1.61)      # the partner keeps 0.8
     assert stands_by_current(30, C.HIGH, 1.0, 512 + 58, 2.0, 1.59)
     assert stands_by_current(30, C.HIGH, 1.0, 512 + 58, -2.0, -1.59)        # a spin: its own way
+    # 1 A at the least: duty 2 asks 0.47 A of a stand, 0.98 A (8 counts) is not enough
+    assert not stands_by_current(2, C.HIGH, 1.0, 512 + 8, *short)
+    assert stands_by_current(2, C.HIGH, 1.0, 512 + 9, *short)
+    assert not stands_by_current(0, C.HIGH, 1.0, 512, *short)
 
 
 def test_a_turning_wheel_at_the_same_duty_draws_less_than_a_standing_one() -> None:
@@ -79,22 +83,28 @@ def test_a_motor_draws_half_the_current_its_effort_calls_for_or_more() -> None:
     512 + 36 = 4.39 A) draws, 35 (4.27 A) does not. Braking (duty 50: -22.5, -7.06 A):
     -3.53 A or more that way. Backward alike. The effort within the driver's current
     limit (``effort_of``): a motor at its limit works. 1 A at the least; not for a wheel slower
-    than 0.3 rad/s its way (a stand is the stall rules'), nor one that reads a speed
-    against its setpoint (a reversed encoder), nor without a setpoint."""
+    than 0.3 rad/s its way (a stand is the stall rules') or counting nothing this tick,
+    nor one that reads a speed against its setpoint (a reversed encoder turning toward
+    it), nor without a setpoint."""
+    def draws(pwm: int, direction: int, setpoint: float, speed: float, count: int, delta: int = 20) -> bool:
+        return motor_draws(pwm, direction, setpoint, speed, delta, count)
+
     assert 0.5 * 27.5 * C.MOTOR_AMPS_PER_DUTY == pytest.approx(4.313, abs=1e-3)
-    assert motor_draws(100, C.HIGH, 1.0, 5.0, 512 + 36) and not motor_draws(100, C.HIGH, 1.0, 5.0, 512 + 35)
-    assert motor_draws(50, C.HIGH, 1.0, 5.0, 512 - 29) and not motor_draws(50, C.HIGH, 1.0, 5.0, 512 - 28)
-    assert motor_draws(100, C.LOW, -1.0, -5.0, 512 - 36) and not motor_draws(100, C.LOW, -1.0, -5.0, 512 + 36)
-    assert not motor_draws(100, C.HIGH, 1.0, 5.0, 512 - 36)                 # against its effort
+    assert draws(100, C.HIGH, 1.0, 5.0, 512 + 36) and not draws(100, C.HIGH, 1.0, 5.0, 512 + 35)
+    assert draws(50, C.HIGH, 1.0, 5.0, 512 - 29) and not draws(50, C.HIGH, 1.0, 5.0, 512 - 28)
+    assert draws(100, C.LOW, -1.0, -5.0, 512 - 36) and not draws(100, C.LOW, -1.0, -5.0, 512 + 36)
+    assert not draws(100, C.HIGH, 1.0, 5.0, 512 - 36)                 # against its effort
     # a small effort (duty 75: 2.5, 0.78 A): 1 A at the least
-    assert not motor_draws(75, C.HIGH, 1.0, 5.0, 512 + 8) and motor_draws(75, C.HIGH, 1.0, 5.0, 512 + 9)
+    assert not draws(75, C.HIGH, 1.0, 5.0, 512 + 8) and draws(75, C.HIGH, 1.0, 5.0, 512 + 9)
     # at the driver's limit: duty 200 at 5 rad/s asks 127.5, within FAULT_EFFORT_MAX 41:
     # half of 12.86 A, 6.43 A; a motor at its 13 A limit draws it (unclamped, 20 A)
-    assert motor_draws(200, C.HIGH, 1.0, 5.0, 512 + 106) and motor_draws(200, C.HIGH, 1.0, 5.0, 512 + 53)
-    assert not motor_draws(200, C.HIGH, 1.0, 5.0, 512 + 52)
-    assert not motor_draws(100, C.HIGH, 1.0, 0.29, 512 + 60)                # standing
-    assert not motor_draws(100, C.HIGH, 1.0, -5.0, 512 + 60)                # reads against its setpoint
-    assert not motor_draws(100, C.HIGH, 0.0, 5.0, 512 + 60)
+    assert draws(200, C.HIGH, 1.0, 5.0, 512 + 106) and draws(200, C.HIGH, 1.0, 5.0, 512 + 53)
+    assert not draws(200, C.HIGH, 1.0, 5.0, 512 + 52)
+    assert not draws(100, C.HIGH, 1.0, 0.29, 512 + 60)                # standing
+    assert not draws(100, C.HIGH, 1.0, -5.0, 512 + 60)                # reads against its setpoint
+    assert not draws(100, C.HIGH, 0.0, 5.0, 512 + 60)
+    # a wheel that counts nothing this tick (just locked, its filtered speed lagging)
+    assert not draws(100, C.HIGH, 1.0, 5.0, 512 + 60, delta=0)
 
 
 # ---- both backends -------------------------------------------------------------------------

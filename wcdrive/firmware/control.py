@@ -264,8 +264,8 @@ def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_
     # Effort without progress is one motor's while it leads and the motor does not draw
     # what its effort calls for, turning or standing loaded. A partner that draws nothing
     # of what its own duty and speed call for is then the dead one.
-    draws_l = loaded_l or motor_draws(s.pwmL, s.dirL, s.setpointL, s.filtVelL, s.currentTickL)
-    draws_r = loaded_r or motor_draws(s.pwmR, s.dirR, s.setpointR, s.filtVelR, s.currentTickR)
+    draws_l = loaded_l or motor_draws(s.pwmL, s.dirL, s.setpointL, s.filtVelL, delta_l, s.currentTickL)
+    draws_r = loaded_r or motor_draws(s.pwmR, s.dirR, s.setpointR, s.filtVelR, delta_r, s.currentTickR)
     lead_l = check_l == WHEEL_NO_EFFECT and effort_leads(
         s.pwmL, s.dirL, s.setpointL, s.filtVelL, s.pwmR, s.dirR, s.setpointR, s.filtVelR)
     lead_r = check_r == WHEEL_NO_EFFECT and effort_leads(

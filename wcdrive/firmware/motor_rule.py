@@ -105,22 +105,34 @@ def effort_leads(applied_pwm: int, applied_dir: int, setpoint: float, measured: 
     return sub(sub(other_progress, progress), asked if asked > 0.0 else 0.0) >= C.FAULT_EFFORT_LAG
 
 
-def motor_draws(applied_pwm: int, applied_dir: int, setpoint: float, measured: float, current: int) -> bool:
+def motor_draws(applied_pwm: int, applied_dir: int, setpoint: float, measured: float, delta: int,
+                current: int) -> bool:
     """``motorDraws``: the wheel turning its setpoint's way (FAULT_STANDING_SPEED or more
-    toward it: not a stand, not a reversal), its motor draws MOTOR_DRAW_MIN or more the
-    way its effort calls for, and MOTOR_DRAW_SHARE or more of the current that effort
-    (``effort_of``: within the driver's current limit) drives through the armature
-    (MOTOR_AMPS_PER_DUTY a duty; negative, braking). It works: effort without progress
-    is then its wheel's load (the chair's momentum as it comes off a ramp, a grade at the
-    current limit), not a dead motor, which draws nothing. A reversed encoder's wheel
-    reads a speed against its setpoint."""
-    if setpoint == 0.0:
+    toward it, and counting this tick: ``delta``, not a stand, nor a wheel just locked
+    whose filtered speed lags), its motor draws MOTOR_DRAW_MIN or more the way its effort
+    calls for, and MOTOR_DRAW_SHARE or more of the current that effort (its duty toward
+    the setpoint less FAULT_EFFORT_EMF a rad/s of its speed that way, within
+    FAULT_EFFORT_MAX, the driver's current limit: ``effort_of``'s, its clamp written out
+    as the sketch has it) drives through the armature (MOTOR_AMPS_PER_DUTY a duty;
+    negative, braking). It works: effort without progress is then its wheel's load (the
+    chair's momentum as it comes off a ramp, a grade at the current limit), not a dead
+    motor, which draws nothing. A reversed encoder's wheel turning toward its setpoint
+    reads a speed against it and is never exempt; one rolled back against its setpoint
+    reads progress, and is the reversal and runaway rules' (docs/safety.md, "What the
+    currents say")."""
+    if setpoint == 0.0 or delta == 0:
         return False
     forward = setpoint > 0.0
-    if (measured if forward else neg(measured)) < C.FAULT_STANDING_SPEED:
+    progress = measured if forward else neg(measured)
+    if progress < C.FAULT_STANDING_SPEED:
         return False
-    called = mul(mul(effort_of(applied_pwm, applied_dir, setpoint, measured), C.MOTOR_AMPS_PER_DUTY),
-                 C.MOTOR_DRAW_SHARE)
+    duty = from_int(applied_pwm) if (applied_dir == C.HIGH) == forward else neg(from_int(applied_pwm))
+    effort = sub(duty, mul(C.FAULT_EFFORT_EMF, progress))
+    if effort <= neg(C.FAULT_EFFORT_MAX):
+        effort = neg(C.FAULT_EFFORT_MAX)
+    elif effort >= C.FAULT_EFFORT_MAX:
+        effort = C.FAULT_EFFORT_MAX
+    called = mul(mul(effort, C.MOTOR_AMPS_PER_DUTY), C.MOTOR_DRAW_SHARE)
     amps = sense_amps(current)
     drawn = amps if forward else neg(amps)
     if called > 0.0:

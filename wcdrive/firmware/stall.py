@@ -92,7 +92,8 @@ def stands_by_current(applied_pwm: int, applied_dir: int, setpoint: float, curre
                       other_setpoint: float, other: float) -> bool:
     """``standsByCurrent``: the wheel driven toward its setpoint, its motor drawing
     STANDING_DRAW_SHARE or more of the current its duty drives through a standing
-    armature (MOTOR_AMPS_PER_DUTY a duty), the way it is driven: its back-EMF, so its
+    armature (MOTOR_AMPS_PER_DUTY a duty), and MOTOR_DRAW_MIN at the least, the way it is
+    driven: its back-EMF, so its
     speed, is a quarter of what its duty would turn it at or less (0.73 rad/s at duty 41,
     24 V); and its partner short of its own setpoint (slower than FAULT_EFFORT_SHORTFALL
     of it its way, ``other`` its measured speed): the chair is loaded, not this wheel
@@ -108,4 +109,5 @@ def stands_by_current(applied_pwm: int, applied_dir: int, setpoint: float, curre
         return False
     amps = sense_amps(current)
     drawn = amps if applied_dir == C.HIGH else neg(amps)
-    return drawn >= mul(C.STANDING_DRAW_SHARE, mul(from_int(applied_pwm), C.MOTOR_AMPS_PER_DUTY))
+    return (drawn >= C.MOTOR_DRAW_MIN
+            and drawn >= mul(C.STANDING_DRAW_SHARE, mul(from_int(applied_pwm), C.MOTOR_AMPS_PER_DUTY)))

@@ -170,7 +170,7 @@ static struct {
         thermal_capacity, thermal_loss, thermal_rollback_temp, supply_volts_per_count, supply_filter,
         battery_low_v, drive_speed_max, drive_accel_max, turn_speed_max, turn_accel_max, turn_at_speed,
         drive_rate_max, wheel_radius, wheelbase, current_amps_per_count, stall_current, current_sense_max,
-        motor_amps_per_duty, standing_draw_share, effort_shortfall;
+        motor_amps_per_duty, standing_draw_share, effort_shortfall, motor_draw_min;
     int64_t control_period_ms, tx_credit_max, tx_credit_per_ms, stall_pwm, stall_pwm_standing, stall_ticks,
         stall_ticks_turning, stall_ticks_loaded,
         reverse_ticks, runaway_pwm, runaway_ticks, effort_pwm, effort_ticks, illegal_per_tick, still_ticks, pivot_ticks,
@@ -355,7 +355,8 @@ static int stands_by_current(int64_t pwm, int64_t dir, double setpoint, int64_t 
         return 0;
     double amps = f_mul(f_from_int(current - K.current_zero_counts), K.current_amps_per_count);
     double drawn = dir == K.high ? amps : -amps;
-    return drawn >= f_mul(K.standing_draw_share, f_mul(f_from_int(pwm), K.motor_amps_per_duty));
+    return drawn >= K.motor_draw_min
+           && drawn >= f_mul(K.standing_draw_share, f_mul(f_from_int(pwm), K.motor_amps_per_duty));
 }
 
 /* winding_loss, winding_step: wcdrive.firmware.thermal */
@@ -903,6 +904,7 @@ static PyObject *bind(PyObject *self, PyObject *args) {
           && const_double(consts, "MOTOR_AMPS_PER_DUTY", &k.motor_amps_per_duty)
           && const_double(consts, "STANDING_DRAW_SHARE", &k.standing_draw_share)
           && const_double(consts, "FAULT_EFFORT_SHORTFALL", &k.effort_shortfall)
+          && const_double(consts, "MOTOR_DRAW_MIN", &k.motor_draw_min)
           && const_int(consts, "CURRENT_ZERO_COUNTS", &k.current_zero_counts)
           && const_int(consts, "STALL_CREEP_COUNTS", &k.stall_creep_counts)
           && const_int(consts, "CONTROL_PERIOD_MS", &k.control_period_ms)
