@@ -9,7 +9,9 @@
 
 ``default`` and ``ci`` are derandomized (each test's examples follow from its name),
 so a red run is red again on the same code; ``explore`` prints the seed that replays
-it (``--hypothesis-seed``).
+it (``--hypothesis-seed``). For that, hypothesis' pool of the project's constants is
+taken once, with every library module imported, and held (tests/support/
+hypothesis_constants.py): else it grew with what each worker happened to import.
 """
 
 from __future__ import annotations
@@ -20,6 +22,8 @@ from pathlib import Path
 
 import pytest
 from hypothesis import HealthCheck, settings
+
+from tests.support.hypothesis_constants import pin_local_constants
 
 #: The example downstream project has its own tests, run by tests/meta/test_downstream.py
 #: in a fresh venv.
@@ -36,6 +40,13 @@ settings.register_profile(
     print_blob=True,
 )
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "default"))
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_sessionstart(session: pytest.Session) -> None:
+    """Holds hypothesis' pool of the project's constants (in each xdist worker too),
+    once the plugins' initialization is over: hypothesis warns if it is taken sooner."""
+    pin_local_constants()
 
 
 def pytest_report_header(config: pytest.Config) -> str:

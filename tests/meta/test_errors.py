@@ -9,27 +9,14 @@ from __future__ import annotations
 import importlib
 import importlib.machinery
 import importlib.util
-import pkgutil
-import sys
 import warnings
 from pathlib import Path
 from types import ModuleType
 
 import pytest
 
-import wcdrive
-import wcdrive.hil
+from tests.support.hypothesis_constants import NOT_IMPORTED, project_modules
 from wcdrive.errors import WcdriveError, WcdriveFileError
-
-#: The modules the walk finds but this test does not import, and why. Nothing else is
-#: left out: a module that fails to import fails the test.
-NOT_IMPORTED = {
-    "wcdrive.__main__": "runs the command line when imported (sys.exit(main())); it defines nothing",
-    "wcdrive.plant._chair_kernel": "a C library that wcdrive._util.native loads with ctypes "
-                                   "(there when built), not a Python extension module",
-    "wcdrive.plant._raycast": "a C library that wcdrive._util.native loads with ctypes "
-                              "(there when built), not a Python extension module",
-}
 
 #: Exception classes that deliberately stay outside ``WcdriveError``, and why.
 NOT_WCDRIVE_ERRORS = {
@@ -39,25 +26,12 @@ NOT_WCDRIVE_ERRORS = {
 }
 
 
-def walk() -> list[str]:
-    """Every module of ``wcdrive`` and of ``wcdrive.hil`` (``hil/``), by pkgutil."""
-    def onerror(name: str) -> None:
-        raise AssertionError(f"cannot import package {name}") from sys.exc_info()[1]
-
-    names: list[str] = []
-    for package in (wcdrive, wcdrive.hil):
-        names.append(package.__name__)
-        names += [info.name for info in pkgutil.walk_packages(package.__path__, package.__name__ + ".",
-                                                              onerror=onerror)]
-    return list(dict.fromkeys(names))
-
-
 @pytest.fixture(scope="module")
 def imported() -> dict[str, ModuleType]:
     # the old names kept for a release warn when imported, by design
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)
-        return {name: importlib.import_module(name) for name in walk() if name not in NOT_IMPORTED}
+        return {name: importlib.import_module(name) for name in project_modules() if name not in NOT_IMPORTED}
 
 
 def _qualified(cls: type) -> str:
@@ -78,7 +52,7 @@ def wcdrive_exceptions() -> list[type[BaseException]]:
 
 
 def test_every_module_is_imported_or_listed_with_its_reason(imported: dict[str, ModuleType]) -> None:
-    names = walk()
+    names = project_modules()
     assert len(imported) > 100 and "wcdrive.hil.lockstep" in imported and "wcdrive.tools.sweep" in imported
     assert set(names) == set(imported) | (set(names) & set(NOT_IMPORTED))
     for name in set(names) & set(NOT_IMPORTED):
