@@ -10,7 +10,9 @@ from pathlib import Path
 
 import pytest
 
+from wcdrive.boards.simavr.virtual_mega import F_CPU
 from wcdrive.hil.isr_cycles import ENTRY_CYCLES, isr_paths
+from wcdrive.hil.trace_base import MAX_TRACE_EDGE_RATE
 
 pytestmark = pytest.mark.simavr
 
@@ -40,6 +42,35 @@ def test_the_path_walker_agrees_with_the_hand_count(elf) -> None:
     assert isr_paths(elf, "__vector_5")[0][0] == 54
     with pytest.raises(ValueError, match="not a leaf"):
         isr_paths(elf, "controlTick")
+
+
+#: The chair's top speed in encoder edges/s a wheel (17.59 rad/s).
+TOP_SPEED_EDGES = 28_000
+#: The longest AVR instruction (call, ret): the one instruction of loop() the chip runs
+#: after a reti before it takes the next pending interrupt.
+LONGEST_INSTRUCTION = 5
+#: An encoder handler's cycles up to and including its read of the pins: the entry and
+#: jmp, saving 8, the ``in`` 1 (the hand count in final_control.ino's comments).
+TO_THE_PIN_READ = ENTRY_CYCLES + 8 + 1
+
+
+def test_the_traces_edge_rate_is_within_what_the_encoders_count_under_a_flood(elf) -> None:
+    """The longest an edge of the left encoder (INT4/INT5, below INT2/INT3 in priority)
+    waits before its handler reads the pins: a receive interrupt (not interruptible)
+    begun just before it, on its longest path (the ring full, a byte lost: a flood); an
+    instruction of loop(); the right encoder's handler, pending too and first by
+    priority; another instruction; its own handler up to the read. The next edge of that
+    encoder must come later, or the handler reads two steps at once: an illegal
+    transition and two edges lost. The generated traces' top rate keeps 10 % under that
+    (the thorough CI drew a trace at 57,720 edges/s under a flood that merged two edges,
+    with the cap at 60,000), and the bound itself is at least twice the top speed."""
+    # the serial line's handlers (receive, transmit): the others open with sei
+    blocking = max(c for vector in ("__vector_25", "__vector_26") for c, _ in isr_paths(elf, vector))
+    right = max(c for c, _ in isr_paths(elf, "__vector_3"))
+    wait = blocking + LONGEST_INSTRUCTION + right + LONGEST_INSTRUCTION + TO_THE_PIN_READ
+    bound = F_CPU / wait
+    assert MAX_TRACE_EDGE_RATE <= 0.9 * bound, (wait, bound)
+    assert bound >= 2 * TOP_SPEED_EDGES, (wait, bound)
 
 
 def _benchmark():
