@@ -349,6 +349,16 @@ def _report(root: Path) -> None:
     print("cycles:", cycles(g) or "none")
 
 
+#: The longest a module may be: small modules, one concern each (docs/architecture.md).
+MODULE_LINES_MAX = 599
+
+
+def test_every_module_is_under_600_lines() -> None:
+    long = {name: n for name, path in modules().items()
+            if (n := len(path.read_text().splitlines())) > MODULE_LINES_MAX}
+    assert not long, long
+
+
 def floor_of_name(label: str) -> int:
     return next(n for n, name, _ in FLOORS if name == label)
 

@@ -54,13 +54,7 @@ from wcdrive.host.telemetry import (
     TelemetryHub,
     chair_wheel_angles,
 )
-from wcdrive.protocol.codec import (
-    MAX_ANGULAR,
-    MAX_LINEAR,
-    ExtendedTelemetry,
-    LineStats,
-    Param,
-)
+from wcdrive.protocol.codec import MAX_ANGULAR, MAX_LINEAR, ExtendedTelemetry, LineStats, Param
 from wcdrive.protocol.motion import velocity_command, wheel_command
 from wcdrive.protocol.spec import integer
 from wcdrive.transports.port import Port
