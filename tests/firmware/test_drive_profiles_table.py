@@ -73,6 +73,8 @@ def test_a_saved_table_and_profile_come_back_at_boot_on_the_port() -> None:
     the profile in force both come back; a row value out of its parameter's range
     makes the block ``range``."""
     image = block_image({"profile": 2, "fwdSpeed": 1.5})
+    # docs/safety.md: layout 6, 160 bytes
+    assert C.EEPROM_LAYOUT == 6 and BLOCK_BYTES == 160 and check(image[:BLOCK_BYTES]) is None
     fw = Firmware(eeprom=bytearray(image))
     assert fw.boot_output().endswith(b"EVT:PARAMS_LOADED\r\n")
     assert fw.state.profile == 2 and fw.state.fwdSpeed == 1.5
@@ -119,3 +121,31 @@ def test_a_profile_selected_caps_and_ramps_the_drive_on_both_backends() -> None:
     assert states[-1].drive_profile == 0
     last = ticks[-1][1]
     assert last["profile"] == 0 and last["setpointR"] > 1.5 / R
+
+
+@pytest.mark.simavr
+def test_an_estop_under_a_slow_profile_stops_at_the_emergency_rate_on_both_backends() -> None:
+    """Under the indoor profile (``drive_decel`` 0.5 m/s^2: 0.164 rad/s a tick), the
+    chair at its 1.0 m/s (6.562 rad/s), then ``estop``: from the next tick the setpoints
+    fall by ``estop_decel`` (15 rad/s^2: 0.75 rad/s a tick) to 0, the profile's slower
+    ramp no part of it. Red with the profile's decel on the emergency ramp: 0.164 a
+    tick, 40 ticks to stop."""
+    duration = 4.0
+    serial = [(0.01, b"hello:4\n"), (0.02, frame(b"set:profile=1", 1)), (0.03, frame(b"x:0.000,t:0.000", 2))]
+    writes = [*every(b"x:1.000,t:0.000", 0.2, 3.0), (3.0, b"estop")]
+    serial += [(t, frame(cmd, 3 + k)) for k, (t, cmd) in enumerate(writes)]
+    wheels = {side: turning(duration, side == "left", 6.5) for side in ("left", "right")}
+    rec = recorded(Trace(duration=duration, serial=serial, encoders=wheels))
+    ticks = tick_states(rec)
+    assert board_lines(rec, b"EVT:ESTOP") == [b"EVT:ESTOP"]
+    k = next(i for i, (t, a) in enumerate(ticks) if t > 3.0 and a["emergencyStop"])
+    before = ticks[k - 1][1]
+    assert before["profile"] == 1 and before["setpointR"] == pytest.approx(1.0 / R, rel=1e-5)
+    step = 15.0 * 0.05
+    assert ticks[k][1]["estopDecel"] == 15.0
+    level = before["setpointR"]
+    for _, a in ticks[k:]:
+        level = max(0.0, level - step)
+        assert a["setpointL"] == a["setpointR"] == pytest.approx(level, abs=1e-5)
+        assert a["targetL"] == a["targetR"] == 0.0
+    assert level == 0.0 and k + 9 <= len(ticks)

@@ -98,8 +98,60 @@ def test_the_seat_input_caps_the_wheels_and_asks_for_neutral_when_released() -> 
 
 
 def test_a_glitch_shorter_than_the_debounce_does_nothing() -> None:
-    """The charger input pulled low for less than a tick, twice: no event, no stop."""
+    """The charger input pulled low for 40 ms, twice, the second a half period later in
+    the tick grid's phase: 40 ms holds at most one tick, and one of the two holds one
+    whatever the grid's phase, so a tick reads the input low (checked: else the test
+    says nothing) and the debounce, two ticks, lets it go: no event, no stop."""
     serial = [(0.02, NEUTRAL), *every(FORWARD, 0.2, 1.2)]
-    rec = _run(serial, [(0.61, 1, True), (0.64, 1, False), (0.81, 1, True), (0.84, 1, False)], 1.3)
+    rec = _run(serial, [(0.600, 1, True), (0.640, 1, False), (0.825, 1, True), (0.865, 1, False)], 1.3)
+    ticks = tick_states(rec)
+    assert [t for t, after in ticks if after["inhibitTick"] & 1], "no tick read the glitch"
     assert board_lines(rec, b"EVT:INHIBIT") == []
-    assert all(after["targetR"] == 3.0 for t, after in tick_states(rec) if 0.4 < t < 1.2)
+    assert all(after["targetR"] == 3.0 and not after["inhibitStable"] for t, after in ticks if 0.4 < t < 1.2)
+
+
+@pytest.mark.parametrize("cause", ["seat", "hot", "low battery"])
+@pytest.mark.parametrize(("left", "right"), [(8.0, 4.0), (16.0, 8.0), (-4.0, 15.0), (14.0, -14.0),
+                                             (-17.0, -11.0), (3.0, 2.0)])
+def test_every_cap_keeps_the_curvature(cause: str, left: float, right: float) -> None:
+    """On the port, by hand: the seat input (0.3 of ``max_wheel``), a winding at 117.5 deg C
+    (the rollback half way: 0.75) and a supply at 21.25 V (half way to the cut-off:
+    0.75) each scale both wheels' goals by one factor, so that the faster wheel is at
+    its cap and the ratio of the two (the path's curvature) is what the profile's
+    limits left of the host's; goals under the cap pass as they are."""
+    from wcdrive.firmware.battery import battery_share
+    from wcdrive.firmware.drive import drive_caps
+    from wcdrive.firmware.inhibit import capped_goals, inhibit_share
+    from wcdrive.firmware.state import FirmwareState
+    from wcdrive.firmware.thermal import thermal_share
+
+    s = FirmwareState(targetL=f32(left), targetR=f32(right), supplyVolts=f32(24.0))
+    if cause == "seat":
+        s.inhibitStable = 2
+    elif cause == "hot":
+        s.windingTempL = f32(117.5)
+    else:
+        s.supplyVolts = f32(21.25)
+    share = min(inhibit_share(s), thermal_share(s), battery_share(s))
+    assert share == pytest.approx({"seat": 0.3, "hot": 0.75, "low battery": 0.75}[cause], abs=1e-6)
+    cap = float(mul(s.maxWheel, share))
+    base_l, base_r = drive_caps(s, s.targetL, s.targetR)        # the profile's limits first
+    goal_l, goal_r = capped_goals(s)
+    if max(abs(base_l), abs(base_r)) <= cap:
+        assert (goal_l, goal_r) == (base_l, base_r)
+    else:
+        assert max(abs(goal_l), abs(goal_r)) == pytest.approx(cap, rel=1e-6)
+        assert goal_l / goal_r == pytest.approx(base_l / base_r, rel=1e-6)
+
+
+@pytest.mark.simavr
+def test_the_seat_input_keeps_a_curve_on_both_backends() -> None:
+    """The seat raised at 0.6 s while the host asks for a curve, the left wheel at 8 rad/s
+    and the right at 4: the setpoints settle at 5.28 and 2.64 rad/s, the curve kept."""
+    serial = [(0.02, NEUTRAL), *every(b"rp04.00,lp08.00,\n", 0.2, 1.5)]
+    rec = recorded(Trace(duration=1.6, serial=_framed(serial), inhibits=[(0.6, 2, True)],
+                         encoders={"left": turning(1.6, True, 5.2), "right": turning(1.6, False, 2.6)}))
+    cap = float(mul(f32(C.MAX_WHEEL_SPEED), C.INHIBIT_2_SPEED))
+    settled = [after for t, after in tick_states(rec) if 1.3 <= t < 1.55]
+    assert settled and all(a["setpointL"] == pytest.approx(cap, abs=1e-6)
+                           and a["setpointR"] == pytest.approx(cap / 2, abs=1e-6) for a in settled)

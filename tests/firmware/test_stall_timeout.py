@@ -8,7 +8,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tests.support.recordings import board_lines, every, recorded, tick_states, turning
+from tests.support.recordings import COUNTS_PER_RAD, board_lines, every, recorded, tick_states, turning
+from wcdrive.avr.f32 import f32
 from wcdrive.boards.current_sense import current_millivolts
 from wcdrive.boards.supply_sense import adc_counts
 from wcdrive.firmware import constants as C
@@ -17,6 +18,7 @@ from wcdrive.firmware.stall import current_sense_fault, held_at_limit, held_boun
 from wcdrive.hil.current_traces import stand_still
 from wcdrive.hil.lockstep import Recording
 from wcdrive.hil.traces import Trace
+from wcdrive.plant.encoders import EdgeTrain, edges_from_trajectory
 from wcdrive.plant.params import ChairParams
 
 #: The duty of a wheel held at its current limit.
@@ -120,21 +122,65 @@ def test_against_a_wall_both_wheels_push_at_their_limit_without_a_fault() -> Non
 @pytest.mark.simavr
 def test_the_stall_clock_run_out_stops_the_chair_until_a_stop_then_neutral() -> None:
     """The same wall, the stall clock set at 14.8 s at 1.3 s: 15 s comes four ticks on,
-    ``EVT:STALL_TIMEOUT``, the chair parked under the hold (its clock back at 0). The
-    host's rp/lp commands are refused until it sends a stop (``limit``, then
-    ``neutral``) and a neutral command has stood: then it drives again. Red with the
-    timeout's branch taken out: no event, the chair pushing on."""
+    ``EVT:STALL_TIMEOUT``, not a fault: the chair halted (the emergency flag, both
+    targets and setpoints 0 at once: it stands against the wall) and parked under the
+    hold, the motors off, its clock back at 0. The host's rp/lp commands are refused
+    until it sends a stop (``limit``, then ``neutral``) and a neutral command has stood:
+    then it drives again. Red with the timeout's branch taken out: no event, the chair
+    pushing on."""
     rec = _push(3.2, 1.0, (12.5, 12.5), pokes=[(1.3, {"stallTime": 14.8})],
                 serial=[(2.02, b"rp0,lp0,\n"), *every(b"rp0,lp0,\n", 2.1, 2.4, 0.05)])
     events = board_lines(rec, b"EVT:")
     assert events[:2] == [b"EVT:PARAMS_DEFAULT,blank", b"EVT:STALL_TIMEOUT"], events
+    assert board_lines(rec, b"EVT:FAULT") == []
     ticks = tick_states(rec)
     at = next(t for t, a in ticks if a["limitLatched"])
     assert 1.45 < at < 1.6
-    assert all(a["stallTime"] == 0.0 and a["targetL"] == 0.0 and a["needNeutral"]
+    assert all(a["faultFlags"] == 0 for _, a in ticks)
+    assert all(a["stallTime"] == 0.0 and a["targetL"] == a["targetR"] == 0.0 and a["needNeutral"]
+               and a["setpointL"] == a["setpointR"] == 0.0 and a["emergencyStop"] and a["parked"]
+               and a["pwmL"] == a["pwmR"] == 0
                for t, a in ticks if at <= t < 2.0)
     assert b"ERR:limit" in rec.tx
     assert any(a["targetL"] > 0.0 for t, a in ticks if t > 2.5)      # driving again after neutral
+
+
+def _wall_that_gives(duration: float, gives: tuple[float, float], creep: float, mirrored: bool
+                     ) -> EdgeTrain:
+    """A wheel at 3 rad/s from 0.3 s into a wall at 1.0 s, standing but for ``gives``
+    (s, s), where the wall gives and the wheel creeps at ``creep`` rad/s."""
+    a, b = gives
+    t = np.array([0.0, 0.3, 1.0, a, b, duration])
+    angle = np.array([0.0, 0.0, 2.1, 2.1, 2.1 + creep * (b - a), 2.1 + creep * (b - a)])
+    return edges_from_trajectory(t, 0.5 + (-1 if mirrored else 1) * angle * COUNTS_PER_RAD)
+
+
+@pytest.mark.simavr
+def test_the_stall_clock_starts_over_when_a_wheel_moves() -> None:
+    """Both wheels against a wall from 1.0 s, both motors at 12.5 A; from 1.52 to 1.62 s
+    the wall gives and they creep at 0.25 rad/s (20 counts a tick, their motors at 2 A),
+    then stand again at 12.5 A: the clock runs a tick at a time while they stand, is 0
+    at a tick that counts their creep, and starts over from one tick once they are held
+    again; no event, no fault. Red with the clock kept through the creep: it goes on
+    from where it was."""
+    duration = 2.4
+    command = b"rp03.00,lp03.00\n"
+    encoders = {side: _wall_that_gives(duration, (1.52, 1.62), 0.25, side == "left")
+                for side in ("left", "right")}
+    currents = sorted((t, side, current_millivolts(amps)) for side in ("left", "right")
+                      for t, amps in ((0.94, 12.5), (1.52, 2.0), (1.62, 12.5)))
+    rec = recorded(Trace(duration=duration, serial=[(0.02, b"rp0,lp0,\n"), *every(command, 0.2, 2.35)],
+                         encoders=encoders, currents=currents))
+    assert board_lines(rec, b"EVT:") == [b"EVT:PARAMS_DEFAULT,blank"]
+    ticks = tick_states(rec)
+    assert all(a["faultFlags"] == 0 for _, a in ticks)
+    clock = [(t, a["stallTime"]) for t, a in ticks if t > 1.0]
+    moved = [i for i, (t, c) in enumerate(clock) if 1.52 < t < 1.72 and c == 0.0]
+    assert moved, clock
+    assert clock[moved[0] - 1][1] > 0.4                   # the clock had run since the wall
+    after = [c for _, c in clock[moved[-1] + 1:]]
+    assert after[0] == pytest.approx(0.05, abs=1e-6)     # starts over
+    assert len(after) > 10 and np.all(np.diff(after) == pytest.approx(0.05, abs=0.002))
 
 
 @pytest.mark.simavr
@@ -169,14 +215,27 @@ def test_one_encoder_cut_while_its_partner_turns_is_its_stall_fault_at_any_curre
 def test_a_failed_current_sense_latches_its_fault() -> None:
     """The left sense's output cut (0 V on A1) at 0.5 s while the chair drives on the
     level: ``EVT:FAULT,CURRENT_SENSE`` at the tick after the ADC read it; the chair
-    stops along the emergency ramp."""
+    stops along the emergency ramp: from that tick the emergency flag, the targets 0,
+    each setpoint down by ``estop_decel`` a tick (15 rad/s², 0.75 a tick) to 0, the
+    host's commands (on until 0.95 s) refused."""
     writes = [(0.02, b"rp0,lp0,\n"), *every(b"rp03.00,lp03.00\n", 0.2, 0.95)]
     rec = recorded(Trace(duration=1.0, serial=writes,
                          encoders={side: turning(1.0, side == "left", 3.0) for side in ("left", "right")},
                          currents=[(0.5, "left", 0)]))
     assert board_lines(rec, b"EVT:FAULT") == [b"EVT:FAULT,CURRENT_SENSE"]
-    at = next(t for t, a in tick_states(rec) if a["faultFlags"])
-    assert 0.5 < at < 0.62 and tick_states(rec)[-1][1]["targetL"] == 0.0
+    ticks = tick_states(rec)
+    k = next(i for i, (_, a) in enumerate(ticks) if a["faultFlags"])
+    assert 0.5 < ticks[k][0] < 0.62
+    step = f32(ticks[k][1]["estopDecel"] * 0.05)
+    assert step == pytest.approx(0.75)
+    before = ticks[k - 1][1]["setpointL"]
+    assert before > step
+    for _, a in ticks[k:]:
+        assert a["emergencyStop"] and a["targetL"] == a["targetR"] == 0.0
+        assert a["setpointL"] == pytest.approx(max(0.0, before - step), abs=1e-6)
+        before = a["setpointL"]
+    assert before == 0.0
+    assert b"ERR:fault" in rec.tx
 
 
 # ---- the parameter ---------------------------------------------------------------------------

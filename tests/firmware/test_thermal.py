@@ -199,3 +199,35 @@ def test_a_reset_of_a_winding_still_at_the_cutoff_latches_it_again() -> None:
     fw.feed(b"reset\n")
     assert fw.state.faultFlags == 0
     assert b"EVT:FAULT,OVERHEAT_R" in fw.tick(300, 0, 0) and fw.state.faultFlags == 0x1000
+
+
+def _held_on_a_grade(duration: float, pokes: list[tuple[float, dict]]) -> Recording:
+    """``hello:4``, a neutral command streamed every 0.1 s, the wheels rolling back down
+    a grade at 0.05 rad/s (some 4 counts a tick, the left counting backwards) from 0.3 s:
+    the chair parks at once and the hold pushes back against the drift."""
+    writes = every(b"x:0.000,t:0.000", 0.02, duration - 0.1)
+    serial = [(0.01, b"hello:4\n")] + [(t, frame(cmd, k + 1)) for k, (t, cmd) in enumerate(writes)]
+    return recorded(Trace(duration=duration, serial=serial, pokes=pokes,
+                          encoders={side: turning(duration, side == "left", -0.05)
+                                    for side in ("left", "right")}))
+
+
+@pytest.mark.simavr
+def test_a_hot_motor_holding_the_chair_on_a_grade_keeps_holding() -> None:
+    """A chair without a brake held on a grade by its motors: the left winding set to
+    111 deg C at 1.0 s (the rollback on), then 126 at 1.5 s (``OVERHEAT_L`` latched).
+    The hold's duties, tick by tick, are those of the same stand with the windings cold:
+    the rollback lowers what the PID may ask for, not the hold's duty, and the cut-off
+    latches its fault but the hold stays on (a hot motor rather than a rollaway)."""
+    duration = 2.5
+    cold = tick_states(_held_on_a_grade(duration, []))
+    rec = _held_on_a_grade(duration, [(1.0, {"windingTempL": 111.0}), (1.5, {"windingTempL": 126.0})])
+    hot = tick_states(rec)
+    assert board_lines(rec, b"EVT:THERMAL") == [b"EVT:THERMAL,1"]
+    assert board_lines(rec, b"EVT:FAULT,") == [b"EVT:FAULT,OVERHEAT_L"]
+    assert [t for t, _ in hot] == [t for t, _ in cold]
+    pushing = [(c, h) for (t, c), (_, h) in zip(cold, hot, strict=True) if t > 0.9]
+    assert all(h["holding"] and h["pwmL"] > 0 and h["pwmR"] > 0 for _, h in pushing)
+    assert [(h["pwmL"], h["dirL"], h["pwmR"], h["dirR"]) for _, h in pushing] == \
+        [(c["pwmL"], c["dirL"], c["pwmR"], c["dirR"]) for c, _ in pushing]
+    assert hot[-1][1]["faultFlags"] == 0x800 and hot[-1][1]["thermalRollback"]
