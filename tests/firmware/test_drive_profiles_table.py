@@ -149,3 +149,34 @@ def test_an_estop_under_a_slow_profile_stops_at_the_emergency_rate_on_both_backe
         assert a["setpointL"] == a["setpointR"] == pytest.approx(level, abs=1e-5)
         assert a["targetL"] == a["targetR"] == 0.0
     assert level == 0.0 and k + 9 <= len(ticks)
+
+
+@pytest.mark.simavr
+def test_a_slower_profile_selected_on_the_move_slows_along_its_own_decel() -> None:
+    """The open profile at 2 m/s (13.12 rad/s), then ``set:profile=1`` (indoor: 1.0 m/s,
+    ``drive_decel`` 0.6 m/s^2) on the move: from the next tick the setpoints fall by
+    0.6 / 0.1524 x 0.05 = 0.197 rad/s a tick (not the open profile's ramp, ``max_accel``
+    5 rad/s^2: 0.25 a tick) and settle at 6.562 rad/s, no event, no fault."""
+    fw = Firmware()
+    fw.feed(b"set:profile=1\n")
+    assert fw.state.driveDecel == pytest.approx(0.6) and fw.state.fwdSpeed == pytest.approx(1.0)
+    duration = 6.5
+    serial = [(0.01, b"hello:4\n"), (0.02, frame(b"x:0.000,t:0.000", 1))]
+    writes = [*every(b"x:2.000,t:0.000", 0.2, 3.5), (3.5, b"set:profile=1"),
+              *every(b"x:2.000,t:0.000", 3.55, duration - 0.1)]
+    serial += [(t, frame(cmd, 2 + k)) for k, (t, cmd) in enumerate(writes)]
+    wheels = {side: turning(duration, side == "left", 13.0) for side in ("left", "right")}
+    rec = recorded(Trace(duration=duration, serial=serial, encoders=wheels))
+    ticks = tick_states(rec)
+    assert board_lines(rec, b"EVT:") == [b"EVT:PARAMS_DEFAULT,blank"]
+    k = next(i for i, (t, a) in enumerate(ticks) if a["profile"] == 1)
+    assert ticks[k - 1][1]["setpointR"] == pytest.approx(2.0 / R, rel=1e-5)
+    falls = [a["setpointR"] - b["setpointR"] for (_, a), (_, b) in pairwise(ticks[k - 1:])
+             if b["setpointR"] > 1.0 / R + 1e-4]
+    # each tick's fall within 3 % (the ramp works in the chair's m/s and rad/s: binary32
+    # rounding of the wheels' share), their mean the decel's
+    step = 0.6 / R * 0.05
+    assert len(falls) >= 30 and all(f == pytest.approx(step, rel=0.03) for f in falls)
+    assert sum(falls) / len(falls) == pytest.approx(step, rel=1e-3)
+    assert ticks[-1][1]["setpointR"] == pytest.approx(1.0 / R, rel=1e-5)
+    assert all(a["faultFlags"] == 0 for _, a in ticks)

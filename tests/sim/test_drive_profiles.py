@@ -19,14 +19,19 @@ sys.modules["drive_profiles"] = bench
 _spec.loader.exec_module(bench)
 
 
-@pytest.mark.parametrize("name", ["indoor", "attendant"])
-def test_each_figure_keeps_within_its_profile(name: str) -> None:
+@pytest.mark.parametrize(("name", "backend"), [
+    ("indoor", "port"), ("outdoor", "port"), ("attendant", "port"),
+    pytest.param("indoor", "simavr", marks=[pytest.mark.simavr, pytest.mark.thorough]),
+    pytest.param("outdoor", "simavr", marks=[pytest.mark.simavr, pytest.mark.thorough]),
+    pytest.param("attendant", "simavr", marks=[pytest.mark.simavr, pytest.mark.thorough])])
+def test_each_figure_keeps_within_its_profile(name: str, backend: str) -> None:
     """Top speeds within 2 % of fwd_speed and rev_speed (asked 2.68 m/s both ways), the
     spin's turn within turn_speed (9.4 rad/s asked), the turn at the top speed within
     turn_speed x turn_at_speed, the acceleration within drive_accel, and the stop from
-    the top speed no shorter than drive_decel allows (v^2 / 2a)."""
+    the top speed no shorter than drive_decel allows (v^2 / 2a): every profile of the
+    table, on the port and (the thorough depth) on the firmware."""
     p = bench.limits(name)
-    f = bench.measure({"profile": bench.PROFILES[name]}, "port")
+    f = bench.measure({"profile": bench.PROFILES[name]}, backend)
     assert p["fwd_speed"] * 0.95 <= f["top_forward_mps"] <= p["fwd_speed"] * 1.02
     assert p["rev_speed"] * 0.95 <= f["top_backward_mps"] <= p["rev_speed"] * 1.02
     assert f["top_turn_rad_s"] <= p["turn_speed"] * 1.02

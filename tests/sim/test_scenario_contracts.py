@@ -81,6 +81,24 @@ def test_port_and_firmware_send_the_same_kinds_of_event(name: str) -> None:
     assert _kinds(_run(name, "simavr")) == _kinds(_run(name, "port"))
 
 
+#: Scenarios docs/safety.md says keep their contracts on both backends, beyond the
+#: grade and fault ones: the drive profile's and the low battery's.
+DOCS_BOTH = ["profile_indoor", "battery_low_flat"]
+
+
+@pytest.mark.simavr
+@pytest.mark.thorough
+@pytest.mark.parametrize("name", DOCS_BOTH)
+def test_the_profile_and_battery_scenarios_keep_their_contracts_on_simavr(name: str) -> None:
+    """Their contracts on the firmware too, the same kinds of event as the port, and the
+    firmware's run replayed on the port in lock step without a difference."""
+    r = _run(name, "simavr")
+    misses = contract.check(scenario.load(name), r)
+    assert not misses, "\n".join(map(str, misses))
+    assert _kinds(r) == _kinds(_run(name, "port"))
+    assert r.firmware_differences == 0
+
+
 @pytest.mark.parametrize("path", [*scenario.bundled(), *sorted(eddie_runner.SCENARIOS.glob("*.toml"))],
                          ids=lambda p: p.stem)
 def test_every_bundled_scenario_has_an_expect_table(path: Path) -> None:
