@@ -227,3 +227,8 @@ def test_a_motor_is_silent_below_1_amp_where_its_duty_and_speed_call_for_3() -> 
     assert motor_silent(7, C.HIGH, 3.0, 512 - 8) and not motor_silent(7, C.HIGH, 3.0, 512 - 9)
     assert not motor_silent(50, C.HIGH, 3.3, 512)
     assert motor_silent(7, C.LOW, -3.0, 512) and not motor_silent(50, C.LOW, -3.3, 512)
+    # the 3 A bracketed: standing, duty 10 calls for 3.14 A (silent at 0 A), duty 9 for
+    # 2.82 A (not); duty 50 at 2.76 rad/s for 3.13 A, at 2.80 for 2.95 A
+    assert motor_silent(10, C.HIGH, 0.0, 512) and not motor_silent(9, C.HIGH, 0.0, 512)
+    assert motor_silent(10, C.LOW, 0.0, 512) and not motor_silent(9, C.LOW, 0.0, 512)
+    assert motor_silent(50, C.HIGH, 2.76, 512) and not motor_silent(50, C.HIGH, 2.80, 512)

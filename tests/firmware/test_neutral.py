@@ -24,7 +24,7 @@ from wcdrive.firmware import constants as C
 from wcdrive.hil.lockstep import Recording
 from wcdrive.hil.traces import Trace
 from wcdrive.plant.encoders import edges_from_trajectory
-from wcdrive.protocol.codec import frame
+from wcdrive.protocol.codec import ExtendedTelemetry, frame, parse_line
 
 pytestmark = pytest.mark.simavr
 
@@ -149,3 +149,19 @@ def test_the_seed_era_hosts_zero_first_then_drive() -> None:
     rec = _run(writes, 2.2)
     assert board_lines(rec, b"ERR:") == [] and board_lines(rec, b"EVT:NOT_NEUTRAL") == []
     assert _driven(tick_states(rec), 2.0, 2.15)
+
+
+def test_the_neutral_fault_is_tlm_state_bit_1_for_a_framed_host() -> None:
+    """A v4 host (``hello:4``, its commands framed) holding the control deflected from
+    switch-on: TLM's state has bit 0 (waiting for neutral) from the first refusal, and
+    bit 1 (the neutral fault) from ``EVT:DEFLECTED`` until a neutral command."""
+    writes = [*_every(FORWARD, 0.05, 5.6, 0.1), (5.6, NEUTRAL), (5.8, FORWARD)]
+    serial = [(0.01, b"hello:4\n")] + [(t, frame(cmd, k + 1)) for k, (t, cmd) in enumerate(writes)]
+    rec = _run(serial, 6.0)
+    assert board_lines(rec, b"EVT:DEFLECTED") == [b"EVT:DEFLECTED"]
+    states = [m for m in map(parse_line, board_lines(rec, b"TLM:")) if isinstance(m, ExtendedTelemetry)]
+    assert len(states) > 100
+    faulted = [k for k, m in enumerate(states) if m.neutral_fault]
+    assert faulted and all(states[k].needs_neutral for k in faulted)
+    assert faulted == list(range(faulted[0], faulted[-1] + 1))      # one run, then cleared
+    assert 95 <= faulted[0] <= 103 and not states[-1].neutral_fault and not states[-1].needs_neutral

@@ -131,6 +131,8 @@ def test_pushed_by_hand_down_a_grade_the_motors_freewheel_then_brake(backend: st
     t, pose = r.board.tick_time, r.truth.pose
     speed = np.r_[0.0, np.hypot(*np.diff(pose[:, :2], axis=0).T) / np.diff(t)]
     assert speed[(t > 2.2) & (t < 6.0)].max() < 0.8
+    held = speed[(t > 2.2) & (t < 6.0)]                  # held near PUSH_SPEED: 0.61 m/s
+    assert np.median(held) == pytest.approx(0.61, abs=0.03) and held.min() > 0.55 and held.max() < 0.7
     assert speed[(t > 1.0) & (t < 2.2)].max() > 0.4
     assert speed[(t > 0.2) & (t < 1.0)].max() < 1e-3
     stood = t > 6.3
