@@ -66,6 +66,13 @@ def test_the_rollback_ends_half_a_volt_above_its_start() -> None:
     assert s.batteryLow == 1 and s.batteryPending == 0
     _settle(s, 24.0, 200)
     assert s.batteryLow == 0 and s.batteryPending == 2
+    # the 23.5 V bracketed by the counts either side: 802 (23.496 V) stays low, 803
+    # (23.525 V) ends it
+    for volts, low in ((23.496, 1), (23.525, 0)):
+        s = FirmwareState()
+        _settle(s, 22.0, 100)
+        _settle(s, volts, 300)
+        assert s.batteryLow == low, volts
 
 
 def test_the_rollback_lowers_the_top_speed_linearly_to_the_cutoff() -> None:

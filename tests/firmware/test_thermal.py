@@ -231,3 +231,18 @@ def test_a_hot_motor_holding_the_chair_on_a_grade_keeps_holding() -> None:
     assert [(h["pwmL"], h["dirL"], h["pwmR"], h["dirR"]) for _, h in pushing] == \
         [(c["pwmL"], c["dirL"], c["pwmR"], c["dirR"]) for c, _ in pushing]
     assert hot[-1][1]["faultFlags"] == 0x800 and hot[-1][1]["thermalRollback"]
+
+
+def test_the_cutoff_comes_at_125_deg_c() -> None:
+    """On the port, a parked chair (no loss, the winding cooling 0.0056 K a tick): a
+    winding the tick's estimate leaves at 124.994 deg C latches nothing, one it leaves at
+    125.004 ``OVERHEAT_R``: the cut-off is THERMAL_CUTOFF_TEMP, bracketed."""
+    from wcdrive.firmware.final_control import Firmware
+
+    for before, fault in ((125.0, 0), (125.01, 0x1000)):
+        fw = Firmware(boot_millis=0)
+        fw.state.windingTempR = f32(before)
+        fw.tick(50, 0, 0)
+        after = fw.state.windingTempR
+        assert (after >= C.THERMAL_CUTOFF_TEMP) == bool(fault) and abs(after - 125.0) < 0.01
+        assert fw.state.faultFlags == fault
