@@ -83,7 +83,7 @@ def _command(node: ChairNode, linear: float, angular: float) -> float:
 
 def test_one_command_is_resent_until_the_timeout_then_the_chair_stops() -> None:
     """One command of 0.2 m/s at t0, nothing after: driving calls from t0 every 0.1 s
-    (the resends), none from 0.55 s after t0, and a stop 0.5 to 0.65 s after it. Red
+    (the resends), none from 0.6 s after t0, and a stop 0.5 to 0.75 s after it. Red
     with the timeout ignored: the chair drives on to the end."""
     chair, graph = _Chair(), _Graph()
     options = Options()
@@ -99,12 +99,13 @@ def test_one_command_is_resent_until_the_timeout_then_the_chair_stops() -> None:
         node.close()
     drives = [t - t0 for t, kind, _ in chair.calls if kind == "drive"]
     stops = [t - t0 for t, kind, _ in chair.calls if kind == "stop"]
-    # the loop's 20 ms period, and some slack for a loaded machine's scheduling
-    assert len(drives) >= 4 and drives[0] < 0.1, drives
-    assert max(drives) < options.cmd_timeout + 0.05, drives
+    # the loop's 20 ms period, and slack for a loaded machine's scheduling (a test run
+    # on two workers): the timeout ignored, the chair would drive on to 1 s
+    assert len(drives) >= 3 and drives[0] < 0.15, drives
+    assert max(drives) < options.cmd_timeout + 0.1, drives
     gaps = [b - a for a, b in pairwise(drives)]
-    assert max(gaps) <= RESEND + 0.06, gaps
-    assert stops and options.cmd_timeout <= stops[0] < options.cmd_timeout + 0.15, stops
+    assert max(gaps) <= RESEND + 0.1, gaps
+    assert stops and options.cmd_timeout <= stops[0] < options.cmd_timeout + 0.25, stops
     assert chair.calls[-1][1] == "stop"
 
 
