@@ -30,19 +30,28 @@ STOP = encode_cmdvel(0.0, 0.0)
 DRIVE = encode_cmdvel(0.5, 0.0)
 
 SCRIPT = textwrap.dedent("""
-    import gc, sys, time
+    import gc, signal, sys, time
     import wcdrive
 
     path, how = sys.argv[1], sys.argv[2]
+    if how == "own":        # the program's own SIGTERM handler: it owns the exit
+        def own(signum, frame):
+            print("own handler", flush=True)
+            raise SystemExit(7)
+        signal.signal(signal.SIGTERM, own)
     chair = wcdrive.connect(path)
     print("driving", flush=True)
-    end = time.monotonic() + (0.6 if how in ("exit", "gc") else 60)
+    end = time.monotonic() + (0.6 if how in ("exit", "gc", "stop_all") else 60)
     while time.monotonic() < end:
         chair.set_velocity(0.5, 0.0)
         time.sleep(0.05)
     if how == "gc":
         del chair
         gc.collect()
+        print("collected", flush=True)
+        time.sleep(60)
+    if how == "stop_all":
+        wcdrive.stop_all()
         print("collected", flush=True)
         time.sleep(60)
     # "exit": the end of the script, with the chair never closed
@@ -110,14 +119,17 @@ def _start(path: str, how: str) -> subprocess.Popen[str]:
     return proc
 
 
-@pytest.mark.parametrize("how", ["SIGINT", "SIGTERM", "exit", "gc"])
+@pytest.mark.parametrize("how", ["SIGINT", "SIGTERM", "SIGHUP", "own", "exit", "gc", "stop_all"])
 def test_ending_a_driving_script_stops_the_chair_before_the_watchdog(watched, how: str) -> None:
+    """However a script lets go of a driving chair (a signal, its own SIGTERM handler
+    left in place, the end of the script, garbage collection, ``wcdrive.stop_all()``),
+    the chair gets a stop within 300 ms of the last drive command, before the watchdog."""
     proc = _start(watched.bridge.path, how)
     try:
-        if how.startswith("SIG"):
+        if how.startswith("SIG") or how == "own":
             time.sleep(0.4)
-            proc.send_signal(getattr(signal, how))
-        elif how == "gc":
+            proc.send_signal(signal.SIGTERM if how == "own" else getattr(signal, how))
+        elif how in ("gc", "stop_all"):
             assert proc.stdout is not None
             assert proc.stdout.readline() == "collected\n"
         deadline = time.monotonic() + 10
@@ -131,16 +143,19 @@ def test_ending_a_driving_script_stops_the_chair_before_the_watchdog(watched, ho
         assert not [m for m in watched.watchdog if m > last_drive], "the watchdog stopped it first"
         state = watched.board.loop.fw.state
         assert state.targetR == 0.0 and state.targetL == 0.0
-        if how == "gc":
-            assert proc.poll() is None                      # the finalizer, not the exit, stopped it
+        if how in ("gc", "stop_all"):
+            assert proc.poll() is None                      # the finalizer or stop_all, not the exit
     finally:
-        if how == "gc" or sys.exc_info()[0] is not None:
+        if how in ("gc", "stop_all") or sys.exc_info()[0] is not None:
             proc.kill()
-        _, err = proc.communicate(timeout=10)                # the others end by themselves
-    expected = {"SIGINT": -signal.SIGINT, "SIGTERM": -signal.SIGTERM, "exit": 0, "gc": -signal.SIGKILL}
+        out, err = proc.communicate(timeout=10)              # the others end by themselves
+    expected = {"SIGINT": -signal.SIGINT, "SIGTERM": -signal.SIGTERM, "SIGHUP": -signal.SIGHUP, "own": 7,
+                "exit": 0, "gc": -signal.SIGKILL, "stop_all": -signal.SIGKILL}
     assert proc.returncode == expected[how], err
     if how == "SIGINT":
         assert "KeyboardInterrupt" in err                   # the script's own traceback
+    if how == "own":
+        assert "own handler" in out                         # left in place, it ran
 
 
 # ---- the command-line tools on Ctrl-C -------------------------------------------------------
