@@ -20,7 +20,7 @@ _spec.loader.exec_module(bench)
 
 
 @pytest.mark.parametrize(("name", "backend"), [
-    ("indoor", "port"), ("outdoor", "port"), ("attendant", "port"),
+    ("indoor", "port"), pytest.param("outdoor", "port", marks=pytest.mark.thorough), ("attendant", "port"),
     pytest.param("indoor", "simavr", marks=[pytest.mark.simavr, pytest.mark.thorough]),
     pytest.param("outdoor", "simavr", marks=[pytest.mark.simavr, pytest.mark.thorough]),
     pytest.param("attendant", "simavr", marks=[pytest.mark.simavr, pytest.mark.thorough])])

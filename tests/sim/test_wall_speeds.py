@@ -22,9 +22,11 @@ from wcdrive.sim import runner, scenario
 #: (docs/safety.md, "Stall timeout"). Safe (the chair stops), but a limit event on the
 #: flat, and motion waits for neutral: known, not fixed.
 CRAWL = "known: below about 0.125 m/s a wall is STALLED_ON_GRADE before the wheels are held"
-SPEEDS = [pytest.param(0.05, marks=pytest.mark.xfail(strict=True, reason=CRAWL)),
+#: The fast depth drives at 0.1, 0.15, 0.4 and 0.8 m/s; the thorough one at all of them.
+SPEEDS = [pytest.param(0.05, marks=[pytest.mark.xfail(strict=True, reason=CRAWL), pytest.mark.thorough]),
           pytest.param(0.1, marks=pytest.mark.xfail(strict=True, reason=CRAWL)),
-          0.15, 0.2, 0.3, 0.4, 0.6, 0.8]
+          0.15, pytest.param(0.2, marks=pytest.mark.thorough), pytest.param(0.3, marks=pytest.mark.thorough),
+          0.4, pytest.param(0.6, marks=pytest.mark.thorough), 0.8]
 
 _ROOM = """
 name = "wall_at_{speed}"
