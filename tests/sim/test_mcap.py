@@ -158,8 +158,10 @@ def test_a_connected_chair_records_mcap(tmp_path: Path) -> None:
     assert np.mean([v for _, v in late]) == pytest.approx(np.mean(truth), rel=0.05)
     assert {round(m.twist.linear.x, 3) for _, m in by_topic["/cmd_vel"]} >= {0.4}
     assert any(m.status[0].message.startswith("TLM:") for _, m in by_topic["/diagnostics/serial"])
-    imu_rate = (len(by_topic["/imu"]) - 1) / (by_topic["/imu"][-1][0] - by_topic["/imu"][0][0])
-    assert imu_rate == pytest.approx(4 * 400.0, rel=0.1)
+    # the gyro at 400 Hz of board time: 20 samples a 50 ms tick. Counted against the
+    # ticks, not the host's clock: the thorough CI once counted 1,898 a host second over
+    # the run, and a loaded machine here 1,800 in the median interval (1,600 at speed 4)
+    assert len(by_topic["/imu"]) / len(odom) == pytest.approx(400.0 / 20.0, rel=0.05)
 
 
 def test_bench_run_writes_mcap_beside_its_recording(tmp_path: Path) -> None:
