@@ -202,14 +202,10 @@ def test_a_reset_of_a_winding_still_at_the_cutoff_latches_it_again() -> None:
 
 
 def _held_on_a_grade(duration: float, pokes: list[tuple[float, dict]]) -> Recording:
-    """``hello:4``, a neutral command streamed every 0.1 s, the wheels rolling back down
-    a grade at 0.05 rad/s (some 4 counts a tick, the left counting backwards) from 0.3 s:
-    the chair parks at once and the hold pushes back against the drift."""
-    writes = every(b"x:0.000,t:0.000", 0.02, duration - 0.1)
-    serial = [(0.01, b"hello:4\n")] + [(t, frame(cmd, k + 1)) for k, (t, cmd) in enumerate(writes)]
-    return recorded(Trace(duration=duration, serial=serial, pokes=pokes,
-                          encoders={side: turning(duration, side == "left", -0.05)
-                                    for side in ("left", "right")}))
+    """``_drive`` of a neutral command, the wheels rolling back down a grade at 0.05
+    rad/s (some 4 counts a tick) from 0.3 s: the chair parks at once and the hold pushes
+    back against the drift."""
+    return _drive(b"x:0.000,t:0.000", duration, pokes, speed=-0.05)
 
 
 @pytest.mark.simavr

@@ -13,7 +13,7 @@ from pathlib import Path
 from hypothesis import Phase, given, settings
 from hypothesis import strategies as st
 
-from tests.support.hypothesis_constants import project_modules
+from tests.support.hypothesis_constants import NOT_IMPORTED, project_modules
 
 _LITERALS = '''
 """Literals hypothesis would add to its pool: a module of the project's kind."""
@@ -56,6 +56,5 @@ def test_a_module_imported_between_two_runs_does_not_change_the_examples(tmp_pat
 def test_every_library_module_was_imported_before_the_first_test() -> None:
     """The pool was taken with the whole library imported (pkgutil's walk, less the
     modules that are not Python)."""
-    missing = [name for name in project_modules() if name not in sys.modules
-               and not name.endswith(("__main__", "_chair_kernel", "_raycast"))]
+    missing = [name for name in project_modules() if name not in sys.modules and name not in NOT_IMPORTED]
     assert not missing
