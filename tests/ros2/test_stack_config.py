@@ -227,13 +227,19 @@ class _Recorder:
 
 
 class _ChairWithLidar(IdleRobot):
-    """A robot with a lidar 0.3 m ahead of the axle, facing backward."""
+    """A robot with a lidar 0.3 m ahead of the axle, facing backward (a
+    ``wcdrive.host.robot.LidarSurface`` whose lidar makes no scans)."""
+
+    has_lidar = True
 
     def __init__(self) -> None:
         from types import SimpleNamespace
 
         self.lidar = SimpleNamespace(frame_id="laser", mount=SimpleNamespace(x=0.3, y=0.0, z=0.4, yaw=math.pi,
                                                                             tf_roll=0.0))
+
+    def on_scan(self, callback: Any) -> None:
+        pass
 
     def on_telemetry(self, callback: Any) -> None:
         pass

@@ -36,6 +36,7 @@ import numpy as np
 
 from wcdrive.protocol.motion import VelocityCommand, WheelCommand, find_motion
 from wcdrive.ros2.topics import TABLE, Profile, by_name
+from wcdrive.transports.recording import Recording, RecordingPort
 from wcdrive.transports.wrapper import PortWrapper
 
 if TYPE_CHECKING:
@@ -508,9 +509,10 @@ class TapPort(PortWrapper):
         self.publisher = publisher
 
     @property
-    def recording(self) -> Any:
-        """The wrapped port's recording (a ``RecordingPort``'s), if it has one."""
-        return getattr(self.port, "recording", None)
+    def recording(self) -> Recording | None:
+        """The wrapped port's recording when it is a ``RecordingPort`` (``connect(url,
+        record=True)``), else None."""
+        return self.port.recording if isinstance(self.port, RecordingPort) else None
 
     def on_sent(self, data: bytes) -> None:
         """Publishes what the host wrote."""

@@ -53,9 +53,8 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Protocol
 
 from wcdrive.errors import WcdriveError
-from wcdrive.host.robot import Robot
+from wcdrive.host.robot import BoardHealthSurface, EstopSurface, LidarSurface, NamedSurface, Robot
 from wcdrive.host.telemetry import Telemetry
-from wcdrive.protocol.codec import ExtendedTelemetry
 from wcdrive.ros2.bridge import laser_scan, tf_static
 from wcdrive.ros2.dds import messages, qos
 from wcdrive.ros2.dds.cmdvel import CmdVelGate
@@ -65,6 +64,7 @@ from wcdrive.ros2.names import NodeNames, RemapRule
 from wcdrive.ros2.topics import TABLE, Topic
 
 if TYPE_CHECKING:
+    from wcdrive.plant.lidar import LaserScan
     from wcdrive.ros2.controller import StackConfig
 
 ODOMETRY = "nav_msgs/msg/Odometry"
@@ -113,16 +113,16 @@ class ScanSource(Protocol):
 
 
 class RobotScans:
-    """A ``ScanSource`` of a robot with a lidar (``Wheelchair.on_scan``): its newest scan,
+    """A ``ScanSource`` of a robot with a lidar (``LidarSurface.on_scan``): its newest scan,
     stamped at its first beam on the node's clock (``stamp(host_s, board_s)``)."""
 
-    def __init__(self, robot: Any, stamp: Callable[[float, float], float]) -> None:
+    def __init__(self, robot: LidarSurface, stamp: Callable[[float, float], float]) -> None:
         self._stamp = stamp
         self._lock = threading.Lock()
-        self._latest: Any = None
+        self._latest: LaserScan | None = None
         robot.on_scan(self._on_scan)
 
-    def _on_scan(self, scan: Any) -> None:
+    def _on_scan(self, scan: LaserScan) -> None:
         with self._lock:
             self._latest = scan
 
@@ -229,7 +229,15 @@ class ImuTap:
 
 class ChairNode:
     """``robot`` on the ROS 2 graph of ``ros`` (module docstring); ``start()``, then
-    ``close()`` (which stops the robot but leaves it open)."""
+    ``close()`` (which stops the robot but leaves it open).
+
+    Beyond ``Robot``, the node serves the extras a robot has (``wcdrive.host.robot``;
+    ``Wheelchair`` has all three): with an ``EstopSurface``, ``/estop`` latches the
+    robot's e-stop and the board's latch drops ``/cmd_vel`` too (without, ``/estop``
+    stops the robot and latches the node's own); with a ``BoardHealthSurface``,
+    ``/diagnostics`` carries its line counts, faults and ``TLM:`` line, and its ``url``
+    is the hardware id (else a ``NamedSurface``'s ``name``, the Eddie's); with a
+    ``LidarSurface`` that has a lidar, ``/scan`` and the lidar's ``/tf_static``."""
 
     def __init__(self, robot: Robot, ros: RosNode, options: Options | None = None,
                  imu: ImuTap | None = None) -> None:
@@ -244,8 +252,11 @@ class ChairNode:
         self._thread: threading.Thread | None = None
         self.estop_held = False
         self.errors: list[str] = []
-        if o.scan is None and getattr(robot, "has_lidar", False):
-            o.scan = RobotScans(robot, self._scan_stamp)
+        self._estop: EstopSurface | None = robot if isinstance(robot, EstopSurface) else None
+        self._health: BoardHealthSurface | None = robot if isinstance(robot, BoardHealthSurface) else None
+        self._lidar: LidarSurface | None = robot if isinstance(robot, LidarSurface) else None
+        if o.scan is None and self._lidar is not None and self._lidar.has_lidar:
+            o.scan = RobotScans(self._lidar, self._scan_stamp)
         self.limiter = CommandLimiter(o.linear_limits, o.angular_limits)
         self._last_odom: float | None = None
         names = o.names or NodeNames.init(ros.name, ros.namespace)
@@ -301,7 +312,7 @@ class ChairNode:
         o = self.options
         if o.publish_static_tf:
             statics = [messages.transform(self.now(), o.base_frame, o.imu_frame)]
-            lidar = getattr(self.robot, "lidar", None)
+            lidar = self._lidar.lidar if self._lidar is not None else None
             if lidar is not None:   # the mount is from the axle; base_frame is base_offset ahead
                 m = lidar.mount     # its laser frame: Rz(yaw) Rx(tf_roll), LidarMount.laser_rotation
                 statics += tf_static(self.now(), o.lidar_frame or lidar.frame_id, m.x - o.base_offset, m.y,
@@ -447,16 +458,16 @@ class ChairNode:
             self.reset_estop()
 
     def _board_estop(self) -> bool:
-        return bool(getattr(self.robot, "estop_latched", False))
+        return self._estop is not None and self._estop.estop_latched
 
     def estop(self) -> None:
-        """Latches the e-stop: the board's (the chair's ``estop()``) and this node's,
-        which drops every ``/cmd_vel`` until ``reset_estop``."""
+        """Latches this node's e-stop, which drops every ``/cmd_vel`` until
+        ``reset_estop``, and the robot's (``EstopSurface.estop``; a robot without one is
+        stopped)."""
         self.estop_held = True
         try:
-            estop = getattr(self.robot, "estop", None)
-            if callable(estop):
-                estop()
+            if self._estop is not None:
+                self._estop.estop()
             else:
                 self.robot.stop()
         except WcdriveError as exc:
@@ -464,11 +475,10 @@ class ChairNode:
             self._halt()
 
     def reset_estop(self) -> None:
-        """Releases the node's e-stop, and the board's once the chair has parked."""
+        """Releases the node's e-stop, and the robot's once it has parked."""
         try:
-            reset = getattr(self.robot, "reset_estop", None)
-            if callable(reset):
-                reset()
+            if self._estop is not None:
+                self._estop.reset_estop()
         except WcdriveError as exc:
             self._note(f"estop_reset: {exc}")
             return
@@ -487,14 +497,20 @@ class ChairNode:
         except WcdriveError as exc:
             self._note(f"stop: {exc}")
 
+    def _hardware_id(self) -> str:
+        """The diagnostics' ``hardware_id``: the board's ``url`` (``BoardHealthSurface``),
+        else the robot's ``name`` (``NamedSurface``), else ""."""
+        if self._health is not None:
+            return self._health.url
+        return self.robot.name if isinstance(self.robot, NamedSurface) else ""
+
     def _publish_diagnostics(self) -> None:
-        robot, hardware = self.robot, str(getattr(self.robot, "url", getattr(self.robot, "name", "")))
-        link = robot.link_ok
+        health, hardware = self._health, self._hardware_id()
+        link = self.robot.link_ok
         link_values: dict[str, Any] = {"link_ok": link}
-        stats = getattr(robot, "link_stats", None)
-        if stats is not None:
-            link_values.update(dataclasses.asdict(stats))
-        faults = tuple(getattr(robot, "faults", ()))
+        if health is not None:
+            link_values.update(dataclasses.asdict(health.link_stats))
+        faults = health.faults if health is not None else ()
         latched = self.estop_held or self._board_estop()
         statuses = [
             messages.status("wcdrive: link", messages.OK if link else messages.ERROR,
@@ -510,11 +526,10 @@ class ChairNode:
         ]
         if self.limiter.active:
             statuses.append(self._limits_status(hardware))
-        tlm = getattr(robot, "status", None)
-        if dataclasses.is_dataclass(tlm) and not isinstance(tlm, type):
+        tlm = health.status if health is not None else None
+        if tlm is not None:
             statuses.append(messages.status("wcdrive: TLM", messages.OK, "the board's last TLM line",
                                             hardware, dataclasses.asdict(tlm)))
-        if isinstance(tlm, ExtendedTelemetry):
             statuses.append(messages.motor_heat(tlm, hardware))
             statuses.append(messages.battery(tlm, hardware))
             statuses.append(messages.drive_profile(tlm, hardware))
