@@ -156,10 +156,13 @@ def compare(recording: Recording) -> Report:
                         mismatches.append(Mismatch(i, ticks, f"{what} {side}",
                                                    "decoder disagrees", str(value)))
             # The input pins the tick read (the inhibit inputs, the brake's status): what
-            # the trace put on the pins between the tick's entry and its exit.
+            # the trace put on the pins between the tick's entry and its exit, at any
+            # moment (a pulse shorter than the window may be all the tick saw).
             read_bits = int(ev.after["inhibitTick"])
             inputs = (read_bits & 3) | int(ev.after["brakeStatusTick"]) << 2 | (read_bits & 4) << 1
-            read = (active_bits(inhibits, ev.cycle / F_CPU), active_bits(inhibits, exit_cycle / F_CPU))
+            entry, exit_s = ev.cycle / F_CPU, exit_cycle / F_CPU
+            read = {active_bits(inhibits, t)
+                    for t in (entry, *(c.at for c in inhibits if entry < c.at <= exit_s))}
             if inputs not in read:
                 mismatches.append(Mismatch(i, ticks, "inhibitTick, brakeStatusTick",
                                            "the trace's pins disagree", str(inputs)))

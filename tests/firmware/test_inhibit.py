@@ -155,3 +155,21 @@ def test_the_seat_input_keeps_a_curve_on_both_backends() -> None:
     settled = [after for t, after in tick_states(rec) if 1.3 <= t < 1.55]
     assert settled and all(a["setpointL"] == pytest.approx(cap, abs=1e-6)
                            and a["setpointR"] == pytest.approx(cap / 2, abs=1e-6) for a in settled)
+
+
+def test_a_pulse_inside_one_tick_window_is_the_pin_that_tick_read() -> None:
+    """An inhibit pulse that starts just after a tick's entry and ends before the next
+    tick is read by that tick alone, and the lock step takes it: the comparison accepts
+    any value the trace put on the pins between a tick's entry and the next event, not
+    only the values at the two ends (a drawn trace whose pulse fell so, once the TX
+    ring's growth moved the ticks 0.19 ms, failed ``wcdrive verify`` with "the trace's
+    pins disagree")."""
+    from wcdrive.boards.simavr.virtual_mega import F_CPU
+
+    serial = [(0.02, NEUTRAL)]
+    quiet = _run(serial, [], 1.0)
+    entry = next(ev.cycle / F_CPU for ev in quiet.events if ev.kind == "tick" and ev.cycle / F_CPU > 0.5)
+    rec = _run(serial, [(entry + 2e-6, 1, True), (entry + 0.02, 1, False)], 1.0)
+    ticks = [ev for ev in rec.events if ev.kind == "tick"]
+    seen = [ev for ev in ticks if int(ev.after["inhibitTick"]) & 1]
+    assert [ev.cycle / F_CPU for ev in seen] == [entry]
