@@ -10,6 +10,7 @@ import pytest
 import serial
 
 from wcdrive.protocol.codec import frame
+from wcdrive.sim.scenario import ScenarioError
 from wcdrive.tools import bench
 from wcdrive.tools.cli import main as wcdrive_main
 from wcdrive.tools.replay import ReplayError, replay
@@ -123,3 +124,10 @@ def test_bench_cli_records_replays_and_plots(tmp_path, elf, capsys) -> None:
     flash = capsys.readouterr().out
     assert "avrdude -p atmega2560 -c wiring -P /dev/ttyACM7" in flash and "final_control.hex:i" in flash
     assert wcdrive_main(["bench", "flash", "--port", "simavr://", "--dry-run"]) == 2
+
+
+def test_bench_run_refuses_a_robot_that_is_not_the_chair() -> None:
+    """A scenario's lines are the chair's protocol: on the Eddie ``bench run`` says so
+    before sending any (it sent them, and the Eddie answered ``ERROR``)."""
+    with pytest.raises(ScenarioError, match="replays the wheelchair's commands; eddie.*is a EddieRobot"):
+        bench.run_scenario("step_response", "eddie+sim://?speed=8", speed=8.0)

@@ -39,14 +39,14 @@ import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Protocol, cast
+from typing import Any
 
 import wcdrive
 from wcdrive._util.resources import firmware_dir
 from wcdrive.boards.simavr.build import build_dir, firmware_elf
 from wcdrive.errors import WcdriveError, WcdriveNeutralError
-from wcdrive.host.robot import Robot
-from wcdrive.protocol.codec import ExtendedTelemetry, Feedback, LineDecoder
+from wcdrive.host.wheelchair import Wheelchair
+from wcdrive.protocol.codec import ExtendedTelemetry, Feedback, Hello, LineDecoder, parse_line
 from wcdrive.sim import scenario
 from wcdrive.tools.options import add_ros_output
 from wcdrive.tools.replay import main as replay_main
@@ -70,23 +70,6 @@ class FlashError(WcdriveError):
 MEGA2560_VECTORS = 57
 _VECTOR_CHIPS = {26: "an ATmega328P/168 (Uno, Nano)", 43: "an ATmega32U4 (Leonardo)",
                  35: "an ATmega644/1284", 57: "an ATmega2560"}
-
-
-class _BenchRobot(Robot, Protocol):
-    """What ``bench run`` uses of the robot it drives, beyond ``Robot``: its recording,
-    its firmware's identity and raw commands (the chair's and the Eddie's)."""
-
-    @property
-    def recording(self) -> Recording: ...
-    @property
-    def protocol_version(self) -> int: ...
-    @property
-    def firmware(self) -> str: ...
-    @property
-    def firmware_version(self) -> str: ...
-    @property
-    def build_id(self) -> str: ...
-    def send_command(self, command: bytes) -> None: ...
 
 
 def check_hex(hex_path: Path) -> dict[int, bytes]:
@@ -251,7 +234,8 @@ def flash(port: str, hex_path: str | Path | None = None, *, check: bool = True,
 def check_build_id(hello: str, runs: dict[int, bytes], hex_path: Path) -> str:
     """The build id of a ``HELLO:`` line, or ``FlashError`` when that id (a string the
     sketch keeps in flash) is not in the HEX's data."""
-    build = hello.split(",")[-1]
+    msg = parse_line(hello.encode())
+    build = msg.build_id if isinstance(msg, Hello) else ""
     data = b"".join(runs.values())
     if len(build) != 8 or (build.encode() + b"\0") not in data:
         raise FlashError(f"the board says build {build} ({hello}), which is not in {hex_path.name}: "
@@ -302,18 +286,17 @@ def run_scenario(name: str, url: str, *, speed: float = 1.0,
     period = 1.0 / (sc.host_rate_hz * speed)
     recording: Recording | None = None
     try:
-        with wcdrive.connect(url, record=True, ros=ros) as robot:   # ros: --mcap/--live sink
-            chair = cast(_BenchRobot, robot)
+        with wcdrive.connect(url, record=True, ros=ros) as chair:   # ros: --mcap/--live sink
+            if not isinstance(chair, Wheelchair):       # the scenario's lines are the chair's
+                raise scenario.ScenarioError(f"bench run replays the wheelchair's commands; {url} is "
+                                             f"a {type(chair).__name__}")
             recording = chair.recording
             recording.meta.update({"scenario": sc.name, "url": url, "protocol": chair.protocol_version,
                                    "firmware": chair.firmware, "firmware_version": chair.firmware_version,
                                    "build_id": chair.build_id})
             if sc.board_params:                             # [params], as wcdrive sim sets them
-                set_param = getattr(chair, "set_param", None)
-                if set_param is None:
-                    raise scenario.ScenarioError(f"{sc.name} sets [params], which {url} does not take")
                 for name, value in sc.board_params.items():
-                    set_param(name, value)
+                    chair.set_param(name, value)
                 recording.meta["params"] = dict(sc.board_params)
             if announce is not None:
                 announce(f"driving {sc.name} on {url} (firmware {chair.firmware} "
