@@ -33,7 +33,7 @@ URLs map onto pyserial (the query goes to the handler, which alone parses it):
 
 On connect the board resets (a real Mega does when its port opens); the API waits
 for it to boot, then says ``hello:4`` (a v3 frame, tried 3 times with growing waits).
-A protocol-v4 board answers ``HELLO:4,final_control,<version>,<build id>``; from then on
+A protocol-v4 board answers ``HELLO:4,final_control,<version>,<build id>,<profile>``; from then on
 every line the host writes is a frame with a CRC-16 and a sequence number (a corrupted
 byte is rejected, never driven; the board refuses unframed lines but stops), every
 line the board sends ends in a line counter and a CRC-16 (one that fails is dropped

@@ -28,8 +28,8 @@
 #include "wc_config.h"
 #include "HardwareSerial_private.h"   // the core's HardwareSerial constructor and TX interrupt
 
-#if SERIAL_TX_BUFFER_SIZE < 512
-#warning "build with -DSERIAL_TX_BUFFER_SIZE=512 (see README.md): output lines may be dropped"
+#if SERIAL_TX_BUFFER_SIZE < 1024
+#warning "build with -DSERIAL_TX_BUFFER_SIZE=1024 (see README.md): output lines may be dropped"
 #endif
 
 // ---------------------------------------------------------------------------
@@ -2038,7 +2038,9 @@ static void answer(ParseResult r, int32_t seq, uint8_t data) {
     line.print(F("HELLO:"));
     line.print(linesFramed ? WC_PROTOCOL_VERSION : WC_PROTOCOL_VERSION_PLAIN);
     line.print(F(",final_control," WC_FIRMWARE_VERSION ","));
-    line.println(F(WC_BUILD_ID));
+    line.print(F(WC_BUILD_ID));
+    line.print(',');
+    line.println(profile);             // the drive profile in force
     line.send();
   } else if (r == PARSE_OK && data == DATA_PARAM) {
     line.print(F("PAR:"));

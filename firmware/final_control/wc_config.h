@@ -15,8 +15,8 @@
 #define WC_SEQ_MAX 65535UL         // largest sequence number of a v3 frame
 #define WC_NUMBER_MAX_DIGITS 24    // most digits of a number before its exponent (leading zeros count): ERR:number past it
 #define WC_NUMBER_MAX_EXP_DIGITS 2 // most digits of a number's exponent: ERR:range past it
-#define WC_TX_CREDIT_MAX 490       // output budget: bytes the board may queue at once (the UART drains more than the refill, so the ring's bytes and the credit never add up to more than this and the 20 bytes of the 2 ms by which millis() may run ahead of the UART between two ticks: 510 of the ring's 511)
-#define WC_TX_CREDIT_BOOT 480      // output budget: the credit setup() starts with, after the BOOT line (the TX ring holds 511: 31 are kept for the BOOT line, which may still be in it; the first tick, 50 ms on, finds it sent)
+#define WC_TX_CREDIT_MAX 500       // output budget: bytes the board may queue at once, what one control period refills (the UART drains more than the refill, so the ring's bytes and the credit never add up to more than this and the 20 bytes of the 2 ms by which millis() may run ahead of the UART between two ticks: 520 of the ring's 1023)
+#define WC_TX_CREDIT_BOOT 480      // output budget: the credit setup() starts with, after the BOOT line, which may still be in the TX ring (31 bytes at most: with the credit and the 2 ms, 531 of the ring's 1023; the first tick, 50 ms on, finds it sent)
 #define WC_TX_CREDIT_PER_MS 10     // output budget: bytes added per millisecond between control ticks (the UART sends 10.7 a ms)
 #define WC_TX_LINE_MAX 144         // bytes of the longest line the board sends, its v4 suffix and line end included (LineBuffer's buffer)
 #define WC_LINE_COUNTER_WRAP 256   // a v4 board line's counter (#NN) counts the framed lines sent, modulo this

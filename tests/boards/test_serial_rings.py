@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 
 from tests.support.recordings import chatter
+from wcdrive._util.resources import firmware_dir
 from wcdrive.boards.simavr.virtual_mega import F_CPU, VirtualMega
 from wcdrive.firmware import constants as C
 from wcdrive.firmware.final_control import Firmware
@@ -27,7 +28,7 @@ from wcdrive.firmware.state import FirmwareState
 from wcdrive.hil.lockstep import Recording, compare, record
 from wcdrive.hil.traces import Trace
 from wcdrive.plant.encoders import edges_from_trajectory
-from wcdrive.protocol.can_frames import REASONS
+from wcdrive.protocol.can_frames import BOOT_CAUSES, REASONS
 from wcdrive.protocol.codec import frame
 
 pytestmark = pytest.mark.simavr
@@ -206,13 +207,34 @@ def test_the_worst_tick_fits_the_refill() -> None:
         answer(big, None, 65535, DATA_PARAM, i, out)
         answered.append(len(out))
     out = bytearray()
-    answer(FirmwareState(buildId="ffffffff", linesFramed=1), None, 65535, DATA_HELLO, 0, out)
+    widest = FirmwareState(buildId="ffffffff", linesFramed=1, profile=C.PROFILE_MAX)
+    answer(widest, None, 65535, DATA_HELLO, 0, out)
     answered.append(len(out))
     longest_nak = max(sent(b"NAK:65535,%s\r\n" % reason.encode()) for reason in REASONS)
     answers = C.ERR_LINES_PER_TICK * max(*answered, longest_nak)
     events = sum(sent(send_event(e)) for e in ("PPM_LOST", "ESTOP", "ROLLAWAY"))
-    assert tick + answers + events <= min(C.CONTROL_PERIOD_MS * C.TX_CREDIT_PER_MS, C.TX_CREDIT_MAX)
+    worst = tick + answers + events
+    assert worst == WORST_TICK_BYTES      # the figure PROTOCOL.md gives
+    assert worst <= min(C.CONTROL_PERIOD_MS * C.TX_CREDIT_PER_MS, C.TX_CREDIT_MAX)
     assert max(map(sent, lines)) <= C.TX_LINE_MAX
+
+
+#: The widest tick a host can cause (protocol/PROTOCOL.md, "Output budget").
+WORST_TICK_BYTES = 494
+
+
+def test_the_tx_ring_holds_the_budget_and_the_2_ms() -> None:
+    """The firmware's TX ring (the Makefile's ``SERIAL_TX_BUFFER_SIZE``, one slot kept
+    empty) holds the most the budget lets the board queue: the credit at its largest, or
+    the boot credit behind the longest ``BOOT:`` line, and the 2 ms of refill by which
+    ``millis()`` may run ahead of the UART between two ticks. So a line the budget lets
+    through never waits on the UART."""
+    makefile = (firmware_dir() / "Makefile").read_text()
+    size = int(re.search(r"-DSERIAL_TX_BUFFER_SIZE=(\d+)", makefile)[1])   # type: ignore[index]
+    ahead = 2 * C.TX_CREDIT_PER_MS
+    boot = max(len(b"BOOT:final_control,%s\r\n" % cause.encode()) for cause in BOOT_CAUSES)
+    assert C.TX_CREDIT_MAX + ahead <= size - 1
+    assert boot + C.TX_CREDIT_BOOT + ahead <= size - 1
 
 
 def test_a_flood_at_top_speed_is_accounted_for_byte_by_byte() -> None:

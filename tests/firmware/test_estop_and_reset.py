@@ -89,7 +89,7 @@ def test_tlm_lines_follow_feedback_after_hello_and_carry_the_tick_inputs(mega) -
     boot(mega, 0.1)
     neutral(mega)
     out = send_and_run(mega, b"hello\n" + frame(b"rp1.0,lp1.0,", 41), 0.3)
-    assert b"HELLO:3,final_control,%s,%s\r\n" % (C.FIRMWARE_VERSION.encode(), C.BUILD_ID.encode()) in out
+    assert b"HELLO:3,final_control,%s,%s,0\r\n" % (C.FIRMWARE_VERSION.encode(), C.BUILD_ID.encode()) in out
     assert b"ACK:41\r\n" in out
     lines = out.split(b"\r\n")
     tlm = [parse_line(line) for line in lines if line.startswith(b"TLM:")]

@@ -1,7 +1,12 @@
 """No normal scenario trips a fault: every bundled scenario but the ``fault_*`` ones,
 driven in closed loop on the port (bit-exact with the firmware, see
 tests/firmware/test_differential.py), never latches a fault, and each detector stays clear of
-its threshold. The margins found are printed (``pytest -s``)."""
+its threshold. The margins found are printed (``pytest -s``).
+
+The motor rule's margin is the effort count of a wheel that strains alone: both wheels
+counting effort without progress at once (both at full duty short of top speed on a
+sagging battery, say) is a load they share, which the rule does not blame (neither
+leads), so it does not eat the margin."""
 
 from __future__ import annotations
 
@@ -33,7 +38,8 @@ def test_no_bundled_scenario_trips_a_fault(name: str) -> None:
         peak["stall"] = max(peak["stall"], s.stallTicksL, s.stallTicksR)
         peak["reverse"] = max(peak["reverse"], s.reverseTicksL, s.reverseTicksR)
         peak["runaway"] = max(peak["runaway"], s.runawayTicksL, s.runawayTicksR)
-        peak["effort"] = max(peak["effort"], s.effortTicksL, s.effortTicksR)
+        if not (s.effortTicksL and s.effortTicksR):        # one wheel alone (docstring)
+            peak["effort"] = max(peak["effort"], s.effortTicksL, s.effortTicksR)
         if previous is not None:
             for count, was, pwm, direction, setpoint in ((s.encTickL, *previous[0::2]),
                                                           (s.encTickR, *previous[1::2])):

@@ -200,9 +200,9 @@ def test_effort_without_progress_latches_a_motor_fault() -> None:
     setpoint: its duty climbs FAULT_EFFORT_PWM above its lowest and stays there for
     FAULT_EFFORT_TICKS ticks with no gain in speed: MOTOR_L, the left motor off and the
     right one, still turning, braked (kills ``noEffect`` never tripping)."""
-    trace = _trace(1.5, _commands(b"rp3.0,lp3.0,", 0.02, 1.5),
-                   encoders={"left": _steady(0.5, 0.02, 1.5, mirrored=True),
-                             "right": _steady(3.0, 0.02, 1.5)})
+    trace = _trace(2.0, _commands(b"rp3.0,lp3.0,", 0.02, 2.0),     # MOTOR_L at 1.7 s
+                   encoders={"left": _steady(0.5, 0.02, 2.0, mirrored=True),
+                             "right": _steady(3.0, 0.02, 2.0)})
     recording = _run(trace)
     assert _events(recording.tx) == [b"EVT:FAULT,MOTOR_L"]
     ticks = _ticks(recording)

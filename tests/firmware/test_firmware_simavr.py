@@ -276,4 +276,4 @@ def test_stop_command_cancels_a_pivot(mega: VirtualMega) -> None:
 def test_no_heap_and_stack_headroom(mega: VirtualMega) -> None:
     boot(mega, 0.5)
     assert "__brkval" not in mega.variables or mega.read_bytes(mega.address_of("__brkval")[0], 2) == b"\0\0"
-    assert mega.free_ram() > 6000
+    assert mega.free_ram() > 5500      # 5,858 (6,000 was the bound before the TX ring's 512 B more)

@@ -147,7 +147,7 @@ def test_avrdude_flashes_two_programs_through_the_real_bootloader_and_the_flash_
         print(f"avrdude final_control.hex: {took:.1f} s")
         t0 = time.monotonic()
         version = text("FIRMWARE_VERSION")
-        assert bench.read_hello(pty.device) == f"HELLO:3,final_control,{version},{build_id()}"
+        assert bench.read_hello(pty.device) == f"HELLO:3,final_control,{version},{build_id()},0"
         print(f"hello after open: {time.monotonic() - t0:.1f} s")
         t0 = time.monotonic()
         done = avrdude(pty.device, tiny["atmega2560"])
@@ -234,6 +234,9 @@ def test_bench_flash_confirms_the_build_id_or_says_the_board_did_not_answer(
 def test_the_build_id_check_compares_with_the_hex(firmware_hex: Path) -> None:
     runs = bench.check_hex(firmware_hex)
     assert bench.check_build_id(f"HELLO:3,final_control,3.0.0,{build_id()}", runs, firmware_hex) == build_id()
+    # a board with drive profiles ends the line with the profile in force
+    with_profile = f"HELLO:3,final_control,4.0.0,{build_id()},2"
+    assert bench.check_build_id(with_profile, runs, firmware_hex) == build_id()
     other = "0123abcd" if build_id() != "0123abcd" else "89abcdef"
     with pytest.raises(bench.FlashError, match=f"says build {other}.*not in final_control.hex"):
         bench.check_build_id(f"HELLO:3,final_control,3.0.0,{other}", runs, firmware_hex)

@@ -144,6 +144,7 @@ reply_lines = st.one_of(
     reasons.map(lambda r: b"ERR:" + r),
     st.sampled_from([b"EVT:" + e.encode() for e in cc.EVENTS[1:]]),
     st.sampled_from([b"HELLO:2,final_control", b"HELLO:3,final_control,3.0.0,2ce1a099",
+                     b"HELLO:4,final_control,4.0.0,2ce1a099,3",
                      b"BOOT:final_control", b"PAR:kp_l,7.2000",
                      b"PAR:watchdog_ms,800", b"PAR:max_wheel,17.5900", b"PAR:ki_r,0.0100"]),
 )
@@ -175,6 +176,24 @@ def test_board_lines_survive_the_bus_byte_for_byte(line) -> None:
         if message.supply_dv is not None:
             f = _decode(*next(fr for fr in frames if fr[0] == cc.STATUS_F))
             assert f["supply"] == pytest.approx(message.supply_dv / 10.0)
+
+
+@pytest.mark.parametrize("profile", range(4))
+def test_the_hello_line_carries_the_profile_in_its_own_frame_before_the_reply(profile: int) -> None:
+    """A board with drive profiles ends ``HELLO:`` with the profile in force: WC_HELLO_E
+    (0x319), then the reply, which completes the line. A board before drive profiles
+    sends the reply alone; a WC_HELLO_E that no HELLO reply follows names nothing."""
+    line = b"HELLO:4,final_control,4.0.0,2ce1a099,%d" % profile
+    frames = cc.message_to_frames(parse_line(line))
+    assert [can_id for can_id, _ in frames] == [cc.HELLO_E, cc.REPLY]
+    assert _decode(*frames[0]) == {"drive_profile": profile}
+    assembler = cc.TelemetryAssembler()
+    assert [assembler.feed(*f) for f in frames] == [b"", line + b"\r\n"]
+    older = b"HELLO:4,final_control,4.0.0,2ce1a099"
+    assert [can_id for can_id, _ in cc.message_to_frames(parse_line(older))] == [cc.REPLY]
+    assert assembler.feed(*frames[0]) == b""
+    assert assembler.feed(*cc.message_to_frames(parse_line(b"ACK:7"))[0]) == b"ACK:7\r\n"
+    assert assembler.feed(*cc.message_to_frames(parse_line(older))[0]) == older + b"\r\n"
 
 
 def test_a_status_without_its_last_frame_makes_no_line() -> None:

@@ -129,8 +129,8 @@ def answer(s: FirmwareState, reason: str | None, seq: int, data: int, param: int
     s.errLinesThisTick += 1
     if reason is None and data == DATA_HELLO:
         version = PROTOCOL_VERSION if s.linesFramed else PROTOCOL_VERSION_PLAIN
-        send(s, b"HELLO:%d,final_control,%s,%s\r\n" % (version, FIRMWARE_VERSION.encode(),
-                                                        s.buildId.encode()), out)
+        send(s, b"HELLO:%d,final_control,%s,%s,%d\r\n" % (version, FIRMWARE_VERSION.encode(),
+                                                           s.buildId.encode(), s.profile), out)
     elif reason is None and data == DATA_PARAM:
         p = PARAMS[param]
         value = getattr(s, p.field)

@@ -55,10 +55,11 @@ STATUS_D = 0x315
 REPLY = 0x316
 STATUS_E = 0x317
 STATUS_F = 0x318
+HELLO_E = 0x319
 
 HOST_TO_CHAIR = (CMD_VEL, CMD_WHEELS, CONTROL, PARAM)
 CHAIR_TO_HOST = (FEEDBACK_ENC, FEEDBACK_VEL, STATUS_A, STATUS_B, STATUS_C, STATUS_D, REPLY, STATUS_E,
-                 STATUS_F)
+                 STATUS_F, HELLO_E)
 
 CONTROL_OPS = {1: b"hello", 2: b"estop", 3: b"reset", 4: b"save", 5: b"defaults", 6: b"hello:4"}
 #: WC_PARAM's indices: each parameter's ``can_index`` in the spec, else the parameters
@@ -244,7 +245,9 @@ def message_to_frames(msg: Message) -> list[tuple[int, bytes]]:
     elif isinstance(msg, Param):
         reply = (KIND_PAR, PARAM_NAMES.index(msg.name), 0, msg.value)
     elif isinstance(msg, Hello):
-        return [(REPLY, struct.pack("<BBHI", KIND_HELLO, msg.version, _pack_version(msg.firmware_version),
+        # the profile in force (boards with drive profiles) goes first: the reply ends the line
+        return [*([] if msg.profile is None else [(HELLO_E, struct.pack("<B7x", msg.profile))]),
+                (REPLY, struct.pack("<BBHI", KIND_HELLO, msg.version, _pack_version(msg.firmware_version),
                                     int(msg.build_id or "0", 16)))]
     elif isinstance(msg, Boot):
         reply = (KIND_BOOT, _index(BOOT_CAUSES, msg.cause), 0, 0.0)
@@ -271,10 +274,13 @@ def _index(names: tuple[str, ...], name: str) -> int:
 class TelemetryAssembler:
     """Chair-to-host frames back into the board's lines (``\\r\\n``-terminated bytes):
     a feedback line from its two frames, a TLM line from its five (0x312 to 0x315 and
-    0x317, in that order: the line is complete at 0x317)."""
+    0x317, in that order: the line is complete at 0x317; 0x318 before 0x317 adds the
+    supply), a ``HELLO:`` line from its reply (0x316; 0x319 just before it adds the
+    drive profile in force)."""
 
     _enc: tuple[int, int] | None = None
     _status: dict[int, bytes] | None = None
+    _profile: int | None = None
 
     def feed(self, can_id: int, data: bytes) -> bytes:
         """One chair-to-host frame; returns the line it completes (a REPLY frame is a
@@ -310,8 +316,15 @@ class TelemetryAssembler:
             if STATUS_F in status:          # the supply (boards since it was measured)
                 values += struct.unpack("<H", status[STATUS_F][:2])
             return b"TLM:" + b",".join(str(v).encode() for v in values) + b"\r\n"
+        if can_id == HELLO_E:
+            self._profile = data[0]
+            return b""
         if can_id == REPLY:
-            return _reply_line(data)
+            profile, self._profile = self._profile, None
+            line = _reply_line(data)
+            if profile is not None and data[0] == KIND_HELLO and line.count(b",") == 3:
+                line = line[:-2] + b",%d\r\n" % profile
+            return line
         return b""
 
 

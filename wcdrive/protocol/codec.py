@@ -381,13 +381,15 @@ class ExtendedTelemetry:
 
 @dataclass(frozen=True, slots=True)
 class Hello:
-    """``HELLO:<version>,<firmware>[,<firmware version>,<build id>]``: the answer to
-    ``hello`` (v2 boards name the firmware only; v3 add its version and build id)."""
+    """``HELLO:<version>,<firmware>[,<firmware version>,<build id>[,<profile>]]``: the
+    answer to ``hello`` (v2 boards name the firmware only; v3 add its version and build
+    id; boards with drive profiles the profile in force, ``None`` from a board before)."""
 
     version: int
     firmware: str
     firmware_version: str = ""
     build_id: str = ""
+    profile: int | None = None
 
     @property
     def lines_framed(self) -> bool:
@@ -440,7 +442,7 @@ def _float(text: bytes) -> float:
 
 
 _TLM = re.compile(rb"TLM:(\d+(?:,\d+){12}(?:,\d+){0,5})")
-_HELLO = re.compile(rb"HELLO:(\d+),([\w.-]+)(?:,([\w.-]+),([0-9a-f]+))?")
+_HELLO = re.compile(rb"HELLO:(\d+),([\w.-]+)(?:,([\w.-]+),([0-9a-f]+)(?:,(\d))?)?")
 _PARAM = re.compile(rb"PAR:(\w+),(\d+(?:\.\d+)?)")
 _ACK = re.compile(rb"ACK:(\d+)")
 _NAK = re.compile(rb"NAK:(\d+),(\w+)")
@@ -476,7 +478,8 @@ def _parse_text(line: bytes) -> Message:
         return Param(m[1].decode(), float(m[2]))
     m = _HELLO.fullmatch(line)
     if m:
-        return Hello(int(m[1]), m[2].decode(), (m[3] or b"").decode(), (m[4] or b"").decode())
+        return Hello(int(m[1]), m[2].decode(), (m[3] or b"").decode(), (m[4] or b"").decode(),
+                     None if m[5] is None else int(m[5]))
     if line.startswith(b"ERR:"):
         return Error(line[4:].decode("ascii", "replace"))
     if line.startswith(b"EVT:"):

@@ -54,7 +54,7 @@ SPEED = 4
 #: A line of the board, complete and well-formed (protocol/PROTOCOL.md).
 _VEL = rb"(?:-?\d+\.\d\d|nan|inf|ovf)"
 LINE = re.compile(
-    rb"(?:BOOT:final_control(?:,[A-Z_]+)?|HELLO:3,final_control,[\w.]+,[0-9a-f]{8}"
+    rb"(?:BOOT:final_control(?:,[A-Z_]+)?|HELLO:3,final_control,[\w.]+,[0-9a-f]{8}(?:,\d)?"
     rb"|ENC:-?\d+,-?\d+,VEL:" + _VEL + rb"," + _VEL + rb",MODE:(?:WHEEL|CMDVEL|PPM)"
     rb"|TLM:\d+(?:,\d+){12,15}|ACK:\d+|NAK:\d+,[a-z]+|ERR:[a-z]+|EVT:[A-Z_]+(?:,[A-Za-z_]+)?"
     rb"|PAR:[a-z_]+,\d+(?:\.\d+)?)\r\n")
