@@ -129,5 +129,5 @@ def test_bench_cli_records_replays_and_plots(tmp_path, elf, capsys) -> None:
 def test_bench_run_refuses_a_robot_that_is_not_the_chair() -> None:
     """A scenario's lines are the chair's protocol: on the Eddie ``bench run`` says so
     before sending any (it sent them, and the Eddie answered ``ERROR``)."""
-    with pytest.raises(ScenarioError, match="replays the wheelchair's commands; eddie.*is a EddieRobot"):
+    with pytest.raises(ScenarioError, match=r"replays the wheelchair's commands; eddie.*is a EddieRobot"):
         bench.run_scenario("step_response", "eddie+sim://?speed=8", speed=8.0)
