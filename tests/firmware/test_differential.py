@@ -83,7 +83,9 @@ def test_the_random_traces_lose_received_bytes(elf) -> None:
     bytes, so the random comparison covers the loss path (``rxGap``, ERR:overrun); bursts
     alone stopped losing any once the interrupts got faster. The first flooded traces of
     ``wcdrive verify --seed 1``: bytes lost in one of them at least, every one accounted
-    for, port and firmware alike."""
+    for, port and firmware alike (the first 3 at CI's depth; at the fast depth, until
+    one lost bytes)."""
+    wanted = 3 if thorough() else 1
     lost: list[int] = []
     for seed in range(1_000_003, 1_000_003 + 200):
         trace = generate_trace(RandomDraw(seed), 5.0)
@@ -92,9 +94,9 @@ def test_the_random_traces_lose_received_bytes(elf) -> None:
         report = compare(record(trace, elf))
         assert not report.mismatches and report.lost_bytes == 0, [str(m) for m in report.mismatches[:5]]
         lost.append(report.rx_lost)
-        if len(lost) == 3:
+        if len(lost) >= wanted and max(lost) > 0:
             break
-    assert len(lost) == 3 and max(lost) > 0, lost
+    assert len(lost) >= wanted and max(lost) > 0, lost
 
 
 def test_millis_wrap_inside_a_trace(elf) -> None:

@@ -73,9 +73,10 @@ SPACING_S = 0.020
 NEUTRAL = b"x:0,t:0,\n"
 NEUTRAL_LEAD_S = 0.12
 
-#: About 70 ms an example (a fresh board in simavr and the port in lock step); the
-#: known costliest lines run at both depths (``test_known_lines_within_budget``).
-EXAMPLES = 1000 if thorough() else 50
+#: About 70 ms an example (a fresh board in simavr and the port in lock step; 0.3 s on
+#: two busy cores); the known costliest lines run at both depths
+#: (``test_known_lines_within_budget``).
+EXAMPLES = 1000 if thorough() else 20
 
 #: The worst lines seen in this module: {"parse"|"whole": (cycles, line)}.
 WORST: dict[str, tuple[int, bytes]] = {"parse": (0, b""), "whole": (0, b"")}

@@ -59,6 +59,7 @@ class _Counting(logging.Handler):
         self.counts[record.getMessage().partition(": ")[2][:40]] += 1
 
 
+@pytest.mark.thorough       # a soak: 12 s, CI's depth
 def test_ten_minute_sim_session_holds_flat_memory() -> None:
     logger = logging.getLogger("wcdrive")
     handler, level = _Counting(), logger.level
