@@ -93,7 +93,7 @@ from wcdrive.host.wheelchair import (
     Wheelchair,
 )
 from wcdrive.transports.port import Port, simulation_of
-from wcdrive.transports.recording import RecordingPort
+from wcdrive.transports.recording import RecordingPort, recording_of
 
 __all__ = ["SCHEMES", "LinkEvent", "LinkLost", "LinkRestored", "Reset", "Telemetry", "Wheelchair", "connect"]
 
@@ -221,7 +221,7 @@ def connect(url: str = "sim://", *, boot_timeout: float = 10.0, record: bool | s
     if url.startswith("/"):
         def reopen() -> Port:
             again = _open_device(url)
-            recording = getattr(first, "recording", None)
+            recording = recording_of(first)
             again_port = RecordingPort(again, recording) if recording is not None else again
             if publisher is not None:
                 from wcdrive.ros2.bridge import TapPort

@@ -124,3 +124,18 @@ def test_the_ros_tap_publishes_through_the_hooks() -> None:
     assert tap.read(64) == b""
     assert publisher.sent == [b"x:0.5,t:0,\n"] and publisher.got == [b"ENC:1,2\r\n"]
     assert tap.recording.sent_bytes == b"x:0.5,t:0,\n"   # the wrapped RecordingPort's
+
+
+def test_the_recording_is_found_through_any_wrappers() -> None:
+    """``recording_of``: a ``RecordingPort``'s own, or one behind wrappers (a ROS tap, an
+    injected fault) however deep; None without a ``RecordingPort`` in the chain."""
+    from wcdrive.ros2.bridge import TapPort
+    from wcdrive.transports.faulty import FaultyPort
+    from wcdrive.transports.recording import recording_of
+
+    recorded = RecordingPort(FakePort())
+    tap = TapPort(FaultyPort(recorded), object())       # type: ignore[arg-type]
+    assert recording_of(recorded) is recorded.recording
+    assert recording_of(tap) is recorded.recording and tap.recording is recorded.recording
+    assert recording_of(FakePort()) is None and recording_of(PortWrapper(FakePort())) is None
+    assert TapPort(FakePort(), object()).recording is None    # type: ignore[arg-type]

@@ -58,7 +58,7 @@ from wcdrive.protocol.codec import MAX_ANGULAR, MAX_LINEAR, ExtendedTelemetry, L
 from wcdrive.protocol.motion import velocity_command, wheel_command
 from wcdrive.protocol.spec import integer
 from wcdrive.transports.port import Port
-from wcdrive.transports.recording import Recording
+from wcdrive.transports.recording import Recording, recording_of
 
 if TYPE_CHECKING:                     # the host side loads no simulator
     from wcdrive.plant.lidar import LaserScan, Lidar
@@ -413,8 +413,8 @@ class Wheelchair:
     @property
     def recording(self) -> Recording:
         """The session so far (``connect(..., record=True)``)."""
-        recording = getattr(self._session.port, "recording", None)
-        if not isinstance(recording, Recording):
+        recording = recording_of(self._session.port)
+        if recording is None:
             raise WcdriveProtocolError(f"{self.url} is not being recorded: connect(url, record=True)")
         return recording
 

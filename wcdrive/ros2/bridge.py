@@ -36,7 +36,7 @@ import numpy as np
 
 from wcdrive.protocol.motion import VelocityCommand, WheelCommand, find_motion
 from wcdrive.ros2.topics import TABLE, Profile, by_name
-from wcdrive.transports.recording import Recording, RecordingPort
+from wcdrive.transports.recording import Recording, recording_of
 from wcdrive.transports.wrapper import PortWrapper
 
 if TYPE_CHECKING:
@@ -510,9 +510,9 @@ class TapPort(PortWrapper):
 
     @property
     def recording(self) -> Recording | None:
-        """The wrapped port's recording when it is a ``RecordingPort`` (``connect(url,
+        """The recording of the port it wraps (``recording_of``: ``connect(url,
         record=True)``), else None."""
-        return self.port.recording if isinstance(self.port, RecordingPort) else None
+        return recording_of(self.port)
 
     def on_sent(self, data: bytes) -> None:
         """Publishes what the host wrote."""

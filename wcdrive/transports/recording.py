@@ -83,3 +83,14 @@ class RecordingPort(PortWrapper):
             with self._lock:
                 self.recording.received.append((time.monotonic(), bytes(data)))
         return data
+
+
+def recording_of(port: object) -> Recording | None:
+    """The recording of ``port``: a ``RecordingPort``'s, or that of the port a
+    ``PortWrapper`` (a ROS tap, an injected fault) wraps, however deep; None when no
+    ``RecordingPort`` is in the chain."""
+    while isinstance(port, PortWrapper):
+        if isinstance(port, RecordingPort):
+            return port.recording
+        port = port.port
+    return None
