@@ -311,6 +311,7 @@ def test_the_firmware_is_unpowered_from_the_first_instruction_after_a_reset(
         assert "ACK:9" in mega.take_tx_text() and mega.pwm("left") > 0
 
 
+@pytest.mark.thorough       # 17 s; at the fast depth tests/transports/test_dtr_reset.py resets live boards
 def test_a_live_board_resets_on_a_dtr_pulse(elf: Path) -> None:
     board = MegaBoard(elf)
     sent: list[int] = []

@@ -45,6 +45,7 @@ def test_wcdrive_pty_eddie_serves_a_board() -> None:
         proc.wait(timeout=10)
 
 
+@pytest.mark.thorough       # 15 s; fast: the pty serves a board (above), the Eddie reaches goals (navigation)
 def test_square_client_through_wcdrive_pty_eddie_odometry_matches_ground_truth() -> None:
     pty = subprocess.Popen([sys.executable, "-m", "wcdrive", "pty", "--eddie", "--speed", "2", "--seed", "3"],
                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)

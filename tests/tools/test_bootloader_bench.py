@@ -131,6 +131,7 @@ class PtyCommand:
                 self.proc.wait()
 
 
+@pytest.mark.thorough       # 16 s; at the fast depth bench flash goes through the same bootloader
 def test_avrdude_flashes_two_programs_through_the_real_bootloader_and_the_flash_is_kept(
         tmp_path: Path, tiny: dict[str, Path], firmware_hex: Path) -> None:
     flash_file = tmp_path / "mega.flash"
