@@ -298,10 +298,16 @@ def square(peer: Peer, writer: Any, side: float = 0.3, timeout: float = 40.0) ->
             left = (gx - x) * math.cos(heading) + (gy - y) * math.sin(heading)
             legs.append(f"{kind} {left if kind == 'straight' else wrap(target - h):+.3f} "
                         f"at {time.monotonic() - started:.1f} s")
-    for _ in range(10):
+    # Stop and wait for the chair to be at rest (its odom's twist exactly 0): 0.5 s on a
+    # quiet machine; up to 3 s more when the simulation runs behind the wall clock.
+    rest = time.monotonic() + 3.5
+    for n in range(70):
         send(0.0, 0.0)
         time.sleep(0.05)
-    peer.poll()
+        peer.poll()
+        _, _, _, v, w = pose()
+        if (n >= 9 and v == 0.0 and w == 0.0) or time.monotonic() > rest:
+            break
     return legs
 
 
