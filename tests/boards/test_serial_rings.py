@@ -23,7 +23,7 @@ from tests.support.recordings import chatter
 from wcdrive._util.resources import firmware_dir
 from wcdrive.boards.simavr.virtual_mega import F_CPU, VirtualMega
 from wcdrive.firmware import constants as C
-from wcdrive.firmware.final_control import Firmware
+from wcdrive.firmware.final_control import Firmware, boot_line
 from wcdrive.firmware.state import FirmwareState
 from wcdrive.hil.lockstep import Recording, compare, record
 from wcdrive.hil.traces import Trace
@@ -232,7 +232,7 @@ def test_the_tx_ring_holds_the_budget_and_the_2_ms() -> None:
     makefile = (firmware_dir() / "Makefile").read_text()
     size = int(re.search(r"-DSERIAL_TX_BUFFER_SIZE=(\d+)", makefile)[1])   # type: ignore[index]
     ahead = 2 * C.TX_CREDIT_PER_MS
-    boot = max(len(b"BOOT:final_control,%s\r\n" % cause.encode()) for cause in BOOT_CAUSES)
+    boot = max(len(boot_line(cause)) for cause in BOOT_CAUSES)
     assert C.TX_CREDIT_MAX + ahead <= size - 1
     assert boot + C.TX_CREDIT_BOOT + ahead <= size - 1
 

@@ -321,10 +321,7 @@ class TelemetryAssembler:
             return b""
         if can_id == REPLY:
             profile, self._profile = self._profile, None
-            line = _reply_line(data)
-            if profile is not None and data[0] == KIND_HELLO and line.count(b",") == 3:
-                line = line[:-2] + b",%d\r\n" % profile
-            return line
+            return _reply_line(data, profile)
         return b""
 
 
@@ -333,7 +330,9 @@ def _centi(value: int) -> str:
     return f"{sign}{abs(value) // 100}.{abs(value) % 100:02d}"
 
 
-def _reply_line(data: bytes) -> bytes:
+def _reply_line(data: bytes, profile: int | None = None) -> bytes:
+    """The line of a WC_REPLY frame; ``profile``: the WC_HELLO_E just before it, the
+    last field of a ``HELLO:`` line that names the firmware's version."""
     kind, code, seq, value = struct.unpack("<BBHf", data[:8])
     if kind == KIND_ACK:
         return b"ACK:%d\r\n" % seq
@@ -352,7 +351,8 @@ def _reply_line(data: bytes) -> bytes:
         if seq == 0 and build == 0:
             return f"HELLO:{code},{FIRMWARE}\r\n".encode()
         version = f"{seq >> 10}.{seq >> 5 & 31}.{seq & 31}"
-        return f"HELLO:{code},{FIRMWARE},{version},{build:08x}\r\n".encode()
+        tail = "" if profile is None else f",{profile}"
+        return f"HELLO:{code},{FIRMWARE},{version},{build:08x}{tail}\r\n".encode()
     if kind == KIND_BOOT:
         cause = BOOT_CAUSES[code] if code < len(BOOT_CAUSES) else ""
         return f"BOOT:{FIRMWARE},{cause}\r\n".encode() if cause else f"BOOT:{FIRMWARE}\r\n".encode()
