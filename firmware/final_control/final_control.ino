@@ -1236,19 +1236,33 @@ static bool straining(uint8_t appliedPwm, uint8_t appliedDir, float setpoint, fl
          appliedPwm >= WC_GRADE_PWM && progress < WC_FAULT_EFFORT_SHORTFALL * fabs(setpoint);
 }
 
-// A wheel held at its current limit: the chair standing (either wheel WC_STALL_CREEP_COUNTS
-// this tick at most, either way), the wheel driven toward its setpoint at
-// WC_FAULT_STALL_PWM_STANDING or more, its motor drawing WC_STALL_CURRENT or more the way
-// it is driven (a braking current, a wheel pushed faster than its duty turns it, is not). Not an encoder fault but the stall
+// Spinning about this wheel: a spin asked (the partner's setpoint the other way from this
+// wheel's) and the partner standing or turning its own setpoint's way: the chair pivots
+// about this wheel, as a spin on a grade does when the wheel that would turn the chair
+// uphill stands at its current limit. A partner turning this wheel's way would show the
+// chair moving, and this wheel with it.
+static bool spinsAbout(float setpoint, float otherSetpoint, float other) {
+  if (setpoint == 0.0f || otherSetpoint == 0.0f || (otherSetpoint > 0.0f) == (setpoint > 0.0f)) return false;
+  float along = otherSetpoint > 0.0f ? other : -other;
+  return along >= 0.0f;
+}
+
+// A wheel held at its current limit: the wheel standing (WC_STALL_CREEP_COUNTS this tick
+// at most, either way) beside a partner that stands too or pivots the chair about it
+// (spinsAbout), driven toward its setpoint at WC_FAULT_STALL_PWM_STANDING or more, its
+// motor drawing WC_STALL_CURRENT or more the way it is driven (a braking current, a wheel
+// pushed faster than its duty turns it, is not). Not an encoder fault but the stall
 // timeout's: its PID runs within WC_STALL_HELD_OUTPUT (heldBounds), so that a current
 // that high means the wheel turns at most (duty - its current's share) / back-EMF a
 // rad/s: 0.5. A cut encoder's wheel that turns faster draws less, and one beside a
-// partner that counts (a chair crawling up a grade at its limit) is a stalled encoder.
+// partner that counts its way (a chair crawling up a grade at its limit) is a stalled
+// encoder.
 static bool heldAtLimit(int32_t delta, int32_t otherDelta, uint8_t appliedPwm, uint8_t appliedDir,
-                        float setpoint, uint16_t current) {
+                        float setpoint, uint16_t current, float otherSetpoint, float other) {
   float drawn = appliedDir == HIGH ? senseAmps(current) : -senseAmps(current);
   return delta >= -WC_STALL_CREEP_COUNTS && delta <= WC_STALL_CREEP_COUNTS &&
-         otherDelta >= -WC_STALL_CREEP_COUNTS && otherDelta <= WC_STALL_CREEP_COUNTS &&
+         ((otherDelta >= -WC_STALL_CREEP_COUNTS && otherDelta <= WC_STALL_CREEP_COUNTS) ||
+          spinsAbout(setpoint, otherSetpoint, other)) &&
          appliedPwm >= WC_FAULT_STALL_PWM_STANDING && setpoint != 0.0f &&
          (appliedDir == HIGH) == (setpoint > 0.0f) && drawn >= WC_STALL_CURRENT;
 }
@@ -1337,8 +1351,12 @@ static uint8_t checkWheel(int32_t delta, uint32_t illegal, uint8_t storm, uint8_
                        : turning ? WC_FAULT_STALL_TICKS_TURNING : WC_FAULT_STALL_TICKS;
   if (stallTicks >= stallLimit) return WHEEL_STALLED;
   float approach = setpoint > 0.0f ? measured - prevMeasured : prevMeasured - measured;
+  // a wheel driven the way it reads (its PID still drives it the way it went) agrees with
+  // its encoder: a reversed encoder reads against the way its wheel is driven
+  bool drivesItsWay = appliedPwm > 0 && (appliedDir == HIGH) == (measured > 0.0f);
   bool against = fabs(setpoint) >= WC_FAULT_REVERSE_SPEED && fabs(measured) >= WC_FAULT_REVERSE_SPEED &&
-                 (setpoint > 0.0f) != (measured > 0.0f) && approach < WC_FAULT_REVERSE_APPROACH;
+                 (setpoint > 0.0f) != (measured > 0.0f) && approach < WC_FAULT_REVERSE_APPROACH &&
+                 !drivesItsWay;
   reverseTicks = against ? reverseTicks + 1 : 0;
   if (reverseTicks >= WC_FAULT_REVERSE_TICKS) return WHEEL_REVERSED;
   // driving, a leaky count: one tick short of the gain (the speed-up wavers) does not start
@@ -1567,8 +1585,8 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
     bool strainR = straining(pwmR, dirR, setpointR, filtVelR);
     bool overrunL = overruns(pwmL, dirL, setpointL, filtVelL);
     bool overrunR = overruns(pwmR, dirR, setpointR, filtVelR);
-    stallHeldL = heldAtLimit(deltaL, deltaR, pwmL, dirL, setpointL, currentTickL);
-    stallHeldR = heldAtLimit(deltaR, deltaL, pwmR, dirR, setpointR, currentTickR);
+    stallHeldL = heldAtLimit(deltaL, deltaR, pwmL, dirL, setpointL, currentTickL, setpointR, filtVelR);
+    stallHeldR = heldAtLimit(deltaR, deltaL, pwmR, dirR, setpointR, currentTickR, setpointL, filtVelL);
     bool loadedL = standsByCurrent(pwmL, dirL, setpointL, currentTickL, setpointR, filtVelR);
     bool loadedR = standsByCurrent(pwmR, dirR, setpointR, currentTickR, setpointL, filtVelL);
     checkL = checkWheel(deltaL, illDeltaL, stormTickL, pwmL, dirL, setpointL, filtVelL, filtVelR,

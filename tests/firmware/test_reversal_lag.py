@@ -70,8 +70,13 @@ def test_turning_on_the_spot_from_motion_on_the_firmware(tmp_path) -> None:
     assert result.firmware_differences == 0
 
 
-def _check(measured: float, previous: float, setpoint: float = -2.0, ticks: int = 0) -> tuple[int, int]:
-    verdict, _, reverse_ticks, _, _ = check_wheel(40, 0, 0, 40, C.LOW, setpoint, measured, 0.0, 0, False,
+def _check(measured: float, previous: float, setpoint: float = -2.0, ticks: int = 0,
+           direction: int | None = None) -> tuple[int, int]:
+    """One wheel's check, the wheel driven at duty 40 toward its setpoint unless
+    ``direction`` says otherwise."""
+    if direction is None:
+        direction = C.HIGH if setpoint > 0.0 else C.LOW
+    verdict, _, reverse_ticks, _, _ = check_wheel(40, 0, 0, 40, direction, setpoint, measured, 0.0, 0, False,
                                                   0, ticks, 0, (0, 0.0, 0.0, 0), previous, False)
     return verdict, reverse_ticks
 
@@ -91,3 +96,22 @@ def test_a_wheel_slowing_toward_its_setpoint_is_not_counted() -> None:
     assert _check(1.5, 1.5, ticks=C.FAULT_REVERSE_TICKS - 1) == (WHEEL_REVERSED, C.FAULT_REVERSE_TICKS)
     # Approaching resets the count, as any tick that is not against does.
     assert _check(1.5, 1.5 + step, ticks=C.FAULT_REVERSE_TICKS - 1) == (WHEEL_OK, 0)
+
+
+def test_a_wheel_driven_the_way_it_reads_is_not_counted() -> None:
+    """A wheel whose duty still drives it the way it turns (its PID's integral from the
+    way it went, before the setpoint's reversal overcame it) reads what it is driven to
+    do: not counted, not suspect (its PID runs, and brakes it), however long it lasts. A
+    reversed encoder reads against the way its wheel is driven. This is what latched
+    ENC_REVERSED on a spin asked on a grade at the chair's limit
+    (tests/sim/test_thermal_plant.py's path climb): the wheel held its forward duty while
+    suspect, and so could not slow."""
+    for setpoint, measured, way in ((-2.0, 1.6, C.HIGH), (2.0, -1.6, C.LOW)):
+        assert _check(measured, measured, setpoint=setpoint, direction=way) == (WHEEL_OK, 0)
+        assert _check(measured, measured, setpoint=setpoint, direction=way,
+                      ticks=C.FAULT_REVERSE_TICKS - 1) == (WHEEL_OK, 0)
+        opposite = C.LOW if way == C.HIGH else C.HIGH
+        assert _check(measured, measured, setpoint=setpoint, direction=opposite) == (WHEEL_SUSPECT, 1)
+    verdict, *_ = check_wheel(40, 0, 0, 0, C.HIGH, -2.0, 1.6, 0.0, 0, False, 0, 0, 0, (0, 0.0, 0.0, 0),
+                              1.6, False)
+    assert verdict == WHEEL_SUSPECT             # at duty 0 it is driven no way: counted

@@ -46,25 +46,41 @@ def test_a_sense_past_30_amps_either_way_has_failed() -> None:
 
 
 def test_a_wheel_is_held_only_standing_driven_and_at_its_limit() -> None:
-    """Held: either wheel 2 counts this tick at most (the chair stands; a tyre against a
-    wall creeps), driven its setpoint's way at duty 42 or more, 11 A or more that way.
-    Each condition alone taken away is not held: a partner that moves (a chair crawling
-    up a grade at its limit, 14 counts a tick at 0.18 rad/s) leaves a count-less wheel a
-    stalled encoder, and a braking current (a wheel pushed downhill faster than its duty
-    turns it) says nothing of a stand."""
+    """Held: the wheel 2 counts this tick at most (a tyre against a wall creeps), beside
+    a partner that stands too or, in a spin (the setpoints of opposite signs), turns its
+    own way at any speed (the chair pivots about the held wheel: up a grade at its limit,
+    the pilot's spin back to its path); driven its setpoint's way at duty 42 or more, 11 A
+    or more that way. Each condition alone taken away is not held: a partner that moves
+    beside it on a straight run (a chair crawling up a grade at its limit, 14 counts a
+    tick at 0.18 rad/s), or that turns this wheel's way in a spin, leaves a count-less
+    wheel a stalled encoder, and a braking current (a wheel pushed downhill faster than
+    its duty turns it) says nothing of a stand."""
     amps = 512 + 100                                   # 12.2 A
-    assert held_at_limit(0, 0, 42, C.HIGH, 2.0, amps)
-    assert held_at_limit(0, 0, 42, C.LOW, -2.0, 512 - 100)            # backward: its current backward
-    assert not held_at_limit(0, 0, 42, C.HIGH, 2.0, 512 - 100)        # braking: pushed faster than it drives
-    assert not held_at_limit(0, 0, 42, C.LOW, -2.0, amps)             # ...backward
-    assert held_at_limit(2, -2, 42, C.HIGH, 2.0, amps)                # creeping, 2 counts a tick
-    assert not held_at_limit(3, 0, 42, C.HIGH, 2.0, amps)             # moving
-    assert not held_at_limit(0, 14, 42, C.HIGH, 2.0, amps)            # the partner moves
-    assert not held_at_limit(0, -3, 42, C.HIGH, 2.0, amps)            # ...either way
-    assert not held_at_limit(0, 0, 41, C.HIGH, 2.0, amps)             # below full torque
-    assert not held_at_limit(0, 0, 42, C.LOW, 2.0, amps)              # driven against its setpoint
-    assert not held_at_limit(0, 0, 42, C.HIGH, 0.0, amps)             # no setpoint
-    assert not held_at_limit(0, 0, 42, C.HIGH, 2.0, 512 + 90)         # 10.99 A
+
+    def straight(delta: int, other_delta: int, pwm: int, way: int, setpoint: float, current: int) -> bool:
+        return held_at_limit(delta, other_delta, pwm, way, setpoint, current, setpoint, 0.0)
+
+    assert straight(0, 0, 42, C.HIGH, 2.0, amps)
+    assert straight(0, 0, 42, C.LOW, -2.0, 512 - 100)                # backward: its current backward
+    assert not straight(0, 0, 42, C.HIGH, 2.0, 512 - 100)            # braking: pushed faster than it drives
+    assert not straight(0, 0, 42, C.LOW, -2.0, amps)                 # ...backward
+    assert straight(2, -2, 42, C.HIGH, 2.0, amps)                    # creeping, 2 counts a tick
+    assert not straight(3, 0, 42, C.HIGH, 2.0, amps)                 # moving
+    assert not straight(0, 14, 42, C.HIGH, 2.0, amps)                # the partner moves
+    assert not straight(0, -3, 42, C.HIGH, 2.0, amps)                # ...either way
+    assert not straight(0, 0, 41, C.HIGH, 2.0, amps)                 # below full torque
+    assert not straight(0, 0, 42, C.LOW, 2.0, amps)                  # driven against its setpoint
+    assert not straight(0, 0, 42, C.HIGH, 0.0, amps)                 # no setpoint
+    assert not straight(0, 0, 42, C.HIGH, 2.0, 512 + 90)             # 10.99 A
+    # a spin: the partner's setpoint the other way
+    assert held_at_limit(0, 90, 42, C.HIGH, 1.12, amps, -1.12, -1.14)      # it turns its own way
+    assert held_at_limit(0, -90, 42, C.LOW, -1.12, 512 - 100, 1.12, 1.14)  # ...mirrored
+    assert held_at_limit(0, 0, 42, C.HIGH, 1.12, amps, -1.12, 0.0)         # it stands
+    assert not held_at_limit(0, 90, 42, C.HIGH, 1.12, amps, -1.12, 1.14)   # it turns this wheel's way
+    assert not held_at_limit(0, 90, 42, C.HIGH, 1.12, amps, 1.12, 1.14)    # no spin: a straight run
+    assert not held_at_limit(0, 90, 42, C.HIGH, 1.12, amps, 0.0, -1.14)    # the partner has no setpoint
+    assert not held_at_limit(3, 90, 42, C.HIGH, 1.12, amps, -1.12, -1.14)  # this wheel moves
+    assert not held_at_limit(0, 90, 42, C.HIGH, 1.12, 512 + 90, -1.12, -1.14)  # 10.99 A
 
 
 def test_a_held_wheel_pushes_at_full_torque_and_no_harder() -> None:
@@ -116,6 +132,31 @@ def test_against_a_wall_both_wheels_push_at_their_limit_without_a_fault() -> Non
     pushing = [(t, a) for t, a in tick_states(rec) if t > 1.15]
     assert all(a["faultFlags"] == 0 and a["pwmL"] == a["pwmR"] == HELD_DUTY for _, a in pushing)
     clock = [a["stallTime"] for _, a in pushing]
+    assert clock[0] > 0.0 and np.all(np.diff(clock) == pytest.approx(0.05, abs=0.002))
+
+
+@pytest.mark.simavr
+def test_a_spin_about_a_wheel_at_its_limit_is_held_not_a_stalled_encoder() -> None:
+    """A spin asked (right +1, left -1 rad/s): from 1.0 s the right encoder stands, its
+    motor at 12.5 A and its integral poked at 0.97 s to full torque (it climbed at its
+    limit), while the left turns on its own way at 1 rad/s (the chair pivots about the
+    right wheel, as a spin on a grade at the chair's limit does): no fault, the right
+    wheel held at duty 42 within a second, and from then on the stall clock running a
+    tick at a time. Red without the spin's case in the held rule: ``ENC_STALL_R``."""
+    duration = 3.0
+    writes = [(0.02, b"rp0,lp0,\n"), *every(b"rp01.00,ln01.00\n", 0.2, duration - 0.05)]
+    encoders = {"left": turning(duration, True, -1.0),
+                "right": stand_still(turning(duration, False, 1.0), 1.0, duration)}
+    currents = [(0.94, "left", current_millivolts(-2.0)), (0.94, "right", current_millivolts(12.5))]
+    rec = recorded(Trace(duration=duration, serial=sorted(writes), encoders=encoders, currents=currents,
+                         pokes=[(0.97, {"integralR": 2.5})]))
+    ticks = tick_states(rec)
+    assert board_lines(rec, b"EVT:") == [b"EVT:PARAMS_DEFAULT,blank"]
+    assert all(a["faultFlags"] == 0 for _, a in ticks)
+    held = [(t, a) for t, a in ticks if t > 1.1 and a["pwmR"] == HELD_DUTY]
+    assert held and held[0][0] < 2.0
+    assert all(a["pwmR"] == HELD_DUTY for t, a in ticks if t > held[0][0])
+    clock = [a["stallTime"] for t, a in ticks if t > held[0][0]]
     assert clock[0] > 0.0 and np.all(np.diff(clock) == pytest.approx(0.05, abs=0.002))
 
 

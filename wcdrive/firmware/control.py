@@ -193,8 +193,12 @@ def check_wheel(delta: int, illegal: int, storm: int, applied_pwm: int, applied_
     if stall_ticks >= limit:
         return WHEEL_STALLED, stall_ticks, reverse_ticks, runaway_ticks, effort
     approach = sub(measured, prev_measured) if setpoint > 0.0 else sub(prev_measured, measured)
+    # a wheel driven the way it reads (its PID still drives it the way it went) agrees
+    # with its encoder: a reversed encoder reads against the way its wheel is driven
+    drives_its_way = applied_pwm > 0 and (applied_dir == C.HIGH) == (measured > 0.0)
     against = (abs(setpoint) >= C.FAULT_REVERSE_SPEED and abs(measured) >= C.FAULT_REVERSE_SPEED
-               and (setpoint > 0.0) != (measured > 0.0) and approach < C.FAULT_REVERSE_APPROACH)
+               and (setpoint > 0.0) != (measured > 0.0) and approach < C.FAULT_REVERSE_APPROACH
+               and not drives_its_way)
     reverse_ticks = (reverse_ticks + 1) & 0xFF if against else 0
     if reverse_ticks >= C.FAULT_REVERSE_TICKS:
         return WHEEL_REVERSED, stall_ticks, reverse_ticks, runaway_ticks, effort
@@ -243,8 +247,10 @@ def _check_faults(s: FirmwareState, delta_l: int, delta_r: int, ill_l: int, ill_
     strain_r = straining(s.pwmR, s.dirR, s.setpointR, s.filtVelR)
     overrun_l = overruns(s.pwmL, s.dirL, s.setpointL, s.filtVelL)
     overrun_r = overruns(s.pwmR, s.dirR, s.setpointR, s.filtVelR)
-    held_l = held_at_limit(delta_l, delta_r, s.pwmL, s.dirL, s.setpointL, s.currentTickL)
-    held_r = held_at_limit(delta_r, delta_l, s.pwmR, s.dirR, s.setpointR, s.currentTickR)
+    held_l = held_at_limit(delta_l, delta_r, s.pwmL, s.dirL, s.setpointL, s.currentTickL, s.setpointR,
+                           s.filtVelR)
+    held_r = held_at_limit(delta_r, delta_l, s.pwmR, s.dirR, s.setpointR, s.currentTickR, s.setpointL,
+                           s.filtVelL)
     loaded_l = stands_by_current(s.pwmL, s.dirL, s.setpointL, s.currentTickL, s.setpointR, s.filtVelR)
     loaded_r = stands_by_current(s.pwmR, s.dirR, s.setpointR, s.currentTickR, s.setpointL, s.filtVelL)
     check_l, s.stallTicksL, s.reverseTicksL, s.runawayTicksL, effort_l = check_wheel(

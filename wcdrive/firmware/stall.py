@@ -7,8 +7,9 @@ PIN_CURRENT_R (A1, A2): CURRENT_ZERO_COUNTS at 0 A, CURRENT_AMPS_PER_COUNT amps 
 above it for a current that drives the wheel forward (DIR HIGH). The ADC interrupt
 converts both after a tick has begun; the next tick reads them (``currentTickL``/``R``).
 
-A wheel held at its current limit (``held_at_limit``: the chair standing, either wheel
-STALL_CREEP_COUNTS at most, the wheel driven toward its setpoint at
+A wheel held at its current limit (``held_at_limit``: the wheel standing, STALL_CREEP_COUNTS
+at most, beside a partner that stands too or pivots the chair about it in a spin
+(``spins_about``), the wheel driven toward its setpoint at
 FAULT_STALL_PWM_STANDING or more, its motor drawing STALL_CURRENT or more the way it is
 driven) is not an encoder fault: ``check_wheel`` does not count it toward ENC_STALL or
 DRIVER_DEAD, nor its effort toward MOTOR_L/R, and its PID runs within
@@ -40,7 +41,7 @@ from wcdrive.avr.f32 import from_int, mul, neg
 from wcdrive.firmware import constants as C
 
 __all__ = ["FAULT_CURRENT_SENSE", "current_sense_fault", "held_at_limit", "held_bounds", "sense_amps",
-           "stands_by_current"]
+           "spins_about", "stands_by_current"]
 
 FAULT_CURRENT_SENSE = 0x4000
 
@@ -61,21 +62,38 @@ def current_sense_fault(count_l: int, count_r: int) -> int:
 
 
 def held_at_limit(delta: int, other_delta: int, applied_pwm: int, applied_dir: int, setpoint: float,
-                  current: int) -> bool:
-    """``heldAtLimit``: the chair standing (either wheel STALL_CREEP_COUNTS this tick at
-    most, either way: ``delta``, ``other_delta``), the wheel driven toward its setpoint at
-    FAULT_STALL_PWM_STANDING or more, its motor drawing STALL_CURRENT or more the way it
-    is driven (a braking current, a wheel pushed faster than its duty turns it, is not:
-    it says nothing of a stand). Its PID
-    then runs within STALL_HELD_OUTPUT (``held_bounds``), so that a current that high
-    bounds how fast it turns; a partner that counts (a chair crawling up a grade at its
-    limit) leaves a count-less wheel a stalled encoder."""
+                  current: int, other_setpoint: float, other: float) -> bool:
+    """``heldAtLimit``: the wheel standing (STALL_CREEP_COUNTS this tick at most, either
+    way: ``delta``), driven toward its setpoint at FAULT_STALL_PWM_STANDING or more, its
+    motor drawing STALL_CURRENT or more the way it is driven (a braking current, a wheel
+    pushed faster than its duty turns it, is not: it says nothing of a stand), beside a
+    partner that stands too (``other_delta`` within STALL_CREEP_COUNTS) or that pivots
+    the chair about it (``spins_about``). Its PID then runs within STALL_HELD_OUTPUT
+    (``held_bounds``), so that a current that high bounds how fast it turns; a partner
+    that counts its way beside it, the same way (a chair crawling up a grade at its
+    limit), leaves a count-less wheel a stalled encoder."""
     amps = sense_amps(current)
     drawn = amps if applied_dir == C.HIGH else -amps
-    return (abs(delta) <= C.STALL_CREEP_COUNTS and abs(other_delta) <= C.STALL_CREEP_COUNTS
+    return (abs(delta) <= C.STALL_CREEP_COUNTS
+            and (abs(other_delta) <= C.STALL_CREEP_COUNTS or spins_about(setpoint, other_setpoint, other))
             and applied_pwm >= C.FAULT_STALL_PWM_STANDING
             and setpoint != 0.0 and (applied_dir == C.HIGH) == (setpoint > 0.0)
             and drawn >= C.STALL_CURRENT)
+
+
+def spins_about(setpoint: float, other_setpoint: float, other: float) -> bool:
+    """``spinsAbout``: a spin asked (the partner's setpoint the other way from this
+    wheel's) and the partner standing or turning its own setpoint's way (``other``, its
+    measured speed): the chair pivots about this wheel, as a spin on a grade does when
+    the wheel that would turn the chair uphill stands at its current limit (the grade
+    turns a chair whose weight is ahead of its drive axle downhill). A partner turning
+    this wheel's way would show the chair moving, and this wheel with it. A cut encoder's
+    wheel drawing that current turns at most 0.5 rad/s (``held_bounds``), until the stall
+    timeout."""
+    if setpoint == 0.0 or other_setpoint == 0.0 or (other_setpoint > 0.0) == (setpoint > 0.0):
+        return False
+    along = other if other_setpoint > 0.0 else neg(other)
+    return along >= 0.0
 
 
 def held_bounds(lo: float, hi: float) -> tuple[float, float]:

@@ -23,8 +23,8 @@
  *   - with a brake fitted (brakeFitted), a tick that parks, finds the brake other than
  *     released and settled (its phase, wcdrive.firmware.brake) or reads its driver's
  *     status LOW;
- *   - both wheels within STALL_CREEP_COUNTS and a motor's current sense at STALL_CURRENT
- *     or more (a wheel may be held at its current limit, the stall clock may run), or a
+ *   - a wheel within STALL_CREEP_COUNTS whose motor's current sense reads STALL_CURRENT
+ *     or more (it may be held at its current limit, the stall clock may run), or a
  *     sense past CURRENT_SENSE_MAX (failed);
  *   - a mode that MODE_NAMES does not name.
  * Each binary32 operation is one IEEE double operation rounded once to binary32, as
@@ -329,8 +329,11 @@ static int check_wheel(int64_t delta, int64_t illegal, int64_t storm, int64_t pw
     if (*stall >= limit)
         return WHEEL_FAULT;
     double approach = setpoint > 0.0 ? f_sub(measured, prev_measured) : f_sub(prev_measured, measured);
+    /* a wheel driven the way it reads agrees with its encoder */
+    int drives_its_way = pwm > 0 && ((dir == K.high) == (measured > 0.0));
     int against = fabs(setpoint) >= K.reverse_speed && fabs(measured) >= K.reverse_speed
-                  && (setpoint > 0.0) != (measured > 0.0) && approach < K.reverse_approach;
+                  && (setpoint > 0.0) != (measured > 0.0) && approach < K.reverse_approach
+                  && !drives_its_way;
     *reverse = against ? ((*reverse + 1) & 0xFF) : 0;
     if (*reverse >= K.reverse_ticks)
         return WHEEL_FAULT;
@@ -571,12 +574,13 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
     int64_t delta_r = i32(I(encTickR) - I(prevEncR));
     SETI(prevEncL, I(encTickL));
     SETI(prevEncR, I(encTickR));
-    /* sense_amps: both wheels within STALL_CREEP_COUNTS and a motor at STALL_CURRENT or
-     * more (a wheel may be held at its limit), or a failed sense, goes to the Python tick */
+    /* sense_amps: a wheel within STALL_CREEP_COUNTS whose motor is at STALL_CURRENT or
+     * more (it may be held at its limit), or a failed sense, goes to the Python tick */
     double amps_l = fabs(f_mul(f_from_int(I(currentTickL) - K.current_zero_counts), K.current_amps_per_count));
     double amps_r = fabs(f_mul(f_from_int(I(currentTickR) - K.current_zero_counts), K.current_amps_per_count));
-    int creeping = llabs(delta_l) <= K.stall_creep_counts && llabs(delta_r) <= K.stall_creep_counts;
-    if ((creeping && !(amps_l < K.stall_current && amps_r < K.stall_current))
+    int creeping_l = llabs(delta_l) <= K.stall_creep_counts && !(amps_l < K.stall_current);
+    int creeping_r = llabs(delta_r) <= K.stall_creep_counts && !(amps_r < K.stall_current);
+    if (creeping_l || creeping_r
         || !(amps_l <= K.current_sense_max) || !(amps_r <= K.current_sense_max))
         Py_RETURN_NONE;
 
