@@ -15,9 +15,11 @@ from __future__ import annotations
 
 import pytest
 
+from tests.support.recordings import board_lines, every, recorded, tick_states, turning
 from wcdrive.boards.port_loop import F_CPU, PortLoop
 from wcdrive.firmware import constants as C
-from wcdrive.firmware.control import WHEEL_OK, WHEEL_REVERSED, WHEEL_SUSPECT, check_wheel
+from wcdrive.firmware.control import FAULT_REVERSED_L, WHEEL_OK, WHEEL_REVERSED, WHEEL_SUSPECT, check_wheel
+from wcdrive.hil.traces import Trace
 from wcdrive.plant import Gyro, Plant
 from wcdrive.sim import runner
 from wcdrive.sim.scenario import Scenario, load
@@ -115,3 +117,31 @@ def test_a_wheel_driven_the_way_it_reads_is_not_counted() -> None:
     verdict, *_ = check_wheel(40, 0, 0, 0, C.HIGH, -2.0, 1.6, 0.0, 0, False, 0, 0, 0, (0, 0.0, 0.0, 0),
                               1.6, False)
     assert verdict == WHEEL_SUSPECT             # at duty 0 it is driven no way: counted
+
+
+@pytest.mark.simavr
+def test_a_reversing_wheel_still_driven_forward_counts_only_once_driven_back() -> None:
+    """Lock step: both wheels at 2 rad/s, then at 1.0 s the left's target reverses
+    (``rp02.00,ln02.00``) while its encoder reads on forward at 2 rad/s, its integral
+    poked at 0.98 s to drive it forward on (as a climb leaves it): while its duty drives
+    it forward its reverse count stays 0 past its setpoint's -1 rad/s, and it counts
+    from the first tick its duty drives it back, ``ENC_REVERSED_L`` three ticks on (an
+    encoder that reads forward while its wheel is driven back is a reversed one). Red
+    without the exemption: the count runs while the duty is forward, and the suspect
+    tick freezes it there."""
+    duration = 2.5
+    writes = [(0.02, b"rp0,lp0,\n"), *every(b"rp02.00,lp02.00\n", 0.2, 1.0),
+              *every(b"rp02.00,ln02.00\n", 1.0, duration - 0.05)]
+    encoders = {side: turning(duration, side == "left", 2.0) for side in ("left", "right")}
+    rec = recorded(Trace(duration=duration, serial=sorted(writes), encoders=encoders,
+                         pokes=[(0.98, {"integralL": 6.0})]))
+    ticks = tick_states(rec)
+    forward = [a for t, a in ticks if a["setpointL"] <= -C.FAULT_REVERSE_SPEED and a["faultFlags"] == 0
+               and a["dirL"] == C.HIGH and a["pwmL"] > 0]
+    assert len(forward) >= C.FAULT_REVERSE_TICKS
+    assert all(a["reverseTicksL"] == 0 for a in forward)
+    back = next(i for i, (t, a) in enumerate(ticks) if a["setpointL"] < 0.0 and a["dirL"] == C.LOW
+                and a["pwmL"] > 0)
+    assert [a["reverseTicksL"] for _, a in ticks[back + 1:back + 3]] == [1, 2]
+    assert ticks[back + 3][1]["faultFlags"] == FAULT_REVERSED_L
+    assert board_lines(rec, b"EVT:FAULT") == [b"EVT:FAULT,ENC_REVERSED_L"]
