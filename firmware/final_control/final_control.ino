@@ -233,12 +233,14 @@ float driveDecel = WC_DRIVE_ACCEL_MAX;      // m/s^2: a wheel slowing down (with
 float turnSpeed = WC_TURN_SPEED_MAX;        // rad/s: top turn rate
 float turnAccel = WC_TURN_ACCEL_MAX;        // rad/s^2: how fast the turn rate may change
 float turnAtSpeed = WC_TURN_AT_SPEED;       // the share of turnSpeed left at the top speed
+float tremorDamping = WC_TREMOR_DAMPING;    // in PPM mode, the share of the last goal a tick keeps
+float dampedL = 0.0f, dampedR = 0.0f;       // the stick's targets through the damping (dampedTargets)
 // The drive profiles (docs/safety.md, "Drive profiles"): WC_PROFILE_COUNT rows of the
-// seven drive limits above, in their parameter table order; the row of the profile in
+// eight drive limits above, in their parameter table order; the row of the profile in
 // force is the limits above, which set: changes together with it. In .noinit: setup()
 // fills it from the presets (presetProfiles) before loadParams, so reset's clearing
 // loop need not.
-#define PROFILE_FLOATS 7
+#define PROFILE_FLOATS 8
 uint8_t profile = WC_PROFILE;               // runtime parameter profile: the row in force
 float profileTable[WC_PROFILE_COUNT][PROFILE_FLOATS] __attribute__((section(".noinit")));
 static const float PROFILE_PRESETS[WC_PROFILE_COUNT][PROFILE_FLOATS] PROGMEM = WC_PROFILE_PRESETS;
@@ -762,6 +764,24 @@ static float rampToward(float current, float target, float maxChange) {
   float diff = target - current;
   if (fabs(diff) <= maxChange) return target;
   return current + (diff > 0.0f ? maxChange : -maxChange);
+}
+
+// The tremor damping (docs/safety.md, "Drive profiles"): in PPM mode (the joystick) with
+// tremorDamping set, each goal moves (1 - tremorDamping) of the way from where it was to
+// its target, a first-order low-pass of the stick at the tick's 20 Hz that takes a hand's
+// tremor out of the motion; otherwise, and whenever both targets are 0 (a stop is never
+// damped), the goals are the targets. The host's paths (WHEEL, CMDVEL) are not a hand's.
+static void dampedTargets(float& goalL, float& goalR) {
+  if (mode != WC_MODE_PPM || tremorDamping == 0.0f || (targetL == 0.0f && targetR == 0.0f)) {
+    dampedL = targetL;
+    dampedR = targetR;
+  } else {
+    float gain = 1.0f - tremorDamping;
+    dampedL = dampedL + gain * (targetL - dampedL);
+    dampedR = dampedR + gain * (targetR - dampedR);
+  }
+  goalL = dampedL;
+  goalR = dampedR;
 }
 
 // The wheel goals within the drive limits: the chair's speed (the wheels' mean at the
@@ -1763,7 +1783,8 @@ extern "C" __attribute__((noinline)) void controlTick(uint32_t now) {
     }
   }
 
-  float goalL = targetL, goalR = targetR;
+  float goalL, goalR;
+  dampedTargets(goalL, goalR);
   driveCaps(goalL, goalR);
   float share = inhibitShare();
   float hotShare = thermalShare();
@@ -1986,13 +2007,13 @@ static const char* const REASONS[] = {
 
 // Runtime parameters: name, variable, range. The first PARAM_FLOATS are floats;
 // watchdog_ms, feedback_form and brake_fitted (the last three) are integers.
-#define PARAM_COUNT 21
-#define PARAM_FLOATS 17
+#define PARAM_COUNT 22
+#define PARAM_FLOATS 18
 #define PARAM_DRIVE_FIRST 10   // fwd_speed: the first of a profile's PROFILE_FLOATS limits
-#define PARAM_WATCHDOG 17
-#define PARAM_FEEDBACK_FORM 18
-#define PARAM_BRAKE_FITTED 19
-#define PARAM_PROFILE 20
+#define PARAM_WATCHDOG 18
+#define PARAM_FEEDBACK_FORM 19
+#define PARAM_BRAKE_FITTED 20
+#define PARAM_PROFILE 21
 static const char P_KP_L[] PROGMEM = "kp_l";
 static const char P_KI_L[] PROGMEM = "ki_l";
 static const char P_KD_L[] PROGMEM = "kd_l";
@@ -2010,6 +2031,7 @@ static const char P_DRIVE_DECEL[] PROGMEM = "drive_decel";
 static const char P_TURN_SPEED[] PROGMEM = "turn_speed";
 static const char P_TURN_ACCEL[] PROGMEM = "turn_accel";
 static const char P_TURN_AT_SPEED[] PROGMEM = "turn_at_speed";
+static const char P_TREMOR_DAMPING[] PROGMEM = "tremor_damping";
 static const char P_WATCHDOG[] PROGMEM = "watchdog_ms";
 static const char P_FEEDBACK_FORM[] PROGMEM = "feedback_form";
 static const char P_BRAKE_FITTED[] PROGMEM = "brake_fitted";
@@ -2017,21 +2039,21 @@ static const char P_PROFILE[] PROGMEM = "profile";
 static const char* const PARAM_NAMES[PARAM_COUNT] = {
   P_KP_L, P_KI_L, P_KD_L, P_KP_R, P_KI_R, P_KD_R, P_MAX_WHEEL, P_MAX_ACCEL, P_ESTOP_DECEL, P_STALL_TIMEOUT,
   P_FWD_SPEED, P_REV_SPEED, P_DRIVE_ACCEL, P_DRIVE_DECEL, P_TURN_SPEED, P_TURN_ACCEL, P_TURN_AT_SPEED,
-  P_WATCHDOG, P_FEEDBACK_FORM, P_BRAKE_FITTED, P_PROFILE,
+  P_TREMOR_DAMPING, P_WATCHDOG, P_FEEDBACK_FORM, P_BRAKE_FITTED, P_PROFILE,
 };
 static float* const PARAM_VARS[PARAM_FLOATS] = {
   &kpL, &kiL, &kdL, &kpR, &kiR, &kdR, &maxWheel, &maxAccel, &estopDecel, &stallTimeout,
-  &fwdSpeed, &revSpeed, &driveAccel, &driveDecel, &turnSpeed, &turnAccel, &turnAtSpeed,
+  &fwdSpeed, &revSpeed, &driveAccel, &driveDecel, &turnSpeed, &turnAccel, &turnAtSpeed, &tremorDamping,
 };
 static const float PARAM_MIN[PARAM_FLOATS] = {
   WC_GAIN_P_MIN, WC_GAIN_I_MIN, 0.0f, WC_GAIN_P_MIN, WC_GAIN_I_MIN, 0.0f, WC_MAX_WHEEL_MIN, WC_ACCEL_MIN,
   WC_DECEL_MIN, WC_STALL_TIMEOUT_MIN, WC_DRIVE_SPEED_MIN, WC_DRIVE_SPEED_MIN, WC_DRIVE_ACCEL_MIN, WC_DRIVE_ACCEL_MIN,
-  WC_TURN_SPEED_MIN, WC_TURN_ACCEL_MIN, 0.0f,
+  WC_TURN_SPEED_MIN, WC_TURN_ACCEL_MIN, 0.0f, 0.0f,
 };
 static const float PARAM_MAX[PARAM_FLOATS] = {
   WC_GAIN_P_MAX, WC_GAIN_I_MAX, WC_GAIN_D_MAX, WC_GAIN_P_MAX, WC_GAIN_I_MAX, WC_GAIN_D_MAX,
   WC_MAX_WHEEL_SPEED, WC_ACCEL_MAX, WC_DECEL_MAX, WC_STALL_TIMEOUT_MAX, WC_DRIVE_SPEED_MAX, WC_DRIVE_SPEED_MAX, WC_DRIVE_ACCEL_MAX,
-  WC_DRIVE_ACCEL_MAX, WC_TURN_SPEED_MAX, WC_TURN_ACCEL_MAX, 1.0f,
+  WC_DRIVE_ACCEL_MAX, WC_TURN_SPEED_MAX, WC_TURN_ACCEL_MAX, 1.0f, WC_TREMOR_DAMPING_MAX,
 };
 
 // The drive profiles' table back to its presets.
@@ -2398,8 +2420,8 @@ static ParseResult parseSet(uint8_t& data) {
 // WC_EEPROM_PARAMS_ADDR: the layout version (WC_EEPROM_LAYOUT), the 10 float parameters
 // before the drive limits in table order (binary32, little-endian), the drive profiles'
 // table (WC_PROFILE_COUNT rows of PROFILE_FLOATS), watchdog_ms (uint16), feedback_form,
-// brake_fitted and profile (uint8 each), then the CRC-16/XMODEM of those 158 bytes
-// (uint16, little-endian): 160 bytes.
+// brake_fitted and profile (uint8 each), then the CRC-16/XMODEM of those 174 bytes
+// (uint16, little-endian): 176 bytes.
 // ---------------------------------------------------------------------------
 #define EE_TABLE_AT (1 + 4 * PARAM_DRIVE_FIRST)
 #define EE_WATCHDOG_AT (EE_TABLE_AT + (int)sizeof(profileTable))

@@ -197,14 +197,16 @@
 #define WC_TURN_ACCEL_MIN 0.5f     // rad/s^2: turn_accel in [TURN_ACCEL_MIN, TURN_ACCEL_MAX]
 #define WC_TURN_ACCEL_MAX 40.0f    // rad/s^2: the default of turn_accel, how fast the turn rate may change (the wheels' difference, WHEELBASE / 2 / WHEEL_RADIUS a rad/s^2 each: 74.8 rad/s^2 at 40, past ACCEL_MAX)
 #define WC_TURN_AT_SPEED 1.0f      // the default of turn_at_speed in [0, 1]: the share of turn_speed left at the top speed (the turn rate falls linearly with the speed toward it; DX's "Turning @ Full Speed")
-#define WC_PROFILE_COUNT 4         // drive profiles: rows of the seven drive limits (the [[profile]] presets below), one in force (the parameter profile); set: of a drive limit changes the row in force, save stores every row
+#define WC_TREMOR_DAMPING 0.0f     // the default of tremor_damping in [0, TREMOR_DAMPING_MAX]: the share of the last damped goal each tick keeps, in PPM mode (the joystick), toward the stick's targets: goal += (1 - tremor_damping) x (target - goal), a first-order low-pass of the stick at 20 Hz (0: off, the targets as they are; a stick at neutral, both targets 0, is never damped: a stop is not delayed). DX's and R-net's tremor damping
+#define WC_TREMOR_DAMPING_MAX 0.9f // tremor_damping at most: a 0.47 s time constant, a 5 Hz tremor sampled at 20 Hz down to 7 % of itself
+#define WC_PROFILE_COUNT 4         // drive profiles: rows of the eight drive limits (the [[profile]] presets below), one in force (the parameter profile); set: of a drive limit changes the row in force, save stores every row
 #define WC_PROFILE 0               // the default of profile in [0, PROFILE_COUNT - 1]: the profile in force at boot without a saved one, and after defaults
 #define WC_PROFILE_MAX 3           // profile in [0, PROFILE_MAX]: PROFILE_COUNT - 1
 
 // ---- Parameters in EEPROM (save / defaults; protocol/PROTOCOL.md) ----------
 #define WC_EEPROM_SIZE 4096        // bytes of the ATmega2560's EEPROM, erased to 0xFF
 #define WC_EEPROM_PARAMS_ADDR 0    // EEPROM address of the parameter block
-#define WC_EEPROM_LAYOUT 6         // the block's first byte: its layout version (a blank EEPROM holds 0xFF; 1 was the block before feedback_form, 2 before brake_fitted, 3 before the drive limits, 4 before the table of drive profiles, 5 before stall_timeout)
+#define WC_EEPROM_LAYOUT 7         // the block's first byte: its layout version (a blank EEPROM holds 0xFF; 1 was the block before feedback_form, 2 before brake_fitted, 3 before the drive limits, 4 before the table of drive profiles, 5 before stall_timeout, 6 before tremor_damping)
 
 // ---- Ranges of the runtime parameters (get:/set:; the defaults are the constants above) ---
 #define WC_GAIN_P_MIN 1.0f         // kp_l, kp_r in [GAIN_P_MIN, GAIN_P_MAX] (tests/firmware/test_gain_safety.py: pure integral control oscillates)
@@ -223,12 +225,12 @@
 #define WC_FEEDBACK_FORM_MAX 1     // feedback_form in [0, FEEDBACK_FORM_MAX]; 1 appends ,r[pn]<|vel r|>,l[pn]<|vel l|> to each unframed feedback line (ros2_control hardware interfaces)
 #define WC_BRAKE_FITTED_MAX 1      // brake_fitted in [0, BRAKE_FITTED_MAX]
 
-// ---- The drive profiles' presets ([[profile]]), rows of fwd_speed, rev_speed, drive_accel, drive_decel, turn_speed, turn_accel, turn_at_speed ---
+// ---- The drive profiles' presets ([[profile]]), rows of fwd_speed, rev_speed, drive_accel, drive_decel, turn_speed, turn_accel, turn_at_speed, tremor_damping ---
 #define WC_PROFILE_PRESETS { \
-  { 2.69f, 2.69f, 3.0f, 3.0f, 9.5f, 40.0f, 1.0f },  /* 0: open */ \
-  { 1.0f, 0.5f, 0.5f, 0.6f, 1.0f, 2.0f, 0.5f },  /* 1: indoor */ \
-  { 2.0f, 0.8f, 0.7f, 0.7f, 1.5f, 3.0f, 0.4f },  /* 2: outdoor */ \
-  { 0.6f, 0.4f, 0.4f, 0.5f, 0.8f, 1.5f, 0.8f },  /* 3: attendant */ \
+  { 2.69f, 2.69f, 3.0f, 3.0f, 9.5f, 40.0f, 1.0f, 0.0f },  /* 0: open */ \
+  { 1.0f, 0.5f, 0.5f, 0.6f, 1.0f, 2.0f, 0.5f, 0.0f },  /* 1: indoor */ \
+  { 2.0f, 0.8f, 0.7f, 0.7f, 1.5f, 3.0f, 0.4f, 0.0f },  /* 2: outdoor */ \
+  { 0.6f, 0.4f, 0.4f, 0.5f, 0.8f, 1.5f, 0.8f, 0.0f },  /* 3: attendant */ \
 }
 
 #endif

@@ -20,7 +20,8 @@ from wcdrive.protocol.codec import ExtendedTelemetry, frame, parse_line
 from wcdrive.protocol.spec import PROFILE_PARAMETERS, PROFILES
 
 R = 0.1524
-FIELDS = ("fwdSpeed", "revSpeed", "driveAccel", "driveDecel", "turnSpeed", "turnAccel", "turnAtSpeed")
+FIELDS = ("fwdSpeed", "revSpeed", "driveAccel", "driveDecel", "turnSpeed", "turnAccel", "turnAtSpeed",
+          "tremorDamping")
 
 
 def _limits(fw: Firmware) -> tuple[float, ...]:
@@ -33,11 +34,11 @@ def test_the_presets_are_the_specs_and_profile_0_limits_nothing() -> None:
     assert [p.name for p in PROFILES] == ["open", "indoor", "outdoor", "attendant"]
     assert len(PROFILES) == C.PROFILE_COUNT == C.PROFILE_MAX + 1
     assert PROFILE_PARAMETERS == ("fwd_speed", "rev_speed", "drive_accel", "drive_decel",
-                                  "turn_speed", "turn_accel", "turn_at_speed")
+                                  "turn_speed", "turn_accel", "turn_at_speed", "tremor_damping")
     fw = Firmware()
     assert fw.state.profile == 0
-    assert _limits(fw) == (2.69, 2.69, 3.0, 3.0, 9.5, 40.0, 1.0)
-    assert PROFILES[1].values == (1.0, 0.5, 0.5, 0.6, 1.0, 2.0, 0.5)
+    assert _limits(fw) == (2.69, 2.69, 3.0, 3.0, 9.5, 40.0, 1.0, 0.0)
+    assert PROFILES[1].values == (1.0, 0.5, 0.5, 0.6, 1.0, 2.0, 0.5, 0.0)
 
 
 def _say(fw: Firmware, command: bytes) -> bytes:
@@ -52,12 +53,12 @@ def _say(fw: Firmware, command: bytes) -> bytes:
 def test_selecting_editing_and_restoring_profiles_on_the_port() -> None:
     fw = Firmware()
     assert _say(fw, b"set:profile=1") == b"PAR:profile,1\r\n"
-    assert _limits(fw) == (1.0, 0.5, 0.5, 0.6, 1.0, 2.0, 0.5)
+    assert _limits(fw) == (1.0, 0.5, 0.5, 0.6, 1.0, 2.0, 0.5, 0.0)
     _say(fw, b"set:fwd_speed=1.25")                       # the row in force changes
     _say(fw, b"set:profile=3")
-    assert _limits(fw) == (0.6, 0.4, 0.4, 0.5, 0.8, 1.5, 0.8)
+    assert _limits(fw) == (0.6, 0.4, 0.4, 0.5, 0.8, 1.5, 0.8, 0.0)
     _say(fw, b"set:profile=1")                            # selected again: the edit is there
-    assert _limits(fw)[0] == 1.25 and _limits(fw)[1:] == (0.5, 0.5, 0.6, 1.0, 2.0, 0.5)
+    assert _limits(fw)[0] == 1.25 and _limits(fw)[1:] == (0.5, 0.5, 0.6, 1.0, 2.0, 0.5, 0.0)
     assert _say(fw, b"set:profile=4") == b"ERR:range\r\n"
     assert _say(fw, b"set:profile=x") == b"ERR:number\r\n"
     assert fw.state.profile == 1
@@ -73,8 +74,8 @@ def test_a_saved_table_and_profile_come_back_at_boot_on_the_port() -> None:
     the profile in force both come back; a row value out of its parameter's range
     makes the block ``range``."""
     image = block_image({"profile": 2, "fwdSpeed": 1.5})
-    # docs/safety.md: layout 6, 160 bytes
-    assert C.EEPROM_LAYOUT == 6 and BLOCK_BYTES == 160 and check(image[:BLOCK_BYTES]) is None
+    # docs/safety.md: layout 7, 176 bytes
+    assert C.EEPROM_LAYOUT == 7 and BLOCK_BYTES == 176 and check(image[:BLOCK_BYTES]) is None
     fw = Firmware(eeprom=bytearray(image))
     assert fw.boot_output().endswith(b"EVT:PARAMS_LOADED\r\n")
     assert fw.state.profile == 2 and fw.state.fwdSpeed == 1.5
@@ -82,7 +83,7 @@ def test_a_saved_table_and_profile_come_back_at_boot_on_the_port() -> None:
     while fw.state.eeBusy:
         fw.eeprom_ready()
     again = Firmware(eeprom=fw.state.eeprom)
-    assert again.state.profile == 3 and _limits(again) == (0.6, 0.4, 0.4, 0.5, 0.8, 1.5, 0.8)
+    assert again.state.profile == 3 and _limits(again) == (0.6, 0.4, 0.4, 0.5, 0.8, 1.5, 0.8, 0.0)
     again.feed(b"set:profile=1\n")
     assert again.state.turnSpeed == 0.5
     again.feed(b"set:profile=2\n")

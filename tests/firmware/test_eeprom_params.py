@@ -55,7 +55,7 @@ def _event(boot: bytes) -> str:
 
 def test_saved_parameters_survive_a_reset() -> None:
     """hello, set every kind of parameter (a drive profile and a limit of its row among
-    them), save, wait for the writes (160 bytes x 3.4 ms), reset (DTR): the new boot
+    them), save, wait for the writes (176 bytes x 3.4 ms), reset (DTR): the new boot
     loads them, says so, and the port agrees bit for bit."""
     trace = Trace(1.6, _frames([b"hello", *TUNED, b"save"]), resets=[(1.3, "external")])
     recording = _same(trace)

@@ -339,7 +339,7 @@ def _values(p: Param) -> st.SearchStrategy[float]:
 #: own figures in tests/firmware/test_drive_limits.py and stay at their defaults here, and
 #: so does the drive profile that sets them (profile 0, whose limits are those defaults).
 DRIVE_LIMITS = ("fwd_speed", "rev_speed", "drive_accel", "drive_decel", "turn_speed", "turn_accel",
-                "turn_at_speed", "profile")
+                "turn_at_speed", "tremor_damping", "profile")
 PARAMETER_SETS = st.fixed_dictionaries({p.name: _values(p) for p in PARAMS
                                         if p.name != "brake_fitted" and p.name not in DRIVE_LIMITS})
 SPEEDS = st.builds(lambda magnitude, sign: sign * round(magnitude, 3),

@@ -282,7 +282,7 @@ def test_a_failed_current_sense_latches_its_fault() -> None:
 # ---- the parameter ---------------------------------------------------------------------------
 def test_stall_timeout_is_a_parameter_in_range_saved_and_restored() -> None:
     """``stall_timeout``: 15 s by default, 1 to 60 s (``ERR:range`` beyond); a save brings
-    it back at boot (EEPROM layout 6), ``defaults`` restores 15 s."""
+    it back at boot (the EEPROM block), ``defaults`` restores 15 s."""
     for bad in (b"0.99", b"60.01"):
         fw = Firmware()
         assert fw.feed(b"set:stall_timeout=" + bad + b"\n") == b"ERR:range\r\n"

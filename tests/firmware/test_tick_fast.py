@@ -339,7 +339,7 @@ def c_tick_writes(text: str) -> set[str]:
 
 
 def _sources() -> tuple[dict[str, str], str]:
-    modules = ("control", "motion", "output", "inhibit", "brake", "motors", "thermal", "battery")
+    modules = ("control", "motion", "output", "inhibit", "drive", "brake", "motors", "thermal", "battery")
     py = {m: (_FIRMWARE / f"{m}.py").read_text() for m in modules}
     return py, (_FIRMWARE / "csrc" / "tick_fast.c").read_text()
 

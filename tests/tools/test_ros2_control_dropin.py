@@ -120,7 +120,7 @@ class Plugin:
 
 def tell_the_form(device: str, form: int) -> list[str]:
     """As any host does once: ``set:feedback_form=<form>`` and ``save`` (unframed,
-    before hello); waits until the save is written (156 bytes, 3.4 ms each). Returns the
+    before hello); waits until the save is written (176 bytes, 3.4 ms each). Returns the
     lines the board sent."""
     with serial.Serial(device, 115200, timeout=0.05) as link:
         time.sleep(0.3)                                 # the board boots (DTR)
@@ -143,7 +143,7 @@ def tell_the_form_by_host(device: str, form: int) -> float:
         assert isinstance(chair, Wheelchair)
         value = chair.set_param("feedback_form", form)
         chair.save_params()
-        time.sleep(0.9)                                 # 156 bytes, 3.4 ms each
+        time.sleep(0.9)                                 # 176 bytes, 3.4 ms each
     return value
 
 

@@ -117,11 +117,12 @@ def test_control_frames() -> None:
 def test_parameter_indices_keep_their_parameters() -> None:
     """WC_PARAM's indices 0 to 11 are the first table's, in its order; the drive limits,
     added to the serial table before watchdog_ms, take 12 to 18, the drive profile 19,
-    and stall_timeout, added after estop_decel, 20 (protocol/CAN.md)."""
+    stall_timeout, added after estop_decel, 20, and tremor_damping, added after
+    turn_at_speed, 21 (protocol/CAN.md)."""
     assert cc.PARAM_NAMES == ("kp_l", "ki_l", "kd_l", "kp_r", "ki_r", "kd_r", "max_wheel", "max_accel",
                               "estop_decel", "watchdog_ms", "feedback_form", "brake_fitted", "fwd_speed",
                               "rev_speed", "drive_accel", "drive_decel", "turn_speed", "turn_accel",
-                              "turn_at_speed", "profile", "stall_timeout")
+                              "turn_at_speed", "profile", "stall_timeout", "tremor_damping")
 
 
 u32 = st.integers(0, 2**32 - 1)

@@ -73,8 +73,9 @@ def overflows_until(target_elapsed: int, start_fract: int = 0) -> int:
 #: motors' current counts, in .data at 0 A's count, 27,773; then stall_timeout and its
 #: parameter table's entries, in .data, 27,917; then the TX ring's 512 bytes more, in
 #: .bss, whose clearing takes 6 cycles a byte, 30,989; then 14 bytes more of .data, which
-#: the link-time optimiser moved there when the stall rule's spin test came in, 31,115).
-TIMER0_START_CYCLE = 31_115 - OVERFLOW_CYCLES
+#: the link-time optimiser moved there when the stall rule's spin test came in, 31,115;
+#: then tremor_damping and the damped goals, 12 bytes of .bss, 31,190).
+TIMER0_START_CYCLE = 31_190 - OVERFLOW_CYCLES
 
 
 _WINDOW_START = TIMER0_START_CYCLE + 128 * 64

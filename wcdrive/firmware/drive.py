@@ -18,6 +18,14 @@ ceiling of both, and the turn rate changing at most ``turn_accel``; the emergenc
 (``estop_decel``) is not the profile's. Each default sits past what the wheels can do,
 so that at the defaults a goal passes unchanged and the ramp is ``max_accel``'s, as
 before the limits.
+
+Before the caps, in PPM mode (the joystick), the profile's ``tremor_damping`` low-passes
+the stick (``damped_targets``): each tick the goals move (1 - ``tremor_damping``) of
+the way to the stick's targets, a first-order filter at the tick's 20 Hz that takes the
+shake of a hand's tremor (4 to 6 Hz) out of the chair's motion while a held deflection
+passes (DX's and R-net's tremor damping). The stick at neutral (both targets 0) is
+never damped: a stop starts at once. The host's paths (WHEEL, CMDVEL) are not damped:
+a navigation stack's commands are not a hand's.
 """
 
 from __future__ import annotations
@@ -26,7 +34,7 @@ from wcdrive.avr.f32 import add, div, mul, neg, sub
 from wcdrive.firmware import constants as C
 from wcdrive.firmware.state import FirmwareState
 
-__all__ = ["drive_caps", "ramp_setpoints", "ramp_toward", "wheel_rate"]
+__all__ = ["damped_targets", "drive_caps", "ramp_setpoints", "ramp_toward", "wheel_rate"]
 
 
 def ramp_toward(current: float, target: float, max_change: float) -> float:
@@ -35,6 +43,20 @@ def ramp_toward(current: float, target: float, max_change: float) -> float:
     if abs(diff) <= max_change:
         return target
     return add(current, max_change if diff > 0.0 else neg(max_change))
+
+
+def damped_targets(s: FirmwareState) -> tuple[float, float]:
+    """``dampedTargets``: the goals of this tick before the caps (``dampedL``/``R``). In
+    PPM mode with ``tremor_damping`` set, each goal moves (1 - ``tremor_damping``) of
+    the way from where it was to its target; otherwise, and whenever both targets are 0
+    (a stop is never damped), the targets themselves."""
+    if s.mode != C.MODE_PPM or s.tremorDamping == 0.0 or (s.targetL == 0.0 and s.targetR == 0.0):
+        s.dampedL, s.dampedR = s.targetL, s.targetR
+    else:
+        gain = sub(1.0, s.tremorDamping)
+        s.dampedL = add(s.dampedL, mul(gain, sub(s.targetL, s.dampedL)))
+        s.dampedR = add(s.dampedR, mul(gain, sub(s.targetR, s.dampedR)))
+    return s.dampedL, s.dampedR
 
 
 def drive_caps(s: FirmwareState, goal_l: float, goal_r: float) -> tuple[float, float]:

@@ -5,9 +5,9 @@ The EEPROM is ``FirmwareState.eeprom`` (``EEPROM_SIZE`` bytes, erased to 0xFF). 
 parameter block at ``EEPROM_PARAMS_ADDR`` (protocol/PROTOCOL.md, "Parameters in
 EEPROM"): the layout version, the 10 float parameters before the drive limits in table
 order (binary32, little-endian), the drive profiles' table (``PROFILE_COUNT`` rows of
-the 7 drive limits, ``wcdrive.firmware.profiles``), ``watchdog_ms`` (uint16),
+the 8 drive limits, ``wcdrive.firmware.profiles``), ``watchdog_ms`` (uint16),
 ``feedback_form``, ``brake_fitted`` and ``profile`` (uint8 each), and the
-CRC-16/XMODEM of those 158 bytes (uint16, little-endian), 160 bytes in all.
+CRC-16/XMODEM of those 174 bytes (uint16, little-endian), 176 bytes in all.
 
 ``save`` snapshots the block into ``eeBlock`` and writes its first byte that differs
 from the EEPROM; each EEPROM-ready interrupt (3.4 ms later on the chip) writes the next

@@ -17,7 +17,7 @@ from __future__ import annotations
 from wcdrive.avr.f32 import div, mul
 from wcdrive.firmware import constants as C
 from wcdrive.firmware.battery import battery_share
-from wcdrive.firmware.drive import drive_caps
+from wcdrive.firmware.drive import damped_targets, drive_caps
 from wcdrive.firmware.motion import PIVOT_NONE, require_neutral
 from wcdrive.firmware.output import send, send_event
 from wcdrive.firmware.state import FirmwareState
@@ -94,11 +94,11 @@ def inhibit_share(s: FirmwareState) -> float:
 
 
 def capped_goals(s: FirmwareState) -> tuple[float, float]:
-    """What the setpoints ramp toward: the targets within the drive limits
-    (``drive_caps``), the faster wheel capped at the
-    engaged inputs' share of ``max_wheel``, or the thermal or the low-battery
-    rollback's if lower, with the curvature kept."""
-    goal_l, goal_r = drive_caps(s, s.targetL, s.targetR)
+    """What the setpoints ramp toward: the targets, through the tremor damping
+    (``damped_targets``), within the drive limits (``drive_caps``), the faster wheel
+    capped at the engaged inputs' share of ``max_wheel``, or the thermal or the
+    low-battery rollback's if lower, with the curvature kept."""
+    goal_l, goal_r = drive_caps(s, *damped_targets(s))
     share = inhibit_share(s)
     hot = thermal_share(s)
     if hot < share:

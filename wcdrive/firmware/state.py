@@ -30,7 +30,7 @@ FLOAT_FIELDS = (
     "effortSetpointR", "overspeedFromL", "overspeedFromR", "windingTempL", "windingTempR", "supplyVolts",
     "kpL", "kiL", "kdL", "kpR", "kiR", "kdR", "maxWheel", "maxAccel", "estopDecel",
     "fwdSpeed", "revSpeed", "driveAccel", "driveDecel", "turnSpeed", "turnAccel", "turnAtSpeed",
-    "stallTimeout", "stallTime",
+    "tremorDamping", "dampedL", "dampedR", "stallTimeout", "stallTime",
 )
 #: Integer and flag globals compared exactly.
 INT_FIELDS = (
@@ -129,6 +129,10 @@ class FirmwareState:
     turnSpeed: float = C.TURN_SPEED_MAX
     turnAccel: float = C.TURN_ACCEL_MAX
     turnAtSpeed: float = C.TURN_AT_SPEED
+    tremorDamping: float = C.TREMOR_DAMPING
+    #: The goals the stick's targets give through the tremor damping (``damped_targets``).
+    dampedL: float = 0.0
+    dampedR: float = 0.0
     watchdogMs: int = C.WATCHDOG_MS
     feedbackForm: int = C.FEEDBACK_FORM
     brakeFitted: int = C.BRAKE_FITTED

@@ -114,7 +114,7 @@ PARAMETERS: tuple[Parameter, ...] = parameters()
 
 #: The drive limits a profile holds, in the parameter table's order (contiguous there).
 PROFILE_PARAMETERS: tuple[str, ...] = ("fwd_speed", "rev_speed", "drive_accel", "drive_decel",
-                                       "turn_speed", "turn_accel", "turn_at_speed")
+                                       "turn_speed", "turn_accel", "turn_at_speed", "tremor_damping")
 
 
 @dataclass(frozen=True)

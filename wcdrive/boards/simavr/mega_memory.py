@@ -32,7 +32,7 @@ VARIABLE_FORMATS = {
           "effortSetpointR", "overspeedFromL", "overspeedFromR", "haltIntegralL", "haltIntegralR",
           "haltSetpointL", "haltSetpointR", "windingTempL", "windingTempR", "supplyVolts", "fwdSpeed",
           "revSpeed", "driveAccel", "driveDecel", "turnSpeed", "turnAccel", "turnAtSpeed", "stallTimeout",
-          "stallTime"),
+          "stallTime", "tremorDamping", "dampedL", "dampedR"),
     "i": ("encoderValueL", "encoderValueR", "encTickL", "encTickR", "prevEncL", "prevEncR", "holdRefL",
           "holdRefR", "holdStepL", "holdStepR"),
     "I": ("illegalL", "illegalR", "lastControlTime", "tickCount", "lastCmdTime", "rejectedCount",

@@ -102,6 +102,7 @@ static double f_from_int(int64_t n) { return rnd((double)n); }   /* |n| < 2**53 
     X(brakeReleased) X(overspeedTicksL) X(overspeedTicksR) X(overspeedFromL) X(overspeedFromR) \
     X(needNeutral) X(neutralFault) \
     X(inhibitTick) X(inhibitStable) X(inhibitCountL) X(inhibitCountR) X(inhibitLatched) X(inhibitPending) X(inhibitOn) X(inhibitCountP) \
+    X(tremorDamping) X(dampedL) X(dampedR) \
     X(brakeFitted) X(profile) X(brakePhase) X(brakeTicks) X(brakeStatusTick) X(brakeStatusTicks) \
     X(windingTempL) X(windingTempR) X(thermalRollback) X(thermalPending) \
     X(supplyTick) X(supplyVolts) X(batteryLow) X(batteryPending) \
@@ -460,6 +461,7 @@ static const int float_fields[] = {
     F_outputR, F_kpL, F_kiL, F_kdL, F_kpR, F_kiR, F_kdR, F_pendingL, F_pendingR,
     F_overspeedFromL, F_overspeedFromR, F_windingTempL, F_windingTempR, F_supplyVolts,
     F_fwdSpeed, F_revSpeed, F_driveAccel, F_driveDecel, F_turnSpeed, F_turnAccel, F_turnAtSpeed, F_stallTime,
+    F_tremorDamping, F_dampedL, F_dampedR,
 };
 
 static unsigned char field_is_float[N_FIELDS];     /* set by _bind from float_fields */
@@ -518,7 +520,7 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
     if (D(fwdSpeed) != K.drive_speed_max || D(revSpeed) != K.drive_speed_max
         || D(driveAccel) != K.drive_accel_max || D(driveDecel) != K.drive_accel_max
         || D(turnSpeed) != K.turn_speed_max || D(turnAccel) != K.turn_accel_max
-        || D(turnAtSpeed) != K.turn_at_speed)
+        || D(turnAtSpeed) != K.turn_at_speed || D(tremorDamping) != 0.0)
         Py_RETURN_NONE;             /* a drive limit set (at the defaults none binds): the Python tick */
     {
         /* drive_caps and wheel_rate at the defaults: targets the wheels can take pass, and
@@ -651,6 +653,9 @@ static PyObject *tick(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
     if (I(watchdogArmed) && ((now - I(lastCmdTime)) & M32) >= I(watchdogMs))
         Py_RETURN_NONE;           /* the watchdog fires: the Python tick */
 
+    /* damped_targets without damping (tremor_damping 0, above): the targets */
+    SETF(dampedL, D(targetL));
+    SETF(dampedR, D(targetR));
     double max_change = f_mul(I(emergencyStop) ? D(estopDecel) : D(maxAccel), dt);
     SETF(setpointL, ramp_toward(D(setpointL), D(targetL), max_change));
     SETF(setpointR, ramp_toward(D(setpointR), D(targetR), max_change));
