@@ -62,11 +62,12 @@ def test_profiles_can_be_left_out() -> None:
 
 # Seeds whose trace (RandomDraw(seed), 2 s long) ends in the profile, from boot, and
 # reaches the path (found by trying seeds from 0 up, again since the traces open with a
-# neutral command: "Neutral before motion", and since ``set:`` draws the drive limits):
+# neutral command: "Neutral before motion", since ``set:`` draws the drive limits, and
+# since it draws tremor_damping):
 # what the firmware sends, and the rule behind it.
 REACHES = [
     (43, "grade", "STALLED_ON_GRADE"),       # both wheels held back to a crawl
-    (69, "overrun", "OVERSPEED"),            # both wheels gaining beyond the setpoint, braked
+    (52, "overrun", "OVERSPEED"),            # both wheels gaining beyond the setpoint, braked
     (4, "dead_motor", "FAULT,MOTOR_L"),      # one wheel's effort leads, the wheel falls back
     (5, "dead_motor", "FAULT,MOTOR_R"),
     (70, "overrun", "FAULT,MOTOR_L"),        # one wheel gaining while the other brakes and holds
