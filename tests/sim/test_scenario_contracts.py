@@ -68,9 +68,12 @@ def test_the_grade_and_fault_scenarios_keep_their_contracts_on_simavr(name: str)
 #: Which scenario sits on the edge moves with the firmware's timing: it was the brake twin
 #: (STALLED_ON_GRADE on simavr only) until the firmware owned the brake and its code grew;
 #: then the chair without a brake reached its limit on the port only (ramp_up_down_rated,
-#: to the drive limits); with the drive profiles' timing both backends send the same
-#: kinds, and none is on the edge. A scenario that differs again goes here, strict.
-KNIFE_EDGE: set[str] = set()
+#: to the drive limits); with the drive profiles' timing both backends sent the same
+#: kinds, and none was on the edge; with the tremor damping's globals (Timer0 at 31,190
+#: cycles) ramp_up_down_rated's climb at a crawl reaches its limit on simavr only
+#: (STALLED_ON_GRADE at 3.86 s, which its contract allows). A scenario that differs goes
+#: here, strict.
+KNIFE_EDGE: set[str] = {"ramp_up_down_rated"}
 
 
 @pytest.mark.simavr
