@@ -139,3 +139,50 @@ def test_the_recording_is_found_through_any_wrappers() -> None:
     assert recording_of(tap) is recorded.recording and tap.recording is recorded.recording
     assert recording_of(FakePort()) is None and recording_of(PortWrapper(FakePort())) is None
     assert TapPort(FakePort(), object()).recording is None    # type: ignore[arg-type]
+
+
+def test_the_optional_pyserial_members_are_typed_capabilities() -> None:
+    """``is_open``, ``reset_input_buffer`` and ``cancel_read`` are optional on a Port:
+    pyserial's ports have them (``loop://``: the first two), a bare Port need not. A
+    wrapper asks its port's through the capability protocols: it drops the bytes of a
+    port that can, takes a port without ``is_open`` as open, and its own members say
+    what the port behind it has."""
+    from wcdrive.transports.port import CancellablePort, OpenStatePort, ResettablePort
+
+    loop = serial.serial_for_url("loop://", timeout=0.1)
+    assert isinstance(loop, OpenStatePort) and isinstance(loop, ResettablePort)
+    loop.write(b"stale")
+    loop.flush()
+    wrapped = PortWrapper(loop)
+    assert isinstance(wrapped, ResettablePort)
+    wrapped.reset_input_buffer()
+    assert loop.in_waiting == 0
+    wrapped.close()
+
+    class Bare:
+        """The five members of ``Port`` and nothing more."""
+
+        timeout: float | None = 0.0
+
+        @property
+        def in_waiting(self) -> int:
+            return 0
+
+        def read(self, size: int = 1) -> bytes:
+            return b""
+
+        def write(self, data: bytes) -> int | None:
+            return len(data)
+
+        def flush(self) -> None:
+            pass
+
+        def close(self) -> None:
+            pass
+
+    bare = Bare()
+    assert isinstance(bare, Port)
+    assert not isinstance(bare, (OpenStatePort, ResettablePort, CancellablePort))
+    around = PortWrapper(bare)
+    assert around.is_open
+    around.reset_input_buffer()                     # a no-op

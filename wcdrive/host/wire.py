@@ -17,7 +17,7 @@ import time
 from collections.abc import Callable
 
 from wcdrive.errors import WcdriveConnectionError
-from wcdrive.transports.port import Port
+from wcdrive.transports.port import CancellablePort, Port
 
 __all__ = ["Wire"]
 
@@ -120,10 +120,9 @@ class Wire:
             if locked:
                 self.lock.release()
         self.closed.set()
-        cancel = getattr(self.port, "cancel_read", None)
         try:
-            if cancel is not None:
-                cancel()                        # wake the reader's select at once
+            if isinstance(self.port, CancellablePort):
+                self.port.cancel_read()         # wake the reader's select at once
             self.port.close()
         except Exception:
             pass

@@ -14,7 +14,7 @@ if TYPE_CHECKING:
     from wcdrive.boards.simulation import Simulated
 
 
-__all__ = ["Port", "SimulatedPort", "simulation_of"]
+__all__ = ["CancellablePort", "OpenStatePort", "Port", "ResettablePort", "SimulatedPort", "simulation_of"]
 
 
 @runtime_checkable
@@ -49,6 +49,32 @@ class Port(Protocol):
 
     def close(self) -> None:
         """Releases the port; wakes a ``read`` blocked in another thread."""
+
+
+@runtime_checkable
+class OpenStatePort(Protocol):
+    """A ``Port`` that says whether it is open (pyserial's ``is_open``); one without is
+    taken as open until it is closed."""
+
+    is_open: bool
+
+
+@runtime_checkable
+class ResettablePort(Protocol):
+    """A ``Port`` that can drop what it received and was not yet read (pyserial's
+    ``reset_input_buffer``)."""
+
+    def reset_input_buffer(self) -> None:
+        """Drops the bytes received and not yet read."""
+
+
+@runtime_checkable
+class CancellablePort(Protocol):
+    """A ``Port`` whose ``read`` blocked in another thread can be woken at once
+    (pyserial's posix ``cancel_read``)."""
+
+    def cancel_read(self) -> None:
+        """Wakes a ``read`` blocked in another thread."""
 
 
 @runtime_checkable

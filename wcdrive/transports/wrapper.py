@@ -24,7 +24,7 @@ from __future__ import annotations
 import warnings
 from typing import TYPE_CHECKING
 
-from wcdrive.transports.port import Port, simulation_of
+from wcdrive.transports.port import OpenStatePort, Port, ResettablePort, simulation_of
 
 if TYPE_CHECKING:
     from wcdrive.boards.simulation import Simulated
@@ -87,7 +87,7 @@ class PortWrapper:
     @property
     def is_open(self) -> bool:
         """The wrapped port's (pyserial's attribute; True for a port without one)."""
-        return bool(getattr(self.port, "is_open", True))
+        return bool(self.port.is_open) if isinstance(self.port, OpenStatePort) else True
 
     @property
     def simulation(self) -> Simulated | None:
@@ -121,9 +121,8 @@ class PortWrapper:
 
     def reset_input_buffer(self) -> None:
         """Drops what the wrapped port received and not yet read (where it can)."""
-        reset = getattr(self.port, "reset_input_buffer", None)
-        if reset is not None:
-            reset()
+        if isinstance(self.port, ResettablePort):
+            self.port.reset_input_buffer()
 
     def close(self) -> None:
         """Closes the wrapped port, then ``on_close``."""
