@@ -41,7 +41,7 @@ def test_the_presets_are_the_specs_and_profile_0_limits_nothing() -> None:
     assert PROFILES[1].values == (1.0, 0.5, 0.5, 0.6, 1.0, 2.0, 0.5, 0.0)
 
 
-def _say(fw: Firmware, command: bytes) -> bytes:
+def say(fw: Firmware, command: bytes) -> bytes:
     """``command`` in a loop() pass of its own, a tick after it (the answers of a tick
     are three at most): what the board answered."""
     now = fw.state.lastControlTime
@@ -52,20 +52,20 @@ def _say(fw: Firmware, command: bytes) -> bytes:
 
 def test_selecting_editing_and_restoring_profiles_on_the_port() -> None:
     fw = Firmware()
-    assert _say(fw, b"set:profile=1") == b"PAR:profile,1\r\n"
+    assert say(fw, b"set:profile=1") == b"PAR:profile,1\r\n"
     assert _limits(fw) == (1.0, 0.5, 0.5, 0.6, 1.0, 2.0, 0.5, 0.0)
-    _say(fw, b"set:fwd_speed=1.25")                       # the row in force changes
-    _say(fw, b"set:profile=3")
+    say(fw, b"set:fwd_speed=1.25")                       # the row in force changes
+    say(fw, b"set:profile=3")
     assert _limits(fw) == (0.6, 0.4, 0.4, 0.5, 0.8, 1.5, 0.8, 0.0)
-    _say(fw, b"set:profile=1")                            # selected again: the edit is there
+    say(fw, b"set:profile=1")                            # selected again: the edit is there
     assert _limits(fw)[0] == 1.25 and _limits(fw)[1:] == (0.5, 0.5, 0.6, 1.0, 2.0, 0.5, 0.0)
-    assert _say(fw, b"set:profile=4") == b"ERR:range\r\n"
-    assert _say(fw, b"set:profile=x") == b"ERR:number\r\n"
+    assert say(fw, b"set:profile=4") == b"ERR:range\r\n"
+    assert say(fw, b"set:profile=x") == b"ERR:number\r\n"
     assert fw.state.profile == 1
-    assert _say(fw, b"get:profile") == b"PAR:profile,1\r\n"
-    _say(fw, b"defaults")                                 # the presets, profile 0
+    assert say(fw, b"get:profile") == b"PAR:profile,1\r\n"
+    say(fw, b"defaults")                                 # the presets, profile 0
     assert fw.state.profile == 0 and _limits(fw)[0] == 2.69
-    _say(fw, b"set:profile=1")
+    say(fw, b"set:profile=1")
     assert _limits(fw)[0] == 1.0
 
 

@@ -9,6 +9,7 @@ import math
 
 import pytest
 
+from tests.firmware.test_drive_profiles_table import say
 from tests.support.recordings import recorded, tick_states, turning
 from wcdrive.avr.f32 import f32
 from wcdrive.firmware import constants as C
@@ -76,15 +77,11 @@ def test_tremor_damping_is_a_drive_limit_of_the_profile() -> None:
     assert fw.state.tremorDamping == 0.0
     for bad in (b"0.91", b"1"):
         assert fw.feed(b"set:tremor_damping=" + bad + b"\n") == b"ERR:range\r\n"
-    assert fw.feed(b"set:profile=1\n") == b"PAR:profile,1\r\n"
-    fw.tick((fw.state.lastControlTime + 50) & 0xFFFFFFFF, 0, 0)
-    assert fw.feed(b"set:tremor_damping=0.6\n") == b"PAR:tremor_damping,0.6000\r\n"
-    fw.tick((fw.state.lastControlTime + 50) & 0xFFFFFFFF, 0, 0)
-    fw.feed(b"set:profile=2\n")
-    fw.tick((fw.state.lastControlTime + 50) & 0xFFFFFFFF, 0, 0)
+    assert say(fw, b"set:profile=1") == b"PAR:profile,1\r\n"
+    assert say(fw, b"set:tremor_damping=0.6") == b"PAR:tremor_damping,0.6000\r\n"
+    say(fw, b"set:profile=2")
     assert fw.state.tremorDamping == 0.0
-    fw.feed(b"set:profile=1\n")
-    fw.tick((fw.state.lastControlTime + 50) & 0xFFFFFFFF, 0, 0)
+    say(fw, b"set:profile=1")
     assert fw.state.tremorDamping == f32(0.6)
 
 
